@@ -1,0 +1,96 @@
+"""From a validated scene to a coupled system and a scheme."""
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+
+from couplers import PointContact
+from multibody import Body, Joint, TreeModel
+
+from .bodies import MultibodySubsystem
+from .integrators import get_integrator
+from .scene import Scene, SceneError
+from .schemes import get_scheme
+from .subsystem import RigidReference
+from .system import ContactLink, CoupledSystem
+
+__all__ = ["build_system"]
+
+#: RK4's stability limit on an undamped oscillator is omega*dt = 2*sqrt(2).
+_RK4_LIMIT = 2.0 * math.sqrt(2.0)
+
+
+def _multibody(spec, scene: Scene, default_step):
+    try:
+        bodies = [Body(b["name"], b["mass"], b["inertia"], b["com"], b["points"])
+                  for b in spec["bodies"]]
+        joints = [Joint(j["name"], j["kind"], j["parent"], j["offset"], j["axis"], j["angle"])
+                  for j in spec["joints"]]
+        model = TreeModel(bodies, joints)
+        step = spec["max_step"] or default_step
+        integ = get_integrator(spec["integrator"])(max_step=step)
+    except ValueError as exc:
+        raise SceneError(scene.path, spec["key"], str(exc)) from None
+    q0 = [j["q0"] for j in spec["joints"]]
+    dq0 = [j["dq0"] for j in spec["joints"]]
+    return MultibodySubsystem(spec["name"], model, q0, dq0, spec["ports"], scene.gravity, integ)
+
+
+def build_system(scene: Scene, scheme: str | None = None):
+    """Build the subsystems, contacts and the coupling scheme of ``scene``.
+
+    Raises
+    ------
+    SceneError
+        If a model cannot be built, or an embedded contact is too stiff for
+        the integrator step of the side that carries it.
+    """
+    name = scheme or scene.scheme
+    cls = get_scheme(name)
+    opts = scene.scheme_options if name == scene.scheme else {}
+    if name != scene.scheme:
+        dropped = sorted(set(scene.scheme_options) - set(cls.options))
+        opts = {k: v for k, v in scene.scheme_options.items() if k in cls.options}
+        if dropped:
+            warnings.warn(f"{scene.path}: scheme `{name}` ignores the options {dropped}",
+                          stacklevel=2)
+        if "macro_step" in cls.options and "macro_step" not in opts:
+            raise SceneError(scene.path, "scheme.macro_step",
+                             f"is required by scheme `{name}` [s]")
+    default_step = min(opts.get("macro_step") or 1e-4, 1e-4)
+    subs = []
+    for spec in scene.subsystems:
+        if spec["type"] == "rigid":
+            subs.append(RigidReference(spec["name"], spec["points"]))
+        else:
+            subs.append(_multibody(spec, scene, default_step))
+    names = [s.name for s in subs]
+    links = []
+    for c in scene.contacts:
+        sa, sb = names.index(c["a"][0]), names.index(c["b"][0])
+        contact = PointContact(c["name"], c["law"], c["normal"], c["offset"])
+        placement = c["placement"] if name != "monolithic" else "coupler"
+        links.append(ContactLink(contact, sa, subs[sa].port_index(c["a"][1]), sb,
+                                 subs[sb].port_index(c["b"][1]), placement))
+    system = CoupledSystem(subs, links)
+    for c, ln in enumerate(links):
+        if ln.placement != "embedded":
+            continue
+        s = ln.sub_a if not subs[ln.sub_a].rigid else ln.sub_b
+        port = ln.port_a if s == ln.sub_a else ln.port_b
+        mob = subs[s].port_mobility(port, ln.contact.normal)
+        omega = math.sqrt(ln.contact.law.stiffness * mob)
+        dt = subs[s].integrator.max_step
+        if omega * dt > 0.5 * _RK4_LIMIT:
+            limit = 0.5 * _RK4_LIMIT / omega
+            raise SceneError(scene.path, f"subsystems.{subs[s].name}.integrator.max_step",
+                             f"is {dt:.3g} s, too large for contact `{ln.contact.name}` "
+                             f"(omega = {omega:.4g} rad/s): the integrator needs a step below "
+                             f"{limit:.3g} s to resolve it")
+    try:
+        sch = cls(**opts)
+    except (TypeError, ValueError) as exc:
+        raise SceneError(scene.path, "scheme", str(exc)) from None
+    return system, sch

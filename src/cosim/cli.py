@@ -1,0 +1,94 @@
+"""The `cosim` command line.  The only module that talks to the terminal."""
+from __future__ import annotations
+
+import argparse
+import sys
+import warnings
+from pathlib import Path
+
+__all__ = ["main"]
+
+
+def _print_summary(s: dict, out: Path | None) -> None:
+    e = s["energy"]
+    print(f"scene {s['scene']}  scheme {s['scheme']}  status {s['status']}")
+    print(f"  t_end {s['t_end']:.6g} s  cpu {s['cpu_time_s']:.3g} s  macro steps "
+          f"{s['macro_steps']}  iterations {s['iterations']}")
+    for name, c in s["contacts"].items():
+        first = c["intervals"][0] if c["intervals"] else None
+        span = f"first [{first[0]:.6g}, {first[1]:.6g}] s" if first else "never touched"
+        print(f"  contact {name}: {c['count']} interval(s), {span}, peak penetration "
+              f"{c['peak_penetration']:.4g} m, impulse {c['impulse']:.4g} N s")
+    print(f"  energy: initial {e['initial']:.6g} J, final {e['final']:.6g} J, dissipated "
+          f"{e['dissipated']:.4g} J, max drift {e['max_abs_drift']:.3g} J")
+    for sub, joints in s["final_state"].items():
+        vals = ", ".join(f"{j} = {v['q']:.6g} ({v['dq']:.6g}/s)" for j, v in joints.items())
+        print(f"  final {sub}: {vals}")
+    if s["message"]:
+        print(f"  message: {s['message']}")
+    if out is not None:
+        print(f"  wrote {out / 'summary.json'} and {out / 'series.npz'}")
+
+
+def _cmd_run(args) -> int:
+    from .result import write_outputs
+    from .run import simulate
+    from .scene import load_scene
+
+    scene = load_scene(args.scene, args.variant, args.set or (), args.scheme)
+    res = simulate(scene)
+    out = Path(args.out) if args.out else Path("runs") / (
+        scene.name + (f"-{scene.variant}" if scene.variant else ""))
+    write_outputs(res, out)
+    _print_summary(res.summary, out)
+    return 0 if res.success else 1
+
+
+def _cmd_verify(args) -> int:
+    from .verify import run_checks
+
+    failed = 0
+    for check in run_checks(args.cases):
+        failed += not check.passed
+        print(f"{'PASS' if check.passed else 'FAIL'}  {check.name}: {check.detail}", flush=True)
+    print(f"{'all checks passed' if not failed else f'{failed} check(s) failed'}")
+    return 1 if failed else 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="cosim", description="Co-simulation of impacts between "
+                                "robots and vibrating structures.")
+    sub = p.add_subparsers(dest="command", required=True)
+    r = sub.add_parser("run", help="run a scene, print a summary, write summary.json and "
+                                   "series.npz")
+    r.add_argument("scene", help="scene file (TOML)")
+    r.add_argument("--variant", help="apply the scene's [variants.NAME] table")
+    r.add_argument("--scheme", help="coupling scheme (monolithic, jacobi, gauss_seidel, "
+                                    "implicit)")
+    r.add_argument("--set", action="append", metavar="KEY=VALUE",
+                   help="override a scene value (after the variant); repeatable")
+    r.add_argument("--out", help="output directory (default runs/SCENE[-VARIANT])")
+    r.set_defaults(func=_cmd_run)
+    v = sub.add_parser("verify", help="run the verification cases; exit 1 if any fails")
+    v.add_argument("--cases", default="cases", help="folder of the scene files (default cases)")
+    v.set_defaults(func=_cmd_verify)
+    return p
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    from .scene import SceneError
+    from .schemes import UnsafeStepError
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("always")
+        warnings.formatwarning = lambda msg, cat, *a, **k: f"warning: {msg}\n"
+        try:
+            return args.func(args)
+        except (SceneError, UnsafeStepError) as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,133 @@
+"""Time steppers that subsystems use inside a co-simulation step.
+
+Each stepper advances ``y' = f(t, y)`` from ``t0`` to ``t1`` exactly (it lands
+on the macro-step boundary) and, when given a switch function, locates the
+instant a contact opens or closes inside a sub-step and restarts there, so a
+penalty force's kink is never stepped over.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable, ClassVar
+
+import numpy as np
+
+__all__ = ["TimeStepper", "RK4", "INTEGRATORS", "get_integrator"]
+
+
+def _hermite(y0, f0, y1, f1, h, theta):
+    t2 = theta * theta
+    t3 = t2 * theta
+    return ((2 * t3 - 3 * t2 + 1) * y0 + (t3 - 2 * t2 + theta) * h * f0
+            + (-2 * t3 + 3 * t2) * y1 + (t3 - t2) * h * f1)
+
+
+@dataclass(frozen=True)
+class TimeStepper:
+    """Base class of fixed-step integrators.
+
+    Parameters
+    ----------
+    max_step : float
+        Largest sub-step [s]; a step of length ``h`` is cut into
+        ``ceil(h / max_step)`` equal sub-steps.
+    """
+
+    max_step: float
+    order: ClassVar[int] = 0
+    name: ClassVar[str] = ""
+
+    def __post_init__(self):
+        if not (isinstance(self.max_step, (int, float)) and math.isfinite(self.max_step)
+                and self.max_step > 0):
+            raise ValueError(f"`max_step` must be > 0 s, got {self.max_step!r}")
+
+    def _single(self, f, t, y, h, k1):
+        raise NotImplementedError  # pragma: no cover - every stepper overrides it
+
+    def integrate(self, f: Callable, t0: float, y0: np.ndarray, t1: float,
+                  switch: Callable | None = None) -> np.ndarray:
+        """Advance ``y0`` from ``t0`` to ``t1``.
+
+        Parameters
+        ----------
+        f : callable ``f(t, y) -> dy/dt``
+        switch : callable ``switch(t, y) -> array`` or None
+            Continuous functions whose sign changes mark a switch of the
+            right-hand side (a contact opening or closing).  A sub-step over
+            which a sign changes is redone in two pieces that meet at the
+            switch, located on the cubic Hermite interpolant of the sub-step.
+        """
+        n = max(1, math.ceil((t1 - t0) / self.max_step - 1e-9))
+        dt = (t1 - t0) / n
+        t, y = t0, y0
+        k1 = f(t, y)
+        s0 = None if switch is None else switch(t, y)
+        i = 0
+        while i < n:
+            te = t1 if i == n - 1 else t0 + (i + 1) * dt
+            h = te - t
+            y1 = self._single(f, t, y, h, k1)
+            k1n = f(te, y1)
+            if s0 is not None:
+                s1 = switch(te, y1)
+                flipped = (s0 > 0) != (s1 > 0)
+                if flipped.any():
+                    ts = self._locate(switch, t, y, k1, y1, k1n, h, s0, flipped)
+                    if ts is not None:
+                        y = self._single(f, t, y, ts - t, k1)
+                        t = ts
+                        k1 = f(t, y)
+                        s0 = switch(t, y)
+                        continue  # the rest of this sub-step, from the switch
+                s0 = s1
+            t, y, k1 = te, y1, k1n
+            i += 1
+        return y
+
+    @staticmethod
+    def _locate(switch, t, y0, f0, y1, f1, h, s0, flipped):
+        """Earliest switch time in (t, t + h) on the Hermite interpolant; the
+        returned time lies just past the root (on the new side)."""
+        lo, hi = 0.0, 1.0
+        sign0 = s0 > 0
+        for _ in range(60):
+            mid = 0.5 * (lo + hi)
+            s = switch(t + mid * h, _hermite(y0, f0, y1, f1, h, mid))
+            if np.any(((s > 0) != sign0) & flipped):
+                hi = mid
+            else:
+                lo = mid
+            if (hi - lo) * h <= 1e-14 * max(1.0, abs(t)):
+                break
+        if hi >= 1.0 - 1e-12:
+            return None  # the switch sits at the sub-step's end: nothing to split
+        return t + hi * h
+
+
+@dataclass(frozen=True)
+class RK4(TimeStepper):
+    """Classical fourth-order Runge-Kutta with fixed sub-steps."""
+
+    order: ClassVar[int] = 4
+    name: ClassVar[str] = "rk4"
+
+    def _single(self, f, t, y, h, k1):
+        k2 = f(t + 0.5 * h, y + 0.5 * h * k1)
+        k3 = f(t + 0.5 * h, y + 0.5 * h * k2)
+        k4 = f(t + h, y + h * k3)
+        return y + (h / 6.0) * (k1 + 2.0 * (k2 + k3) + k4)
+
+
+INTEGRATORS: dict[str, type[TimeStepper]] = {RK4.name: RK4}
+
+
+def get_integrator(name) -> type[TimeStepper]:
+    if isinstance(name, type) and issubclass(name, TimeStepper):
+        return name
+    try:
+        return INTEGRATORS[name]
+    except (KeyError, TypeError):
+        raise ValueError(f"unknown integrator {name!r}; valid integrators are "
+                         f"{sorted(INTEGRATORS)}") from None

@@ -1,0 +1,445 @@
+"""Scene files: TOML to validated objects.
+
+A scene declares its subsystems, contacts, effects, coupling scheme, end
+time and outputs; nothing undeclared is simulated.  Every value is checked
+when the file is read, and a :class:`SceneError` names the file, the key path
+and what was expected.  Variants (``[variants.NAME]``) are tables of
+overrides merged into the scene; ``--set key.path=value`` applies after them.
+"""
+from __future__ import annotations
+
+import copy
+import logging
+import math
+import tomllib
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["SceneError", "Scene", "load_scene", "parse_override", "SUBSYSTEM_TYPES"]
+
+log = logging.getLogger(__name__)
+
+SUBSYSTEM_TYPES = ("multibody", "rigid")
+_MISSING = object()
+
+
+class SceneError(ValueError):
+    """A scene file that cannot be used, with the file and key path."""
+
+    def __init__(self, file, key: str, message: str):
+        self.file, self.key = str(file), key
+        where = f"`{key}` " if key else ""
+        super().__init__(f"{self.file}: {where}{message}")
+
+
+def _type_name(v) -> str:
+    return {bool: "a boolean", int: "an integer", float: "a number", str: "a string",
+            list: "an array", dict: "a table"}.get(type(v), type(v).__name__)
+
+
+class _Table:
+    """A table of the scene being read: typed getters that record what was
+    used, so that :meth:`finish` can reject unknown keys."""
+
+    def __init__(self, data, path: tuple, file):
+        self.data, self.path, self.file = data, path, file
+        self.used: set[str] = set()
+
+    def key(self, k: str = "") -> str:
+        return ".".join(self.path + ((k,) if k else ()))
+
+    def error(self, k: str, message: str):
+        raise SceneError(self.file, self.key(k), message)
+
+    def has(self, k: str) -> bool:
+        return k in self.data
+
+    def raw(self, k: str, default=_MISSING):
+        self.used.add(k)
+        if k not in self.data:
+            if default is _MISSING:
+                self.error(k, "is required but missing")
+            return default
+        return self.data[k]
+
+    def number(self, k, default=_MISSING, *, rule: str | None = None, unit: str = ""):
+        v = self.raw(k, default)
+        if v is default and default is not _MISSING:
+            return v
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            self.error(k, f"must be a number{' [' + unit + ']' if unit else ''}, "
+                          f"got {_type_name(v)} {v!r}")
+        v = float(v)
+        if not math.isfinite(v):
+            self.error(k, f"must be finite, got {v!r}")
+        checks = {">0": v > 0, ">=0": v >= 0, None: True}
+        if not checks[rule]:
+            self.error(k, f"must be {rule.replace('>', '> ').replace('> =', '>=')} "
+                          f"{unit}, got {v!r}".replace("  ", " ").replace(" ,", ","))
+        return v
+
+    def integer(self, k, default=_MISSING, *, low: int | None = None):
+        v = self.raw(k, default)
+        if v is default and default is not _MISSING:
+            return v
+        if isinstance(v, bool) or not isinstance(v, int):
+            self.error(k, f"must be an integer, got {_type_name(v)} {v!r}")
+        if low is not None and v < low:
+            self.error(k, f"must be >= {low}, got {v!r}")
+        return v
+
+    def string(self, k, default=_MISSING, *, choices=None):
+        v = self.raw(k, default)
+        if v is default and default is not _MISSING:
+            return v
+        if not isinstance(v, str):
+            self.error(k, f"must be a string, got {_type_name(v)} {v!r}")
+        if choices is not None and v not in choices:
+            self.error(k, f"must be one of {sorted(choices)}, got {v!r}")
+        return v
+
+    def boolean(self, k, default=_MISSING):
+        v = self.raw(k, default)
+        if not isinstance(v, bool):
+            self.error(k, f"must be true or false, got {_type_name(v)} {v!r}")
+        return v
+
+    def vec2(self, k, default=_MISSING, *, unit="m", nonzero=False):
+        v = self.raw(k, default)
+        if v is default and default is not _MISSING:
+            return v
+        if (not isinstance(v, list) or len(v) != 2
+                or any(isinstance(x, bool) or not isinstance(x, (int, float)) for x in v)):
+            self.error(k, f"must be an array of two numbers [{unit}], got {v!r}")
+        if not all(math.isfinite(x) for x in v):
+            self.error(k, f"must be finite, got {v!r}")
+        if nonzero and v[0] == 0 and v[1] == 0:
+            self.error(k, f"must be a non-zero vector, got {v!r}")
+        return (float(v[0]), float(v[1]))
+
+    def table(self, k, default=_MISSING) -> "_Table":
+        v = self.raw(k, {} if default is not _MISSING else _MISSING)
+        if not isinstance(v, dict):
+            self.error(k, f"must be a table, got {_type_name(v)} {v!r}")
+        return _Table(v, self.path + (k,), self.file)
+
+    def tables(self, k, default=_MISSING) -> list[tuple[str, "_Table"]]:
+        t = self.table(k, default)
+        out = []
+        for name in t.data:
+            out.append((name, t.table(name)))
+        return out
+
+    def finish(self) -> None:
+        unknown = [k for k in self.data if k not in self.used]
+        if unknown:
+            where = self.key() or "the top level"
+            raise SceneError(self.file, self.key(unknown[0]),
+                             f"is not a known key of {where}; known keys are "
+                             f"{sorted(self.used)}")
+
+
+# ---------------------------------------------------------------- overrides
+def _merge(base: dict, over: dict) -> dict:
+    for k, v in over.items():
+        if isinstance(v, dict) and isinstance(base.get(k), dict):
+            _merge(base[k], v)
+        else:
+            base[k] = copy.deepcopy(v)
+    return base
+
+
+def parse_override(text: str, file="--set") -> tuple[list[str], object]:
+    """Parse ``a.b.c=value``; the value is read as a TOML value, else a string."""
+    if "=" not in text:
+        raise SceneError(file, "", f"override {text!r} must read key.path=value")
+    key, value = text.split("=", 1)
+    path = [p.strip() for p in key.strip().split(".")]
+    if not all(path):
+        raise SceneError(file, key, f"override {text!r} has an empty key")
+    try:
+        parsed = tomllib.loads(f"v = {value.strip()}")["v"]
+    except tomllib.TOMLDecodeError:
+        parsed = value.strip()
+    return path, parsed
+
+
+def _apply_override(data: dict, path: list[str], value, file) -> None:
+    node = data
+    for i, k in enumerate(path[:-1]):
+        nxt = node.setdefault(k, {})
+        if not isinstance(nxt, dict):
+            raise SceneError(file, ".".join(path[:i + 1]),
+                             f"is {_type_name(nxt)}, so --set cannot reach "
+                             f"`{'.'.join(path)}` inside it")
+        node = nxt
+    node[path[-1]] = value
+
+
+# ------------------------------------------------------------------- specs
+@dataclass(frozen=True)
+class Scene:
+    """A validated scene, ready to :meth:`build`.
+
+    Attributes
+    ----------
+    name, path, variant : str
+    t_end : float
+        End time [s].
+    scheme : str
+        Default coupling scheme's name.
+    scheme_options : dict
+        Options of that scheme, validated.
+    data : dict
+        The merged scene table (after variant and overrides).
+    """
+
+    name: str
+    path: str
+    variant: str | None
+    t_end: float
+    scheme: str
+    scheme_options: dict
+    output_every: int
+    subsystems: tuple
+    contacts: tuple
+    gravity: tuple | None
+    data: dict = field(repr=False)
+
+    def build(self, scheme: str | None = None):
+        """Make the coupled system and the scheme (optionally another one)."""
+        from .build import build_system
+        return build_system(self, scheme)
+
+
+def load_scene(path, variant: str | None = None, overrides=(), scheme: str | None = None
+               ) -> Scene:
+    """Read, merge and validate a scene file.
+
+    Parameters
+    ----------
+    path : path-like
+    variant : str, optional
+        Name of a ``[variants.NAME]`` table; the scene's ``default_variant``
+        when omitted.
+    overrides : iterable of str or (path list, value)
+        ``key.path=value`` overrides, applied after the variant.
+    scheme : str, optional
+        Replace the scene's coupling scheme; options the new scheme does not
+        take are dropped with one warning naming them.
+
+    Raises
+    ------
+    SceneError
+    """
+    file = Path(path)
+    try:
+        text = file.read_text()
+    except OSError as exc:
+        raise SceneError(file, "", f"cannot be read: {exc.strerror or exc}") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise SceneError(file, "", f"is not valid TOML: {exc}") from None
+    variants = data.pop("variants", {})
+    if not isinstance(variants, dict) or not all(isinstance(v, dict) for v in variants.values()):
+        raise SceneError(file, "variants", "must be a table of tables")
+    default_variant = data.pop("default_variant", None)
+    chosen = variant if variant is not None else default_variant
+    if chosen is not None:
+        if chosen not in variants:
+            raise SceneError(file, "variants",
+                             f"has no variant {chosen!r}; variants are {sorted(variants)}")
+        _merge(data, variants[chosen])
+    for ov in overrides:
+        p, v = parse_override(ov, file) if isinstance(ov, str) else ov
+        _apply_override(data, list(p), v, file)
+    if scheme is not None:
+        sch = data.setdefault("scheme", {})
+        if not isinstance(sch, dict):
+            raise SceneError(file, "scheme", f"must be a table, got {sch!r}")
+        sch["name"] = scheme
+    return _validate(data, file, chosen)
+
+
+def _validate(data: dict, file, variant) -> Scene:
+    from .schemes import COUPLING_SCHEMES
+
+    top = _Table(data, (), file)
+    name = top.string("name", file.stem)
+    top.string("description", "")
+    t_end = top.number("t_end", rule=">0", unit="s")
+
+    sch = top.table("scheme")
+    scheme_name = sch.string("name", choices=COUPLING_SCHEMES)
+    cls = COUPLING_SCHEMES[scheme_name]
+    all_options = {k for c in COUPLING_SCHEMES.values() for k in c.options}
+    opts, ignored = {}, []
+    for k in list(sch.data):
+        if k == "name":
+            continue
+        sch.used.add(k)
+        if k not in all_options:
+            sch.error(k, f"is not an option of any scheme; options of `{scheme_name}` are "
+                         f"{sorted(cls.options)}")
+        if k not in cls.options:
+            ignored.append(k)
+            continue
+        opts[k] = _scheme_option(sch, k, cls.options[k])
+    if ignored:
+        warnings.warn(f"{file}: scheme `{scheme_name}` ignores the options {sorted(ignored)}",
+                      stacklevel=3)
+    if "macro_step" in cls.options and "macro_step" not in opts:
+        sch.error("macro_step", f"is required by scheme `{scheme_name}` [s]")
+
+    out = top.table("output", {})
+    every = out.integer("every", 1, low=1)
+    out.finish()
+
+    eff = top.table("effects", {})
+    gravity = None
+    if eff.has("gravity"):
+        g = eff.raw("gravity")
+        if isinstance(g, list):
+            gravity = eff.vec2("gravity", unit="m/s^2")
+        else:
+            gravity = (0.0, -eff.number("gravity", rule=">0", unit="m/s^2"))
+    eff.finish()
+
+    subs = []
+    for sname, st in top.tables("subsystems"):
+        subs.append(_subsystem_spec(sname, st))
+    if not subs:
+        top.error("subsystems", "must declare at least one subsystem")
+    contacts = []
+    for cname, ct in top.tables("contacts", {}):
+        contacts.append(_contact_spec(cname, ct, subs))
+    top.finish()
+    return Scene(name=name, path=str(file), variant=variant, t_end=t_end, scheme=scheme_name,
+                 scheme_options=opts, output_every=every, subsystems=tuple(subs),
+                 contacts=tuple(contacts), gravity=gravity, data=data)
+
+
+def _scheme_option(sch: _Table, k, opt):
+    v = sch.raw(k)
+    if opt.kind is float:
+        v = sch.number(k)
+    elif opt.kind is int:
+        v = sch.integer(k)
+    elif opt.kind is bool:
+        v = sch.boolean(k)
+    elif opt.kind is str:
+        v = sch.string(k)
+    elif opt.kind is list and not isinstance(v, list):
+        sch.error(k, f"must be an array, got {v!r}")
+    if not opt.check(v):
+        sch.error(k, f"must be {opt.rule}, got {v!r}")
+    return v
+
+
+def _subsystem_spec(name: str, t: _Table) -> dict:
+    kind = t.string("type", choices=SUBSYSTEM_TYPES)
+    spec = {"name": name, "type": kind, "key": t.key()}
+    if kind == "rigid":
+        pts = t.table("points")
+        spec["points"] = {p: pts.vec2(p) for p in list(pts.data)}
+        if not spec["points"]:
+            t.error("points", "must name at least one point")
+    else:
+        integ = t.table("integrator", {})
+        from .integrators import INTEGRATORS
+        spec["integrator"] = integ.string("method", "rk4", choices=INTEGRATORS)
+        spec["max_step"] = integ.number("max_step", None, rule=">0", unit="s")
+        integ.finish()
+        bodies, joints, ports = [], [], {}
+        names = []
+        for bname, bt in t.tables("bodies"):
+            jt = bt.table("joint")
+            parent = jt.string("parent", "ground")
+            if parent != "ground" and parent not in names:
+                jt.error("parent", f"must be `ground` or a body declared before `{bname}`; "
+                                   f"declared so far: {names}")
+            joint = {
+                "name": jt.string("name"),
+                "kind": jt.string("type", choices=("revolute", "prismatic")),
+                "parent": -1 if parent == "ground" else names.index(parent),
+                "offset": jt.vec2("offset", (0.0, 0.0)),
+                "axis": jt.vec2("axis", (1.0, 0.0), nonzero=True),
+                "angle": jt.number("angle", 0.0, unit="rad"),
+                "q0": jt.number("q0", 0.0),
+                "dq0": jt.number("dq0", 0.0),
+            }
+            jt.finish()
+            pts = bt.table("points", {})
+            points = {p: pts.vec2(p) for p in list(pts.data)}
+            for p in points:
+                if p in ports:
+                    pts.error(p, f"names a point already declared on body `{ports[p][0]}`; "
+                                 f"point names must be unique in subsystem `{name}`")
+                ports[p] = (bname, len(names), points[p])
+            bodies.append({"name": bname, "mass": bt.number("mass", rule=">=0", unit="kg"),
+                           "inertia": bt.number("inertia", 0.0, rule=">=0", unit="kg m^2"),
+                           "com": bt.vec2("com", (0.0, 0.0)), "points": points,
+                           "key": bt.key()})
+            joints.append(joint)
+            names.append(bname)
+            bt.finish()
+        if not bodies:
+            t.error("bodies", "must declare at least one body")
+        spec.update(bodies=bodies, joints=joints,
+                    ports={p: (i, pt) for p, (_, i, pt) in ports.items()})
+    t.finish()
+    return spec
+
+
+def _contact_spec(name: str, t: _Table, subs: list[dict]) -> dict:
+    from couplers import CONTACT_LAWS
+
+    def port(k):
+        ref = t.string(k)
+        sname, _, pname = ref.partition(".")
+        match = [s for s in subs if s["name"] == sname]
+        if not match or not pname:
+            t.error(k, f"must read SUBSYSTEM.POINT with a declared subsystem "
+                       f"({[s['name'] for s in subs]}), got {ref!r}")
+        s = match[0]
+        pts = s["points"] if s["type"] == "rigid" else s["ports"]
+        if pname not in pts:
+            t.error(k, f"names no point of subsystem `{sname}`; its points are {sorted(pts)}")
+        return sname, pname
+
+    a, b = port("a"), port("b")
+    if a[0] == b[0]:
+        t.error("b", f"must be on another subsystem than `a`, got {a[0]!r} twice")
+    law_t = t.table("law")
+    law_name = law_t.string("type", choices=CONTACT_LAWS)
+    law_cls = CONTACT_LAWS[law_name]
+    import dataclasses
+    params = {}
+    for f in dataclasses.fields(law_cls):
+        if f.name in law_t.data:
+            params[f.name] = law_t.number(f.name)
+        elif f.default is dataclasses.MISSING:
+            law_t.error(f.name, f"is required by law `{law_name}`")
+    law_t.finish()
+    try:
+        law = law_cls(**params)
+    except (TypeError, ValueError) as exc:
+        raise SceneError(t.file, law_t.key(), str(exc)) from None
+    kinds = {s["name"]: s["type"] for s in subs}
+    rigid_side = kinds[a[0]] == "rigid" or kinds[b[0]] == "rigid"
+    if kinds[a[0]] == "rigid" and kinds[b[0]] == "rigid":
+        t.error("b", "a contact between two rigid subsystems has nothing to simulate")
+    placement = t.string("placement", "embedded" if rigid_side else "coupler",
+                         choices=("embedded", "coupler"))
+    if placement == "embedded" and not rigid_side:
+        t.error("placement", "`embedded` needs a rigid side (wall, ground); with two moving "
+                             "sides use `coupler`")
+    spec = {"name": name, "a": a, "b": b, "normal": t.vec2("normal", unit="1", nonzero=True),
+            "offset": t.number("offset", 0.0, unit="m"), "law": law, "placement": placement,
+            "key": t.key()}
+    t.finish()
+    return spec

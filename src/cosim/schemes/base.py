@@ -1,0 +1,189 @@
+"""Base classes of coupling schemes."""
+from __future__ import annotations
+
+import math
+from abc import ABC, abstractmethod
+from typing import Any, Callable, ClassVar, NamedTuple
+
+import numpy as np
+
+from .. import preflight
+
+__all__ = ["Option", "CouplingScheme", "CoSimulationScheme", "UnsafeStepError", "CouplingError",
+           "extrapolation_coeffs"]
+
+
+class Option(NamedTuple):
+    """A scheme option: its type, default, check and the rule it states."""
+
+    kind: type
+    default: Any
+    check: Callable[[Any], bool]
+    rule: str
+
+
+def _pos(v):
+    return v > 0 and math.isfinite(v)
+
+
+class UnsafeStepError(ValueError):
+    """The macro step is too large for a contact's stiffness."""
+
+
+class CouplingError(RuntimeError):
+    """The coupling failed during a run (an implicit step did not converge)."""
+
+
+def extrapolation_coeffs(hist: list, order: int, ratio: float = 1.0) -> np.ndarray:
+    """Coefficients (order + 1, n) of the force over the next step, in the
+    step's normalised time ``s`` in [0, 1], extrapolated from the history
+    ``[..., f_{n-1}, f_n]`` at equal spacing; ``ratio`` is the next step's
+    length over the previous one's."""
+    p = min(order, len(hist) - 1)
+    fn = hist[-1]
+    if p == 0:
+        return fn[None, :]
+    if p == 1:
+        return np.stack([fn, (fn - hist[-2]) * ratio])
+    f1, f2 = hist[-2], hist[-3]
+    return np.stack([fn, 0.5 * (3 * fn - 4 * f1 + f2) * ratio,
+                     0.5 * (fn - 2 * f1 + f2) * ratio * ratio])
+
+
+class CouplingScheme(ABC):
+    """A way of advancing a :class:`~cosim.system.CoupledSystem` in time.
+
+    Subclasses declare ``name`` and the option names they accept in
+    ``options``; :meth:`run` fills a :class:`~cosim.recorder.Recorder` and
+    returns the counters ``n_windows``, ``n_iterations``, ``n_rejected``.
+    """
+
+    name: ClassVar[str] = ""
+    #: option name -> Option; the scene loader validates them.
+    options: ClassVar[dict] = {}
+    explicit: ClassVar[bool] = False
+
+    def __init__(self, **opts):
+        unknown = set(opts) - set(self.options)
+        if unknown:
+            raise TypeError(f"scheme `{self.name}` takes no options {sorted(unknown)}; "
+                            f"valid options are {sorted(self.options)}")
+        for key, opt in self.options.items():
+            value = opts.get(key, opt.default)
+            if value is not None and not opt.check(value):
+                raise ValueError(f"`{key}` of scheme `{self.name}` must be {opt.rule}, "
+                                 f"got {value!r}")
+            setattr(self, key, value)
+
+    @abstractmethod
+    def run(self, system, t_end: float, recorder) -> dict:
+        """Advance the system to ``t_end``, recording as it goes."""
+
+
+class CoSimulationScheme(CouplingScheme):
+    """Macro-step loop shared by the co-simulation schemes.
+
+    Contacts placed ``coupler`` are exchanged as forces: at each
+    communication point the scheme computes them from the subsystems'
+    outputs and hands each side a force polynomial for the next step;
+    :meth:`advance` decides which.
+    """
+
+    options: ClassVar[dict] = {
+        "macro_step": Option(float, None, _pos, "> 0 s"),
+        "extrapolation_order": Option(int, 0, lambda v: v in (0, 1, 2), "0, 1 or 2"),
+        "max_energy_gain": Option(float, 0.01, lambda v: v >= 0 and math.isfinite(v), ">= 0"),
+        "accept_unsafe_step": Option(bool, False, lambda v: True, "true or false"),
+    }
+
+    def preflight(self, system) -> None:
+        """Refuse a macro step that is too large for a contact's stiffness."""
+        if not self.explicit or self.accept_unsafe_step:
+            return
+        H = self.macro_step
+        for c in system.coupler:
+            ln = system.links[c]
+            n = ln.contact.normal
+            mob = (system.subsystems[ln.sub_a].port_mobility(ln.port_a, n)
+                   + system.subsystems[ln.sub_b].port_mobility(ln.port_b, n))
+            if mob <= 0:
+                continue
+            m, k, cd = 1.0 / mob, ln.contact.law.stiffness, ln.contact.law.damping
+            partner_first = self._partner_first(system, c)
+            if preflight.is_safe(m, k, cd, H, self.extrapolation_order, self.max_energy_gain,
+                                 partner_first):
+                continue
+            hmax = preflight.largest_safe_step(m, k, cd, H, self.extrapolation_order,
+                                               self.max_energy_gain, partner_first)
+            gain = preflight.contact_energy_gain(m, k, cd, H, self.extrapolation_order,
+                                                 partner_first)
+            raise UnsafeStepError(
+                f"contact `{ln.contact.name}`: macro step {H:.3g} s is too large for scheme "
+                f"`{self.name}` (extrapolation order {self.extrapolation_order}): contact "
+                f"frequency omega = {math.sqrt(k / m):.4g} rad/s with reduced mass {m:.4g} kg; "
+                f"one contact would change the energy by a factor {gain:.4g} "
+                f"(allowed 1 + {self.max_energy_gain:g}). The largest safe macro step is "
+                f"{hmax:.3g} s. Use a smaller `scheme.macro_step`, the `implicit` scheme, "
+                f"or set `scheme.accept_unsafe_step = true` to run anyway.")
+
+    def _partner_first(self, system, c) -> bool:
+        return False
+
+    @abstractmethod
+    def advance(self, system, t: float, h: float, ratio: float) -> np.ndarray:
+        """Step every subsystem over [t, t + h]; return the polynomial
+        coefficients (order + 1, n_contacts) of the coupler forces applied to
+        the contacts' side ``a``, for the impulse ledger."""
+
+    def run(self, system, t_end, recorder):
+        H = self.macro_step
+        if H is None:
+            raise ValueError(f"scheme `{self.name}` needs `macro_step` [s]")
+        self.preflight(system)
+        self._system = system
+        self.n_iterations = 0
+        nc = system.n_contacts
+        coupler = system.coupler
+        outs = system.outputs()
+        d, dd = system.penetrations(outs)
+        f = system.forces(d, dd)
+        self._outs, self._f = outs, f
+        self._hist = [f]
+        impulse, diss = np.zeros(nc), np.zeros(nc)
+        law = [ln.contact.law for ln in system.links]
+        p_prev = np.array([float(law[c].dissipation_rate(f[c], d[c], dd[c])) for c in coupler])
+        recorder.record(0.0, d, dd, f, impulse, diss)
+        n = max(1, math.ceil(t_end / H - 1e-9))
+        h_prev = H
+        for k in range(n):
+            t = k * H
+            h = min(H, t_end - t)
+            if h <= 1e-12 * H:
+                break
+            coeffs = self.advance(system, t, h, h / h_prev)
+            h_prev = h
+            outs = system.outputs()
+            d, dd = system.penetrations(outs)
+            f = system.forces(d, dd)
+            self._outs, self._f = outs, f
+            self._hist = (self._hist + [f])[-3:]
+            if len(coupler):
+                j = np.arange(coeffs.shape[0])[:, None]
+                impulse[coupler] += h * np.sum(coeffs[:, coupler] / (j + 1), axis=0)
+                p_now = np.array([float(law[c].dissipation_rate(f[c], d[c], dd[c]))
+                                  for c in coupler])
+                diss[coupler] += 0.5 * h * (p_prev + p_now)
+                p_prev = p_now
+            emb = system.embedded_quadratures()
+            for c in system.embedded:
+                impulse[c], diss[c] = emb[c]
+            if not (np.all(np.isfinite(d)) and np.all(np.isfinite(dd))):
+                raise CouplingError(f"non-finite state at t = {t + h:.6g} s")
+            recorder.record(t + h, d, dd, f, impulse, diss)
+        return {"n_windows": n, "n_iterations": self.n_iterations, "n_rejected": 0}
+
+    def _extrapolated(self, ratio: float) -> np.ndarray:
+        return extrapolation_coeffs(self._hist, self.extrapolation_order, ratio)
+
+    def _moving(self, system):
+        return [s for s, sub in enumerate(system.subsystems) if not sub.rigid]

@@ -1,0 +1,180 @@
+"""The subsystem protocol: what every side of a co-simulation offers.
+
+A subsystem is a first-order system ``x' = f(t, x, u)``, ``y = g(t, x)``
+whose inputs ``u`` are forces on named ports and whose outputs ``y`` are the
+positions and velocities of those ports.  It offers both faces of the FMI
+standard: model exchange (:meth:`Subsystem.derivatives`,
+:meth:`Subsystem.outputs`) for the monolithic reference, and co-simulation
+(:meth:`Subsystem.step` with its own integrator, :meth:`Subsystem.get_state`
+and :meth:`Subsystem.set_state` for rollback, :meth:`Subsystem.energy`).
+"""
+from __future__ import annotations
+
+import math
+from abc import ABC, abstractmethod
+
+import numpy as np
+
+__all__ = ["StepInput", "Subsystem", "RigidReference", "SubsystemState"]
+
+
+class StepInput:
+    """Port forces over one step, a polynomial in the normalised time.
+
+    ``u(t) = sum_j coeffs[j] * s**j`` with ``s = (t - t0) / h``;
+    ``coeffs`` has shape ``(order + 1, n_ports, 2)`` [N].
+    """
+
+    __slots__ = ("t0", "h", "coeffs")
+
+    def __init__(self, t0: float, h: float, coeffs: np.ndarray):
+        self.t0, self.h, self.coeffs = t0, h, coeffs
+
+    def __call__(self, t: float) -> np.ndarray:
+        s = (t - self.t0) / self.h
+        c = self.coeffs
+        out = c[-1].copy()
+        for j in range(len(c) - 2, -1, -1):
+            out *= s
+            out += c[j]
+        return out
+
+    @classmethod
+    def zero(cls, t0: float, h: float, n_ports: int) -> "StepInput":
+        return cls(t0, h, np.zeros((1, n_ports, 2)))
+
+
+class SubsystemState:
+    """Opaque snapshot for rollback (time, state vector, quadratures, counters)."""
+
+    __slots__ = ("t", "x", "aux", "n_steps", "status")
+
+    def __init__(self, t, x, aux, n_steps, status):
+        self.t, self.x, self.aux, self.n_steps, self.status = t, x, aux, n_steps, status
+
+
+class Subsystem(ABC):
+    """Base class of subsystems, with a template :meth:`step`.
+
+    Subclasses set ``n_states``, ``port_names``, the state ``x`` and implement
+    :meth:`_step_impl`, :meth:`derivatives`, :meth:`outputs` and
+    :meth:`energy`.  ``aux`` holds quadratures a subsystem integrates along
+    its state (the impulse and dissipated energy of contacts embedded in it).
+    """
+
+    #: True for a subsystem without dynamics (wall, ground).
+    rigid: bool = False
+
+    def __init__(self, name: str, port_names):
+        self.name = name
+        self.port_names = tuple(port_names)
+        self.t = 0.0
+        self.status = "running"
+        self.n_steps = 0
+        self.x = np.zeros(0)
+        self.aux = np.zeros(0)
+
+    # -------------------------------------------------------------- protocol
+    @property
+    def n_states(self) -> int:
+        return self.x.size
+
+    @property
+    def n_ports(self) -> int:
+        return len(self.port_names)
+
+    def port_index(self, port: str) -> int:
+        try:
+            return self.port_names.index(port)
+        except ValueError:
+            raise KeyError(f"subsystem `{self.name}` has no port `{port}`; "
+                           f"ports are {list(self.port_names)}") from None
+
+    def step(self, t: float, h: float, inputs: StepInput | None = None) -> None:
+        """Advance the state from ``t`` to ``t + h`` under ``inputs``.
+
+        Raises
+        ------
+        RuntimeError
+            If the subsystem is not running or ``t`` is not its current time.
+        """
+        if self.status != "running":
+            raise RuntimeError(f"subsystem `{self.name}` is {self.status}; it cannot step")
+        if not math.isclose(t, self.t, rel_tol=1e-12, abs_tol=1e-15):
+            raise RuntimeError(f"subsystem `{self.name}` is at t = {self.t!r} s, asked to step "
+                               f"from t = {t!r} s")
+        if not (h > 0 and math.isfinite(h)):
+            raise ValueError(f"`h` must be > 0 s, got {h!r}")
+        try:
+            self._step_impl(t, h, inputs)
+        except Exception:
+            self.status = "failed"
+            raise
+        self.t = t + h
+        self.n_steps += 1
+
+    @abstractmethod
+    def _step_impl(self, t: float, h: float, inputs: StepInput | None) -> None:
+        """Advance ``self.x`` (and ``self.aux``) over the step."""
+
+    @abstractmethod
+    def derivatives(self, t: float, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """``dx/dt`` for port forces ``u`` (n_ports, 2) [N]."""
+
+    @abstractmethod
+    def outputs(self, t: float, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Port positions and velocities, each (n_ports, 2)."""
+
+    @abstractmethod
+    def energy(self, x: np.ndarray | None = None) -> float:
+        """Mechanical energy held by the subsystem [J]."""
+
+    def port_mobility(self, port: int, direction) -> float:
+        """Interface compliance of a port along ``direction`` at the current
+        state: the acceleration answering a unit force, ``n^T J M^-1 J^T n``
+        [1/kg].  Zero for a rigid subsystem."""
+        return 0.0
+
+    def coordinates(self) -> dict[str, tuple[int, int]]:
+        """Named coordinates: name -> (index of q in x, index of dq in x)."""
+        return {}
+
+    def get_state(self) -> SubsystemState:
+        return SubsystemState(self.t, self.x.copy(), self.aux.copy(), self.n_steps, self.status)
+
+    def set_state(self, state: SubsystemState) -> None:
+        self.t = state.t
+        self.x[...] = state.x
+        self.aux[...] = state.aux
+        self.n_steps = state.n_steps
+        self.status = state.status
+
+
+class RigidReference(Subsystem):
+    """A subsystem without degrees of freedom: a wall or the ground.
+
+    Parameters
+    ----------
+    name : str
+    ports : dict[str, (2,) sequence]
+        Fixed port positions [m].
+    """
+
+    rigid = True
+
+    def __init__(self, name: str, ports: dict):
+        super().__init__(name, ports.keys())
+        self._pos = np.array([np.asarray(p, dtype=float) for p in ports.values()]).reshape(-1, 2)
+        self._vel = np.zeros_like(self._pos)
+
+    def _step_impl(self, t, h, inputs):
+        return None
+
+    def derivatives(self, t, x, u):
+        return np.zeros(0)
+
+    def outputs(self, t, x):
+        return self._pos, self._vel
+
+    def energy(self, x=None):
+        return 0.0

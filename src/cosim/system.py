@@ -1,0 +1,148 @@
+"""The coupled system: subsystems, and the contacts that link their ports."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from couplers import PointContact
+
+from .subsystem import StepInput, Subsystem
+
+__all__ = ["ContactLink", "CoupledSystem", "PLACEMENTS"]
+
+#: Where a contact's penalty law is evaluated in a co-simulation.
+PLACEMENTS = ("embedded", "coupler")
+
+
+@dataclass(frozen=True)
+class ContactLink:
+    """A contact between port ``port_a`` of subsystem ``sub_a`` (the point)
+    and port ``port_b`` of subsystem ``sub_b`` (the surface).
+
+    ``placement`` is ``"embedded"`` (evaluated inside the moving side's
+    integrator; needs a rigid partner) or ``"coupler"`` (the coupling scheme
+    exchanges the force).
+    """
+
+    contact: PointContact
+    sub_a: int
+    port_a: int
+    sub_b: int
+    port_b: int
+    placement: str
+
+
+class CoupledSystem:
+    """Subsystems and contacts, with the bookkeeping every scheme shares.
+
+    Contacts placed ``"embedded"`` are handed to their moving side at
+    construction; the others are the scheme's to exchange.
+    """
+
+    def __init__(self, subsystems: list[Subsystem], links: list[ContactLink]):
+        self.subsystems = list(subsystems)
+        self.links = list(links)
+        self.names = [s.name for s in self.subsystems]
+        self.contact_names = [ln.contact.name for ln in self.links]
+        self.n_contacts = len(self.links)
+        self.coupler = np.array([i for i, ln in enumerate(self.links)
+                                 if ln.placement == "coupler"], dtype=int)
+        # embedded: contact index -> (subsystem index, slot in its aux)
+        self.embedded: dict[int, tuple[int, int]] = {}
+        slots = [0] * len(self.subsystems)
+        for i, ln in enumerate(self.links):
+            if ln.placement != "embedded":
+                continue
+            a, b = self.subsystems[ln.sub_a], self.subsystems[ln.sub_b]
+            if a.rigid == b.rigid:
+                raise ValueError(f"contact `{ln.contact.name}`: placement `embedded` needs one "
+                                 f"rigid side and one moving side")
+            own, partner, side = ((ln.sub_a, ln.sub_b, 1.0) if b.rigid else
+                                  (ln.sub_b, ln.sub_a, -1.0))
+            own_port = ln.port_a if side > 0 else ln.port_b
+            partner_port = ln.port_b if side > 0 else ln.port_a
+            psub = self.subsystems[partner]
+            ppos, pvel = psub.outputs(0.0, psub.x)
+            self.subsystems[own].embed_contact(ln.contact, own_port, side, ppos[partner_port],
+                                               pvel[partner_port])
+            self.embedded[i] = (own, slots[own])
+            slots[own] += 1
+        self._normals = np.array([ln.contact.normal for ln in self.links]).reshape(-1, 2)
+        self._offsets = np.array([ln.contact.offset for ln in self.links])
+        # Port-force maps: flat port forces of subsystem s = G[s] @ contact forces.
+        self._G = []
+        for s, sub in enumerate(self.subsystems):
+            G = np.zeros((sub.n_ports * 2, self.n_contacts))
+            for c, ln in enumerate(self.links):
+                n = np.asarray(ln.contact.normal)
+                if ln.sub_a == s:
+                    G[2 * ln.port_a:2 * ln.port_a + 2, c] += n
+                if ln.sub_b == s:
+                    G[2 * ln.port_b:2 * ln.port_b + 2, c] -= n
+            self._G.append(G)
+        # Co-simulation exchanges only the coupler contacts' forces.
+        mask = np.zeros(self.n_contacts)
+        mask[self.coupler] = 1.0
+        self._Gc = [G * mask for G in self._G]
+        self.touches = [bool(np.any(G[:, self.coupler])) for G in self._G]
+
+    # ------------------------------------------------------------- states
+    def outputs(self, states=None):
+        """Port positions and velocities of every subsystem at its own state."""
+        return [sub.outputs(sub.t, sub.x if states is None else states[i])
+                for i, sub in enumerate(self.subsystems)]
+
+    def penetrations(self, outs):
+        """Penetration and rate of every contact, from subsystem outputs."""
+        xa = np.array([outs[ln.sub_a][0][ln.port_a] for ln in self.links]).reshape(-1, 2)
+        va = np.array([outs[ln.sub_a][1][ln.port_a] for ln in self.links]).reshape(-1, 2)
+        xb = np.array([outs[ln.sub_b][0][ln.port_b] for ln in self.links]).reshape(-1, 2)
+        vb = np.array([outs[ln.sub_b][1][ln.port_b] for ln in self.links]).reshape(-1, 2)
+        n = self._normals
+        d = self._offsets - np.einsum("cx,cx->c", xa - xb, n)
+        dd = -np.einsum("cx,cx->c", va - vb, n)
+        return d, dd
+
+    def forces(self, d, dd, which=None):
+        """Penalty forces of the contacts ``which`` (all by default)."""
+        idx = range(self.n_contacts) if which is None else which
+        return np.array([float(self.links[c].contact.law.force(d[c], dd[c])) for c in idx])
+
+    def contact_potential(self, d) -> float:
+        return float(sum(ln.contact.law.potential(d[c]) for c, ln in enumerate(self.links)))
+
+    def energy(self, d) -> float:
+        """Energy of the subsystems plus the elastic energy of the contacts [J]."""
+        return float(sum(s.energy() for s in self.subsystems)) + self.contact_potential(d)
+
+    def step_input(self, s: int, t0: float, h: float, coeffs: np.ndarray) -> StepInput:
+        """Port forces of subsystem ``s`` from contact-force polynomial
+        coefficients ``coeffs`` (order + 1, n_contacts)."""
+        sub = self.subsystems[s]
+        c = coeffs @ self._Gc[s].T
+        return StepInput(t0, h, c.reshape(len(coeffs), sub.n_ports, 2))
+
+    def embedded_quadratures(self):
+        """(n_contacts, 2) impulse and dissipated energy of embedded contacts."""
+        out = np.zeros((self.n_contacts, 2))
+        for c, (s, slot) in self.embedded.items():
+            out[c] = self.subsystems[s].embedded_quadratures()[slot]
+        return out
+
+    def get_state(self):
+        return [s.get_state() for s in self.subsystems]
+
+    def set_state(self, states):
+        for s, st in zip(self.subsystems, states):
+            s.set_state(st)
+
+    # ----------------------------------------------- monolithic (stacked) face
+    def stacked(self):
+        """Offsets of each subsystem's state in the stacked vector."""
+        sizes = [s.n_states for s in self.subsystems]
+        return np.concatenate([[0], np.cumsum(sizes)]).astype(int)
+
+    def port_forces(self, s: int, f: np.ndarray) -> np.ndarray:
+        sub = self.subsystems[s]
+        return (self._G[s] @ f).reshape(sub.n_ports, 2)
