@@ -45,6 +45,9 @@ class MultibodySubsystem(Subsystem):
         self._port_body = np.array([b for b, _ in ports.values()], dtype=int)
         self._port_local = np.array([p for _, p in ports.values()], dtype=float).reshape(-1, 2)
         self._embedded: list = []
+        #: switches of embedded contacts located during the last step:
+        #: (time, embedded slot, now active)
+        self.switch_log: list[tuple[float, int, bool]] = []
         self._zero_u = np.zeros((self.n_ports, 2))
 
     # ------------------------------------------------------ embedded contacts
@@ -112,8 +115,10 @@ class MultibodySubsystem(Subsystem):
     def _step_impl(self, t, h, inputs: StepInput | None):
         y0 = np.concatenate([self.x, self.aux])
         switch = self._switch if self._embedded else None
+        self.switch_log = []
         y1 = self.integrator.integrate(lambda tt, yy: self._rhs(tt, yy, inputs), t, y0, t + h,
-                                       switch)
+                                       switch, lambda ts, j, on: self.switch_log.append(
+                                           (ts, j, on)))
         n2 = 2 * self.n_dof
         self.x[:] = y1[:n2]
         self.aux[:] = y1[n2:]

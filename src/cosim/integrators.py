@@ -47,7 +47,8 @@ class TimeStepper:
         raise NotImplementedError  # pragma: no cover - every stepper overrides it
 
     def integrate(self, f: Callable, t0: float, y0: np.ndarray, t1: float,
-                  switch: Callable | None = None) -> np.ndarray:
+                  switch: Callable | None = None,
+                  on_switch: Callable | None = None) -> np.ndarray:
         """Advance ``y0`` from ``t0`` to ``t1``.
 
         Parameters
@@ -79,8 +80,15 @@ class TimeStepper:
                         y = self._single(f, t, y, ts - t, k1)
                         t = ts
                         k1 = f(t, y)
-                        s0 = switch(t, y)
+                        s_new = switch(t, y)
+                        if on_switch is not None:
+                            for j in np.flatnonzero((s0 > 0) != (s_new > 0)):
+                                on_switch(t, int(j), bool(s_new[j] > 0))
+                        s0 = s_new
                         continue  # the rest of this sub-step, from the switch
+                    if on_switch is not None:
+                        for j in np.flatnonzero(flipped):
+                            on_switch(te, int(j), bool(s1[j] > 0))
                 s0 = s1
             t, y, k1 = te, y1, k1n
             i += 1

@@ -59,16 +59,18 @@ class Recorder:
     t_end : float
     every : int
         Keep every ``every``-th sample in the series (statistics use all).
-    auto_edges : bool
-        Locate contact onset/release between samples; a scheme that locates
-        them itself (the monolithic one) reports them with :meth:`edge`.
+    auto_edges : bool or (n_contacts,) array of bool
+        Locate contact onset/release between samples, for all contacts or
+        those marked; a scheme (or an integrator) that locates them itself
+        reports them with :meth:`edge`.
     """
 
     def __init__(self, system, scene: str, scheme: str, t_end: float, every: int = 1,
                  auto_edges: bool = True):
         self.system, self.scene, self.scheme, self.t_end = system, scene, scheme, t_end
-        self.every, self.auto_edges = max(1, int(every)), auto_edges
         nc = system.n_contacts
+        self.every = max(1, int(every))
+        self.auto_edges = np.broadcast_to(np.asarray(auto_edges, dtype=bool), (nc,))
         self._laws = [ln.contact.law for ln in system.links]
         self._t, self._x, self._d, self._f, self._e, self._diss = [], [], [], [], [], []
         self._count = 0
@@ -106,12 +108,12 @@ class Recorder:
                 if h > 0 and (ap[c] or active[c]) and ddp[c] > 0 >= dd[c]:
                     self.peak[c] = max(self.peak[c], hermite_cubic_max(dp[c], ddp[c], d[c],
                                                                        dd[c], h)[0])
-                if self.auto_edges and ap[c] != active[c]:
+                if self.auto_edges[c] and ap[c] != active[c]:
                     self.edge(c, self._crossing(c, tp, dp[c], ddp[c], t, d[c], dd[c], ap[c]),
                               bool(active[c]))
         if len(d):
             self.peak = np.maximum(self.peak, np.where(active, d, 0.0))
-        if self.auto_edges and prev is None:
+        if prev is None:
             for c in np.flatnonzero(active):
                 self.edge(int(c), t, True)
         self._prev = (t, d.copy(), dd.copy(), active)

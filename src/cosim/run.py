@@ -23,8 +23,12 @@ def simulate(scene: Scene, *, scheme: str | None = None):
         pre-flight check); nothing has run then.
     """
     system, sch = scene.build(scheme)
+    if isinstance(sch, Monolithic):
+        auto = False                       # it locates every switch itself
+    else:                                  # embedded contacts: their integrator does
+        auto = [c not in system.embedded for c in range(system.n_contacts)]
     rec = Recorder(system, scene.name, sch.name, scene.t_end, every=scene.output_every,
-                   auto_edges=not isinstance(sch, Monolithic))
+                   auto_edges=auto)
     cpu0 = time.process_time()
     status, message = "finished", ""
     counters = {}

@@ -175,8 +175,11 @@ class CoSimulationScheme(CouplingScheme):
                 diss[coupler] += 0.5 * h * (p_prev + p_now)
                 p_prev = p_now
             emb = system.embedded_quadratures()
-            for c in system.embedded:
+            for c, (s, slot) in system.embedded.items():
                 impulse[c], diss[c] = emb[c]
+                for ts, j, on in system.subsystems[s].switch_log:
+                    if j == slot:
+                        recorder.edge(c, ts, on)
             if not (np.all(np.isfinite(d)) and np.all(np.isfinite(dd))):
                 raise CouplingError(f"non-finite state at t = {t + h:.6g} s")
             recorder.record(t + h, d, dd, f, impulse, diss)
