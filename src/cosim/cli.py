@@ -82,7 +82,7 @@ def main(argv=None) -> int:
 
     with warnings.catch_warnings():
         warnings.simplefilter("always")
-        warnings.formatwarning = lambda msg, cat, *a, **k: f"warning: {msg}\n"
+        warnings.showwarning = lambda msg, *a, **k: print(f"warning: {msg}", file=sys.stderr)
         try:
             return args.func(args)
         except (SceneError, UnsafeStepError) as exc:
@@ -90,5 +90,5 @@ def main(argv=None) -> int:
             return 2
 
 
-if __name__ == "__main__":  # pragma: no cover
+if __name__ == "__main__":  # pragma: no cover - `python -m cosim.cli`
     sys.exit(main())

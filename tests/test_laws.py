@@ -1,0 +1,66 @@
+"""Penalty laws: never tensile, switch and force agree, dissipation is never negative."""
+import numpy as np
+import pytest
+
+from couplers import CONTACT_LAWS, KelvinVoigtLaw, LinearLaw, get_contact_law
+
+EXAMPLES = {"linear": LinearLaw(1e6), "kelvin_voigt": KelvinVoigtLaw(1e6, 300.0)}
+
+
+def test_every_registered_law_has_an_example():
+    assert set(EXAMPLES) == set(CONTACT_LAWS)
+
+
+@pytest.fixture(params=sorted(CONTACT_LAWS))
+def law(request):
+    return EXAMPLES[request.param]
+
+
+def test_force_is_never_tensile_and_agrees_with_switch(law):
+    rng = np.random.default_rng(1)
+    d = rng.uniform(-1e-3, 1e-3, 2000)
+    dd = rng.uniform(-5, 5, 2000)
+    f = law.force(d, dd)
+    assert np.all(f >= 0)
+    assert np.all((f > 0) == (law.switch(d, dd) > 0))
+    assert np.all(f[d <= 0] == 0)
+
+
+def test_dissipation_is_never_negative(law):
+    rng = np.random.default_rng(2)
+    d = rng.uniform(-1e-3, 1e-3, 2000)
+    dd = rng.uniform(-5, 5, 2000)
+    p = law.dissipation_rate(law.force(d, dd), d, dd)
+    assert np.all(p >= -1e-9)
+
+
+def test_potential_slope_is_derivative(law):
+    d = np.linspace(1e-5, 1e-3, 7)
+    eps = 1e-9
+    num = (law.potential(d + eps) - law.potential(d - eps)) / (2 * eps)
+    assert np.allclose(num, law.potential_slope(d), rtol=1e-5)
+
+
+def test_kelvin_voigt_dissipates_only_by_its_dashpot_while_active():
+    law = EXAMPLES["kelvin_voigt"]
+    d, dd = 1e-4, 2.0
+    f = law.force(d, dd)
+    assert law.dissipation_rate(f, d, dd) == pytest.approx(300.0 * dd ** 2)
+
+
+@pytest.mark.parametrize("kwargs,match", [
+    ({"contact_stiffness": -1e6}, r"`contact_stiffness` must be > 0 N/m, got -1000000\.0"),
+    ({"contact_stiffness": 0.0}, r"`contact_stiffness` must be > 0 N/m"),
+    ({"contact_stiffness": float("nan")}, r"`contact_stiffness` must be > 0 N/m, got nan"),
+    ({"contact_stiffness": 1e6, "contact_damping": -1.0}, r"`contact_damping` must be >= 0"),
+])
+def test_parameters_are_checked(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        KelvinVoigtLaw(**kwargs)
+
+
+def test_registry_lookup():
+    assert get_contact_law("linear") is LinearLaw
+    assert get_contact_law(KelvinVoigtLaw) is KelvinVoigtLaw
+    with pytest.raises(ValueError, match=r"unknown contact law 'hertzz'; valid laws are"):
+        get_contact_law("hertzz")

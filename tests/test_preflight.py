@@ -1,0 +1,78 @@
+"""The pre-flight stability check of explicit coupling."""
+import math
+
+import pytest
+
+import cosim
+from analytic import held_force_rebound_factor
+from conftest import CASES
+from cosim import preflight
+
+M, K = 1.0, 1e6
+W = math.sqrt(K / M)
+
+
+def test_held_force_gain_matches_delay_theory():
+    """The model problem's energy gain is the square of exp(pi omega H / 4)."""
+    for H in (1e-5, 4e-5, 1e-4):
+        gain = preflight.contact_energy_gain(M, K, 0.0, H, 0)
+        assert gain == pytest.approx(held_force_rebound_factor(W, H) ** 2, rel=0.01)
+
+
+def test_largest_safe_step_undamped_held_force():
+    """1 % energy per contact: H* = 4 ln(1.01) / (2 pi omega) from the delay model."""
+    h = preflight.largest_safe_step(M, K, 0.0, 1e-3, 0, 0.01)
+    assert h == pytest.approx(4 * math.log(1.01) / (2 * math.pi * W), rel=0.03)
+    assert preflight.is_safe(M, K, 0.0, 0.9 * h, 0, 0.01)
+    assert not preflight.is_safe(M, K, 0.0, 1.1 * h, 0, 0.01)
+
+
+def test_damped_held_force_stable_only_below_2c_over_k():
+    """In sustained contact the held force is a delay H/2 that feeds energy at
+    the rate omega^2 H / 4 against the dashpot's c / (2 m): stable iff H < 2c/k."""
+    c = 20.0                            # zeta = 0.01, omega * 2c/k = 0.04
+    h_crit = 2 * c / K
+    for H, stable in ((0.9 * h_crit, True), (1.1 * h_crit, False)):
+        A = preflight.step_map(M, K, c, H, 0)
+        rho = max(abs(__import__("numpy").linalg.eigvals(A)))
+        assert (rho <= 1.0) == stable, (H, rho)
+
+
+@pytest.mark.parametrize("order", [1, 2])
+def test_extrapolation_gains_less_than_holding(order):
+    H = 2e-5
+    held = preflight.contact_energy_gain(M, K, 0.0, H, 0) - 1
+    assert abs(preflight.contact_energy_gain(M, K, 0.0, H, order) - 1) < 0.1 * held
+
+
+def _load(H, scheme="jacobi", extra=()):
+    return cosim.load_scene(CASES / "spring_drop.toml", overrides=[
+        'contacts.wall.placement="coupler"', f"scheme.macro_step={H}", *extra], scheme=scheme)
+
+
+def test_refuses_too_large_step_and_names_contact_step_and_limit():
+    # energy factor exp(pi omega H / 2) = 1.01  ->  H* = 2 ln(1.01) / (pi omega) = 6.33e-6 s
+    with pytest.raises(cosim.UnsafeStepError,
+                       match=r"contact `wall`: macro step 0\.0001 s is too large.*largest safe "
+                             r"macro step is 6\.3\de-06 s"):
+        cosim.simulate(_load(1e-4))
+
+
+@pytest.mark.parametrize("scheme", ["jacobi", "gauss_seidel"])
+def test_accepts_safe_step(scheme):
+    res = cosim.simulate(_load(5e-6, scheme, ["t_end=0.014"]))
+    assert res.success
+    assert res.summary["final_state"]["body"]["x"]["dq"] == pytest.approx(1.0, rel=0.01)
+
+
+def test_explicit_risk_acceptance_runs_and_gains_energy():
+    res = cosim.simulate(_load(1e-4, extra=["scheme.accept_unsafe_step=true"]))
+    assert res.success
+    assert res.summary["energy"]["final"] > 1.15 * res.summary["energy"]["initial"]
+
+
+def test_implicit_and_embedded_need_no_check():
+    assert cosim.simulate(_load(1e-4, "implicit")).success
+    scene = cosim.load_scene(CASES / "spring_drop.toml", overrides=["scheme.macro_step=1e-3"],
+                             scheme="jacobi")
+    assert cosim.simulate(scene).success       # the wall's contact is embedded
