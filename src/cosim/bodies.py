@@ -41,9 +41,12 @@ class MultibodySubsystem(Subsystem):
                              f"got {q0.shape} and {dq0.shape}")
         self.x = np.concatenate([q0, dq0])
         self.gravity = None if gravity is None else np.asarray(gravity, float)
+        self._g = None if gravity is None else complex(self.gravity[0], self.gravity[1])
         self.integrator = integrator if integrator is not None else RK4(max_step=1e-4)
         self._port_body = np.array([b for b, _ in ports.values()], dtype=int)
         self._port_local = np.array([p for _, p in ports.values()], dtype=float).reshape(-1, 2)
+        self._port_local_c = self._port_local[:, 0] + 1j * self._port_local[:, 1]
+        self._last_switch = (None, None)
         self._embedded: list = []
         #: switches of embedded contacts located during the last step:
         #: (time, embedded slot, now active)
@@ -60,57 +63,67 @@ class MultibodySubsystem(Subsystem):
         (the point), -1 when it is side ``b`` (the surface).  The impulse and
         dissipated energy of the contact are integrated in ``aux``.
         """
+        xp, vp = np.asarray(partner_position, float), np.asarray(partner_velocity, float)
         self._embedded.append((contact, int(port), float(own_side),
-                               np.asarray(partner_position, float),
-                               np.asarray(partner_velocity, float)))
+                               complex(contact.normal[0], contact.normal[1]),
+                               complex(xp[0], xp[1]), complex(vp[0], vp[1])))
         self.aux = np.zeros(2 * len(self._embedded))
 
     def embedded_quadratures(self) -> np.ndarray:
         """(n_embedded, 2): impulse [N s] and dissipated energy [J] so far."""
         return self.aux.reshape(-1, 2)
 
-    def _embedded_state(self, pos, vel):
-        out = []
-        for contact, port, side, xp, vp in self._embedded:
-            n = np.asarray(contact.normal)
-            d = contact.offset - side * float((pos[port] - xp) @ n)
-            dd = -side * float((vel[port] - vp) @ n)
-            out.append((contact, port, side, n, d, dd))
-        return out
+    def _embedded_state(self, x, v):
+        """Penetration and rate of each embedded contact from complex port
+        positions ``x`` and velocities ``v``."""
+        for contact, port, side, n, xp, vp in self._embedded:
+            d = contact.offset - side * (n.conjugate() * (x[port] - xp)).real
+            dd = -side * (n.conjugate() * (v[port] - vp)).real
+            yield contact, port, side, n, d, dd
 
     # ----------------------------------------------------------- dynamics
-    def _kinematics(self, x):
+    def _evaluate(self, y):
         n = self.n_dof
-        q, dq = x[:n], x[n:2 * n]
-        _, M, F, pk = self.model.dynamics(q, dq, self.gravity, self._port_body, self._port_local)
-        return dq, M, F, pk
+        q, dq = y[:n], y[n:2 * n]
+        M, F, x, v, J, _ = self.model.evaluate(q, dq, self._g, self._port_body,
+                                               self._port_local_c)
+        return dq, M, F, x, v, J
 
-    def _accelerations(self, M, F, pk, u):
-        Q = np.einsum("mxk,mx->k", pk.jacobian, u)
-        return np.linalg.solve(M, Q - F)
+    @staticmethod
+    def _accelerations(M, F, J, u):
+        return np.linalg.solve(M, (J.conj().T @ u).real - F)
 
     def derivatives(self, t, x, u):
-        dq, M, F, pk = self._kinematics(x)
-        return np.concatenate([dq, self._accelerations(M, F, pk, u)])
+        dq, M, F, _, _, J = self._evaluate(x)
+        return np.concatenate([dq, self._accelerations(M, F, J, u[:, 0] + 1j * u[:, 1])])
 
     def _rhs(self, t, y, inputs):
         n2 = 2 * self.n_dof
-        dq, M, F, pk = self._kinematics(y[:n2])
-        u = self._zero_u.copy() if inputs is None else inputs(t)
-        rates = []
-        for contact, port, side, n, d, dd in self._embedded_state(pk.position, pk.velocity):
-            f = float(contact.law.force(d, dd))
+        dq, M, F, x, v, J = self._evaluate(y[:n2])
+        if inputs is None:
+            u = np.zeros(self.n_ports, complex)
+        else:
+            ur = inputs(t)
+            u = ur[:, 0] + 1j * ur[:, 1]
+        rates, switch = [], []
+        for contact, port, side, n, d, dd in self._embedded_state(x, v):
+            law = contact.law
+            f = float(law.force(d, dd))
             u[port] += side * f * n
-            rates += [f, float(contact.law.dissipation_rate(f, d, dd))]
-        return np.concatenate([dq, self._accelerations(M, F, pk, u), rates])
+            rates += [f, float(law.dissipation_rate(f, d, dd))]
+            switch.append(float(law.switch(d, dd)))
+        self._last_switch = (y, np.array(switch))
+        return np.concatenate([dq, self._accelerations(M, F, J, u), rates])
 
     def _switch(self, t, y):
+        if self._last_switch[0] is y:        # the RHS was just evaluated at this state
+            return self._last_switch[1]
         n = self.n_dof
         q, dq = y[:n], y[n:2 * n]
-        fr = self.model.frames(q, dq)
-        pk = self.model.points(fr, dq, self._port_body, self._port_local)
+        x, v, _, _ = self.model.points_c(self.model.frames(q, dq), dq, self._port_body,
+                                        self._port_local_c)
         return np.array([float(c.law.switch(d, dd)) for c, _, _, _, d, dd
-                         in self._embedded_state(pk.position, pk.velocity)])
+                         in self._embedded_state(x, v)])
 
     def _step_impl(self, t, h, inputs: StepInput | None):
         y0 = np.concatenate([self.x, self.aux])
@@ -122,12 +135,14 @@ class MultibodySubsystem(Subsystem):
         n2 = 2 * self.n_dof
         self.x[:] = y1[:n2]
         self.aux[:] = y1[n2:]
+        self._last_switch = (None, None)
 
     def outputs(self, t, x):
         n = self.n_dof
         q, dq = x[:n], x[n:2 * n]
-        pk = self.model.points(self.model.frames(q, dq), dq, self._port_body, self._port_local)
-        return pk.position, pk.velocity
+        xp, vp, _, _ = self.model.points_c(self.model.frames(q, dq), dq, self._port_body,
+                                          self._port_local_c)
+        return np.stack((xp.real, xp.imag), -1), np.stack((vp.real, vp.imag), -1)
 
     def energy(self, x=None):
         x = self.x if x is None else x
@@ -136,11 +151,8 @@ class MultibodySubsystem(Subsystem):
         return self.model.kinetic_energy(q, dq) + self.model.potential_energy(q, self.gravity)
 
     def port_mobility(self, port, direction):
-        n = self.n_dof
-        q, dq = self.x[:n], self.x[n:]
-        _, M, _, pk = self.model.dynamics(q, dq, None, self._port_body[[port]],
-                                          self._port_local[[port]])
-        jn = np.asarray(direction, float) @ pk.jacobian[0]
+        _, M, _, _, _, J = self._evaluate(self.x)
+        jn = (complex(direction[0], direction[1]).conjugate() * J[port]).real
         return float(jn @ np.linalg.solve(M, jn))
 
     def coordinates(self):

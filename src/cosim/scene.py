@@ -24,6 +24,8 @@ log = logging.getLogger(__name__)
 
 SUBSYSTEM_TYPES = ("multibody", "rigid")
 _MISSING = object()
+#: rule name -> (text, check)
+_RULES = {">0": ("> 0", lambda v: v > 0), ">=0": (">= 0", lambda v: v >= 0)}
 
 
 class SceneError(ValueError):
@@ -75,10 +77,8 @@ class _Table:
         v = float(v)
         if not math.isfinite(v):
             self.error(k, f"must be finite, got {v!r}")
-        checks = {">0": v > 0, ">=0": v >= 0, None: True}
-        if not checks[rule]:
-            self.error(k, f"must be {rule.replace('>', '> ').replace('> =', '>=')} "
-                          f"{unit}, got {v!r}".replace("  ", " ").replace(" ,", ","))
+        if rule is not None and not _RULES[rule][1](v):
+            self.error(k, f"must be {_RULES[rule][0]}{' ' + unit if unit else ''}, got {v!r}")
         return v
 
     def integer(self, k, default=_MISSING, *, low: int | None = None):

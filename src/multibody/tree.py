@@ -119,16 +119,17 @@ class Joint:
 
 
 class Frames(NamedTuple):
-    """Kinematic state of every body frame (world coordinates)."""
+    """Kinematic state of every body frame.  Planar vectors are complex
+    numbers ``x + iy``: a rotation by ``theta`` is a product with
+    ``exp(i theta)`` and ``e_z x v`` is ``1j * v``."""
 
-    theta: np.ndarray   # (n,) absolute angles [rad]
-    origin: np.ndarray  # (n, 2) frame origins [m]
-    axis: np.ndarray    # (n, 2) prismatic directions in the world
-    omega: np.ndarray   # (n,) angular velocities [rad/s]
-    velocity: np.ndarray  # (n, 2) origin velocities [m/s]
+    theta: np.ndarray     # (n,) absolute angles [rad]
+    rot: np.ndarray       # (n,) exp(i theta)
+    origin: np.ndarray    # (n,) frame origins [m]
+    axis: np.ndarray      # (n,) prismatic directions in the world
+    omega: np.ndarray     # (n,) angular velocities [rad/s]
+    velocity: np.ndarray  # (n,) origin velocities [m/s]
     parent_omega: np.ndarray  # (n,) angular velocity of each joint's parent
-    cos: np.ndarray     # (n,) cos(theta)
-    sin: np.ndarray     # (n,) sin(theta)
 
 
 class PointKinematics(NamedTuple):
@@ -140,20 +141,13 @@ class PointKinematics(NamedTuple):
     accel_bias: np.ndarray    # (m, 2): acceleration at ddq = 0 (dJ/dt dq)
 
 
-def _perp(v: np.ndarray) -> np.ndarray:
-    """Rotate vectors (..., 2) by +90 degrees: e_z x v."""
-    out = np.empty_like(v)
-    out[..., 0] = -v[..., 1]
-    out[..., 1] = v[..., 0]
-    return out
+def _complex(v) -> np.ndarray:
+    v = np.asarray(v, dtype=float).reshape(-1, 2)
+    return v[:, 0] + 1j * v[:, 1]
 
 
-
-def _rotate_cs(c: np.ndarray, s: np.ndarray, v: np.ndarray) -> np.ndarray:
-    out = np.empty(np.broadcast_shapes(np.shape(c) + (2,), v.shape))
-    out[..., 0] = c * v[..., 0] - s * v[..., 1]
-    out[..., 1] = s * v[..., 0] + c * v[..., 1]
-    return out
+def _real(z: np.ndarray) -> np.ndarray:
+    return np.stack((z.real, z.imag), axis=-1)
 
 
 class TreeModel:
@@ -198,18 +192,17 @@ class TreeModel:
         self.ancestors = anc
         self.revolute = np.array([j.kind == "revolute" for j in joints], dtype=float)
         self.prismatic = 1.0 - self.revolute
-        self._offset = np.array([j.offset for j in joints])
-        self._axis = np.array([j.axis for j in joints])
+        self._offset = _complex([j.offset for j in joints])
+        self._axis = _complex([j.axis for j in joints])
         self._angle0 = anc @ np.array([j.angle for j in joints])
         self.mass = np.array([b.mass for b in bodies])
         self.inertia = np.array([b.inertia for b in bodies])
-        self._com = np.array([b.com for b in bodies])
+        self._com = _complex([b.com for b in bodies])
         self._com_body = np.arange(n)
         # Angular Jacobian is constant in the plane.
-        self._jw = anc * self.revolute[None, :]
-        self._rot_mass = self._jw.T @ (self.inertia[:, None] * self._jw)
-        self._has_parent = self.parent >= 0
-        self._parent_idx = np.where(self._has_parent, self.parent, 0)
+        jw = anc * self.revolute[None, :]
+        self._rot_mass = jw.T @ (self.inertia[:, None] * jw)
+        self._rev1j = 1j * self.revolute
         if not np.all(np.linalg.eigvalsh(self.mass_matrix(np.zeros(n))) > 0):
             raise ValueError("the tree's mass matrix is singular: every joint must move some mass")
 
@@ -226,58 +219,71 @@ class TreeModel:
 
     # ------------------------------------------------------------ kinematics
     def frames(self, q: np.ndarray, dq: np.ndarray) -> Frames:
-        """Angles, origins, velocities of every body frame."""
+        """Angles, origins and velocities of every body frame."""
         anc = self.ancestors
         theta = self._angle0 + anc @ (self.revolute * q)
-        c, s = np.cos(theta), np.sin(theta)
-        pc = np.where(self._has_parent, c[self._parent_idx], 1.0)
-        ps = np.where(self._has_parent, s[self._parent_idx], 0.0)
-        local = self._offset + (self.prismatic * q)[:, None] * self._axis
-        disp = _rotate_cs(pc, ps, local)
-        origin = anc @ disp
-        axis = _rotate_cs(pc, ps, self._axis)
+        rot = np.exp(1j * theta)
+        prot = np.append(rot, 1.0)[self.parent]          # parent -1 is the ground
+        axis = prot * self._axis
+        origin = anc @ (prot * (self._offset + self.prismatic * q * self._axis))
         omega = anc @ (self.revolute * dq)
-        parent_omega = np.where(self._has_parent, omega[self._parent_idx], 0.0)
-        # velocity of origin b = sum over ancestors k of dq_k * column_k(origin_b)
-        cols = self._columns(origin, np.arange(self.n_dof), origin, axis)
-        velocity = np.einsum("bkx,k->bx", cols, dq)
-        return Frames(theta, origin, axis, omega, velocity, parent_omega, c, s)
+        parent_omega = np.append(omega, 0.0)[self.parent]
+        velocity = self._columns(origin, anc, origin, axis) @ dq
+        return Frames(theta, rot, origin, axis, omega, velocity, parent_omega)
 
-    def _columns(self, x: np.ndarray, body: np.ndarray, origin: np.ndarray,
-                 axis: np.ndarray) -> np.ndarray:
-        """Jacobian columns (m, n, 2) of world points ``x`` (m, 2) on bodies ``body``."""
-        rel = x[:, None, :] - origin[None, :, :]
-        cols = self.revolute[None, :, None] * _perp(rel) + self.prismatic[None, :, None] * axis[None]
-        return self.ancestors[body][:, :, None] * cols
+    def _columns(self, x, anc_rows, origin, axis):
+        """Jacobian columns (m, n) of world points ``x`` (m,) whose ancestor
+        rows are ``anc_rows`` (m, n)."""
+        return anc_rows * (self._rev1j * (x[:, None] - origin) + self.prismatic * axis)
+
+    def points_c(self, fr: Frames, dq, body, local_c):
+        """Kinematics of points ``local_c`` (complex, in their body frames) on
+        ``body``, as complex arrays: position, velocity, Jacobian (m, n) and
+        the velocity-product term dJ/dt dq (the fast path of :meth:`points`)."""
+        anc_rows = self.ancestors[body]
+        x = fr.origin[body] + fr.rot[body] * local_c
+        cols = self._columns(x, anc_rows, fr.origin, fr.axis)
+        v = cols @ dq
+        dcol = anc_rows * (self._rev1j * (v[:, None] - fr.velocity)
+                           + self.prismatic * 1j * fr.parent_omega * fr.axis)
+        return x, v, cols, dcol @ dq
 
     def points(self, frames: Frames, dq: np.ndarray, body: np.ndarray,
                local: np.ndarray) -> PointKinematics:
         """Kinematics of material points ``local`` (m, 2) fixed on ``body`` (m,).
 
         Returns position, velocity, Jacobian and the velocity-product term of
-        the acceleration (Lipinski, eqs. 1-2).
+        the acceleration (Lipinski, eqs. 1-2), as real arrays.
         """
-        rel = _rotate_cs(frames.cos[body], frames.sin[body], local)
-        x = frames.origin[body] + rel
-        cols = self._columns(x, body, frames.origin, frames.axis)     # (m, n, 2)
-        v = np.einsum("mkx,k->mx", cols, dq)
-        # d/dt of each column times dq_k
-        dcol = (self.revolute[None, :, None] * _perp(v[:, None, :] - frames.velocity[None])
-                + self.prismatic[None, :, None]
-                * (frames.parent_omega[:, None] * _perp(frames.axis))[None])
-        dcol *= self.ancestors[body][:, :, None]
-        a_bias = np.einsum("mkx,k->mx", dcol, dq)
-        return PointKinematics(x, v, np.swapaxes(cols, 1, 2), a_bias)
+        x, v, J, a = self.points_c(frames, dq, np.asarray(body, int), _complex(local))
+        return PointKinematics(_real(x), _real(v), np.stack((J.real, J.imag), axis=1), _real(a))
 
     # -------------------------------------------------------------- dynamics
     def mass_matrix(self, q: np.ndarray) -> np.ndarray:
         """Mass matrix M(q) (n, n) [kg, kg m, kg m^2 by joint kind]."""
-        fr = self.frames(q, np.zeros_like(q))
-        pk = self.points(fr, np.zeros_like(q), self._com_body, self._com)
-        return self._mass_matrix(pk.jacobian)
+        z = np.zeros_like(q)
+        jc = self.points_c(self.frames(q, z), z, self._com_body, self._com)[2]
+        return self._mass_matrix(jc)
 
     def _mass_matrix(self, jc: np.ndarray) -> np.ndarray:
-        return np.einsum("bxk,bxl,b->kl", jc, jc, self.mass) + self._rot_mass
+        return ((jc.conj().T * self.mass) @ jc).real + self._rot_mass
+
+    def evaluate(self, q, dq, gravity, body, local_c, fr: Frames | None = None):
+        """Fast path for integrators: ``M``, ``F`` and the complex kinematics
+        ``(x, v, J)`` of points ``local_c`` (complex, body frames) on ``body``.
+
+        ``gravity`` is a complex number or None.  The generalised force of
+        point forces ``u`` (complex, one per point) is ``(J.conj().T @ u).real``.
+        """
+        fr = self.frames(q, dq) if fr is None else fr
+        nb = self.n_dof
+        x, v, J, a = self.points_c(fr, dq, np.concatenate((self._com_body, body)),
+                                  np.concatenate((self._com, local_c)))
+        jc = J[:nb]
+        acc = a[:nb] if gravity is None else a[:nb] - gravity
+        M = self._mass_matrix(jc)
+        F = (jc.conj().T @ (self.mass * acc)).real
+        return M, F, x[nb:], v[nb:], J[nb:], a[nb:]
 
     def dynamics(self, q: np.ndarray, dq: np.ndarray, gravity: np.ndarray | None = None,
                  body: np.ndarray | None = None, local: np.ndarray | None = None):
@@ -302,21 +308,14 @@ class TreeModel:
         points : PointKinematics or None
             Kinematics of the extra points.
         """
+        g = None if gravity is None else complex(gravity[0], gravity[1])
         fr = self.frames(q, dq)
-        nb = self.n_dof
         if body is None:
-            pk = self.points(fr, dq, self._com_body, self._com)
-            extra = None
-        else:
-            allpk = self.points(fr, dq, np.concatenate([self._com_body, body]),
-                                np.concatenate([self._com, local]))
-            pk = PointKinematics(*(a[:nb] for a in allpk))
-            extra = PointKinematics(*(a[nb:] for a in allpk))
-        jc = pk.jacobian
-        M = self._mass_matrix(jc)
-        acc = pk.accel_bias if gravity is None else pk.accel_bias - gravity
-        F = np.einsum("bxk,bx,b->k", jc, acc, self.mass)
-        return fr, M, F, extra
+            M, F, *_ = self.evaluate(q, dq, g, np.zeros(0, int), np.zeros(0, complex), fr)
+            return fr, M, F, None
+        M, F, x, v, J, a = self.evaluate(q, dq, g, np.asarray(body, int), _complex(local), fr)
+        return fr, M, F, PointKinematics(_real(x), _real(v), np.stack((J.real, J.imag), 1),
+                                         _real(a))
 
     def kinetic_energy(self, q: np.ndarray, dq: np.ndarray) -> float:
         return 0.5 * float(dq @ self.mass_matrix(q) @ dq)
@@ -326,5 +325,6 @@ class TreeModel:
         if gravity is None:
             return 0.0
         fr = self.frames(q, np.zeros_like(q))
-        com = fr.origin + _rotate_cs(fr.cos, fr.sin, self._com)
-        return -float(np.sum(self.mass * (com @ gravity)))
+        com = fr.origin + fr.rot * self._com
+        g = complex(gravity[0], gravity[1])
+        return -float(np.sum(self.mass * (com.conj() * g).real))
