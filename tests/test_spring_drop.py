@@ -112,7 +112,10 @@ def test_coupler_contact_converges_at_its_order(scheme, order, expected):
     hs = np.array([1e-4, 5e-5, 2.5e-5, 1.25e-5])
     ev, et = [], []
     for H in hs:
-        _, t_c, v = run(scheme, H=H, order=order, placement="coupler")
+        res, t_c, v = run(scheme, H=H, order=order, placement="coupler")
+        # the impulse ledger is exactly the momentum the body received
+        assert res.summary["contacts"]["wall"]["impulse"] == pytest.approx(M * (v + V0),
+                                                                           rel=1e-9)
         ev.append(abs(v / V0 - 1))
         et.append(abs(t_c / T_C - 1))
         if expected != 1:

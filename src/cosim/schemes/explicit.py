@@ -51,33 +51,34 @@ class GaussSeidel(CoSimulationScheme):
 
     def advance(self, system, t, h, ratio):
         base = self._extrapolated(ratio)
-        order = self._order(system)
+        width = max(2, base.shape[0])
+        # per contact, the force polynomial that side `a` (else `b`) receives
+        applied = np.zeros((width, system.n_contacts))
+        applied[:base.shape[0]] = base
         done = {s for s, sub in enumerate(system.subsystems) if sub.rigid}
         outs_n = self._outs
-        applied_a = None
-        for s in order:
-            coeffs = np.zeros((max(2, base.shape[0]), system.n_contacts))
+        for s in self._order(system):
+            coeffs = np.zeros_like(applied)
             coeffs[:base.shape[0]] = base
-            partners = [c for c in system.coupler
-                        if s in (system.links[c].sub_a, system.links[c].sub_b)]
-            if partners:
-                outs = system.outputs()
-                pred = list(outs)
+            mine = [c for c in system.coupler
+                    if s in (system.links[c].sub_a, system.links[c].sub_b)]
+            if mine:
+                pred = list(system.outputs())
                 pos, vel = outs_n[s]
                 if self.extrapolation_order > 0:
                     pos = pos + h * vel
                 pred[s] = (pos, vel)
                 d, dd = system.penetrations(pred)
-                for c in partners:
-                    ln = system.links[c]
-                    other = ln.sub_b if ln.sub_a == s else ln.sub_a
-                    if other in done:
-                        ftilde = float(ln.contact.law.force(d[c], dd[c]))
-                        coeffs[:, c] = 0.0
-                        coeffs[0, c] = self._f[c]
-                        coeffs[1, c] = ftilde - self._f[c]
+            for c in mine:
+                ln = system.links[c]
+                other = ln.sub_b if ln.sub_a == s else ln.sub_a
+                if other in done:
+                    ftilde = float(ln.contact.law.force(d[c], dd[c]))
+                    coeffs[:, c] = 0.0
+                    coeffs[0, c] = self._f[c]
+                    coeffs[1, c] = ftilde - self._f[c]
+                if ln.sub_a == s or system.subsystems[ln.sub_a].rigid:
+                    applied[:, c] = coeffs[:, c]
             system.subsystems[s].step(t, h, system.step_input(s, t, h, coeffs))
             done.add(s)
-            if applied_a is None:
-                applied_a = coeffs
-        return base if applied_a is None else applied_a
+        return applied
