@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 
 from couplers import PointContact
-from multibody import TreeModel
+from multibody import JointEffects, TreeModel
 
 from .integrators import RK4, TimeStepper
 from .subsystem import StepInput, Subsystem
@@ -27,10 +27,18 @@ class MultibodySubsystem(Subsystem):
         Gravitational acceleration [m/s^2]; ``None`` builds no gravity term.
     integrator : TimeStepper
         Used by :meth:`step`; RK4 with sub-steps of at most 1e-4 s by default.
+    effects : JointEffects or None
+        Joint springs, dampers and drives; ``None`` builds none.
+
+    Notes
+    -----
+    ``aux`` holds, per embedded contact, its impulse and dissipated energy,
+    then the energy dissipated by joint dampers and supplied by drives.
     """
 
     def __init__(self, name: str, model: TreeModel, q0, dq0, ports: dict,
-                 gravity=None, integrator: TimeStepper | None = None):
+                 gravity=None, integrator: TimeStepper | None = None,
+                 effects: JointEffects | None = None):
         super().__init__(name, ports.keys())
         self.model = model
         n = model.n_dof
@@ -47,6 +55,8 @@ class MultibodySubsystem(Subsystem):
         self._port_local = np.array([p for _, p in ports.values()], dtype=float).reshape(-1, 2)
         self._port_local_c = self._port_local[:, 0] + 1j * self._port_local[:, 1]
         self._last_switch = (None, None)
+        self.effects = None if effects is None or effects.empty else effects
+        self.aux = np.zeros(2)
         self._embedded: list = []
         #: switches of embedded contacts located during the last step:
         #: (time, embedded slot, now active)
@@ -67,11 +77,30 @@ class MultibodySubsystem(Subsystem):
         self._embedded.append((contact, int(port), float(own_side),
                                complex(contact.normal[0], contact.normal[1]),
                                complex(xp[0], xp[1]), complex(vp[0], vp[1])))
-        self.aux = np.zeros(2 * len(self._embedded))
+        self.aux = np.zeros(2 * len(self._embedded) + 2)
 
     def embedded_quadratures(self) -> np.ndarray:
         """(n_embedded, 2): impulse [N s] and dissipated energy [J] so far."""
-        return self.aux.reshape(-1, 2)
+        return self.aux[:-2].reshape(-1, 2)
+
+    def ledger(self):
+        return float(self.aux[-2]), float(self.aux[-1])
+
+    def ledger_rates(self, t, x):
+        if self.effects is None:
+            return 0.0, 0.0
+        n = self.n_dof
+        return self.effects.rates(t, x[:n], x[n:2 * n])
+
+    def _joint_forces(self, t, y, F):
+        """``F`` less the joint effects' torques, and the ledger rates."""
+        if self.effects is None:
+            return F, 0.0, 0.0
+        n = self.n_dof
+        q, dq = y[:n], y[n:2 * n]
+        drive = self.effects.drive_torque(t, q, dq)
+        diss, sup = self.effects.rates(t, q, dq, drive)
+        return F - self.effects.torque(t, q, dq, drive), diss, sup
 
     def _embedded_state(self, x, v):
         """Penetration and rate of each embedded contact from complex port
@@ -95,11 +124,13 @@ class MultibodySubsystem(Subsystem):
 
     def derivatives(self, t, x, u):
         dq, M, F, _, _, J = self._evaluate(x)
+        F = self._joint_forces(t, x, F)[0]
         return np.concatenate([dq, self._accelerations(M, F, J, u[:, 0] + 1j * u[:, 1])])
 
     def _rhs(self, t, y, inputs):
         n2 = 2 * self.n_dof
         dq, M, F, x, v, J = self._evaluate(y[:n2])
+        F, diss, sup = self._joint_forces(t, y, F)
         if inputs is None:
             u = np.zeros(self.n_ports, complex)
         else:
@@ -113,7 +144,7 @@ class MultibodySubsystem(Subsystem):
             rates += [f, float(law.dissipation_rate(f, d, dd))]
             switch.append(float(law.switch(d, dd)))
         self._last_switch = (y, np.array(switch))
-        return np.concatenate([dq, self._accelerations(M, F, J, u), rates])
+        return np.concatenate([dq, self._accelerations(M, F, J, u), rates, (diss, sup)])
 
     def _switch(self, t, y):
         if self._last_switch[0] is y:        # the RHS was just evaluated at this state
@@ -148,7 +179,8 @@ class MultibodySubsystem(Subsystem):
         x = self.x if x is None else x
         n = self.n_dof
         q, dq = x[:n], x[n:2 * n]
-        return self.model.kinetic_energy(q, dq) + self.model.potential_energy(q, self.gravity)
+        e = self.model.kinetic_energy(q, dq) + self.model.potential_energy(q, self.gravity)
+        return e if self.effects is None else e + self.effects.potential(q)
 
     def port_mobility(self, port, direction):
         _, M, _, _, _, J = self._evaluate(self.x)

@@ -7,7 +7,7 @@ import warnings
 import numpy as np
 
 from couplers import PointContact
-from multibody import Body, Joint, TreeModel
+from multibody import Body, Joint, JointEffects, TreeModel
 
 from .bodies import MultibodySubsystem
 from .integrators import get_integrator
@@ -35,7 +35,9 @@ def _multibody(spec, scene: Scene, default_step):
         raise SceneError(scene.path, spec["key"], str(exc)) from None
     q0 = [j["q0"] for j in spec["joints"]]
     dq0 = [j["dq0"] for j in spec["joints"]]
-    return MultibodySubsystem(spec["name"], model, q0, dq0, spec["ports"], scene.gravity, integ)
+    effects = [e for j in spec["joints"] for e in j["effects"]]
+    return MultibodySubsystem(spec["name"], model, q0, dq0, spec["ports"], scene.gravity, integ,
+                              JointEffects(model.n_dof, effects) if effects else None)
 
 
 def build_system(scene: Scene, scheme: str | None = None):

@@ -79,6 +79,7 @@ class Recorder:
         self.intervals = [[] for _ in range(nc)]
         self._open = [None] * nc
         self.e0 = None
+        self.supplied = 0.0
         self.max_drift = 0.0
         self.last = None
 
@@ -91,13 +92,17 @@ class Recorder:
             self._open[c] = None
 
     def record(self, t: float, d: np.ndarray, dd: np.ndarray, f: np.ndarray,
-               impulse: np.ndarray, dissipated: np.ndarray) -> None:
-        """Add a sample; subsystem states are read from the system."""
+               impulse: np.ndarray, dissipated: np.ndarray, internal=(0.0, 0.0)) -> None:
+        """Add a sample; subsystem states are read from the system.
+
+        ``dissipated`` is per contact; ``internal`` is the energy dissipated
+        inside the subsystems and supplied to them by drives, in total."""
         energy = self.system.energy(d)
-        diss_total = float(np.sum(dissipated))
+        diss_total = float(np.sum(dissipated)) + internal[0]
         if self.e0 is None:
             self.e0 = energy
-        drift = energy + diss_total - self.e0
+        self.supplied = internal[1]
+        drift = energy + diss_total - internal[1] - self.e0
         self.max_drift = max(self.max_drift, abs(drift))
         active = f > 0.0
         prev = self._prev
@@ -117,7 +122,7 @@ class Recorder:
             for c in np.flatnonzero(active):
                 self.edge(int(c), t, True)
         self._prev = (t, d.copy(), dd.copy(), active)
-        self.last = (t, impulse.copy(), dissipated.copy(), energy)
+        self.last = (t, impulse.copy(), dissipated.copy(), energy, diss_total)
         if self._count % self.every == 0:
             self._store(t, d, f, energy, diss_total)
         self._count += 1
@@ -148,7 +153,7 @@ class Recorder:
         if self._count and self._t[-1] != self._prev[0]:
             tp, dp, _, _ = self._prev   # always keep the final sample
             self._store(tp, dp, self.system.forces(dp, self._prev[2]), self.last[3],
-                        float(np.sum(self.last[2])))
+                        self.last[4])
         t_last = self._prev[0] if self._prev else 0.0
         intervals = [list(iv) + ([[self._open[c], t_last]] if self._open[c] is not None else [])
                      for c, iv in enumerate(self.intervals)]
@@ -205,7 +210,8 @@ class Recorder:
                 "initial": float(self.e0 if self.e0 is not None else 0.0),
                 "final": float(e_final),
                 "max_abs_drift": float(self.max_drift),
-                "dissipated": float(np.sum(dissipated)),
+                "dissipated": float(self.last[4]) if self.last else 0.0,
+                "supplied": float(self.supplied),
             },
             "contacts": contacts,
             "impacts": [],

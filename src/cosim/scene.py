@@ -372,6 +372,7 @@ def _subsystem_spec(name: str, t: _Table) -> dict:
                 "q0": jt.number("q0", 0.0),
                 "dq0": jt.number("dq0", 0.0),
             }
+            joint["effects"] = _joint_effects(jt, len(names))
             jt.finish()
             pts = bt.table("points", {})
             points = {p: pts.vec2(p) for p in list(pts.data)}
@@ -393,6 +394,70 @@ def _subsystem_spec(name: str, t: _Table) -> dict:
                     ports={p: (i, pt) for p, (_, i, pt) in ports.items()})
     t.finish()
     return spec
+
+
+def _model(t: _Table, cls, **kw):
+    """Construct a model object, turning its ValueError into a SceneError."""
+    try:
+        return cls(**kw)
+    except (TypeError, ValueError) as exc:
+        raise SceneError(t.file, t.key(), str(exc)) from None
+
+
+def _floats(t: _Table, k: str) -> tuple:
+    v = t.raw(k)
+    if not isinstance(v, list) or not v or any(
+            isinstance(x, bool) or not isinstance(x, (int, float)) for x in v):
+        t.error(k, f"must be a non-empty array of numbers, got {v!r}")
+    return tuple(float(x) for x in v)
+
+
+def _trajectory(t: _Table):
+    from multibody import TRAJECTORIES, MinimumJerk, Sinusoid, Table
+    kind = t.string("type", choices=TRAJECTORIES)
+    if kind == "table":
+        out = _model(t, Table, times=_floats(t, "times"), values=_floats(t, "values"))
+    elif kind == "minimum_jerk":
+        out = _model(t, MinimumJerk, start=t.number("start"), end=t.number("end"),
+                     t_start=t.number("t_start", unit="s"), t_end=t.number("t_end", unit="s"))
+    else:
+        out = _model(t, Sinusoid, amplitude=t.number("amplitude"),
+                     frequency=t.number("frequency", unit="Hz"), phase=t.number("phase", 0.0),
+                     offset=t.number("offset", 0.0))
+    t.finish()
+    return out
+
+
+def _joint_effects(jt: _Table, index: int) -> list:
+    """Springs, dampers and drives declared on a joint (none unless declared)."""
+    from multibody import (ConstantTorque, JointDamper, JointSpring, PDTracking, Table,
+                           TorqueTable)
+    out = []
+    if jt.has("spring"):
+        st = jt.table("spring")
+        out.append(_model(st, JointSpring, joint=index,
+                          stiffness=st.number("stiffness", rule=">=0"),
+                          rest=st.number("rest", 0.0)))
+        st.finish()
+    if jt.has("damper"):
+        dt = jt.table("damper")
+        out.append(_model(dt, JointDamper, joint=index, damping=dt.number("damping", rule=">=0")))
+        dt.finish()
+    if jt.has("drive"):
+        dr = jt.table("drive")
+        kind = dr.string("type", choices=("constant", "table", "pd"))
+        if kind == "constant":
+            out.append(_model(dr, ConstantTorque, joint=index, torque=dr.number("torque")))
+        elif kind == "table":
+            table = _model(dr, Table, times=_floats(dr, "times"), values=_floats(dr, "torques"))
+            out.append(TorqueTable(index, table))
+        else:
+            out.append(_model(dr, PDTracking, joint=index, kp=dr.number("kp", rule=">=0"),
+                              kd=dr.number("kd", rule=">=0"),
+                              reference=_trajectory(dr.table("reference")),
+                              max_torque=dr.number("max_torque", math.inf, rule=">0")))
+        dr.finish()
+    return out
 
 
 def _contact_spec(name: str, t: _Table, subs: list[dict]) -> dict:

@@ -129,6 +129,15 @@ class Subsystem(ABC):
     def energy(self, x: np.ndarray | None = None) -> float:
         """Mechanical energy held by the subsystem [J]."""
 
+    def ledger(self) -> tuple[float, float]:
+        """Energy dissipated inside the subsystem and supplied to it by drives
+        since the start [J] (co-simulation face)."""
+        return 0.0, 0.0
+
+    def ledger_rates(self, t: float, x: np.ndarray) -> tuple[float, float]:
+        """Rates of :meth:`ledger` at ``(t, x)`` [W] (model-exchange face)."""
+        return 0.0, 0.0
+
     def port_mobility(self, port: int, direction) -> float:
         """Interface compliance of a port along ``direction`` at the current
         state: the acceleration answering a unit force, ``n^T J M^-1 J^T n``

@@ -1,4 +1,8 @@
 """Planar tree-like multibody systems in joint coordinates."""
+from .effects import (TRAJECTORIES, ConstantTorque, JointDamper, JointEffects, JointSpring,
+                      MinimumJerk, PDTracking, Sinusoid, Table, TorqueTable)
 from .tree import JOINT_KINDS, Body, Frames, Joint, PointKinematics, TreeModel
 
-__all__ = ["Body", "Joint", "TreeModel", "Frames", "PointKinematics", "JOINT_KINDS"]
+__all__ = ["Body", "Joint", "TreeModel", "Frames", "PointKinematics", "JOINT_KINDS",
+           "JointEffects", "JointSpring", "JointDamper", "ConstantTorque", "TorqueTable",
+           "PDTracking", "Table", "MinimumJerk", "Sinusoid", "TRAJECTORIES"]

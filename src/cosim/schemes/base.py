@@ -152,7 +152,7 @@ class CoSimulationScheme(CouplingScheme):
         impulse, diss = np.zeros(nc), np.zeros(nc)
         law = [ln.contact.law for ln in system.links]
         p_prev = np.array([float(law[c].dissipation_rate(f[c], d[c], dd[c])) for c in coupler])
-        recorder.record(0.0, d, dd, f, impulse, diss)
+        recorder.record(0.0, d, dd, f, impulse, diss, self._internal(system))
         n = max(1, math.ceil(t_end / H - 1e-9))
         h_prev = H
         for k in range(n):
@@ -182,8 +182,13 @@ class CoSimulationScheme(CouplingScheme):
                         recorder.edge(c, ts, on)
             if not (np.all(np.isfinite(d)) and np.all(np.isfinite(dd))):
                 raise CouplingError(f"non-finite state at t = {t + h:.6g} s")
-            recorder.record(t + h, d, dd, f, impulse, diss)
+            recorder.record(t + h, d, dd, f, impulse, diss, self._internal(system))
         return {"n_windows": n, "n_iterations": self.n_iterations, "n_rejected": 0}
+
+    @staticmethod
+    def _internal(system):
+        led = [s.ledger() for s in system.subsystems]
+        return sum(a for a, _ in led), sum(b for _, b in led)
 
     def _extrapolated(self, ratio: float) -> np.ndarray:
         return extrapolation_coeffs(self._hist, self.extrapolation_order, ratio)

@@ -51,8 +51,8 @@ class Monolithic(CouplingScheme):
         def contact_state(y):
             xs = split(y)
             d, dd = system.penetrations([sub.outputs(0.0, xs[s]) for s, sub in enumerate(subs)])
-            f = np.array([float(laws[c].force_active(d[c], dd[c])) if active[c] else 0.0
-                          for c in range(nc)])
+            f = np.array([max(float(laws[c].force_active(d[c], dd[c])), 0.0) if active[c]
+                          else 0.0 for c in range(nc)])
             return xs, d, dd, f
 
         def rhs(t, y):
@@ -60,7 +60,8 @@ class Monolithic(CouplingScheme):
             parts = [sub.derivatives(t, xs[s], system.port_forces(s, f))
                      for s, sub in enumerate(subs)]
             diss = [float(laws[c].dissipation_rate(f[c], d[c], dd[c])) for c in range(nc)]
-            return np.concatenate(parts + [f, diss])
+            led = np.sum([sub.ledger_rates(t, xs[s]) for s, sub in enumerate(subs)], axis=0)
+            return np.concatenate(parts + [f, diss, led])
 
         def make_switch(c):
             def ev(t, y):
@@ -79,7 +80,7 @@ class Monolithic(CouplingScheme):
 
         switches = [make_switch(c) for c in range(nc)]
         peaks = [make_peak(c) for c in range(nc)]
-        y = np.concatenate([s.x for s in subs] + [np.zeros(2 * nc)])
+        y = np.concatenate([s.x for s in subs] + [np.zeros(2 * nc + 2)])
         dt_out = self.output_interval or t_end / 1000.0
 
         def record(t, yy):
@@ -88,7 +89,8 @@ class Monolithic(CouplingScheme):
                 sub.x[...] = xs[s]
                 sub.t = t
             _, d, dd, f = contact_state(yy)
-            recorder.record(t, d, dd, f, yy[n_x:n_x + nc], yy[n_x + nc:])
+            recorder.record(t, d, dd, f, yy[n_x:n_x + nc], yy[n_x + nc:n_x + 2 * nc],
+                            (yy[-2], yy[-1]))
 
         # Contacts already closed at t = 0.
         _, d0, dd0, _ = contact_state(y)
