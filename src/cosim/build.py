@@ -29,8 +29,12 @@ def _multibody(spec, scene: Scene, default_step):
         joints = [Joint(j["name"], j["kind"], j["parent"], j["offset"], j["axis"], j["angle"])
                   for j in spec["joints"]]
         model = TreeModel(bodies, joints)
-        step = spec["max_step"] or default_step
-        integ = get_integrator(spec["integrator"])(max_step=step)
+        cls = get_integrator(spec["integrator"])
+        if spec["integrator"] == "rk4":
+            integ = cls(max_step=spec["max_step"] or default_step)
+        else:
+            step = {"max_step": spec["max_step"]} if spec["max_step"] else {}
+            integ = cls(**step, **spec["integrator_options"])
     except ValueError as exc:
         raise SceneError(scene.path, spec["key"], str(exc)) from None
     q0 = [j["q0"] for j in spec["joints"]]
@@ -50,7 +54,10 @@ def build_system(scene: Scene, scheme: str | None = None):
         the integrator step of the side that carries it.
     """
     name = scheme or scene.scheme
-    cls = get_scheme(name)
+    try:
+        cls = get_scheme(name)
+    except ValueError as exc:
+        raise SceneError(scene.path, "scheme.name", str(exc)) from None
     opts = scene.scheme_options if name == scene.scheme else {}
     if name != scene.scheme:
         dropped = sorted(set(scene.scheme_options) - set(cls.options))
@@ -85,12 +92,19 @@ def build_system(scene: Scene, scheme: str | None = None):
         mob = subs[s].port_mobility(port, ln.contact.normal)
         omega = math.sqrt(ln.contact.law.stiffness * mob)
         dt = subs[s].integrator.max_step
-        if omega * dt > 0.5 * _RK4_LIMIT:
+        if subs[s].integrator.name == "rk4" and omega * dt > 0.5 * _RK4_LIMIT:
             limit = 0.5 * _RK4_LIMIT / omega
             raise SceneError(scene.path, f"subsystems.{subs[s].name}.integrator.max_step",
                              f"is {dt:.3g} s, too large for contact `{ln.contact.name}` "
                              f"(omega = {omega:.4g} rad/s): the integrator needs a step below "
                              f"{limit:.3g} s to resolve it")
+    seq = opts.get("sequence")
+    if seq is not None:
+        moving = [s.name for s in subs if not s.rigid]
+        unknown = [n for n in seq if n not in names]
+        if unknown or sorted(n for n in seq if n in moving) != sorted(moving):
+            raise SceneError(scene.path, "scheme.sequence",
+                             f"must list every moving subsystem once ({moving}), got {seq!r}")
     try:
         sch = cls(**opts)
     except (TypeError, ValueError) as exc:

@@ -13,7 +13,7 @@ from typing import Callable, ClassVar
 
 import numpy as np
 
-__all__ = ["TimeStepper", "RK4", "INTEGRATORS", "get_integrator"]
+__all__ = ["TimeStepper", "RK4", "ScipyStepper", "INTEGRATORS", "get_integrator"]
 
 
 def _hermite(y0, f0, y1, f1, h, theta):
@@ -128,7 +128,88 @@ class RK4(TimeStepper):
         return y + (h / 6.0) * (k1 + 2.0 * (k2 + k3) + k4)
 
 
-INTEGRATORS: dict[str, type[TimeStepper]] = {RK4.name: RK4}
+@dataclass(frozen=True)
+class ScipyStepper(TimeStepper):
+    """Adaptive integration with :func:`scipy.integrate.solve_ivp` over each
+    step, ending exactly at its end.
+
+    A switch (a sign change of one of the ``switch`` functions) is a terminal
+    event: located on the dense output, the integration restarts there, so no
+    step of the adaptive method straddles a kink.
+
+    Parameters
+    ----------
+    max_step : float
+        Largest internal step [s] (``inf`` for none).
+    rtol, atol : float
+        Tolerances of the error control.
+    """
+
+    max_step: float = math.inf
+    rtol: float = 1e-8
+    atol: float = 1e-10
+    method: ClassVar[str] = "RK45"
+
+    def __post_init__(self):
+        if not (isinstance(self.max_step, (int, float)) and self.max_step > 0):
+            raise ValueError(f"`max_step` must be > 0 s, got {self.max_step!r}")
+        for k in ("rtol", "atol"):
+            v = getattr(self, k)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise ValueError(f"`{k}` must be > 0, got {v!r}")
+
+    def _single(self, f, t, y, h, k1):  # pragma: no cover - integrate() is overridden
+        return self.integrate(f, t, y, t + h)
+
+    def integrate(self, f, t0, y0, t1, switch=None, on_switch=None):
+        from scipy.integrate import solve_ivp
+
+        t, y = t0, y0
+        sign = None if switch is None else switch(t, y) > 0
+        while t < t1:
+            events = None
+            if switch is not None:
+                events = [self._event(switch, j, bool(sign[j])) for j in range(len(sign))]
+            sol = solve_ivp(f, (t, t1), y, method=self.method, rtol=self.rtol, atol=self.atol,
+                            max_step=self.max_step, events=events)
+            if sol.status == -1:
+                raise RuntimeError(f"integrator {self.name} failed at t = {sol.t[-1]:.6g} s: "
+                                   f"{sol.message}")
+            t, y = float(sol.t[-1]), sol.y[:, -1]
+            if sol.status != 1:
+                break
+            j = min((i for i in range(len(sign)) if len(sol.t_events[i])),
+                    key=lambda i: sol.t_events[i][0])
+            sign = sign.copy()
+            sign[j] = not sign[j]
+            if on_switch is not None:
+                on_switch(t, j, bool(sign[j]))
+        return y
+
+    @staticmethod
+    def _event(switch, j, positive):
+        def ev(t, y):
+            return float(switch(t, y)[j])
+        ev.terminal = True
+        ev.direction = -1.0 if positive else 1.0
+        return ev
+
+
+def _scipy(method_name: str, scipy_method: str, doc: str):
+    cls = type(f"Scipy{scipy_method}", (ScipyStepper,), {
+        "__doc__": doc, "name": method_name, "method": scipy_method,
+        "order": {"RK45": 5, "DOP853": 8, "Radau": 5, "BDF": 5}[scipy_method],
+        "__annotations__": {}})
+    return dataclass(frozen=True)(cls)
+
+
+RK45 = _scipy("rk45", "RK45", "Adaptive explicit Dormand-Prince 5(4) (scipy).")
+DOP853 = _scipy("dop853", "DOP853", "Adaptive explicit Dormand-Prince 8(5,3) (scipy).")
+Radau = _scipy("radau", "Radau", "Implicit Radau IIA of order 5 (scipy), for stiff contacts.")
+BDF = _scipy("bdf", "BDF", "Implicit backward differentiation, orders 1-5 (scipy).")
+
+INTEGRATORS: dict[str, type[TimeStepper]] = {
+    cls.name: cls for cls in (RK4, RK45, DOP853, Radau, BDF)}
 
 
 def get_integrator(name) -> type[TimeStepper]:

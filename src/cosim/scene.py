@@ -11,6 +11,7 @@ from __future__ import annotations
 import copy
 import logging
 import math
+import re
 import tomllib
 import warnings
 from dataclasses import dataclass, field
@@ -74,7 +75,10 @@ class _Table:
         if isinstance(v, bool) or not isinstance(v, (int, float)):
             self.error(k, f"must be a number{' [' + unit + ']' if unit else ''}, "
                           f"got {_type_name(v)} {v!r}")
-        v = float(v)
+        try:
+            v = float(v)
+        except OverflowError:
+            v = math.inf
         if not math.isfinite(v):
             self.error(k, f"must be finite, got {v!r}")
         if rule is not None and not _RULES[rule][1](v):
@@ -114,8 +118,12 @@ class _Table:
         if (not isinstance(v, list) or len(v) != 2
                 or any(isinstance(x, bool) or not isinstance(x, (int, float)) for x in v)):
             self.error(k, f"must be an array of two numbers [{unit}], got {v!r}")
+        try:
+            v = [float(x) for x in v]
+        except OverflowError:
+            v = [math.inf]
         if not all(math.isfinite(x) for x in v):
-            self.error(k, f"must be finite, got {v!r}")
+            self.error(k, f"must be finite, got {self.data[k]!r}")
         if nonzero and v[0] == 0 and v[1] == 0:
             self.error(k, f"must be a non-zero vector, got {v!r}")
         return (float(v[0]), float(v[1]))
@@ -168,6 +176,8 @@ def parse_override(text: str, file="--set") -> tuple[list[str], object]:
 
 
 def _apply_override(data: dict, path: list[str], value, file) -> None:
+    if path[0] in ("variants", "default_variant"):
+        raise SceneError(file, ".".join(path), "is chosen with --variant, not with --set")
     node = data
     for i, k in enumerate(path[:-1]):
         nxt = node.setdefault(k, {})
@@ -248,11 +258,16 @@ def load_scene(path, variant: str | None = None, overrides=(), scheme: str | Non
     if not isinstance(variants, dict) or not all(isinstance(v, dict) for v in variants.values()):
         raise SceneError(file, "variants", "must be a table of tables")
     default_variant = data.pop("default_variant", None)
+    if default_variant is not None and not isinstance(default_variant, str):
+        raise SceneError(file, "default_variant",
+                         f"must be a string, got {_type_name(default_variant)} "
+                         f"{default_variant!r}")
     chosen = variant if variant is not None else default_variant
     if chosen is not None:
         if chosen not in variants:
-            raise SceneError(file, "variants",
-                             f"has no variant {chosen!r}; variants are {sorted(variants)}")
+            key = "default_variant" if variant is None else "variants"
+            raise SceneError(file, key,
+                             f"names no variant {chosen!r}; variants are {sorted(variants)}")
         _merge(data, variants[chosen])
     for ov in overrides:
         p, v = parse_override(ov, file) if isinstance(ov, str) else ov
@@ -260,7 +275,7 @@ def load_scene(path, variant: str | None = None, overrides=(), scheme: str | Non
     if scheme is not None:
         sch = data.setdefault("scheme", {})
         if not isinstance(sch, dict):
-            raise SceneError(file, "scheme", f"must be a table, got {sch!r}")
+            raise SceneError(file, "scheme", f"must be a table, got {_type_name(sch)} {sch!r}")
         sch["name"] = scheme
     return _validate(data, file, chosen)
 
@@ -286,6 +301,8 @@ def _validate(data: dict, file, variant) -> Scene:
             sch.error(k, f"is not an option of any scheme; options of `{scheme_name}` are "
                          f"{sorted(cls.options)}")
         if k not in cls.options:
+            other = next(c for c in COUPLING_SCHEMES.values() if k in c.options)
+            _scheme_option(sch, k, other.options[k])      # still a valid value
             ignored.append(k)
             continue
         opts[k] = _scheme_option(sch, k, cls.options[k])
@@ -353,17 +370,26 @@ def _subsystem_spec(name: str, t: _Table) -> dict:
         from .integrators import INTEGRATORS
         spec["integrator"] = integ.string("method", "rk4", choices=INTEGRATORS)
         spec["max_step"] = integ.number("max_step", None, rule=">0", unit="s")
+        opts = {k: integ.number(k, rule=">0") for k in ("rtol", "atol") if integ.has(k)}
+        if opts and spec["integrator"] == "rk4":
+            integ.error(sorted(opts)[0], "is not an option of the fixed-step `rk4` (it takes "
+                                         "`max_step`); adaptive methods take `rtol` and `atol`")
+        spec["integrator_options"] = opts
         integ.finish()
         bodies, joints, ports = [], [], {}
         names = []
         for bname, bt in t.tables("bodies"):
             jt = bt.table("joint")
+            jname = jt.string("name")
+            if jname in [j["name"] for j in joints]:
+                jt.error("name", f"repeats joint {jname!r}; joint names must be unique in "
+                                 f"subsystem `{name}`")
             parent = jt.string("parent", "ground")
             if parent != "ground" and parent not in names:
                 jt.error("parent", f"must be `ground` or a body declared before `{bname}`; "
                                    f"declared so far: {names}")
             joint = {
-                "name": jt.string("name"),
+                "name": jname,
                 "kind": jt.string("type", choices=("revolute", "prismatic")),
                 "parent": -1 if parent == "ground" else names.index(parent),
                 "offset": jt.vec2("offset", (0.0, 0.0)),
@@ -397,11 +423,20 @@ def _subsystem_spec(name: str, t: _Table) -> dict:
 
 
 def _model(t: _Table, cls, **kw):
-    """Construct a model object, turning its ValueError into a SceneError."""
+    """Construct a model object, turning its ValueError into a SceneError at
+    the key of the parameter it names (or the table's)."""
     try:
         return cls(**kw)
     except (TypeError, ValueError) as exc:
-        raise SceneError(t.file, t.key(), str(exc)) from None
+        raise _model_error(t, exc) from None
+
+
+def _model_error(t: _Table, exc: Exception) -> SceneError:
+    msg = str(exc)
+    m = re.match(r"`(\w+)` (.*)", msg, re.S)
+    if m and m.group(1) in t.data:
+        return SceneError(t.file, t.key(m.group(1)), m.group(2))
+    return SceneError(t.file, t.key(), msg)
 
 
 def _floats(t: _Table, k: str) -> tuple:
@@ -490,10 +525,7 @@ def _contact_spec(name: str, t: _Table, subs: list[dict]) -> dict:
         elif f.default is dataclasses.MISSING:
             law_t.error(f.name, f"is required by law `{law_name}`")
     law_t.finish()
-    try:
-        law = law_cls(**params)
-    except (TypeError, ValueError) as exc:
-        raise SceneError(t.file, law_t.key(), str(exc)) from None
+    law = _model(law_t, law_cls, **params)
     kinds = {s["name"]: s["type"] for s in subs}
     rigid_side = kinds[a[0]] == "rigid" or kinds[b[0]] == "rigid"
     if kinds[a[0]] == "rigid" and kinds[b[0]] == "rigid":
