@@ -2,18 +2,31 @@
 import numpy as np
 import pytest
 
-from couplers import CONTACT_LAWS, KelvinVoigtLaw, LinearLaw, get_contact_law
+from couplers import CONTACT_LAWS, KelvinVoigtLaw, LinearLaw, RigidLaw, get_contact_law
 
-EXAMPLES = {"linear": LinearLaw(1e6), "kelvin_voigt": KelvinVoigtLaw(1e6, 300.0)}
+EXAMPLES = {"linear": LinearLaw(1e6), "kelvin_voigt": KelvinVoigtLaw(1e6, 300.0),
+            "rigid": RigidLaw(0.5, 0.2)}
+PENALTY = sorted(k for k, v in CONTACT_LAWS.items() if not v.rigid)
 
 
 def test_every_registered_law_has_an_example():
     assert set(EXAMPLES) == set(CONTACT_LAWS)
 
 
-@pytest.fixture(params=sorted(CONTACT_LAWS))
+@pytest.fixture(params=PENALTY)
 def law(request):
     return EXAMPLES[request.param]
+
+
+def test_rigid_law_has_no_force_and_switches_at_touch():
+    law = EXAMPLES["rigid"]
+    d = np.array([-1e-3, 0.0, 1e-3])
+    assert np.all(law.force(d, np.ones(3)) == 0) and np.all(law.potential(d) == 0)
+    assert list(law.switch(d, np.zeros(3)) > 0) == [False, False, True]
+    with pytest.raises(ValueError, match=r"`restitution` must be in \[0, 1\], got 1\.5"):
+        RigidLaw(1.5, 0.0)
+    with pytest.raises(ValueError, match=r"`friction` must be >= 0"):
+        RigidLaw(0.5, -0.1)
 
 
 def test_force_is_never_tensile_and_agrees_with_switch(law):

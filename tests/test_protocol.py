@@ -109,7 +109,7 @@ def test_rk4_locates_a_switch_and_restarts_there():
     sw = lambda t, y: np.array([-y[0]])
     log = []
     y = RK4(max_step=7e-4).integrate(f, 0.0, np.array([0.05, -1.0]), 0.2, sw,
-                                     lambda t, j, on: log.append((t, on)))
+                                     lambda t, j, on, y: log.append((t, on)))
     t_c = math.pi / math.sqrt(w2)
     assert [on for _, on in log] == [True, False]
     assert log[0][0] == pytest.approx(0.05, abs=1e-12)

@@ -5,7 +5,9 @@ import numpy as np
 
 from couplers import PointContact
 from multibody import JointEffects, TreeModel
+from multibody.impact import frictional_impact, frictionless_impact
 
+from .errors import SimulationError
 from .integrators import RK4, TimeStepper
 from .subsystem import StepInput, Subsystem
 
@@ -61,6 +63,8 @@ class MultibodySubsystem(Subsystem):
         #: switches of embedded contacts located during the last step:
         #: (time, embedded slot, now active)
         self.switch_log: list[tuple[float, int, bool]] = []
+        #: rigid impacts resolved during the last step (dicts for the summary)
+        self.impact_log: list[dict] = []
         self._zero_u = np.zeros((self.n_ports, 2))
 
     # ------------------------------------------------------ embedded contacts
@@ -160,13 +164,76 @@ class MultibodySubsystem(Subsystem):
         y0 = np.concatenate([self.x, self.aux])
         switch = self._switch if self._embedded else None
         self.switch_log = []
+        self.impact_log = []
         y1 = self.integrator.integrate(lambda tt, yy: self._rhs(tt, yy, inputs), t, y0, t + h,
-                                       switch, lambda ts, j, on: self.switch_log.append(
-                                           (ts, j, on)))
+                                       switch, self._on_switch)
         n2 = 2 * self.n_dof
         self.x[:] = y1[:n2]
         self.aux[:] = y1[n2:]
         self._last_switch = (None, None)
+
+    def _on_switch(self, t, j, on, y):
+        self.switch_log.append((t, j, on))
+        if on and self._embedded[j][0].law.rigid:
+            return self.rigid_impact(t, y, j)
+        return None
+
+    def rigid_impact(self, t: float, y: np.ndarray, slot: int):
+        """Resolve the impact of embedded rigid contact ``slot`` at state ``y``.
+
+        Poisson restitution and, with ``friction > 0``, Coulomb friction
+        integrated in impulse space (``multibody.impact``).  Returns the state
+        with the post-impact velocities (``aux`` quadratures updated when
+        ``y`` carries them), or None if the point is not approaching.
+
+        Raises
+        ------
+        SimulationError
+            If the contact would stay closed after the impact (restitution 0):
+            sustained rigid contact is not modelled; use a penalty law.
+        """
+        contact, port, side, nrm, _, _ = self._embedded[slot]
+        law = contact.law
+        n = self.n_dof
+        q, dq = y[:n], y[n:2 * n]
+        M, _, _, _, J, _ = self.model.evaluate(q, dq, None, self._port_body,
+                                               self._port_local_c)
+        jn = side * (nrm.conjugate() * J[port]).real
+        jt = side * ((1j * nrm).conjugate() * J[port]).real
+        vn, vt = float(jn @ dq), float(jt @ dq)
+        if vn >= 0.0:
+            return None
+        if law.friction > 0:
+            res = frictional_impact(M, dq, jn, jt, law.restitution, law.friction)
+        else:
+            res = frictionless_impact(M, dq, jn[None, :], law.restitution)
+        out = y.copy()
+        out[n:2 * n] = res.dq_plus
+        if y.size > 2 * n:           # the stepping state carries the quadratures
+            out[2 * n + 2 * slot] += float(res.normal_impulse[0])
+            out[2 * n + 2 * slot + 1] += res.energy_loss
+        vn_plus = float(jn @ res.dq_plus)
+        names = self.model.joint_names
+        self.impact_log.append({
+            "time": float(t), "contact": contact.name,
+            "normal_impulse": float(res.normal_impulse[0]),
+            "tangential_impulse": float(res.tangential_impulse[0]),
+            "compression_impulse": float(res.compression_impulse[0]),
+            "normal_velocity": [vn, vn_plus],
+            "tangential_velocity": [vt, float(jt @ res.dq_plus)],
+            "q": dict(zip(names, map(float, q))),
+            "dq_before": dict(zip(names, map(float, dq))),
+            "dq_after": dict(zip(names, map(float, res.dq_plus))),
+            "energy_loss": float(res.energy_loss),
+            "slip_history": [[float(a), float(b), m] for a, b, m in res.slip_history],
+            "slip_end": res.slip_end,
+        })
+        if vn_plus <= 1e-9 * max(1.0, abs(vn)):
+            raise SimulationError(
+                f"rigid contact `{contact.name}` stays closed after its impact at t = {t:.6g} s "
+                f"(normal velocity {vn_plus:.3g} m/s): sustained rigid contact is not modelled; "
+                f"give it a restitution above 0 or use a penalty law")
+        return out
 
     def outputs(self, t, x):
         n = self.n_dof

@@ -21,6 +21,17 @@ def _print_summary(s: dict, out: Path | None) -> None:
               f"{c['peak_penetration']:.4g} m, impulse {c['impulse']:.4g} N s")
     print(f"  energy: initial {e['initial']:.6g} J, final {e['final']:.6g} J, dissipated "
           f"{e['dissipated']:.4g} J, max drift {e['max_abs_drift']:.3g} J")
+    for imp in s["impacts"]:
+        vn, vt = imp["normal_velocity"], imp["tangential_velocity"]
+        slip = " -> ".join(m for _, _, m in imp["slip_history"]) or "frictionless"
+        print(f"  impact {imp['contact']} at t = {imp['time']:.6g} s: normal impulse "
+              f"{imp['normal_impulse']:.5g} N s (compression {imp['compression_impulse']:.5g}), "
+              f"tangential {imp['tangential_impulse']:.5g} N s")
+        print(f"    contact velocity normal {vn[0]:.5g} -> {vn[1]:.5g} m/s, tangential "
+              f"{vt[0]:.5g} -> {vt[1]:.5g} m/s; slip: {slip}"
+              + (f" ({imp['slip_end']})" if imp["slip_end"] else ""))
+        after = ", ".join(f"{k} {v:.5g}" for k, v in imp["dq_after"].items())
+        print(f"    joint velocities after [rad/s]: {after}")
     for sub, joints in s["final_state"].items():
         vals = ", ".join(f"{j} = {v['q']:.6g} ({v['dq']:.6g}/s)" for j, v in joints.items())
         print(f"  final {sub}: {vals}")

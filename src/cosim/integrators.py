@@ -59,6 +59,11 @@ class TimeStepper:
             right-hand side (a contact opening or closing).  A sub-step over
             which a sign changes is redone in two pieces that meet at the
             switch, located on the cubic Hermite interpolant of the sub-step.
+        on_switch : callable ``on_switch(t, index, positive, y)`` or None
+            Told of each located switch: its time, the switch function's
+            index, its new sign and the state there.  It may return a new
+            state (an impact's jump of the velocities); the integration then
+            goes on from it.
         """
         n = max(1, math.ceil((t1 - t0) / self.max_step - 1e-9))
         dt = (t1 - t0) / n
@@ -82,17 +87,27 @@ class TimeStepper:
                         k1 = f(t, y)
                         s_new = switch(t, y)
                         if on_switch is not None:
-                            for j in np.flatnonzero((s0 > 0) != (s_new > 0)):
-                                on_switch(t, int(j), bool(s_new[j] > 0))
+                            y, k1, s_new = self._notify(f, switch, on_switch, t, y, k1,
+                                                        s0, s_new)
                         s0 = s_new
                         continue  # the rest of this sub-step, from the switch
                     if on_switch is not None:
-                        for j in np.flatnonzero(flipped):
-                            on_switch(te, int(j), bool(s1[j] > 0))
+                        y1, k1n, s1 = self._notify(f, switch, on_switch, te, y1, k1n, s0, s1)
                 s0 = s1
             t, y, k1 = te, y1, k1n
             i += 1
         return y
+
+    @staticmethod
+    def _notify(f, switch, on_switch, t, y, k, s_old, s_new):
+        """Tell of each flipped switch; apply any jump it returns."""
+        for j in np.flatnonzero((s_old > 0) != (s_new > 0)):
+            jumped = on_switch(t, int(j), bool(s_new[j] > 0), y)
+            if jumped is not None:
+                y = jumped
+                k = f(t, y)
+                s_new = switch(t, y)
+        return y, k, s_new
 
     @staticmethod
     def _locate(switch, t, y0, f0, y1, f1, h, s0, flipped):
@@ -183,7 +198,10 @@ class ScipyStepper(TimeStepper):
             sign = sign.copy()
             sign[j] = not sign[j]
             if on_switch is not None:
-                on_switch(t, j, bool(sign[j]))
+                jumped = on_switch(t, j, bool(sign[j]), y)
+                if jumped is not None:
+                    y = jumped
+                    sign = switch(t, y) > 0
         return y
 
     @staticmethod

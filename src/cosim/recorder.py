@@ -79,6 +79,8 @@ class Recorder:
         self.intervals = [[] for _ in range(nc)]
         self._open = [None] * nc
         self.e0 = None
+        #: rigid impacts, in time order (dicts, see MultibodySubsystem.rigid_impact)
+        self.impacts: list[dict] = []
         self.supplied = 0.0
         self.max_drift = 0.0
         self.last = None
@@ -214,7 +216,7 @@ class Recorder:
                 "supplied": float(self.supplied),
             },
             "contacts": contacts,
-            "impacts": [],
+            "impacts": sorted(self.impacts, key=lambda i: i["time"]),
             "final_state": final_state,
         }
         return SimulationResult(

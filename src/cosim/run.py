@@ -6,7 +6,8 @@ import time
 
 from .recorder import Recorder
 from .scene import Scene, load_scene
-from .schemes import CouplingError, Monolithic
+from .errors import SimulationError
+from .schemes import Monolithic
 
 __all__ = ["simulate", "run_scene"]
 
@@ -34,7 +35,7 @@ def simulate(scene: Scene, *, scheme: str | None = None):
     counters = {}
     try:
         counters = sch.run(system, scene.t_end, rec)
-    except CouplingError as exc:
+    except SimulationError as exc:
         status, message = "failed", str(exc)
         log.error("%s", exc)
     return rec.finish(status, message, time.process_time() - cpu0, counters)

@@ -152,9 +152,13 @@ class _Table:
 
 # ---------------------------------------------------------------- overrides
 def _merge(base: dict, over: dict) -> dict:
+    """Merge ``over`` into ``base`` key by key.  A table that names another
+    ``type`` than the one it overrides (a law, a drive) replaces it whole."""
     for k, v in over.items():
-        if isinstance(v, dict) and isinstance(base.get(k), dict):
-            _merge(base[k], v)
+        old = base.get(k)
+        if (isinstance(v, dict) and isinstance(old, dict)
+                and not ("type" in v and v["type"] != old.get("type"))):
+            _merge(old, v)
         else:
             base[k] = copy.deepcopy(v)
     return base
@@ -532,6 +536,9 @@ def _contact_spec(name: str, t: _Table, subs: list[dict]) -> dict:
         t.error("b", "a contact between two rigid subsystems has nothing to simulate")
     placement = t.string("placement", "embedded" if rigid_side else "coupler",
                          choices=("embedded", "coupler"))
+    if law.rigid and placement != "embedded":
+        t.error("placement", "a `rigid` law is resolved inside its moving side's integrator: "
+                             "it needs placement `embedded` and a rigid side")
     if placement == "embedded" and not rigid_side:
         t.error("placement", "`embedded` needs a rigid side (wall, ground); with two moving "
                              "sides use `coupler`")

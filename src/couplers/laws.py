@@ -23,7 +23,7 @@ from typing import ClassVar
 
 import numpy as np
 
-__all__ = ["ContactLaw", "LinearLaw", "KelvinVoigtLaw", "CONTACT_LAWS", "get_contact_law"]
+__all__ = ["ContactLaw", "LinearLaw", "KelvinVoigtLaw", "RigidLaw", "CONTACT_LAWS", "get_contact_law"]
 
 
 def _positive(value, name: str, unit: str, allow_zero: bool = False) -> float:
@@ -44,6 +44,8 @@ class ContactLaw(ABC):
     and the force on the active branch."""
 
     name: ClassVar[str] = ""
+    #: True for a law resolved by impulses instead of a force.
+    rigid: ClassVar[bool] = False
 
     @abstractmethod
     def force_active(self, d, dd):
@@ -149,9 +151,52 @@ class KelvinVoigtLaw(LinearLaw):
         return self.contact_damping
 
 
+@dataclass(frozen=True)
+class RigidLaw(ContactLaw):
+    """A rigid contact: no force and no penetration, an impulse at touch-down.
+
+    The impact is resolved by the moving side's integrator with Poisson
+    restitution and Coulomb friction (``multibody.impact``).  The law itself
+    has no force, no potential, and its switch ``d`` marks touch-down.
+
+    Parameters
+    ----------
+    restitution : float
+        Poisson's kinetic coefficient, in [0, 1].
+    friction : float
+        Coulomb friction coefficient ``mu >= 0``.
+    """
+
+    restitution: float = 0.0
+    friction: float = 0.0
+    name: ClassVar[str] = "rigid"
+    rigid: ClassVar[bool] = True
+
+    def __post_init__(self):
+        e = self.restitution
+        if isinstance(e, bool) or not isinstance(e, (int, float)) or not 0.0 <= e <= 1.0:
+            raise ValueError(f"`restitution` must be in [0, 1], got {e!r}")
+        object.__setattr__(self, "restitution", float(e))
+        object.__setattr__(self, "friction", _positive(self.friction, "friction", "", True))
+
+    def force_active(self, d, dd):
+        return 0.0 * d
+
+    def potential(self, d):
+        return 0.0 * d
+
+    def potential_slope(self, d):
+        return 0.0 * d
+
+    @property
+    def stiffness(self) -> float:
+        return math.inf
+
+
 CONTACT_LAWS: dict[str, type[ContactLaw]] = {
     LinearLaw.name: LinearLaw,
     KelvinVoigtLaw.name: KelvinVoigtLaw,
+    RigidLaw.name: RigidLaw,
 }
 
 

@@ -8,6 +8,7 @@ from typing import Any, Callable, ClassVar, NamedTuple
 import numpy as np
 
 from .. import preflight
+from ..errors import CouplingError, UnsafeStepError
 
 __all__ = ["Option", "CouplingScheme", "CoSimulationScheme", "UnsafeStepError", "CouplingError",
            "extrapolation_coeffs"]
@@ -26,12 +27,6 @@ def _pos(v):
     return v > 0 and math.isfinite(v)
 
 
-class UnsafeStepError(ValueError):
-    """The macro step is too large for a contact's stiffness."""
-
-
-class CouplingError(RuntimeError):
-    """The coupling failed during a run (an implicit step did not converge)."""
 
 
 def extrapolation_coeffs(hist: list, order: int, ratio: float = 1.0) -> np.ndarray:
@@ -177,9 +172,16 @@ class CoSimulationScheme(CouplingScheme):
             emb = system.embedded_quadratures()
             for c, (s, slot) in system.embedded.items():
                 impulse[c], diss[c] = emb[c]
-                for ts, j, on in system.subsystems[s].switch_log:
-                    if j == slot:
+                sub = system.subsystems[s]
+                rigid = system.links[c].contact.law.rigid
+                for ts, j, on in sub.switch_log:
+                    if j == slot and not rigid:
                         recorder.edge(c, ts, on)
+                    elif j == slot and on:            # an impact is an instant
+                        recorder.edge(c, ts, True)
+                        recorder.edge(c, ts, False)
+            for s in self._moving(system):
+                recorder.impacts += getattr(system.subsystems[s], "impact_log", [])
             if not (np.all(np.isfinite(d)) and np.all(np.isfinite(dd))):
                 raise CouplingError(f"non-finite state at t = {t + h:.6g} s")
             recorder.record(t + h, d, dd, f, impulse, diss, self._internal(system))

@@ -104,7 +104,7 @@ class Monolithic(CouplingScheme):
         next_out = dt_out
         while t < t_end * (1 - 1e-14):
             for c, ev in enumerate(switches):
-                ev.direction = -1.0 if active[c] else 1.0
+                ev.direction = -1.0 if active[c] else 1.0   # a rigid one is never active
             sol = solve_ivp(rhs, (t, t_end), y, method=self.method, rtol=self.rtol,
                             atol=self.atol, max_step=self.max_step, dense_output=True,
                             events=switches + peaks)
@@ -129,8 +129,31 @@ class Monolithic(CouplingScheme):
                 c = min(range(nc), key=lambda i: sol.t_events[i][0]
                         if len(sol.t_events[i]) else math.inf)
                 record(t, y)
-                active[c] = not active[c]
-                recorder.edge(c, t, bool(active[c]))
+                if laws[c].rigid:
+                    y = self._impact(system, c, t, y, off, n_x, nc, recorder)
+                    record(t, y)
+                else:
+                    active[c] = not active[c]
+                    recorder.edge(c, t, bool(active[c]))
             elif t >= t_end * (1 - 1e-14):
                 record(t, y)
         return {"n_windows": n_segments, "n_iterations": 0, "n_rejected": 0}
+
+    @staticmethod
+    def _impact(system, c, t, y, off, n_x, nc, recorder):
+        """Apply rigid contact ``c``'s impact to the stacked state."""
+        s, slot = system.embedded[c]
+        sub = system.subsystems[s]
+        sub.impact_log = []
+        x_new = sub.rigid_impact(t, y[off[s]:off[s + 1]], slot)
+        if x_new is None:
+            return y
+        y = y.copy()
+        y[off[s]:off[s + 1]] = x_new
+        imp = sub.impact_log[-1]
+        y[n_x + c] += imp["normal_impulse"]
+        y[n_x + nc + c] += imp["energy_loss"]
+        recorder.impacts.append(imp)
+        recorder.edge(c, t, True)
+        recorder.edge(c, t, False)
+        return y
