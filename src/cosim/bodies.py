@@ -178,61 +178,88 @@ class MultibodySubsystem(Subsystem):
             return self.rigid_impact(t, y, j)
         return None
 
-    def rigid_impact(self, t: float, y: np.ndarray, slot: int):
-        """Resolve the impact of embedded rigid contact ``slot`` at state ``y``.
+    #: a rigid contact this close to touching takes part in another's impact [m]
+    CLOSED_GAP = 1e-9
 
-        Poisson restitution and, with ``friction > 0``, Coulomb friction
-        integrated in impulse space (``multibody.impact``).  Returns the state
-        with the post-impact velocities (``aux`` quadratures updated when
+    def rigid_impact(self, t: float, y: np.ndarray, slot: int):
+        """Resolve the impact that embedded rigid contact ``slot`` starts at
+        state ``y``.
+
+        Every rigid contact closed at this instant (gap below
+        :attr:`CLOSED_GAP`) takes part.  One contact: Poisson restitution and,
+        with ``friction > 0``, Coulomb friction integrated in impulse space;
+        several: frictionless Poisson impact, the active impulses decided as a
+        linear complementarity problem (``multibody.impact``).  Returns the
+        state with the post-impact velocities (``aux`` quadratures updated when
         ``y`` carries them), or None if the point is not approaching.
 
         Raises
         ------
         SimulationError
-            If the contact would stay closed after the impact (restitution 0):
-            sustained rigid contact is not modelled; use a penalty law.
+            If a contact would stay closed after the impact (restitution 0):
+            sustained rigid contact is not modelled; use a penalty law.  Or if
+            several contacts with friction strike at once.
         """
-        contact, port, side, nrm, _, _ = self._embedded[slot]
-        law = contact.law
         n = self.n_dof
         q, dq = y[:n], y[n:2 * n]
-        M, _, _, _, J, _ = self.model.evaluate(q, dq, None, self._port_body,
+        M, _, x, v, J, _ = self.model.evaluate(q, dq, None, self._port_body,
                                                self._port_local_c)
-        jn = side * (nrm.conjugate() * J[port]).real
-        jt = side * ((1j * nrm).conjugate() * J[port]).real
-        vn, vt = float(jn @ dq), float(jt @ dq)
-        if vn >= 0.0:
+        states = list(self._embedded_state(x, v))
+        part = [slot] + [k for k, (c, _, _, _, d, _) in enumerate(states)
+                         if k != slot and c.law.rigid and d >= -self.CLOSED_GAP]
+        rows = []
+        for k in part:
+            _, port, side, nrm, _, _ = self._embedded[k]
+            rows.append((side * (nrm.conjugate() * J[port]).real,
+                         side * ((1j * nrm).conjugate() * J[port]).real))
+        jn = np.array([r[0] for r in rows])
+        jt = np.array([r[1] for r in rows])
+        vn, vt = jn @ dq, jt @ dq
+        if vn[0] >= 0.0:
             return None
-        if law.friction > 0:
-            res = frictional_impact(M, dq, jn, jt, law.restitution, law.friction)
+        laws = [self._embedded[k][0].law for k in part]
+        names = [self._embedded[k][0].name for k in part]
+        if len(part) == 1 and laws[0].friction > 0:
+            res = frictional_impact(M, dq, jn[0], jt[0], laws[0].restitution, laws[0].friction)
+        elif len(part) > 1 and any(law.friction > 0 for law in laws):
+            raise SimulationError(
+                f"rigid contacts {names} strike at once at t = {t:.6g} s with friction: only "
+                f"frictionless simultaneous impacts are modelled; set their friction to 0 or "
+                f"use penalty laws")
         else:
-            res = frictionless_impact(M, dq, jn[None, :], law.restitution)
+            res = frictionless_impact(M, dq, jn, [law.restitution for law in laws])
         out = y.copy()
         out[n:2 * n] = res.dq_plus
-        if y.size > 2 * n:           # the stepping state carries the quadratures
-            out[2 * n + 2 * slot] += float(res.normal_impulse[0])
-            out[2 * n + 2 * slot + 1] += res.energy_loss
-        vn_plus = float(jn @ res.dq_plus)
-        names = self.model.joint_names
-        self.impact_log.append({
-            "time": float(t), "contact": contact.name,
-            "normal_impulse": float(res.normal_impulse[0]),
-            "tangential_impulse": float(res.tangential_impulse[0]),
-            "compression_impulse": float(res.compression_impulse[0]),
-            "normal_velocity": [vn, vn_plus],
-            "tangential_velocity": [vt, float(jt @ res.dq_plus)],
-            "q": dict(zip(names, map(float, q))),
-            "dq_before": dict(zip(names, map(float, dq))),
-            "dq_after": dict(zip(names, map(float, res.dq_plus))),
-            "energy_loss": float(res.energy_loss),
-            "slip_history": [[float(a), float(b), m] for a, b, m in res.slip_history],
-            "slip_end": res.slip_end,
-        })
-        if vn_plus <= 1e-9 * max(1.0, abs(vn)):
-            raise SimulationError(
-                f"rigid contact `{contact.name}` stays closed after its impact at t = {t:.6g} s "
-                f"(normal velocity {vn_plus:.3g} m/s): sustained rigid contact is not modelled; "
-                f"give it a restitution above 0 or use a penalty law")
+        vn_plus, vt_plus = jn @ res.dq_plus, jt @ res.dq_plus
+        total = float(np.sum(res.normal_impulse))
+        joints = self.model.joint_names
+        for i, k in enumerate(part):
+            p_i = float(res.normal_impulse[i])
+            if y.size > 2 * n:           # the stepping state carries the quadratures
+                out[2 * n + 2 * k] += p_i
+                out[2 * n + 2 * k + 1] += res.energy_loss * (p_i / total if total else 0.0)
+            if k != slot:
+                self.switch_log.append((t, k, True))
+            self.impact_log.append({
+                "time": float(t), "contact": names[i],
+                "simultaneous_with": [m for m in names if m != names[i]],
+                "normal_impulse": p_i,
+                "tangential_impulse": float(res.tangential_impulse[i]),
+                "compression_impulse": float(res.compression_impulse[i]),
+                "normal_velocity": [float(vn[i]), float(vn_plus[i])],
+                "tangential_velocity": [float(vt[i]), float(vt_plus[i])],
+                "q": dict(zip(joints, map(float, q))),
+                "dq_before": dict(zip(joints, map(float, dq))),
+                "dq_after": dict(zip(joints, map(float, res.dq_plus))),
+                "energy_loss": float(res.energy_loss) * (p_i / total if total else 0.0),
+                "slip_history": [[float(a), float(b), m] for a, b, m in res.slip_history],
+                "slip_end": res.slip_end,
+            })
+            if p_i > 0 and vn_plus[i] <= 1e-9 * max(1.0, abs(vn[i])):
+                raise SimulationError(
+                    f"rigid contact `{names[i]}` stays closed after its impact at t = {t:.6g} s "
+                    f"(normal velocity {vn_plus[i]:.3g} m/s): sustained rigid contact is not "
+                    f"modelled; give it a restitution above 0 or use a penalty law")
         return out
 
     def outputs(self, t, x):

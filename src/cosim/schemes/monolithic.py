@@ -150,10 +150,11 @@ class Monolithic(CouplingScheme):
             return y
         y = y.copy()
         y[off[s]:off[s + 1]] = x_new
-        imp = sub.impact_log[-1]
-        y[n_x + c] += imp["normal_impulse"]
-        y[n_x + nc + c] += imp["energy_loss"]
-        recorder.impacts.append(imp)
-        recorder.edge(c, t, True)
-        recorder.edge(c, t, False)
+        for imp in sub.impact_log:          # one entry per contact taking part
+            k = system.contact_names.index(imp["contact"])
+            y[n_x + k] += imp["normal_impulse"]
+            y[n_x + nc + k] += imp["energy_loss"]
+            recorder.impacts.append(imp)
+            recorder.edge(k, t, True)
+            recorder.edge(k, t, False)
         return y
