@@ -66,6 +66,44 @@ def _cmd_verify(args) -> int:
     return 1 if failed else 0
 
 
+def _fmt(v):
+    if v is None:
+        return "not limited"
+    return f"{v:.4g}" if isinstance(v, float) else str(v)
+
+
+def _cmd_info(args) -> int:
+    import json
+
+    from .info import scene_info
+    from .scene import load_scene
+
+    info = scene_info(load_scene(args.scene, args.variant, args.set or ()))
+    if args.json:
+        print(json.dumps(info, indent=2))
+        return 0
+    print(f"scene {info['scene']}  variant {info['variant']}  scheme {info['scheme']}  "
+          f"t_end {info['t_end']:g} s")
+    for name, s in info["subsystems"].items():
+        line = f"  subsystem {name}: {s['type']}, {s['dofs']} DOF"
+        if "natural_frequencies_hz" in s:
+            line += ", lowest frequencies [Hz] " + ", ".join(
+                f"{f:.4g}" for f in s["natural_frequencies_hz"][:6])
+        print(line)
+    for name, c in info["contacts"].items():
+        print(f"  contact {name}: {c['law']} ({c['placement']}) between {c['between'][0]} and "
+              f"{c['between'][1]}")
+        if "frequency_hz" in c:
+            print(f"    reduced mass {c['reduced_mass']:.4g} kg, frequency {c['frequency_hz']:.4g}"
+                  f" Hz, contact time {c['contact_time_s']:.4g} s")
+            print("    largest stable macro step [s]: " + ", ".join(
+                f"{k} {_fmt(v)}" for k, v in c["max_macro_step_s"].items()))
+            if "max_integrator_step_s" in c:
+                print("    largest stable integrator step [s]: " + ", ".join(
+                    f"{k} {_fmt(v)}" for k, v in c["max_integrator_step_s"].items()))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="cosim", description="Co-simulation of impacts between "
                                 "robots and vibrating structures.")
@@ -80,6 +118,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="override a scene value (after the variant); repeatable")
     r.add_argument("--out", help="output directory (default runs/SCENE[-VARIANT])")
     r.set_defaults(func=_cmd_run)
+    i = sub.add_parser("info", help="what a run will meet: DOFs, frequencies, stable steps")
+    i.add_argument("scene", help="scene file (TOML)")
+    i.add_argument("--variant")
+    i.add_argument("--set", action="append", metavar="KEY=VALUE")
+    i.add_argument("--json", action="store_true", help="print JSON")
+    i.set_defaults(func=_cmd_info)
     v = sub.add_parser("verify", help="run the verification cases; exit 1 if any fails")
     v.add_argument("--cases", default="cases", help="folder of the scene files (default cases)")
     v.set_defaults(func=_cmd_verify)

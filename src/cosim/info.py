@@ -1,0 +1,72 @@
+"""What a run will meet, before it runs: `cosim info`."""
+from __future__ import annotations
+
+import math
+
+from . import preflight
+from .schemes import COUPLING_SCHEMES
+
+__all__ = ["scene_info"]
+
+#: RK4's stability limit on an undamped oscillator, omega * dt.
+RK4_LIMIT = 2.0 * math.sqrt(2.0)
+
+
+def _contact_info(system, c, scene) -> dict:
+    ln = system.links[c]
+    law = ln.contact.law
+    out = {"law": law.name, "placement": ln.placement,
+           "between": [system.names[ln.sub_a], system.names[ln.sub_b]]}
+    if law.rigid:
+        out.update(restitution=law.restitution, friction=law.friction)
+        return out
+    n = ln.contact.normal
+    mob = (system.subsystems[ln.sub_a].port_mobility(ln.port_a, n)
+           + system.subsystems[ln.sub_b].port_mobility(ln.port_b, n))
+    k, cd = law.stiffness, law.damping
+    m = 1.0 / mob
+    omega = math.sqrt(k / m)
+    out.update(stiffness=k, damping=cd, reduced_mass=m, frequency_hz=omega / (2 * math.pi),
+               contact_time_s=math.pi / omega)
+    opts = scene.scheme_options
+    order, gain = opts.get("extrapolation_order", 0), opts.get("max_energy_gain", 0.01)
+    steps = {}
+    for name, cls in COUPLING_SCHEMES.items():
+        if ln.placement == "embedded" or not cls.explicit:
+            steps[name] = None       # not limited by this contact
+        else:
+            steps[name] = preflight.largest_safe_step(
+                m, k, cd, 10 * math.pi / omega, order, gain,
+                name == "gauss_seidel" and order > 0)
+    out["max_macro_step_s"] = steps
+    if ln.placement == "embedded":
+        out["max_integrator_step_s"] = {"rk4": RK4_LIMIT / omega}
+    return out
+
+
+def scene_info(scene) -> dict:
+    """DOFs and natural frequencies of each subsystem, and each contact's
+    frequency, contact time and largest stable macro step per scheme.
+
+    Frequencies are in Hz, times in s.  The reduced mass of a contact is
+    that of its two ports at the initial state, ``1 / (n^T J M^-1 J^T n)``
+    summed over both sides."""
+    system, _ = scene.build()
+    subs = {}
+    for sub in system.subsystems:
+        entry = {"type": "rigid" if sub.rigid else type(sub).__name__, "dofs": sub.n_states // 2,
+                 "ports": list(sub.port_names)}
+        coords = sub.coordinates()
+        if coords:
+            entry["coordinates"] = list(coords)
+        freqs = getattr(sub, "natural_frequencies_hz", None)
+        if freqs is not None:
+            entry["natural_frequencies_hz"] = [float(f) for f in freqs]
+        subs[sub.name] = entry
+    return {
+        "scene": scene.name, "variant": scene.variant, "scheme": scene.scheme,
+        "scheme_options": dict(scene.scheme_options), "t_end": scene.t_end,
+        "subsystems": subs,
+        "contacts": {name: _contact_info(system, c, scene)
+                     for c, name in enumerate(system.contact_names)},
+    }
