@@ -15,7 +15,7 @@ import pytest
 
 from conftest import CASES
 from cosim.integrators import INTEGRATORS
-from cosim.scene import SceneError, load_scene, parse_override
+from cosim.scene import SUBSYSTEM_TYPES, SceneError, load_scene, parse_override
 from couplers import CONTACT_LAWS, KelvinVoigtLaw, LinearLaw
 
 SPRING_DROP = CASES / "spring_drop.toml"
@@ -293,7 +293,8 @@ CASES_BAD = [
     (["subsystems=1"], at("subsystems", "must be a table, got an integer 1")),
     (["subsystems={}"], at("subsystems", "must declare at least one subsystem")),
     ([f"{B}=1"], at(B, "must be a table, got an integer 1")),
-    ([f"{B}.type=fem"], at(f"{B}.type", "must be one of ['multibody', 'rigid'], got 'fem'")),
+    ([f"{B}.type=fem"], at(f"{B}.type", f"must be one of {sorted(SUBSYSTEM_TYPES)}, "
+                                        "got 'fem'")),
     ([f"{B}.type=1"], at(f"{B}.type", "must be a string, got an integer 1")),
     ([f"{B}.damping=1"], at(f"{B}.damping", f"is not a known key of {B}")),
     ([f"{B}.integrator=rk4"], at(f"{B}.integrator", "must be a table, got a string 'rk4'")),

@@ -44,6 +44,28 @@ def _multibody(spec, scene: Scene, default_step):
                               JointEffects(model.n_dof, effects) if effects else None)
 
 
+def _structure(spec, scene: Scene):
+    """Assemble a structure, keep its modes, set its initial state."""
+    import fem
+
+    from .structure import StructureSubsystem
+    try:
+        structure = spec["model"].assemble()
+        basis = fem.modes(structure, **{k: v for k, v in spec["modes"].items() if v})
+    except ValueError as exc:
+        raise SceneError(scene.path, spec["key"], str(exc)) from None
+    n = structure.n_dof
+    u0 = None
+    if spec["static_equilibrium"]:
+        if scene.gravity is None:
+            raise SceneError(scene.path, f"{spec['key']}.static_equilibrium",
+                             "needs gravity (`effects.gravity`) to have a meaning")
+        u0 = structure.static_displacement(structure.gravity_load(np.asarray(scene.gravity)))
+    v0 = np.full(n, spec["initial_velocity"]) if spec["initial_velocity"] else None
+    return StructureSubsystem(spec["name"], structure, basis, spec["ports"], u0, v0,
+                              scene.gravity, spec["contact_step"])
+
+
 def build_system(scene: Scene, scheme: str | None = None):
     """Build the subsystems, contacts and the coupling scheme of ``scene``.
 
@@ -73,8 +95,10 @@ def build_system(scene: Scene, scheme: str | None = None):
     for spec in scene.subsystems:
         if spec["type"] == "rigid":
             subs.append(RigidReference(spec["name"], spec["points"]))
-        else:
+        elif spec["type"] == "multibody":
             subs.append(_multibody(spec, scene, default_step))
+        else:
+            subs.append(_structure(spec, scene))
     names = [s.name for s in subs]
     links = []
     for c in scene.contacts:
@@ -92,13 +116,20 @@ def build_system(scene: Scene, scheme: str | None = None):
             continue
         s = ln.sub_a if not subs[ln.sub_a].rigid else ln.sub_b
         port = ln.port_a if s == ln.sub_a else ln.port_b
+        if ln.contact.law.rigid:
+            continue
         mob = subs[s].port_mobility(port, ln.contact.normal)
         omega = math.sqrt(ln.contact.law.stiffness * mob)
-        dt = subs[s].integrator.max_step
-        if (not ln.contact.law.rigid and subs[s].integrator.name == "rk4"
-                and omega * dt > 0.5 * _RK4_LIMIT):
+        if isinstance(subs[s], MultibodySubsystem):
+            if subs[s].integrator.name != "rk4":
+                continue
+            dt, key = subs[s].integrator.max_step, "max_step"
+        else:   # a structure: RK4 while the contact is closed, over every kept mode
+            omega = max(omega, float(np.max(subs[s].omega)))
+            dt, key = subs[s]._rk4.max_step, "contact_step"
+        if omega * dt > 0.5 * _RK4_LIMIT:
             limit = 0.5 * _RK4_LIMIT / omega
-            raise SceneError(scene.path, f"subsystems.{subs[s].name}.integrator.max_step",
+            raise SceneError(scene.path, f"subsystems.{subs[s].name}.integrator.{key}",
                              f"is {dt:.3g} s, too large for contact `{ln.contact.name}` "
                              f"(omega = {omega:.4g} rad/s): the integrator needs a step below "
                              f"{limit:.3g} s to resolve it")

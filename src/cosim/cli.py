@@ -19,6 +19,10 @@ def _print_summary(s: dict, out: Path | None) -> None:
         span = f"first [{first[0]:.6g}, {first[1]:.6g}] s" if first else "never touched"
         print(f"  contact {name}: {c['count']} interval(s), {span}, peak penetration "
               f"{c['peak_penetration']:.4g} m, impulse {c['impulse']:.4g} N s")
+        if c["count"] > 1:
+            t0, t1 = c["intervals"][0][0], c["intervals"][-1][1]
+            print(f"    first touch {t0:.6g} s, last release {t1:.6g} s (span {t1 - t0:.6g} s, "
+                  f"in touch {c['in_touch_time']:.6g} s)")
     print(f"  energy: initial {e['initial']:.6g} J, final {e['final']:.6g} J, dissipated "
           f"{e['dissipated']:.4g} J, max drift {e['max_abs_drift']:.3g} J")
     for imp in s["impacts"]:
@@ -33,6 +37,9 @@ def _print_summary(s: dict, out: Path | None) -> None:
         after = ", ".join(f"{k} {v:.5g}" for k, v in imp["dq_after"].items())
         print(f"    joint velocities after [rad/s]: {after}")
     for sub, joints in s["final_state"].items():
+        if len(joints) > 12:
+            print(f"  final {sub}: {len(joints)} DOFs (in summary.json)")
+            continue
         vals = ", ".join(f"{j} = {v['q']:.6g} ({v['dq']:.6g}/s)" for j, v in joints.items())
         print(f"  final {sub}: {vals}")
     if s["message"]:
@@ -86,6 +93,8 @@ def _cmd_info(args) -> int:
           f"t_end {info['t_end']:g} s")
     for name, s in info["subsystems"].items():
         line = f"  subsystem {name}: {s['type']}, {s['dofs']} DOF"
+        if "modes_kept" in s:
+            line += f" ({s['modes_kept']} modes kept, {s['modes_dropped']} dropped)"
         if "natural_frequencies_hz" in s:
             line += ", lowest frequencies [Hz] " + ", ".join(
                 f"{f:.4g}" for f in s["natural_frequencies_hz"][:6])

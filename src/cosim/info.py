@@ -60,7 +60,11 @@ def scene_info(scene) -> dict:
         if coords:
             entry["coordinates"] = list(coords)
         freqs = getattr(sub, "natural_frequencies_hz", None)
-        if freqs is not None:
+        if freqs is not None:       # a structure: physical DOFs, kept and dropped modes
+            entry["dofs"] = sub.structure.n_dof
+            entry["modes_kept"] = int(sub.basis.kept)
+            entry["modes_dropped"] = int(sub.basis.dropped)
+            entry["mode_cutoff_hz"] = sub.basis.cutoff_hz
             entry["natural_frequencies_hz"] = [float(f) for f in freqs]
         subs[sub.name] = entry
     return {

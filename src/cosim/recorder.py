@@ -170,6 +170,15 @@ class Recorder:
         offsets = sysm.stacked()
         final_state = {}
         for s, sub in enumerate(sysm.subsystems):
+            if hasattr(sub, "named_values"):      # a structure: physical DOFs of its modes
+                names, U, V = sub.named_values(X[:, offsets[s]:offsets[s + 1]])
+                _, uf, vf = sub.named_values(sub.x)
+                final_state[sub.name] = {}
+                for i, name in enumerate(names):
+                    series[f"q/{sub.name}/{name}"] = U[:, i]
+                    series[f"dq/{sub.name}/{name}"] = V[:, i]
+                    final_state[sub.name][name] = {"q": float(uf[i]), "dq": float(vf[i])}
+                continue
             coords = sub.coordinates()
             if not coords:
                 continue

@@ -23,7 +23,8 @@ __all__ = ["SceneError", "Scene", "load_scene", "parse_override", "SUBSYSTEM_TYP
 
 log = logging.getLogger(__name__)
 
-SUBSYSTEM_TYPES = ("multibody", "rigid")
+STRUCTURE_TYPES = ("chain", "beam", "cable", "string", "rod")
+SUBSYSTEM_TYPES = ("multibody", "rigid") + STRUCTURE_TYPES
 _MISSING = object()
 #: rule name -> (text, check)
 _RULES = {">0": ("> 0", lambda v: v > 0), ">=0": (">= 0", lambda v: v >= 0)}
@@ -364,7 +365,9 @@ def _scheme_option(sch: _Table, k, opt):
 def _subsystem_spec(name: str, t: _Table) -> dict:
     kind = t.string("type", choices=SUBSYSTEM_TYPES)
     spec = {"name": name, "type": kind, "key": t.key()}
-    if kind == "rigid":
+    if kind in STRUCTURE_TYPES:
+        spec.update(_structure_spec(t, kind))
+    elif kind == "rigid":
         pts = t.table("points")
         spec["points"] = {p: pts.vec2(p) for p in list(pts.data)}
         if not spec["points"]:
@@ -497,6 +500,88 @@ def _joint_effects(jt: _Table, index: int) -> list:
                               max_torque=dr.number("max_torque", math.inf, rule=">0")))
         dr.finish()
     return out
+
+
+def _structure_spec(t: _Table, kind: str) -> dict:
+    """Model, ports, modes and initial state of a structure (a chain, beam,
+    cable, string or rod)."""
+    import fem
+    kw = {}
+    if kind == "chain":
+        kw["masses"] = _floats(t, "masses")
+        kw["stiffnesses"] = _floats(t, "stiffnesses")
+        kw["ground_below"] = t.boolean("ground_below", True)
+        kw["spacing"] = t.number("spacing", rule=">0", unit="m")
+        kw["origin"] = t.vec2("origin", (0.0, 0.0))
+        kw["direction"] = t.vec2("direction", (0.0, 1.0), nonzero=True)
+        cls, size = fem.Chain, len(kw["masses"])
+    else:
+        kw["length"] = t.number("length", rule=">0", unit="m")
+        kw["density"] = t.number("density", rule=">0", unit="kg/m^3")
+        kw["n_elements"] = t.integer("elements", low=1)
+        kw["origin"] = t.vec2("origin", (0.0, 0.0))
+        kw["axis"] = t.vec2("axis", (1.0, 0.0), nonzero=True)
+        if kind in ("beam", "cable"):
+            kw["youngs_modulus"] = t.number("youngs_modulus", rule=">0", unit="Pa")
+            sec = t.table("section")
+            if sec.has("diameter"):
+                a, i = fem.circular_section(sec.number("diameter", rule=">0", unit="m"))
+            else:
+                a, i = fem.rectangular_section(sec.number("width", rule=">0", unit="m"),
+                                               sec.number("height", rule=">0", unit="m"))
+            sec.finish()
+            kw.update(area=a, second_moment=i)
+            kw["left"] = t.string("left", choices=fem.BEAM_ENDS)
+            kw["right"] = t.string("right", choices=fem.BEAM_ENDS)
+            kw["tension"] = (t.number("tension", rule=">0", unit="N") if kind == "cable"
+                             else t.number("tension", 0.0, rule=">=0", unit="N"))
+            kw["direction"] = t.vec2("direction", (0.0, 1.0), nonzero=True)
+            cls = fem.Beam
+        elif kind == "string":
+            kw["tension"] = t.number("tension", rule=">0", unit="N")
+            kw["area"] = t.number("area", rule=">0", unit="m^2")
+            kw["direction"] = t.vec2("direction", (0.0, 1.0), nonzero=True)
+            cls = fem.String
+        else:
+            kw["youngs_modulus"] = t.number("youngs_modulus", rule=">0", unit="Pa")
+            kw["area"] = t.number("area", rule=">0", unit="m^2")
+            kw["left"] = t.string("left", "free", choices=fem.ROD_ENDS)
+            kw["right"] = t.string("right", "free", choices=fem.ROD_ENDS)
+            cls = fem.Rod
+        size = kw["length"]
+    if t.has("rayleigh"):
+        r = _floats(t, "rayleigh")
+        if len(r) != 2:
+            t.error("rayleigh", f"must be [a0, a1] ([1/s], [s]), got {list(r)}")
+        kw["rayleigh"] = r
+    model = _model(t, cls, **kw)
+    pts = t.table("points")
+    ports = {}
+    for p in list(pts.data):
+        v = pts.number(p, unit="m" if kind != "chain" else "")
+        if kind == "chain":
+            if not (v == int(v) and 0 <= v < size):
+                pts.error(p, f"must be a mass index 0..{size - 1}, got {v!r}")
+        elif not 0.0 <= v <= size:
+            pts.error(p, f"must be a material coordinate in [0, {size:g}] m, got {v!r}")
+        ports[p] = v
+    if not ports:
+        t.error("points", "must name at least one point")
+    md = t.table("modes", {})
+    modes = {"n_modes": md.integer("count", None, low=1),
+             "cutoff_hz": md.number("cutoff_hz", None, rule=">0", unit="Hz")}
+    md.finish()
+    integ = t.table("integrator", {})
+    integ.string("method", "exact", choices=("exact",))
+    contact_step = integ.number("contact_step", 1e-6, rule=">0", unit="s")
+    integ.finish()
+    v0 = t.number("initial_velocity", 0.0, unit="m/s")
+    if v0 and kind in ("beam", "cable"):
+        t.error("initial_velocity", "a uniform initial velocity is offered for chains, "
+                                    "strings and rods, whose DOFs are all translations")
+    return {"model": model, "ports": ports, "modes": modes, "contact_step": contact_step,
+            "initial_velocity": v0,
+            "static_equilibrium": t.boolean("static_equilibrium", False)}
 
 
 def _contact_spec(name: str, t: _Table, subs: list[dict]) -> dict:

@@ -1,7 +1,24 @@
-"""Linear structural models (discrete chain, beam, cable, rod).
+"""Linear structural models: the discrete chain, the Euler-Bernoulli beam and
+the tensioned cable, the string and the axial rod; their modes and their
+time integrators.
 
-The structures arrive with their own issue; this package holds no model yet
-and imports nothing heavy, so a scene without a structure pays nothing for it.
+Importing this package loads numpy and scipy only; scikit-fem is imported
+when a mesh-based model (beam, string, rod) is assembled, and meshio when a
+field is exported, so a scene with a chain or without any structure pays for
+neither.
 """
+from .beam import BEAM_ENDS, Beam, Section, String, circular_section, rectangular_section
+from .chain import Chain, ChainStructure
+from .integrators import (STRUCTURAL_INTEGRATORS, CentralDifference, ExactModal,
+                          GeneralizedAlpha, HHTAlpha, Newmark, StructuralIntegrator,
+                          get_structural_integrator)
+from .modal import DENSE_LIMIT, ModalBasis, modes, natural_frequencies, residual_compliance
+from .rod import ROD_ENDS, Rod
+from .structures import LinearStructure, LineStructure
 
-__all__: list[str] = []
+__all__ = ["Beam", "String", "Section", "rectangular_section", "circular_section", "Chain",
+           "ChainStructure", "Rod", "LinearStructure", "LineStructure", "ModalBasis", "modes",
+           "natural_frequencies", "StructuralIntegrator", "Newmark", "HHTAlpha",
+           "GeneralizedAlpha", "CentralDifference", "ExactModal", "STRUCTURAL_INTEGRATORS",
+           "get_structural_integrator", "BEAM_ENDS", "ROD_ENDS", "DENSE_LIMIT",
+           "residual_compliance"]

@@ -1,0 +1,211 @@
+"""The structural side as a subsystem: a linear structure in modal coordinates.
+
+The state is the modal coordinates ``(q, dq)`` of the kept modes
+(mass-normalised, so the modal equations are ``q'' + d q' + omega^2 q = g``).
+A port is a material point: its position and velocity are rows ``R`` of the
+mode shapes evaluated there (``w = R q``), and a port force becomes the modal
+load ``R^T (f . direction)``, i.e. the consistent nodal load projected on the
+modes.  The model-exchange face is diagonal, so the monolithic reference pays
+no more than the modes it keeps.
+
+Stepping: while every contact embedded in the structure is open, a step is
+exact in time under the polynomial port load (:class:`fem.ExactModal`).  A
+step over which an embedded contact is, or becomes, closed is integrated by
+RK4 on the modal equations with the contact force, the switch located inside
+the sub-step (as for a robot).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .integrators import RK4
+from .subsystem import StepInput, Subsystem
+
+__all__ = ["StructureSubsystem"]
+
+
+class StructureSubsystem(Subsystem):
+    """A :class:`fem.LinearStructure` reduced to the modes of ``basis``.
+
+    Parameters
+    ----------
+    name : str
+    structure : fem.LinearStructure
+    basis : fem.ModalBasis
+        Kept modes (mass-normalised).
+    ports : dict[str, float]
+        Port name -> material coordinate ``s`` (arc length [m], or the mass
+        index of a chain).
+    u0, v0 : (n_dof,) arrays, optional
+        Initial displacement and velocity of the free DOFs (projected on the
+        kept modes).
+    gravity : (2,) array or None
+        Gravity [m/s^2]; ``None`` builds no weight load.
+    contact_step : float
+        Largest RK4 sub-step while an embedded contact is closed [s].
+    """
+
+    def __init__(self, name, structure, basis, ports: dict, u0=None, v0=None, gravity=None,
+                 contact_step: float = 1e-6):
+        super().__init__(name, ports.keys())
+        from fem import ExactModal
+
+        self.structure, self.basis = structure, basis
+        self.omega = np.asarray(basis.omega, float)
+        self.Phi = np.asarray(basis.shapes, float)
+        m = self.omega.size
+        self.n_modes = m
+        self._stepper = ExactModal(structure.mass, structure.damping, structure.stiffness,
+                                   basis=(self.omega, self.Phi))
+        self.modal_damping = np.asarray(self._stepper.damping, float)
+        rows, refs = [], []
+        for s in ports.values():
+            dofs, w = structure.point_operator(s)
+            rows.append(w @ self.Phi[dofs])
+            refs.append(structure.reference_position(s))
+        self._R = np.array(rows).reshape(len(rows), m)
+        self._ref = np.array(refs).reshape(-1, 2)
+        self._dir = np.asarray(structure.direction, float)
+        self._g_modal = np.zeros(m)
+        if gravity is not None:
+            self._g_modal = self.Phi.T @ structure.gravity_load(np.asarray(gravity, float))
+        n = structure.n_dof
+        u0 = np.zeros(n) if u0 is None else np.asarray(u0, float)
+        v0 = np.zeros(n) if v0 is None else np.asarray(v0, float)
+        q0, dq0 = self._stepper.to_modal(u0, v0)
+        self.x = np.concatenate([q0, dq0])
+        self.aux = np.zeros(2)
+        self._embedded = []
+        self._rk4 = RK4(max_step=contact_step)
+        self.switch_log: list[tuple[float, int, bool]] = []
+        self.impact_log: list[dict] = []
+        self._names = [f"{d}" for d in structure.dof_names]
+
+    # ------------------------------------------------------------- ports
+    def outputs(self, t, x):
+        m = self.n_modes
+        w, dw = self._R @ x[:m], self._R @ x[m:2 * m]
+        return self._ref + w[:, None] * self._dir, dw[:, None] * self._dir
+
+    def _modal_force(self, u):
+        """Modal load of port forces ``u`` (..., n_ports, 2)."""
+        return (u @ self._dir) @ self._R
+
+    def port_mobility(self, port, direction):
+        """``n^T J M^-1 J^T n`` within the kept modes: ``(n . dir)^2 |R_p|^2``."""
+        c = float(np.asarray(direction, float) @ self._dir)
+        return c * c * float(self._R[port] @ self._R[port])
+
+    @property
+    def natural_frequencies_hz(self) -> np.ndarray:
+        return self.omega / (2 * math.pi)
+
+    # ----------------------------------------------------------- dynamics
+    def derivatives(self, t, x, u):
+        m = self.n_modes
+        q, dq = x[:m], x[m:2 * m]
+        g = self._modal_force(u) + self._g_modal
+        return np.concatenate([dq, g - self.modal_damping * dq - self.omega ** 2 * q])
+
+    def energy(self, x=None):
+        x = self.x if x is None else x
+        m = self.n_modes
+        q, dq = x[:m], x[m:2 * m]
+        return 0.5 * float(dq @ dq + (self.omega * q) @ (self.omega * q)) \
+            - float(self._g_modal @ q)
+
+    def ledger(self):
+        return float(self.aux[-2]), 0.0
+
+    def ledger_rates(self, t, x):
+        m = self.n_modes
+        dq = x[m:2 * m]
+        return float(self.modal_damping @ (dq * dq)), 0.0
+
+    def coordinates(self):
+        return {}
+
+    def named_values(self, X):
+        """Physical DOFs of states ``X`` (..., 2 m): names, u, v."""
+        m = self.n_modes
+        return self._names, X[..., :m] @ self.Phi.T, X[..., m:2 * m] @ self.Phi.T
+
+    # -------------------------------------------------- embedded contacts
+    def embed_contact(self, contact, port, own_side, partner_position,
+                      partner_velocity=(0.0, 0.0)):
+        """As :meth:`cosim.bodies.MultibodySubsystem.embed_contact`."""
+        if contact.law.rigid:
+            raise ValueError(f"contact `{contact.name}`: a rigid law on a structure would "
+                             f"need an impact law of the continuum; use a penalty law")
+        self._embedded.append((contact, int(port), float(own_side),
+                               np.asarray(contact.normal, float),
+                               np.asarray(partner_position, float),
+                               np.asarray(partner_velocity, float)))
+        self.aux = np.zeros(2 * len(self._embedded) + 2)
+
+    def embedded_quadratures(self):
+        return self.aux[:-2].reshape(-1, 2)
+
+    def _contacts(self, q, dq):
+        """Penetration, rate and the law of each embedded contact."""
+        w, dw = self._R @ q, self._R @ dq
+        for contact, port, side, n, xp, vp in self._embedded:
+            x = self._ref[port] + w[port] * self._dir
+            v = dw[port] * self._dir
+            yield contact, port, side, n, contact.offset - side * float((x - xp) @ n), \
+                -side * float((v - vp) @ n)
+
+    def _switch(self, t, y):
+        m = self.n_modes
+        return np.array([float(c.law.switch(d, dd)) for c, _, _, _, d, dd
+                         in self._contacts(y[:m], y[m:2 * m])])
+
+    def _rhs(self, t, y, inputs):
+        m = self.n_modes
+        q, dq = y[:m], y[m:2 * m]
+        u = np.zeros((self.n_ports, 2)) if inputs is None else inputs(t)
+        rates = []
+        for contact, port, side, n, d, dd in self._contacts(q, dq):
+            f = float(contact.law.force(d, dd))
+            u[port] += side * f * n
+            rates += [f, float(contact.law.dissipation_rate(f, d, dd))]
+        g = self._modal_force(u) + self._g_modal
+        ddq = g - self.modal_damping * dq - self.omega ** 2 * q
+        return np.concatenate([dq, ddq, rates, [float(self.modal_damping @ (dq * dq)), 0.0]])
+
+    # ---------------------------------------------------------- stepping
+    def _step_impl(self, t, h, inputs: StepInput | None):
+        m = self.n_modes
+        self.switch_log = []
+        closed = self._embedded and bool(np.any(self._switch(t, self.x) > 0))
+        if not closed:
+            G = (self._modal_force(inputs.coeffs) if inputs is not None
+                 else np.zeros((1, m)))
+            G = G.copy()
+            G[0] += self._g_modal
+            q1, dq1 = self._stepper.step_modal(self.x[:m], self.x[m:], h, G)
+            y1 = np.concatenate([q1, dq1])
+            if not self._embedded or not np.any(self._switch(t + h, y1) > 0):
+                self._account_damping(h, self.x, y1)
+                self.x[:] = y1
+                return
+        # a contact is or becomes closed: RK4 on the modal equations
+        y0 = np.concatenate([self.x, self.aux])
+        y1 = self._rk4.integrate(lambda tt, yy: self._rhs(tt, yy, inputs), t, y0, t + h,
+                                 self._switch, self._on_switch)
+        self.x[:] = y1[:2 * m]
+        self.aux[:] = y1[2 * m:]
+
+    def _on_switch(self, t, j, on, y):
+        self.switch_log.append((t, j, on))
+
+    def _account_damping(self, h, y0, y1):
+        """Energy dissipated by Rayleigh damping over an exact step
+        (trapezoidal rule on the modal damping power)."""
+        if np.any(self.modal_damping):
+            m = self.n_modes
+            p0 = self.modal_damping @ (y0[m:] ** 2)
+            p1 = self.modal_damping @ (y1[m:] ** 2)
+            self.aux[-2] += 0.5 * h * float(p0 + p1)
