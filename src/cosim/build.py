@@ -62,8 +62,21 @@ def _structure(spec, scene: Scene):
                              "needs gravity (`effects.gravity`) to have a meaning")
         u0 = structure.static_displacement(structure.gravity_load(np.asarray(scene.gravity)))
     v0 = np.full(n, spec["initial_velocity"]) if spec["initial_velocity"] else None
-    return StructureSubsystem(spec["name"], structure, basis, spec["ports"], u0, v0,
-                              scene.gravity, spec["contact_step"])
+    try:
+        sub = StructureSubsystem(spec["name"], structure, basis, spec["ports"], u0, v0,
+                                 scene.gravity, spec["contact_step"], spec["integrator"],
+                                 spec["integrator_options"])
+    except (TypeError, ValueError) as exc:
+        raise SceneError(scene.path, f"{spec['key']}.integrator", str(exc)) from None
+    H = scene.scheme_options.get("macro_step")
+    if H is not None and H > sub.max_stable_step():
+        raise SceneError(scene.path, f"{spec['key']}.integrator.method",
+                         f"`{spec['integrator']}` is stable only for steps below "
+                         f"{sub.max_stable_step():.3g} s (highest kept mode "
+                         f"{basis.frequencies_hz[-1]:.4g} Hz), the macro step is {H:.3g} s; "
+                         f"keep fewer modes (`modes.cutoff_hz`), shorten the step or use "
+                         f"`exact`")
+    return sub
 
 
 def build_system(scene: Scene, scheme: str | None = None):

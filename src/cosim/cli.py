@@ -59,6 +59,10 @@ def _cmd_run(args) -> int:
         scene.name + (f"-{scene.variant}" if scene.variant else ""))
     write_outputs(res, out)
     _print_summary(res.summary, out)
+    if scene.export:
+        from .export import export_structures
+        for path in export_structures(scene, res, out):
+            print(f"  wrote {path} (open in ParaView)")
     return 0 if res.success else 1
 
 

@@ -223,6 +223,8 @@ class Scene:
     contacts: tuple
     gravity: tuple | None
     data: dict = field(repr=False)
+    export: tuple = ()
+    export_every: int = 1
 
     def build(self, scheme: str | None = None):
         """Make the coupled system and the scheme (optionally another one)."""
@@ -319,6 +321,10 @@ def _validate(data: dict, file, variant) -> Scene:
 
     out = top.table("output", {})
     every = out.integer("every", 1, low=1)
+    export = out.raw("export", [])
+    if not isinstance(export, list) or not all(isinstance(x, str) for x in export):
+        out.error("export", f"must be a list of structure names, got {export!r}")
+    export_every = out.integer("export_every", 1, low=1)
     out.finish()
 
     eff = top.table("effects", {})
@@ -336,13 +342,19 @@ def _validate(data: dict, file, variant) -> Scene:
         subs.append(_subsystem_spec(sname, st))
     if not subs:
         top.error("subsystems", "must declare at least one subsystem")
+    structures = [s["name"] for s in subs if s["type"] in STRUCTURE_TYPES]
+    for name in export:
+        if name not in structures:
+            raise SceneError(file, "output.export", f"names {name!r}, which is not a structure "
+                                                    f"of this scene; structures are {structures}")
     contacts = []
     for cname, ct in top.tables("contacts", {}):
         contacts.append(_contact_spec(cname, ct, subs))
     top.finish()
     return Scene(name=name, path=str(file), variant=variant, t_end=t_end, scheme=scheme_name,
                  scheme_options=opts, output_every=every, subsystems=tuple(subs),
-                 contacts=tuple(contacts), gravity=gravity, data=data)
+                 contacts=tuple(contacts), gravity=gravity, data=data,
+                 export=tuple(export), export_every=export_every)
 
 
 def _scheme_option(sch: _Table, k, opt):
@@ -572,14 +584,17 @@ def _structure_spec(t: _Table, kind: str) -> dict:
              "cutoff_hz": md.number("cutoff_hz", None, rule=">0", unit="Hz")}
     md.finish()
     integ = t.table("integrator", {})
-    integ.string("method", "exact", choices=("exact",))
+    method = integ.string("method", "exact", choices=fem.STRUCTURAL_INTEGRATORS)
     contact_step = integ.number("contact_step", 1e-6, rule=">0", unit="s")
+    options = {k: integ.number(k) for k in ("beta", "gamma", "alpha", "rho_inf")
+               if integ.has(k)}
     integ.finish()
     v0 = t.number("initial_velocity", 0.0, unit="m/s")
     if v0 and kind in ("beam", "cable"):
         t.error("initial_velocity", "a uniform initial velocity is offered for chains, "
                                     "strings and rods, whose DOFs are all translations")
     return {"model": model, "ports": ports, "modes": modes, "contact_step": contact_step,
+            "integrator": method, "integrator_options": options,
             "initial_velocity": v0,
             "static_equilibrium": t.boolean("static_equilibrium", False)}
 

@@ -9,10 +9,14 @@ modes.  The model-exchange face is diagonal, so the monolithic reference pays
 no more than the modes it keeps.
 
 Stepping: while every contact embedded in the structure is open, a step is
-exact in time under the polynomial port load (:class:`fem.ExactModal`).  A
-step over which an embedded contact is, or becomes, closed is integrated by
-RK4 on the modal equations with the contact force, the switch located inside
-the sub-step (as for a robot).
+made by the structure's integrator on the modal equations: by default exact
+in time under the polynomial port load (:class:`fem.ExactModal`), or any
+scheme of ``fem.STRUCTURAL_INTEGRATORS`` (Newmark, HHT-alpha,
+generalized-alpha, central difference), which on the modal equations
+(``M = I``, diagonal ``C`` and ``K``) is the same as on the physical model
+restricted to the kept modes.  A step over which an embedded contact is, or
+becomes, closed is integrated by RK4 on the modal equations with the contact
+force, the switch located inside the sub-step (as for a robot).
 """
 from __future__ import annotations
 
@@ -45,10 +49,15 @@ class StructureSubsystem(Subsystem):
         Gravity [m/s^2]; ``None`` builds no weight load.
     contact_step : float
         Largest RK4 sub-step while an embedded contact is closed [s].
+    integrator : str
+        A name of ``fem.STRUCTURAL_INTEGRATORS``; ``"exact"`` by default.
+    integrator_options : dict
+        Options of that integrator (``beta``, ``gamma``, ``alpha``, ``rho_inf``).
     """
 
     def __init__(self, name, structure, basis, ports: dict, u0=None, v0=None, gravity=None,
-                 contact_step: float = 1e-6):
+                 contact_step: float = 1e-6, integrator: str = "exact",
+                 integrator_options=None):
         super().__init__(name, ports.keys())
         from fem import ExactModal
 
@@ -76,6 +85,15 @@ class StructureSubsystem(Subsystem):
         v0 = np.zeros(n) if v0 is None else np.asarray(v0, float)
         q0, dq0 = self._stepper.to_modal(u0, v0)
         self.x = np.concatenate([q0, dq0])
+        self.integrator = integrator
+        self._ts = None
+        if integrator != "exact":
+            from fem import get_structural_integrator
+            cls = get_structural_integrator(integrator)
+            self._ts = cls(np.eye(m), np.diag(self.modal_damping) if np.any(
+                self.modal_damping) else None, np.diag(self.omega ** 2),
+                **(integrator_options or {}))
+        self._acc = self._modal_acceleration(self.x, None, 0.0)
         self.aux = np.zeros(2)
         self._embedded = []
         self._rk4 = RK4(max_step=contact_step)
@@ -176,6 +194,16 @@ class StructureSubsystem(Subsystem):
         return np.concatenate([dq, ddq, rates, [float(self.modal_damping @ (dq * dq)), 0.0]])
 
     # ---------------------------------------------------------- stepping
+    def max_stable_step(self) -> float:
+        """Largest stable step of the structure's integrator [s] (inf if none)."""
+        return math.inf if self._ts is None else float(self._ts.max_stable_step())
+
+    def _modal_acceleration(self, x, inputs, t):
+        m = self.n_modes
+        u = np.zeros((self.n_ports, 2)) if inputs is None else inputs(t)
+        g = self._modal_force(u) + self._g_modal
+        return g - self.modal_damping * x[m:2 * m] - self.omega ** 2 * x[:m]
+
     def _step_impl(self, t, h, inputs: StepInput | None):
         m = self.n_modes
         self.switch_log = []
@@ -185,11 +213,17 @@ class StructureSubsystem(Subsystem):
                  else np.zeros((1, m)))
             G = G.copy()
             G[0] += self._g_modal
-            q1, dq1 = self._stepper.step_modal(self.x[:m], self.x[m:], h, G)
+            if self._ts is None:
+                q1, dq1 = self._stepper.step_modal(self.x[:m], self.x[m:], h, G)
+                a1 = None
+            else:
+                q1, dq1, a1 = self._ts.step(self.x[:m], self.x[m:], self._acc, h, G)
             y1 = np.concatenate([q1, dq1])
             if not self._embedded or not np.any(self._switch(t + h, y1) > 0):
                 self._account_damping(h, self.x, y1)
                 self.x[:] = y1
+                if a1 is not None:
+                    self._acc = a1
                 return
         # a contact is or becomes closed: RK4 on the modal equations
         y0 = np.concatenate([self.x, self.aux])
@@ -197,6 +231,20 @@ class StructureSubsystem(Subsystem):
                                  self._switch, self._on_switch)
         self.x[:] = y1[:2 * m]
         self.aux[:] = y1[2 * m:]
+        if self._ts is not None:
+            self._acc = self._modal_acceleration(self.x, inputs, t + h)
+
+    def get_state(self):
+        st = super().get_state()
+        st.x = np.concatenate([st.x, self._acc])
+        return st
+
+    def set_state(self, state):
+        n = self.x.size
+        self.t, self.n_steps, self.status = state.t, state.n_steps, state.status
+        self.x[...] = state.x[:n]
+        self._acc = state.x[n:].copy()
+        self.aux[...] = state.aux
 
     def _on_switch(self, t, j, on, y):
         self.switch_log.append((t, j, on))
