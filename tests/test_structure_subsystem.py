@@ -203,3 +203,27 @@ def test_export_names_must_be_structures():
     with pytest.raises(cosim.SceneError, match=r"`output\.export` names 'wall', which is not a "
                                                r"structure of this scene; structures are \['rod'\]"):
         cosim.load_scene(CASES / "rod_impact.toml", overrides=['output.export=["wall"]'])
+
+
+def test_following_contact_keeps_the_struck_point_under_c():
+    """beam_impact's contact C follows: after each macro step the beam's port
+    sits at the material coordinate below C (updated before each step, so
+    within one macro step's drift of C)."""
+    from cosim.recorder import Recorder
+    scene = cosim.load_scene(CASES / "beam_impact.toml", overrides=["t_end=0.02"])
+    system, scheme = scene.build()
+    scheme.run(system, scene.t_end, Recorder(system, "b", "implicit", scene.t_end))
+    beam = system.subsystems[system.names.index("beam")]
+    robot = system.subsystems[system.names.index("robot")]
+    pos, vel = robot.outputs(robot.t, robot.x)
+    c = robot.port_index("C")
+    s_expected = beam.material_coordinate(pos[c])
+    assert s_expected != pytest.approx(0.45, abs=1e-3)        # C has drifted
+    assert beam.port_coordinates[0] == pytest.approx(
+        s_expected, abs=abs(vel[c][0]) * scene.scheme_options["macro_step"] * 1.01)
+
+
+def test_follow_needs_a_line_structure():
+    with pytest.raises(cosim.SceneError, match=r"`contacts\.A\.follow` moves side b's point "
+                                               r"along a line structure; `ground` is a rigid"):
+        cosim.load_scene(CASES / "beam_impact.toml", overrides=["contacts.A.follow=true"])

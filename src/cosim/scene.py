@@ -642,7 +642,12 @@ def _contact_spec(name: str, t: _Table, subs: list[dict]) -> dict:
     if placement == "embedded" and not rigid_side:
         t.error("placement", "`embedded` needs a rigid side (wall, ground); with two moving "
                              "sides use `coupler`")
+    follow = t.boolean("follow", False)
+    if follow and kinds[b[0]] not in ("beam", "cable", "string", "rod"):
+        t.error("follow", f"moves side b's point along a line structure; `{b[0]}` is a "
+                          f"{kinds[b[0]]}")
     spec = {"name": name, "a": a, "b": b, "normal": t.vec2("normal", unit="1", nonzero=True),
+            "follow": follow,
             "offset": t.number("offset", 0.0, unit="m"), "law": law, "placement": placement,
             "key": t.key()}
     t.finish()

@@ -75,6 +75,7 @@ class StructureSubsystem(Subsystem):
             rows.append(w @ self.Phi[dofs])
             refs.append(structure.reference_position(s))
         self._R = np.array(rows).reshape(len(rows), m)
+        self.port_coordinates = [float(s) for s in ports.values()]
         self._ref = np.array(refs).reshape(-1, 2)
         self._dir = np.asarray(structure.direction, float)
         self._g_modal = np.zeros(m)
@@ -102,6 +103,24 @@ class StructureSubsystem(Subsystem):
         self._names = [f"{d}" for d in structure.dof_names]
 
     # ------------------------------------------------------------- ports
+    def move_port(self, port: int, s: float) -> None:
+        """Move a port to material coordinate ``s`` (clipped to the structure).
+
+        The state is modal, so only the port's shape row changes; a contact
+        that follows a moving point uses this between steps."""
+        st = self.structure
+        length = getattr(st, "length", None)
+        if length is not None:
+            s = min(max(float(s), 0.0), float(length))
+        dofs, w = st.point_operator(s)
+        self._R[port] = w @ self.Phi[dofs]
+        self._ref[port] = st.reference_position(s)
+        self.port_coordinates[port] = s
+
+    def material_coordinate(self, point) -> float:
+        """Material coordinate ``s`` of the structure below a world point."""
+        return float((np.asarray(point, float) - self.structure.origin) @ self.structure.axis)
+
     def outputs(self, t, x):
         m = self.n_modes
         w, dw = self._R @ x[:m], self._R @ x[m:2 * m]

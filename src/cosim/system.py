@@ -31,6 +31,7 @@ class ContactLink:
     sub_b: int
     port_b: int
     placement: str
+    follow: bool = False
 
 
 class CoupledSystem:
@@ -68,6 +69,11 @@ class CoupledSystem:
                                                pvel[partner_port])
             self.embedded[i] = (own, slots[own])
             slots[own] += 1
+        self._followers = [ln for ln in self.links if ln.follow]
+        for ln in self._followers:
+            if not hasattr(self.subsystems[ln.sub_b], "move_port"):
+                raise ValueError(f"contact `{ln.contact.name}`: `follow` needs a structure as "
+                                 f"side b")
         self._normals = np.array([ln.contact.normal for ln in self.links]).reshape(-1, 2)
         self._offsets = np.array([ln.contact.offset for ln in self.links])
         # Port-force maps: flat port forces of subsystem s = G[s] @ contact forces.
@@ -86,6 +92,14 @@ class CoupledSystem:
         mask[self.coupler] = 1.0
         self._Gc = [G * mask for G in self._G]
         self.touches = [bool(np.any(G[:, self.coupler])) for G in self._G]
+
+    # ---------------------------------------------------- moving surface points
+    def update_followers(self, outs) -> None:
+        """Move each following contact's surface port under its point: the
+        material coordinate of side ``b`` below side ``a``'s port."""
+        for ln in self._followers:
+            sub = self.subsystems[ln.sub_b]
+            sub.move_port(ln.port_b, sub.material_coordinate(outs[ln.sub_a][0][ln.port_a]))
 
     # ------------------------------------------------------------- states
     def outputs(self, states=None):

@@ -155,6 +155,8 @@ class CoSimulationScheme(CouplingScheme):
             h = min(H, t_end - t)
             if h <= 1e-12 * H:
                 break
+            if system._followers:
+                system.update_followers(self._outs)
             coeffs = self.advance(system, t, h, h / h_prev)
             h_prev = h
             outs = system.outputs()

@@ -50,7 +50,11 @@ class Monolithic(CouplingScheme):
 
         def contact_state(y):
             xs = split(y)
-            d, dd = system.penetrations([sub.outputs(0.0, xs[s]) for s, sub in enumerate(subs)])
+            outs = [sub.outputs(0.0, xs[s]) for s, sub in enumerate(subs)]
+            if system._followers:      # surface points move with the point above them
+                system.update_followers(outs)
+                outs = [sub.outputs(0.0, xs[s]) for s, sub in enumerate(subs)]
+            d, dd = system.penetrations(outs)
             f = np.array([max(float(laws[c].force_active(d[c], dd[c])), 0.0) if active[c]
                           else 0.0 for c in range(nc)])
             return xs, d, dd, f
