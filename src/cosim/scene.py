@@ -17,7 +17,6 @@ import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
 
 __all__ = ["SceneError", "Scene", "load_scene", "parse_override", "SUBSYSTEM_TYPES"]
 

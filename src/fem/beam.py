@@ -32,7 +32,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .structures import (LineStructure, _assemble_line, _choice, _count, _line_structure,
-                         _perpendicular, _positive, _rayleigh, _vector)
+                         _place, _positive)
 
 __all__ = ["Beam", "String", "Section", "rectangular_section", "circular_section",
            "BEAM_ENDS"]
@@ -158,11 +158,7 @@ class Beam:
         put(self, "left", _choice(self.left, "left", BEAM_ENDS))
         put(self, "right", _choice(self.right, "right", BEAM_ENDS))
         put(self, "tension", _positive(self.tension, "tension", "N", allow_zero=True))
-        put(self, "origin", _vector(self.origin, "origin", unit=False))
-        put(self, "axis", _vector(self.axis, "axis", unit=True))
-        put(self, "direction", _vector(self.direction, "direction", unit=True))
-        _perpendicular(self.axis, self.direction)
-        put(self, "rayleigh", _rayleigh(self.rayleigh))
+        _place(self, "origin", "axis", "direction", "rayleigh")
 
     @property
     def bending_stiffness(self) -> float:
@@ -245,11 +241,7 @@ class String:
         put(self, "density", _positive(self.density, "density", "kg/m^3"))
         put(self, "area", _positive(self.area, "area", "m^2"))
         put(self, "n_elements", _count(self.n_elements, "n_elements", minimum=2))
-        put(self, "origin", _vector(self.origin, "origin", unit=False))
-        put(self, "axis", _vector(self.axis, "axis", unit=True))
-        put(self, "direction", _vector(self.direction, "direction", unit=True))
-        _perpendicular(self.axis, self.direction)
-        put(self, "rayleigh", _rayleigh(self.rayleigh))
+        _place(self, "origin", "axis", "direction", "rayleigh")
 
     @property
     def wave_speed(self) -> float:

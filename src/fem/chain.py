@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from .structures import LinearStructure, _positive, _rayleigh, _vector
+from .structures import LinearStructure, _place, _positive
 
 __all__ = ["Chain", "ChainStructure"]
 
@@ -90,8 +90,7 @@ class Chain:
                              f"got {len(self.stiffnesses)}")
         if not isinstance(self.ground_below, (bool, np.bool_)):
             raise TypeError(f"`ground_below` must be True or False, got {self.ground_below!r}")
-        put(self, "origin", _vector(self.origin, "origin", unit=False))
-        put(self, "direction", _vector(self.direction, "direction", unit=True))
+        _place(self, "origin", "direction")
         if (self.spacing is None) == (self.positions is None):
             raise ValueError("give exactly one of `spacing` [m] and `positions` (n, 2) [m], got "
                              f"spacing={self.spacing!r}, positions={self.positions!r}")
@@ -103,7 +102,7 @@ class Chain:
                 raise ValueError(f"`positions` must be a finite ({n}, 2) array [m], "
                                  f"got shape {p.shape}")
             put(self, "positions", tuple(map(tuple, p.tolist())))
-        put(self, "rayleigh", _rayleigh(self.rayleigh))
+        _place(self, "rayleigh")
 
     def reference_positions(self) -> np.ndarray:
         """Reference world positions of the masses, (n, 2) [m]."""

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .structures import (LineStructure, _assemble_line, _choice, _count, _line_structure,
-                         _positive, _rayleigh, _vector)
+                         _place, _positive)
 
 __all__ = ["Rod", "ROD_ENDS"]
 
@@ -84,9 +84,7 @@ class Rod:
         put(self, "n_elements", _count(self.n_elements, "n_elements"))
         put(self, "left", _choice(self.left, "left", ROD_ENDS))
         put(self, "right", _choice(self.right, "right", ROD_ENDS))
-        put(self, "origin", _vector(self.origin, "origin", unit=False))
-        put(self, "axis", _vector(self.axis, "axis", unit=True))
-        put(self, "rayleigh", _rayleigh(self.rayleigh))
+        _place(self, "origin", "axis", "rayleigh")
 
     @property
     def wave_speed(self) -> float:

@@ -73,6 +73,20 @@ def _vector(value, name: str, unit: bool) -> tuple[float, float]:
     return (float(v[0]), float(v[1]))
 
 
+def _place(obj, *names: str) -> None:
+    """Check and normalise a frozen model's placement fields in place:
+    ``origin`` (a point), ``axis`` and ``direction`` (unit vectors, mutually
+    perpendicular when both are given) and ``rayleigh``."""
+    for name in names:
+        if name == "rayleigh":
+            value = _rayleigh(obj.rayleigh)
+        else:
+            value = _vector(getattr(obj, name), name, unit=name != "origin")
+        object.__setattr__(obj, name, value)
+    if "axis" in names and "direction" in names:
+        _perpendicular(obj.axis, obj.direction)
+
+
 def _perpendicular(axis, direction) -> None:
     if abs(axis[0] * direction[0] + axis[1] * direction[1]) > 1e-9:
         raise ValueError("`direction` must be perpendicular to `axis` for a transverse "
