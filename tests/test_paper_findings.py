@@ -1,0 +1,70 @@
+"""The paper's findings (Lipinski, sections 6-7; CASES.md sections 4-5), computed
+with the monolithic reference.  Nothing in the code knows these numbers."""
+import numpy as np
+import pytest
+
+import cosim
+from conftest import CASES
+
+THREE_MASS = CASES / "three_mass.toml"
+
+
+def c_contacts(variant):
+    res = cosim.simulate(cosim.load_scene(THREE_MASS, variant))
+    assert res.success, res.message
+    return res
+
+
+@pytest.mark.parametrize("f,count", [(1, 1), (2, 1), (4, 4), (10, 8), (100, 9)])
+def test_contact_count_of_c_grows_with_the_contact_stiffness(f, count):
+    """CASES.md section 5: for f >= 4 a train of rebounds and re-contacts (up to
+    about 9 at f = 100) inside one in-touch period."""
+    c = c_contacts(f"f{f}").summary["contacts"]["C"]
+    assert c["count"] == count, c["intervals"]
+
+
+def test_in_touch_period_barely_depends_on_f():
+    """The whole in-touch period (first touch to last release) at f = 4, 10 and
+    100 stays within 25 % of its mean while the stiffness grows 25-fold."""
+    spans = []
+    for f in (4, 10, 100):
+        iv = c_contacts(f"f{f}").summary["contacts"]["C"]["intervals"]
+        spans.append(iv[-1][1] - iv[0][0])
+    assert max(spans) / min(spans) < 1.25, spans
+
+
+def regime(res):
+    """backward: one contact; backward+: the arm turns back before C touches
+    again (the faster top mass catches it); forward: a train of contacts
+    before the arm turns back."""
+    iv = res.summary["contacts"]["C"]["intervals"]
+    if len(iv) == 1:
+        return "backward"
+    t, darm = res.series["t"], res.series["dq/robot/arm"]
+    i0 = np.searchsorted(t, iv[0][0])
+    t_back = t[i0 + np.flatnonzero(darm[i0:] > 0)[0]]
+    return "backward+" if t_back <= iv[1][0] else "forward"
+
+
+@pytest.mark.parametrize("ms,expected", [("ms6.4", "backward"), ("ms1.6", "backward+"),
+                                         ("ms0.2", "forward")])
+def test_three_regimes_as_the_chain_mass_falls(ms, expected):
+    assert regime(c_contacts(ms)) == expected
+
+
+@pytest.mark.slow
+def test_regime_sweep_is_ordered():
+    """The whole sweep: heaviest chains backward, lightest forward, in order."""
+    order = {"backward": 0, "backward+": 1, "forward": 2}
+    found = [regime(c_contacts(f"ms{m}")) for m in ("6.4", "3.2", "1.6", "0.8", "0.4", "0.2",
+                                                     "0.1", "0.05")]
+    assert found[0] == "backward" and found[-1] == "forward"
+    assert [order[r] for r in found] == sorted(order[r] for r in found), found
+
+
+def test_ground_multicontact_lifts_off_before_c_strikes():
+    """CASES.md section 4: B leaves within 2 ms, A later, both before C strikes."""
+    res = cosim.simulate(cosim.load_scene(CASES / "ground_multicontact.toml"))
+    c = res.summary["contacts"]
+    assert c["B"]["intervals"][0][1] < 2e-3
+    assert c["B"]["intervals"][0][1] < c["A"]["intervals"][0][1] < c["C"]["intervals"][0][0]
