@@ -89,13 +89,14 @@ class CoSimulationScheme(CouplingScheme):
         "extrapolation_order": Option(int, 0, lambda v: v in (0, 1, 2), "0, 1 or 2"),
         "max_energy_gain": Option(float, 0.01, lambda v: v >= 0 and math.isfinite(v), ">= 0"),
         "accept_unsafe_step": Option(bool, False, lambda v: True, "true or false"),
+        "contact_step": Option(float, None, _pos, "> 0 s"),
     }
 
     def preflight(self, system) -> None:
         """Refuse a macro step that is too large for a contact's stiffness."""
         if not self.explicit or self.accept_unsafe_step:
             return
-        H = self.macro_step
+        H = self.contact_step or self.macro_step     # the step used while in contact
         for c in system.coupler:
             ln = system.links[c]
             n = ln.contact.normal
@@ -148,20 +149,42 @@ class CoSimulationScheme(CouplingScheme):
         law = [ln.contact.law for ln in system.links]
         p_prev = np.array([float(law[c].dissipation_rate(f[c], d[c], dd[c])) for c in coupler])
         recorder.record(0.0, d, dd, f, impulse, diss, self._internal(system))
+        controlled = self.contact_step is not None and len(coupler) > 0
         n = max(1, math.ceil(t_end / H - 1e-9))
         h_prev = H
-        for k in range(n):
-            t = k * H
-            h = min(H, t_end - t)
-            if h <= 1e-12 * H:
-                break
+        k, t, n_rejected = 0, 0.0, 0
+        while True:
+            if controlled:
+                if t_end - t <= 1e-12 * H:
+                    break
+                h = self._controlled_step(d, dd, f, t_end - t)
+                saved = system.get_state()
+            else:
+                if k >= n:
+                    break
+                t = k * H
+                h = min(H, t_end - t)
+                if h <= 1e-12 * H:
+                    break
             if system._followers:
                 system.update_followers(self._outs)
             coeffs = self.advance(system, t, h, h / h_prev)
-            h_prev = h
             outs = system.outputs()
-            d, dd = system.penetrations(outs)
-            f = system.forces(d, dd)
+            d1, dd1 = system.penetrations(outs)
+            f = system.forces(d1, dd1)
+            if controlled and h > self.contact_step and not self._aimed:
+                onset = self._onset(d, dd, d1, dd1, h)
+                if onset is not None:           # a contact closed inside a long step
+                    system.set_state(saved)
+                    n_rejected += 1
+                    self._h_next, self._aimed = onset, True
+                    self._outs = system.outputs()
+                    continue
+            self._aimed = False
+            self._dd_prev, self._h_prev_step = dd.copy(), h
+            d, dd = d1, dd1
+            h_prev = h
+            k += 1
             self._outs, self._f = outs, f
             self._hist = (self._hist + [f])[-3:]
             if len(coupler):
@@ -187,7 +210,58 @@ class CoSimulationScheme(CouplingScheme):
             if not (np.all(np.isfinite(d)) and np.all(np.isfinite(dd))):
                 raise CouplingError(f"non-finite state at t = {t + h:.6g} s")
             recorder.record(t + h, d, dd, f, impulse, diss, self._internal(system))
-        return {"n_windows": n, "n_iterations": self.n_iterations, "n_rejected": 0}
+            if controlled:
+                t = t + h
+        return {"n_windows": k, "n_iterations": self.n_iterations, "n_rejected": n_rejected}
+
+    _h_next = None
+    _aimed = False          # the current step was aimed at an onset: accept it
+    _dd_prev = None
+    _h_prev_step = None
+
+    def _controlled_step(self, d, dd, f, remaining):
+        """The next macro step: the onset found by a rejected step, else
+        ``contact_step`` while a coupler contact is closed or would close
+        within a long step (penetration predicted linearly), else
+        ``macro_step``."""
+        if self._h_next is not None:
+            h, self._h_next = self._h_next, None
+            return min(h, remaining)
+        c = self._system.coupler
+        H = self.macro_step
+        # short steps while a contact is closed, was closed a step ago (so the
+        # extrapolation history is clear of force before the step grows), or
+        # would close within a long step
+        recent = len(self._hist) > 1 and np.any(self._hist[-2][c] > 0)
+        if np.any(f[c] > 0) or recent or np.any(d[c] + H * dd[c] > 0):
+            return min(self.contact_step, remaining)
+        return min(H, remaining)
+
+    def _onset(self, d0, dd0, d1, dd1, h):
+        """Length of step that ends where the first coupler contact closes, or
+        None if none closed in the step.
+
+        The end state of the rejected step already holds the contact's
+        response, so the onset is predicted from the free motion before it:
+        ``d0 + dd0 tau + a tau^2 / 2 = 0``, the relative acceleration ``a``
+        from the last two outputs (exact under a constant push).  Without a
+        root inside the step, half the step."""
+        c = self._system.coupler
+        closing = c[(d0[c] <= 0) & (d1[c] > 0)]
+        if not len(closing):
+            return None
+        best = 0.5 * h
+        for i in closing:
+            a = 0.0
+            if self._dd_prev is not None:
+                a = (dd0[i] - self._dd_prev[i]) / self._h_prev_step
+            roots = np.roots([0.5 * a, dd0[i], d0[i]]) if a else (
+                [-d0[i] / dd0[i]] if dd0[i] > 0 else [])
+            tau = [r.real for r in np.atleast_1d(roots) if abs(r.imag) < 1e-12 and
+                   0 < r.real < h]
+            if tau:
+                best = min(best, min(tau)) if best != 0.5 * h else min(tau)
+        return max(best, 1e-12 * h)
 
     @staticmethod
     def _internal(system):
@@ -195,7 +269,18 @@ class CoSimulationScheme(CouplingScheme):
         return sum(a for a, _ in led), sum(b for _, b in led)
 
     def _extrapolated(self, ratio: float) -> np.ndarray:
-        return extrapolation_coeffs(self._hist, self.extrapolation_order, ratio)
+        """Force polynomials for the next step.
+
+        When the step grows (``ratio > 1``, as step control lengthens it after
+        a release), a contact open at ``t`` is held at zero: extrapolating its
+        falling force over the longer step would pull hard.  With equal steps
+        the extrapolation is kept: its small overshoot into tension after
+        release offsets its lag before, and holding it would double the
+        rebound error of linear extrapolation."""
+        co = extrapolation_coeffs(self._hist, self.extrapolation_order, ratio)
+        if ratio > 1.0 + 1e-9:
+            co[1:, self._hist[-1] == 0.0] = 0.0
+        return co
 
     def _moving(self, system):
         return [s for s, sub in enumerate(system.subsystems) if not sub.rigid]
