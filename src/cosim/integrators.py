@@ -8,6 +8,7 @@ penalty force's kink is never stepped over.
 from __future__ import annotations
 
 import math
+from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from typing import Callable, ClassVar
 
@@ -24,7 +25,7 @@ def _hermite(y0, f0, y1, f1, h, theta):
 
 
 @dataclass(frozen=True)
-class TimeStepper:
+class TimeStepper(ABC):
     """Base class of fixed-step integrators.
 
     Parameters
@@ -43,8 +44,9 @@ class TimeStepper:
                 and self.max_step > 0):
             raise ValueError(f"`max_step` must be > 0 s, got {self.max_step!r}")
 
+    @abstractmethod
     def _single(self, f, t, y, h, k1):
-        raise NotImplementedError  # pragma: no cover - every stepper overrides it
+        """One step of length ``h`` from ``(t, y)``; ``k1 = f(t, y)`` is given."""
 
     def integrate(self, f: Callable, t0: float, y0: np.ndarray, t1: float,
                   switch: Callable | None = None,
@@ -230,11 +232,23 @@ INTEGRATORS: dict[str, type[TimeStepper]] = {
     cls.name: cls for cls in (RK4, RK45, DOP853, Radau, BDF)}
 
 
-def get_integrator(name) -> type[TimeStepper]:
-    if isinstance(name, type) and issubclass(name, TimeStepper):
+def lookup(registry: dict, name, base: type, kind: str):
+    """Resolve ``name`` in a registry; a subclass of ``base`` passes through.
+
+    Raises
+    ------
+    ValueError
+        For an unknown name, listing the valid ones.
+    """
+    if isinstance(name, type) and issubclass(name, base):
         return name
     try:
-        return INTEGRATORS[name]
+        return registry[name]
     except (KeyError, TypeError):
-        raise ValueError(f"unknown integrator {name!r}; valid integrators are "
-                         f"{sorted(INTEGRATORS)}") from None
+        raise ValueError(f"unknown {kind} {name!r}; valid {kind}s are "
+                         f"{sorted(registry)}") from None
+
+
+def get_integrator(name) -> type[TimeStepper]:
+    """Resolve an integrator given by registry name or as a class."""
+    return lookup(INTEGRATORS, name, TimeStepper, "integrator")

@@ -1,4 +1,5 @@
 """Coupling schemes, chosen by name."""
+from ..integrators import lookup
 from .base import (CoSimulationScheme, CouplingError, CouplingScheme, UnsafeStepError,
                    extrapolation_coeffs)
 from .explicit import GaussSeidel, Jacobi
@@ -11,13 +12,7 @@ COUPLING_SCHEMES: dict[str, type[CouplingScheme]] = {
 
 def get_scheme(name) -> type[CouplingScheme]:
     """Resolve a scheme given by registry name or as a class."""
-    if isinstance(name, type) and issubclass(name, CouplingScheme):
-        return name
-    try:
-        return COUPLING_SCHEMES[name]
-    except (KeyError, TypeError):
-        raise ValueError(f"unknown coupling scheme {name!r}; valid schemes are "
-                         f"{sorted(COUPLING_SCHEMES)}") from None
+    return lookup(COUPLING_SCHEMES, name, CouplingScheme, "coupling scheme")
 
 
 __all__ = ["COUPLING_SCHEMES", "get_scheme", "CouplingScheme", "CoSimulationScheme",
