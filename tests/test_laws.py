@@ -2,10 +2,16 @@
 import numpy as np
 import pytest
 
-from couplers import CONTACT_LAWS, KelvinVoigtLaw, LinearLaw, RigidLaw, get_contact_law
+from couplers import (CONTACT_LAWS, FloresLaw, HertzLaw, HuntCrossleyLaw, KelvinVoigtLaw,
+                      LankaraniNikraveshLaw, LinearLaw, RigidLaw, get_contact_law)
 
+# The hysteresis examples clip (1 + chi dd <= 0) inside the sampled |dd| <= 5 m/s.
 EXAMPLES = {"linear": LinearLaw(1e6), "kelvin_voigt": KelvinVoigtLaw(1e6, 300.0),
-            "rigid": RigidLaw(0.5, 0.2)}
+            "rigid": RigidLaw(0.5, 0.2),
+            "hertz": HertzLaw(1e9, 1.5),
+            "hunt_crossley": HuntCrossleyLaw(1e9, 1.5, 0.5),
+            "lankarani_nikravesh": LankaraniNikraveshLaw(1e9, 1.5, 0.8, 1.0),
+            "flores": FloresLaw(1e9, 1.5, 0.5, 2.0)}
 PENALTY = sorted(k for k, v in CONTACT_LAWS.items() if not v.rigid)
 
 

@@ -369,8 +369,8 @@ CASES_BAD = [
     ([f"{C}.b=body.tip"], at(f"{C}.b", "must be on another subsystem than `a`, "
                                        "got 'body' twice")),
     ([f"{C}.law=linear"], at(f"{C}.law", "must be a table, got a string 'linear'")),
-    ([f"{C}.law.type=hertz"], at(f"{C}.law.type", f"must be one of {sorted(CONTACT_LAWS)}, "
-                                                  "got 'hertz'")),
+    ([f"{C}.law.type=hertzz"], at(f"{C}.law.type", f"must be one of {sorted(CONTACT_LAWS)}, "
+                                                   "got 'hertzz'")),
     ([f"{C}.law.contact_stiffness=0"], at(f"{C}.law.contact_stiffness", "must be > 0 N/m, "
                                                                         "got 0.0")),
     ([f"{C}.law.contact_stiffness=-1e6"], at(f"{C}.law.contact_stiffness", "must be > 0 "

@@ -106,7 +106,7 @@ def _cmd_info(args) -> int:
     for name, c in info["contacts"].items():
         print(f"  contact {name}: {c['law']} ({c['placement']}) between {c['between'][0]} and "
               f"{c['between'][1]}")
-        if "frequency_hz" in c:
+        if c.get("frequency_hz") is not None:
             print(f"    reduced mass {c['reduced_mass']:.4g} kg, frequency {c['frequency_hz']:.4g}"
                   f" Hz, contact time {c['contact_time_s']:.4g} s")
             print("    largest stable macro step [s]: " + ", ".join(

@@ -25,6 +25,10 @@ def _contact_info(system, c, scene) -> dict:
            + system.subsystems[ln.sub_b].port_mobility(ln.port_b, n))
     k, cd = law.stiffness, law.damping
     m = 1.0 / mob
+    if not (math.isfinite(k) and math.isfinite(cd)):
+        out.update(reduced_mass=m, frequency_hz=None, contact_time_s=None,
+                   note="nonlinear law without `reference_penetration`: no linearisation")
+        return out
     omega = math.sqrt(k / m)
     out.update(stiffness=k, damping=cd, reduced_mass=m, frequency_hz=omega / (2 * math.pi),
                contact_time_s=math.pi / omega)

@@ -105,6 +105,13 @@ class CoSimulationScheme(CouplingScheme):
             if mob <= 0:
                 continue
             m, k, cd = 1.0 / mob, ln.contact.law.stiffness, ln.contact.law.damping
+            if not (math.isfinite(k) and math.isfinite(cd)):
+                raise UnsafeStepError(
+                    f"contact `{ln.contact.name}`: law `{ln.contact.law.name}` has no "
+                    f"linearised stiffness, so the pre-flight check cannot judge macro step "
+                    f"{H:.3g} s of scheme `{self.name}`; give the law a "
+                    f"`reference_penetration`, use the `implicit` scheme, or set "
+                    f"`scheme.accept_unsafe_step = true`")
             partner_first = self._partner_first(system, c)
             if preflight.is_safe(m, k, cd, H, self.extrapolation_order, self.max_energy_gain,
                                  partner_first):
