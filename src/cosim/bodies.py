@@ -9,7 +9,7 @@ from multibody.impact import frictional_impact, frictionless_impact
 
 from .errors import SimulationError
 from .integrators import RK4, TimeStepper
-from .subsystem import StepInput, Subsystem
+from .subsystem import EmbeddedContact, StepInput, Subsystem
 
 __all__ = ["MultibodySubsystem"]
 
@@ -66,26 +66,29 @@ class MultibodySubsystem(Subsystem):
         #: rigid impacts resolved during the last step (dicts for the summary)
         self.impact_log: list[dict] = []
         self._zero_u = np.zeros((self.n_ports, 2))
+        self._t0 = 0.0
 
     # ------------------------------------------------------ embedded contacts
     def embed_contact(self, contact: PointContact, port: int, own_side: int,
-                      partner_position, partner_velocity=(0.0, 0.0)) -> None:
+                      partner_position, partner_velocity=(0.0, 0.0)) -> EmbeddedContact:
         """Evaluate ``contact`` inside this subsystem's integrator against a
-        partner port that moves as given (fixed for a rigid reference).
+        partner port that moves as given (fixed for a rigid reference; set per
+        step with :meth:`EmbeddedContact.set_motion` for a moving partner).
 
         ``own_side`` is +1 when this subsystem is the contact's side ``a``
-        (the point), -1 when it is side ``b`` (the surface).  The impulse and
-        dissipated energy of the contact are integrated in ``aux``.
+        (the point), -1 when it is side ``b`` (the surface).  The impulse, the
+        dissipated energy and the step's first moment of the force are
+        integrated in ``aux``.
         """
-        xp, vp = np.asarray(partner_position, float), np.asarray(partner_velocity, float)
-        self._embedded.append((contact, int(port), float(own_side),
-                               complex(contact.normal[0], contact.normal[1]),
-                               complex(xp[0], xp[1]), complex(vp[0], vp[1])))
-        self.aux = np.zeros(2 * len(self._embedded) + 2)
+        e = EmbeddedContact(contact, port, own_side, partner_position, partner_velocity)
+        self._embedded.append(e)
+        self.aux = np.zeros(3 * len(self._embedded) + 2)
+        return e
 
     def embedded_quadratures(self) -> np.ndarray:
-        """(n_embedded, 2): impulse [N s] and dissipated energy [J] so far."""
-        return self.aux[:-2].reshape(-1, 2)
+        """(n_embedded, 3): impulse [N s], dissipated energy [J] so far, and the
+        current step's first moment of the force ``int f (t - t0) dt`` [N s^2]."""
+        return self.aux[:-2].reshape(-1, 3)
 
     def ledger(self):
         return float(self.aux[-2]), float(self.aux[-1])
@@ -106,13 +109,12 @@ class MultibodySubsystem(Subsystem):
         diss, sup = self.effects.rates(t, q, dq, drive)
         return F - self.effects.torque(t, q, dq, drive), diss, sup
 
-    def _embedded_state(self, x, v):
-        """Penetration and rate of each embedded contact from complex port
-        positions ``x`` and velocities ``v``."""
-        for contact, port, side, n, xp, vp in self._embedded:
-            d = contact.offset - side * (n.conjugate() * (x[port] - xp)).real
-            dd = -side * (n.conjugate() * (v[port] - vp)).real
-            yield contact, port, side, n, d, dd
+    def _embedded_state(self, t, x, v):
+        """Penetration and rate of each embedded contact at ``t`` from complex
+        port positions ``x`` and velocities ``v``."""
+        for e in self._embedded:
+            d, dd = e.penetration(t, x[e.port], v[e.port])
+            yield e, d, dd
 
     # ----------------------------------------------------------- dynamics
     def _evaluate(self, y):
@@ -141,11 +143,12 @@ class MultibodySubsystem(Subsystem):
             ur = inputs(t)
             u = ur[:, 0] + 1j * ur[:, 1]
         rates, switch = [], []
-        for contact, port, side, n, d, dd in self._embedded_state(x, v):
-            law = contact.law
+        tau = t - self._t0
+        for e, d, dd in self._embedded_state(t, x, v):
+            law = e.law
             f = float(law.force(d, dd))
-            u[port] += side * f * n
-            rates += [f, float(law.dissipation_rate(f, d, dd))]
+            u[e.port] += e.side * f * e.normal
+            rates += [f, float(law.dissipation_rate(f, d, dd)), f * tau]
             switch.append(float(law.switch(d, dd)))
         self._last_switch = (y, np.array(switch))
         return np.concatenate([dq, self._accelerations(M, F, J, u), rates, (diss, sup)])
@@ -157,10 +160,12 @@ class MultibodySubsystem(Subsystem):
         q, dq = y[:n], y[n:2 * n]
         x, v, _, _ = self.model.points_c(self.model.frames(q, dq), dq, self._port_body,
                                         self._port_local_c)
-        return np.array([float(c.law.switch(d, dd)) for c, _, _, _, d, dd
-                         in self._embedded_state(x, v)])
+        return np.array([float(e.law.switch(d, dd)) for e, d, dd
+                         in self._embedded_state(t, x, v)])
 
     def _step_impl(self, t, h, inputs: StepInput | None):
+        self._t0 = t
+        self.aux[2:-2:3] = 0.0          # first moments are per step
         y0 = np.concatenate([self.x, self.aux])
         switch = self._switch if self._embedded else None
         self.switch_log = []
@@ -174,7 +179,7 @@ class MultibodySubsystem(Subsystem):
 
     def _on_switch(self, t, j, on, y):
         self.switch_log.append((t, j, on))
-        if on and self._embedded[j][0].law.rigid:
+        if on and self._embedded[j].law.rigid:
             return self.rigid_impact(t, y, j)
         return None
 
@@ -204,21 +209,21 @@ class MultibodySubsystem(Subsystem):
         q, dq = y[:n], y[n:2 * n]
         M, _, x, v, J, _ = self.model.evaluate(q, dq, None, self._port_body,
                                                self._port_local_c)
-        states = list(self._embedded_state(x, v))
-        part = [slot] + [k for k, (c, _, _, _, d, _) in enumerate(states)
-                         if k != slot and c.law.rigid and d >= -self.CLOSED_GAP]
+        states = list(self._embedded_state(t, x, v))
+        part = [slot] + [k for k, (e, d, _) in enumerate(states)
+                         if k != slot and e.law.rigid and d >= -self.CLOSED_GAP]
         rows = []
         for k in part:
-            _, port, side, nrm, _, _ = self._embedded[k]
-            rows.append((side * (nrm.conjugate() * J[port]).real,
-                         side * ((1j * nrm).conjugate() * J[port]).real))
+            e = self._embedded[k]
+            rows.append((e.side * (e.normal.conjugate() * J[e.port]).real,
+                         e.side * ((1j * e.normal).conjugate() * J[e.port]).real))
         jn = np.array([r[0] for r in rows])
         jt = np.array([r[1] for r in rows])
         vn, vt = jn @ dq, jt @ dq
         if vn[0] >= 0.0:
             return None
-        laws = [self._embedded[k][0].law for k in part]
-        names = [self._embedded[k][0].name for k in part]
+        laws = [self._embedded[k].law for k in part]
+        names = [self._embedded[k].contact.name for k in part]
         if len(part) == 1 and laws[0].friction > 0:
             res = frictional_impact(M, dq, jn[0], jt[0], laws[0].restitution, laws[0].friction)
         elif len(part) > 1 and any(law.friction > 0 for law in laws):
@@ -236,8 +241,9 @@ class MultibodySubsystem(Subsystem):
         for i, k in enumerate(part):
             p_i = float(res.normal_impulse[i])
             if y.size > 2 * n:           # the stepping state carries the quadratures
-                out[2 * n + 2 * k] += p_i
-                out[2 * n + 2 * k + 1] += res.energy_loss * (p_i / total if total else 0.0)
+                out[2 * n + 3 * k] += p_i
+                out[2 * n + 3 * k + 1] += res.energy_loss * (p_i / total if total else 0.0)
+                out[2 * n + 3 * k + 2] += p_i * (t - self._t0)
             if k != slot:
                 self.switch_log.append((t, k, True))
             self.impact_log.append({

@@ -97,6 +97,7 @@ def build_system(scene: Scene, scheme: str | None = None):
     if name != scene.scheme:
         dropped = sorted(set(scene.scheme_options) - set(cls.options))
         opts = {k: v for k, v in scene.scheme_options.items() if k in cls.options}
+        opts.update(scene.scheme_tables.get(name, {}))
         if dropped:
             warnings.warn(f"{scene.path}: scheme `{name}` ignores the options {dropped}",
                           stacklevel=2)
@@ -121,13 +122,21 @@ def build_system(scene: Scene, scheme: str | None = None):
         # stays with its moving side, which resolves the impact
         placement = ("coupler" if name == "monolithic" and not c["law"].rigid
                      else c["placement"])
-        links.append(ContactLink(contact, sa, subs[sa].port_index(c["a"][1]), sb,
-                                 subs[sb].port_index(c["b"][1]), placement, c["follow"]))
+        pa, pb = subs[sa].port_index(c["a"][1]), subs[sb].port_index(c["b"][1])
+        host = None
+        if placement == "embedded" and not (subs[sa].rigid or subs[sb].rigid):
+            if c["host"] is not None:
+                host = names.index(c["host"])
+            else:   # the lighter side: it resolves the spring, the heavier one lags least
+                mob_a = subs[sa].port_mobility(pa, contact.normal)
+                mob_b = subs[sb].port_mobility(pb, contact.normal)
+                host = sa if mob_a >= mob_b else sb
+        links.append(ContactLink(contact, sa, pa, sb, pb, placement, c["follow"], host))
     system = CoupledSystem(subs, links)
     for c, ln in enumerate(links):
         if ln.placement != "embedded":
             continue
-        s = ln.sub_a if not subs[ln.sub_a].rigid else ln.sub_b
+        s = system.embedded[c][0]
         port = ln.port_a if s == ln.sub_a else ln.port_b
         if ln.contact.law.rigid:
             continue

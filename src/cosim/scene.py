@@ -207,6 +207,10 @@ class Scene:
         Default coupling scheme's name.
     scheme_options : dict
         Options of that scheme, validated.
+    scheme_tables : dict
+        Scheme name -> options that apply only when that scheme runs
+        (``[scheme.NAME]`` tables, e.g. the monolithic reference's tolerances
+        in a scene whose default is a co-simulation), validated.
     data : dict
         The merged scene table (after variant and overrides).
     """
@@ -224,6 +228,7 @@ class Scene:
     data: dict = field(repr=False)
     export: tuple = ()
     export_every: int = 1
+    scheme_tables: dict = field(default_factory=dict)
 
     def build(self, scheme: str | None = None):
         """Make the coupled system and the scheme (optionally another one)."""
@@ -298,9 +303,19 @@ def _validate(data: dict, file, variant) -> Scene:
     scheme_name = sch.string("name", choices=COUPLING_SCHEMES)
     cls = COUPLING_SCHEMES[scheme_name]
     all_options = {k for c in COUPLING_SCHEMES.values() for k in c.options}
-    opts, ignored = {}, []
+    opts, ignored, tables = {}, [], {}
     for k in list(sch.data):
         if k == "name":
+            continue
+        if k in COUPLING_SCHEMES and isinstance(sch.data[k], dict):
+            sub = sch.table(k)
+            other = COUPLING_SCHEMES[k]
+            for ko in list(sub.data):
+                if ko not in other.options:
+                    sub.error(ko, f"is not an option of scheme `{k}`; its options are "
+                                  f"{sorted(other.options)}")
+            tables[k] = {ko: _scheme_option(sub, ko, other.options[ko]) for ko in sub.data}
+            sub.finish()
             continue
         sch.used.add(k)
         if k not in all_options:
@@ -315,6 +330,7 @@ def _validate(data: dict, file, variant) -> Scene:
     if ignored:
         warnings.warn(f"{file}: scheme `{scheme_name}` ignores the options {sorted(ignored)}",
                       stacklevel=3)
+    opts.update(tables.get(scheme_name, {}))
     if "macro_step" in cls.options and "macro_step" not in opts:
         sch.error("macro_step", f"is required by scheme `{scheme_name}` [s]")
 
@@ -353,7 +369,7 @@ def _validate(data: dict, file, variant) -> Scene:
     return Scene(name=name, path=str(file), variant=variant, t_end=t_end, scheme=scheme_name,
                  scheme_options=opts, output_every=every, subsystems=tuple(subs),
                  contacts=tuple(contacts), gravity=gravity, data=data,
-                 export=tuple(export), export_every=export_every)
+                 export=tuple(export), export_every=export_every, scheme_tables=tables)
 
 
 def _scheme_option(sch: _Table, k, opt):
@@ -635,12 +651,15 @@ def _contact_spec(name: str, t: _Table, subs: list[dict]) -> dict:
         t.error("b", "a contact between two rigid subsystems has nothing to simulate")
     placement = t.string("placement", "embedded" if rigid_side else "coupler",
                          choices=("embedded", "coupler"))
-    if law.rigid and placement != "embedded":
+    if law.rigid and (placement != "embedded" or not rigid_side):
         t.error("placement", "a `rigid` law is resolved inside its moving side's integrator: "
                              "it needs placement `embedded` and a rigid side")
-    if placement == "embedded" and not rigid_side:
-        t.error("placement", "`embedded` needs a rigid side (wall, ground); with two moving "
-                             "sides use `coupler`")
+    host = None
+    if t.has("host"):
+        host = t.string("host", choices=(a[0], b[0]))
+        if placement != "embedded" or rigid_side:
+            t.error("host", "names the side that integrates an `embedded` contact between two "
+                            "moving sides; here there is nothing to choose")
     follow = t.boolean("follow", False)
     if follow and kinds[b[0]] not in ("beam", "cable", "string", "rod"):
         t.error("follow", f"moves side b's point along a line structure; `{b[0]}` is a "
@@ -648,6 +667,6 @@ def _contact_spec(name: str, t: _Table, subs: list[dict]) -> dict:
     spec = {"name": name, "a": a, "b": b, "normal": t.vec2("normal", unit="1", nonzero=True),
             "follow": follow,
             "offset": t.number("offset", 0.0, unit="m"), "law": law, "placement": placement,
-            "key": t.key()}
+            "host": host, "key": t.key()}
     t.finish()
     return spec

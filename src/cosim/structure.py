@@ -25,7 +25,7 @@ import math
 import numpy as np
 
 from .integrators import RK4
-from .subsystem import StepInput, Subsystem
+from .subsystem import EmbeddedContact, StepInput, Subsystem
 
 __all__ = ["StructureSubsystem"]
 
@@ -97,6 +97,7 @@ class StructureSubsystem(Subsystem):
         self._acc = self._modal_acceleration(self.x, None, 0.0)
         self.aux = np.zeros(2)
         self._embedded = []
+        self._t0 = 0.0
         self._rk4 = RK4(max_step=contact_step)
         self.switch_log: list[tuple[float, int, bool]] = []
         self.impact_log: list[dict] = []
@@ -176,38 +177,39 @@ class StructureSubsystem(Subsystem):
         if contact.law.rigid:
             raise ValueError(f"contact `{contact.name}`: a rigid law on a structure would "
                              f"need an impact law of the continuum; use a penalty law")
-        self._embedded.append((contact, int(port), float(own_side),
-                               np.asarray(contact.normal, float),
-                               np.asarray(partner_position, float),
-                               np.asarray(partner_velocity, float)))
-        self.aux = np.zeros(2 * len(self._embedded) + 2)
+        e = EmbeddedContact(contact, port, own_side, partner_position, partner_velocity)
+        self._embedded.append(e)
+        self.aux = np.zeros(3 * len(self._embedded) + 2)
+        return e
 
     def embedded_quadratures(self):
-        return self.aux[:-2].reshape(-1, 2)
+        return self.aux[:-2].reshape(-1, 3)
 
-    def _contacts(self, q, dq):
-        """Penetration, rate and the law of each embedded contact."""
+    def _contacts(self, t, q, dq):
+        """Each embedded contact with its penetration and rate at ``t``."""
         w, dw = self._R @ q, self._R @ dq
-        for contact, port, side, n, xp, vp in self._embedded:
-            x = self._ref[port] + w[port] * self._dir
-            v = dw[port] * self._dir
-            yield contact, port, side, n, contact.offset - side * float((x - xp) @ n), \
-                -side * float((v - vp) @ n)
+        dirc = complex(self._dir[0], self._dir[1])
+        for e in self._embedded:
+            p = self._ref[e.port]
+            d, dd = e.penetration(t, complex(p[0], p[1]) + w[e.port] * dirc, dw[e.port] * dirc)
+            yield e, d, dd
 
     def _switch(self, t, y):
         m = self.n_modes
-        return np.array([float(c.law.switch(d, dd)) for c, _, _, _, d, dd
-                         in self._contacts(y[:m], y[m:2 * m])])
+        return np.array([float(e.law.switch(d, dd)) for e, d, dd
+                         in self._contacts(t, y[:m], y[m:2 * m])])
 
     def _rhs(self, t, y, inputs):
         m = self.n_modes
         q, dq = y[:m], y[m:2 * m]
         u = np.zeros((self.n_ports, 2)) if inputs is None else inputs(t)
         rates = []
-        for contact, port, side, n, d, dd in self._contacts(q, dq):
-            f = float(contact.law.force(d, dd))
-            u[port] += side * f * n
-            rates += [f, float(contact.law.dissipation_rate(f, d, dd))]
+        tau = t - self._t0
+        for e, d, dd in self._contacts(t, q, dq):
+            f = float(e.law.force(d, dd))
+            fn = e.side * f * e.normal
+            u[e.port] += (fn.real, fn.imag)
+            rates += [f, float(e.law.dissipation_rate(f, d, dd)), f * tau]
         g = self._modal_force(u) + self._g_modal
         ddq = g - self.modal_damping * dq - self.omega ** 2 * q
         return np.concatenate([dq, ddq, rates, [float(self.modal_damping @ (dq * dq)), 0.0]])
@@ -226,6 +228,8 @@ class StructureSubsystem(Subsystem):
     def _step_impl(self, t, h, inputs: StepInput | None):
         m = self.n_modes
         self.switch_log = []
+        self._t0 = t
+        self.aux[2:-2:3] = 0.0          # first moments are per step
         closed = self._embedded and bool(np.any(self._switch(t, self.x) > 0))
         if not closed:
             G = (self._modal_force(inputs.coeffs) if inputs is not None

@@ -15,7 +15,7 @@ from abc import ABC, abstractmethod
 
 import numpy as np
 
-__all__ = ["StepInput", "Subsystem", "RigidReference", "SubsystemState"]
+__all__ = ["StepInput", "Subsystem", "RigidReference", "SubsystemState", "EmbeddedContact"]
 
 
 class StepInput:
@@ -42,6 +42,67 @@ class StepInput:
     @classmethod
     def zero(cls, t0: float, h: float, n_ports: int) -> "StepInput":
         return cls(t0, h, np.zeros((1, n_ports, 2)))
+
+
+class EmbeddedContact:
+    """A contact evaluated inside its host subsystem's integrator.
+
+    The partner port moves along a polynomial in the step's normalised time
+    ``s = (t - t0) / h``: ``x_p(s) = sum_j motion[j] s**j`` (complex, ``x + iy``
+    [m]), set per step by the coupling scheme with :meth:`set_motion`.  A
+    rigid partner keeps one constant coefficient.
+
+    Attributes
+    ----------
+    contact : couplers.PointContact
+    port : int
+        The host's port.
+    side : float
+        +1 when the host is the contact's side ``a`` (the point), -1 when it
+        is side ``b`` (the surface).
+    normal : complex
+        Unit normal, from ``b`` towards ``a``.
+    """
+
+    __slots__ = ("contact", "law", "port", "side", "normal", "offset", "t0", "h", "motion",
+                 "_dmotion")
+
+    def __init__(self, contact, port: int, side: float, partner_position,
+                 partner_velocity=(0.0, 0.0)):
+        self.contact, self.law = contact, contact.law
+        self.port, self.side = int(port), float(side)
+        self.normal = complex(contact.normal[0], contact.normal[1])
+        self.offset = float(contact.offset)
+        xp = complex(partner_position[0], partner_position[1])
+        vp = complex(partner_velocity[0], partner_velocity[1])
+        self.set_motion(0.0, 1.0, np.array([xp, vp]))
+
+    def set_motion(self, t0: float, h: float, coeffs) -> None:
+        """Partner position over ``[t0, t0 + h]``: complex polynomial
+        coefficients in ``s`` (lowest first)."""
+        c = np.asarray(coeffs, complex)
+        self.t0, self.h, self.motion = float(t0), float(h), c
+        self._dmotion = (c[1:] * np.arange(1, c.size)) / h if c.size > 1 else np.zeros(1, complex)
+
+    def partner(self, t: float) -> tuple[complex, complex]:
+        """Partner port position and velocity at ``t`` (complex)."""
+        s = (t - self.t0) / self.h
+        x = 0j
+        for c in self.motion[::-1]:
+            x = x * s + c
+        v = 0j
+        for c in self._dmotion[::-1]:
+            v = v * s + c
+        return x, v
+
+    def penetration(self, t: float, x: complex, v: complex) -> tuple[float, float]:
+        """Penetration [m] and its rate [m/s] for host port position ``x``
+        and velocity ``v`` (complex) at ``t``."""
+        xp, vp = self.partner(t)
+        nc = self.normal.conjugate()
+        d = self.offset - self.side * (nc * (x - xp)).real
+        dd = -self.side * (nc * (v - vp)).real
+        return d, dd
 
 
 class SubsystemState:

@@ -20,9 +20,10 @@ class ContactLink:
     """A contact between port ``port_a`` of subsystem ``sub_a`` (the point)
     and port ``port_b`` of subsystem ``sub_b`` (the surface).
 
-    ``placement`` is ``"embedded"`` (evaluated inside the moving side's
-    integrator; needs a rigid partner) or ``"coupler"`` (the coupling scheme
-    exchanges the force).
+    ``placement`` is ``"embedded"`` (evaluated inside one side's integrator:
+    the moving side against a rigid partner, or the side ``host`` against the
+    other side's port moving as the scheme extrapolates or interpolates it)
+    or ``"coupler"`` (the coupling scheme exchanges the force).
     """
 
     contact: PointContact
@@ -32,6 +33,7 @@ class ContactLink:
     port_b: int
     placement: str
     follow: bool = False
+    host: int | None = None
 
 
 class CoupledSystem:
@@ -51,23 +53,35 @@ class CoupledSystem:
                                  if ln.placement == "coupler"], dtype=int)
         # embedded: contact index -> (subsystem index, slot in its aux)
         self.embedded: dict[int, tuple[int, int]] = {}
+        # hosted (embedded against a moving partner): contact index ->
+        # (host, slot, partner, partner port, EmbeddedContact)
+        self.hosted: dict[int, tuple] = {}
         slots = [0] * len(self.subsystems)
         for i, ln in enumerate(self.links):
             if ln.placement != "embedded":
                 continue
             a, b = self.subsystems[ln.sub_a], self.subsystems[ln.sub_b]
-            if a.rigid == b.rigid:
-                raise ValueError(f"contact `{ln.contact.name}`: placement `embedded` needs one "
-                                 f"rigid side and one moving side")
-            own, partner, side = ((ln.sub_a, ln.sub_b, 1.0) if b.rigid else
-                                  (ln.sub_b, ln.sub_a, -1.0))
+            if a.rigid and b.rigid:
+                raise ValueError(f"contact `{ln.contact.name}`: placement `embedded` needs a "
+                                 f"moving side")
+            if a.rigid or b.rigid:
+                own = ln.sub_a if b.rigid else ln.sub_b
+            else:
+                own = ln.sub_a if ln.host is None else ln.host
+                if own not in (ln.sub_a, ln.sub_b):
+                    raise ValueError(f"contact `{ln.contact.name}`: its host must be one of "
+                                     f"its sides")
+            side = 1.0 if own == ln.sub_a else -1.0
+            partner = ln.sub_b if side > 0 else ln.sub_a
             own_port = ln.port_a if side > 0 else ln.port_b
             partner_port = ln.port_b if side > 0 else ln.port_a
             psub = self.subsystems[partner]
             ppos, pvel = psub.outputs(0.0, psub.x)
-            self.subsystems[own].embed_contact(ln.contact, own_port, side, ppos[partner_port],
-                                               pvel[partner_port])
+            emb = self.subsystems[own].embed_contact(ln.contact, own_port, side,
+                                                     ppos[partner_port], pvel[partner_port])
             self.embedded[i] = (own, slots[own])
+            if not psub.rigid:
+                self.hosted[i] = (own, slots[own], partner, partner_port, emb)
             slots[own] += 1
         self._followers = [ln for ln in self.links if ln.follow]
         for ln in self._followers:
@@ -87,11 +101,19 @@ class CoupledSystem:
                 if ln.sub_b == s:
                     G[2 * ln.port_b:2 * ln.port_b + 2, c] -= n
             self._G.append(G)
-        # Co-simulation exchanges only the coupler contacts' forces.
-        mask = np.zeros(self.n_contacts)
-        mask[self.coupler] = 1.0
-        self._Gc = [G * mask for G in self._G]
-        self.touches = [bool(np.any(G[:, self.coupler])) for G in self._G]
+        # Co-simulation exchanges the coupler contacts' forces, and hands a
+        # hosted contact's force to its partner side.
+        self._Gc = []
+        for s, G in enumerate(self._G):
+            mask = np.zeros(self.n_contacts)
+            mask[self.coupler] = 1.0
+            for c, (_, _, partner, _, _) in self.hosted.items():
+                if partner == s:
+                    mask[c] = 1.0
+            self._Gc.append(G * mask)
+        #: the contacts whose force a scheme hands over (coupler and hosted)
+        self.exchanged = np.array(sorted(set(self.coupler.tolist()) | set(self.hosted)),
+                                  dtype=int)
 
     # ---------------------------------------------------- moving surface points
     def update_followers(self, outs) -> None:
@@ -141,8 +163,20 @@ class CoupledSystem:
         """(n_contacts, 2) impulse and dissipated energy of embedded contacts."""
         out = np.zeros((self.n_contacts, 2))
         for c, (s, slot) in self.embedded.items():
-            out[c] = self.subsystems[s].embedded_quadratures()[slot]
+            out[c] = self.subsystems[s].embedded_quadratures()[slot, :2]
         return out
+
+    def hosted_force(self, c: int, h: float, impulse_before: float) -> np.ndarray:
+        """Force that hosted contact ``c`` exerted over its host's last step of
+        length ``h``, as the linear polynomial in ``s`` (coefficients (2,),
+        lowest first) with the same impulse and first moment: the L2
+        projection of the force history on linear functions.  The partner
+        side receives it, so momentum passes over exactly."""
+        host, slot = self.embedded[c]
+        imp, _, mom = self.subsystems[host].embedded_quadratures()[slot]
+        m0 = (imp - impulse_before) / h          # int_0^1 f ds
+        m1 = mom / (h * h)                       # int_0^1 f s ds
+        return np.array([4.0 * m0 - 6.0 * m1, 12.0 * m1 - 6.0 * m0])
 
     def get_state(self):
         return [s.get_state() for s in self.subsystems]

@@ -156,7 +156,7 @@ class CoSimulationScheme(CouplingScheme):
         law = [ln.contact.law for ln in system.links]
         p_prev = np.array([float(law[c].dissipation_rate(f[c], d[c], dd[c])) for c in coupler])
         recorder.record(0.0, d, dd, f, impulse, diss, self._internal(system))
-        controlled = self.contact_step is not None and len(coupler) > 0
+        controlled = self.contact_step is not None and len(system.exchanged) > 0
         n = max(1, math.ceil(t_end / H - 1e-9))
         h_prev = H
         k, t, n_rejected = 0, 0.0, 0
@@ -180,7 +180,7 @@ class CoSimulationScheme(CouplingScheme):
             d1, dd1 = system.penetrations(outs)
             f = system.forces(d1, dd1)
             if controlled and h > self.contact_step and not self._aimed:
-                onset = self._onset(d, dd, d1, dd1, h)
+                onset = self._onset(d, dd, d1, dd1, t, h)
                 if onset is not None:           # a contact closed inside a long step
                     system.set_state(saved)
                     n_rejected += 1
@@ -189,6 +189,7 @@ class CoSimulationScheme(CouplingScheme):
                     continue
             self._aimed = False
             self._dd_prev, self._h_prev_step = dd.copy(), h
+            self._outs_prev = self._outs
             d, dd = d1, dd1
             h_prev = h
             k += 1
@@ -225,6 +226,7 @@ class CoSimulationScheme(CouplingScheme):
     _aimed = False          # the current step was aimed at an onset: accept it
     _dd_prev = None
     _h_prev_step = None
+    _outs_prev = None       # outputs at the communication point before the last
 
     def _controlled_step(self, d, dd, f, remaining):
         """The next macro step: the onset found by a rejected step, else
@@ -234,7 +236,7 @@ class CoSimulationScheme(CouplingScheme):
         if self._h_next is not None:
             h, self._h_next = self._h_next, None
             return min(h, remaining)
-        c = self._system.coupler
+        c = self._system.exchanged
         H = self.macro_step
         # short steps while a contact is closed, was closed a step ago (so the
         # extrapolation history is clear of force before the step grows), or
@@ -244,16 +246,22 @@ class CoSimulationScheme(CouplingScheme):
             return min(self.contact_step, remaining)
         return min(H, remaining)
 
-    def _onset(self, d0, dd0, d1, dd1, h):
-        """Length of step that ends where the first coupler contact closes, or
-        None if none closed in the step.
+    def _onset(self, d0, dd0, d1, dd1, t, h):
+        """Length of step that ends where the first exchanged contact closes,
+        or None if none closed in the step.
 
-        The end state of the rejected step already holds the contact's
-        response, so the onset is predicted from the free motion before it:
-        ``d0 + dd0 tau + a tau^2 / 2 = 0``, the relative acceleration ``a``
-        from the last two outputs (exact under a constant push).  Without a
-        root inside the step, half the step."""
-        c = self._system.coupler
+        A hosted contact's onset was located by its host's integrator.  For a
+        coupler contact, the end state of the rejected step already holds the
+        contact's response, so the onset is predicted from the free motion
+        before it: ``d0 + dd0 tau + a tau^2 / 2 = 0``, the relative
+        acceleration ``a`` from the last two outputs (exact under a constant
+        push).  Without a root inside the step, half the step."""
+        system = self._system
+        hosted = [ts - t for c, (host, slot, _, _, _) in system.hosted.items()
+                  for ts, j, on in system.subsystems[host].switch_log if j == slot and on]
+        if hosted:
+            return max(min(hosted), 1e-12 * h)
+        c = system.coupler
         closing = c[(d0[c] <= 0) & (d1[c] > 0)]
         if not len(closing):
             return None
@@ -288,6 +296,33 @@ class CoSimulationScheme(CouplingScheme):
         if ratio > 1.0 + 1e-9:
             co[1:, self._hist[-1] == 0.0] = 0.0
         return co
+
+    def _set_partner_motion(self, system, c: int, t: float, h: float, after=None) -> None:
+        """Give hosted contact ``c``'s host the partner port's motion over
+        ``[t, t + h]``: the cubic Hermite between its outputs at ``t`` and
+        ``after`` (the partner's outputs at ``t + h``, when it has already
+        stepped), else extrapolated from ``t``: ``x + v tau`` at order 0,
+        ``+ a tau^2 / 2`` at order >= 1 with ``a`` from the last two
+        velocities."""
+        _, _, partner, port, emb = system.hosted[c]
+        pos, vel = self._outs[partner]
+        x0, v0 = complex(*pos[port]), complex(*vel[port])
+        if after is not None:
+            x1, v1 = complex(*after[0][port]), complex(*after[1][port])
+            dx = x1 - x0
+            emb.set_motion(t, h, (x0, h * v0, 3 * dx - h * (2 * v0 + v1),
+                                  -2 * dx + h * (v0 + v1)))
+            return
+        a = 0j
+        if self.extrapolation_order > 0 and self._outs_prev is not None:
+            a = (v0 - complex(*self._outs_prev[partner][1][port])) / self._h_prev_step
+        emb.set_motion(t, h, (x0, h * v0, 0.5 * a * h * h))
+
+    @staticmethod
+    def _hosted_impulses(system) -> dict:
+        """Impulse so far of each hosted contact, before a step."""
+        return {c: system.subsystems[host].embedded_quadratures()[slot, 0]
+                for c, (host, slot, _, _, _) in system.hosted.items()}
 
     def _moving(self, system):
         return [s for s, sub in enumerate(system.subsystems) if not sub.rigid]

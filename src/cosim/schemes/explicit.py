@@ -20,6 +20,8 @@ class Jacobi(CoSimulationScheme):
 
     def advance(self, system, t, h, ratio):
         coeffs = self._extrapolated(ratio)
+        for c in system.hosted:
+            self._set_partner_motion(system, c, t, h)
         for s in self._moving(system):
             system.subsystems[s].step(t, h, system.step_input(s, t, h, coeffs))
         return coeffs
@@ -57,9 +59,17 @@ class GaussSeidel(CoSimulationScheme):
         applied[:base.shape[0]] = base
         done = {s for s, sub in enumerate(system.subsystems) if sub.rigid}
         outs_n = self._outs
+        after = {}                      # outputs at t + h of the subsystems done
+        imp0 = self._hosted_impulses(system)
         for s in self._order(system):
             coeffs = np.zeros_like(applied)
             coeffs[:base.shape[0]] = base
+            for c, (host, _, partner, _, _) in system.hosted.items():
+                if host == s:           # the partner's motion: its own if it has stepped
+                    self._set_partner_motion(system, c, t, h, after.get(partner))
+                elif partner == s and host in done:     # the force the host exerted
+                    coeffs[:, c] = 0.0
+                    coeffs[:2, c] = system.hosted_force(c, h, imp0[c])
             mine = [c for c in system.coupler
                     if s in (system.links[c].sub_a, system.links[c].sub_b)]
             if mine:
@@ -79,6 +89,8 @@ class GaussSeidel(CoSimulationScheme):
                     coeffs[1, c] = ftilde - self._f[c]
                 if ln.sub_a == s or system.subsystems[ln.sub_a].rigid:
                     applied[:, c] = coeffs[:, c]
-            system.subsystems[s].step(t, h, system.step_input(s, t, h, coeffs))
+            sub = system.subsystems[s]
+            sub.step(t, h, system.step_input(s, t, h, coeffs))
             done.add(s)
+            after[s] = sub.outputs(sub.t, sub.x)
         return applied
