@@ -391,9 +391,14 @@ CASES_BAD = [
     ([f"{C}.friction=0.3"], at(f"{C}.friction", f"is not a known key of {C}")),
     (['subsystems.wall2={type="rigid", points={p=[0.0, 0.0]}}', f"{C}.a=wall2.p"],
      at(f"{C}.b", "a contact between two rigid subsystems has nothing to simulate")),
-    ([ARM, f"{C}.b=arm.hand", f"{C}.placement=embedded"],
-     at(f"{C}.placement", "`embedded` needs a rigid side (wall, ground); with two moving "
-                          "sides use `coupler`")),
+    ([ARM, f"{C}.b=arm.hand", f"{C}.placement=embedded", f'{C}.host="wall"'],
+     at(f"{C}.host", "must be one of ['arm', 'body'], got 'wall'")),
+    ([f'{C}.host="body"'],
+     at(f"{C}.host", "names the side that integrates an `embedded` contact between two "
+                     "moving sides; here there is nothing to choose")),
+    ([f'{C}.law={{type="rigid", restitution=0.5}}', ARM, f"{C}.b=arm.hand",
+      f"{C}.placement=embedded"],
+     at(f"{C}.placement", "a `rigid` law is resolved inside its moving side's integrator")),
 ]
 
 

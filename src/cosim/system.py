@@ -166,6 +166,17 @@ class CoupledSystem:
             out[c] = self.subsystems[s].embedded_quadratures()[slot, :2]
         return out
 
+    def hosted_view_forces(self, outs) -> dict:
+        """Force of each hosted contact as its host sees it now, against the
+        partner motion it was given, from outputs ``outs``."""
+        out = {}
+        for c, (host, _, _, _, emb) in self.hosted.items():
+            sub = self.subsystems[host]
+            pos, vel = outs[host]
+            d, dd = emb.penetration(sub.t, complex(*pos[emb.port]), complex(*vel[emb.port]))
+            out[c] = float(emb.law.force(d, dd))
+        return out
+
     def hosted_force(self, c: int, h: float, impulse_before: float) -> np.ndarray:
         """Force that hosted contact ``c`` exerted over its host's last step of
         length ``h``, as the linear polynomial in ``s`` (coefficients (2,),

@@ -90,6 +90,7 @@ class CoSimulationScheme(CouplingScheme):
         "max_energy_gain": Option(float, 0.01, lambda v: v >= 0 and math.isfinite(v), ">= 0"),
         "accept_unsafe_step": Option(bool, False, lambda v: True, "true or false"),
         "contact_step": Option(float, None, _pos, "> 0 s"),
+        "interface_tolerance": Option(float, None, _pos, "> 0 (relative)"),
     }
 
     def preflight(self, system) -> None:
@@ -175,10 +176,22 @@ class CoSimulationScheme(CouplingScheme):
                     break
             if system._followers:
                 system.update_followers(self._outs)
+            predicted = self._predicted_end_forces(system, h / h_prev) if self.interface_tolerance \
+                and controlled else None
             coeffs = self.advance(system, t, h, h / h_prev)
             outs = system.outputs()
             d1, dd1 = system.penetrations(outs)
             f = system.forces(d1, dd1)
+            if predicted is not None and not self._aimed:
+                for c, view in system.hosted_view_forces(outs).items():
+                    predicted[c] = view
+                h_new = self._error_control(f, predicted, h)
+                if h_new is not None:           # the interface error is too large
+                    system.set_state(saved)
+                    n_rejected += 1
+                    self._h_next = h_new
+                    self._outs = system.outputs()
+                    continue
             if controlled and h > self.contact_step and not self._aimed:
                 onset = self._onset(d, dd, d1, dd1, t, h)
                 if onset is not None:           # a contact closed inside a long step
@@ -227,6 +240,43 @@ class CoSimulationScheme(CouplingScheme):
     _dd_prev = None
     _h_prev_step = None
     _outs_prev = None       # outputs at the communication point before the last
+    _h_adapt = None         # step in contact under interface error control
+    _f_scale = None         # largest force seen per contact [N]
+
+    def _predicted_end_forces(self, system, ratio):
+        """Force each coupler contact is predicted to carry at the step's
+        end: the extrapolated force at ``s = 1``.  (A hosted contact's
+        prediction is the force its host saw at the step's end, against the
+        partner's extrapolated motion; it is read after the step.)"""
+        return np.sum(self._extrapolated(ratio), axis=0)
+
+    def _error_control(self, f, predicted, h):
+        """Interface error estimate (predictor against corrector): the
+        largest difference between the force each exchanged contact was
+        predicted to carry at the step's end and the force it carries,
+        relative to the largest force it has carried so far.  Returns a
+        shorter step to retry with when it exceeds ``interface_tolerance``,
+        else None, and sets the next contact step from it (Schierz, Arnold
+        and Clauss 2012: elementary controller on the extrapolation error,
+        whose order is ``extrapolation_order + 1``).  The step in contact
+        stays between ``contact_step / 64`` and ``contact_step``."""
+        c = self._system.exchanged
+        if self._f_scale is None:
+            self._f_scale = np.zeros(self._system.n_contacts)
+        self._f_scale[c] = np.maximum(self._f_scale[c], np.abs(f[c]))
+        scale = np.maximum(self._f_scale[c], 1e-300)
+        err = float(np.max(np.abs(f[c] - predicted[c]) / scale)) if len(c) else 0.0
+        if not np.any(self._f_scale[c] > 0):
+            return None
+        tol, p = self.interface_tolerance, self.extrapolation_order + 1
+        fac = 2.0 if err == 0 else min(2.0, max(0.2, 0.9 * (tol / err) ** (1.0 / (p + 1))))
+        floor = self.contact_step / 64.0
+        if err > tol and h > floor * (1 + 1e-9):
+            return max(fac * h, floor)
+        # never above contact_step: an end-point estimate cannot see a
+        # contact that opens and closes again inside a longer step
+        self._h_adapt = min(max(fac * h, floor), self.contact_step)
+        return None
 
     def _controlled_step(self, d, dd, f, remaining):
         """The next macro step: the onset found by a rejected step, else
@@ -243,7 +293,11 @@ class CoSimulationScheme(CouplingScheme):
         # would close within a long step
         recent = len(self._hist) > 1 and np.any(self._hist[-2][c] > 0)
         if np.any(f[c] > 0) or recent or np.any(d[c] + H * dd[c] > 0):
-            return min(self.contact_step, remaining)
+            h = self.contact_step
+            if self.interface_tolerance and self._h_adapt is not None:
+                h = self._h_adapt
+            return min(h, remaining)
+        self._h_adapt = None            # contacts open: start again from contact_step
         return min(H, remaining)
 
     def _onset(self, d0, dd0, d1, dd1, t, h):
