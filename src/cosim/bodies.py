@@ -66,7 +66,10 @@ class MultibodySubsystem(Subsystem):
         #: rigid impacts resolved during the last step (dicts for the summary)
         self.impact_log: list[dict] = []
         self._zero_u = np.zeros((self.n_ports, 2))
-        self._t0 = 0.0
+        self._t0, self._h = 0.0, 1.0
+        #: ``int v_p(t) s^j dt`` over the last step, (3, n_ports) complex [m]:
+        #: the work of a polynomial port force follows from them exactly
+        self.port_moments = np.zeros((3, self.n_ports), complex)
 
     # ------------------------------------------------------ embedded contacts
     def embed_contact(self, contact: PointContact, port: int, own_side: int,
@@ -82,13 +85,15 @@ class MultibodySubsystem(Subsystem):
         """
         e = EmbeddedContact(contact, port, own_side, partner_position, partner_velocity)
         self._embedded.append(e)
-        self.aux = np.zeros(3 * len(self._embedded) + 2)
+        self.aux = np.zeros(4 * len(self._embedded) + 2)
         return e
 
     def embedded_quadratures(self) -> np.ndarray:
-        """(n_embedded, 3): impulse [N s], dissipated energy [J] so far, and the
-        current step's first moment of the force ``int f (t - t0) dt`` [N s^2]."""
-        return self.aux[:-2].reshape(-1, 3)
+        """(n_embedded, 4): impulse [N s], dissipated energy [J] and work done on
+        this subsystem [J] so far, and the current step's first moment of the
+        force ``int f (t - t0) dt`` [N s^2], in the order impulse, dissipated,
+        moment, work."""
+        return self.aux[:-2].reshape(-1, 4)
 
     def ledger(self):
         return float(self.aux[-2]), float(self.aux[-1])
@@ -147,11 +152,15 @@ class MultibodySubsystem(Subsystem):
         for e, d, dd in self._embedded_state(t, x, v):
             law = e.law
             f = float(law.force(d, dd))
-            u[e.port] += e.side * f * e.normal
-            rates += [f, float(law.dissipation_rate(f, d, dd)), f * tau]
+            fn = e.side * f * e.normal
+            u[e.port] += fn
+            rates += [f, float(law.dissipation_rate(f, d, dd)), f * tau,
+                      (fn.conjugate() * v[e.port]).real]
             switch.append(float(law.switch(d, dd)))
         self._last_switch = (y, np.array(switch))
-        return np.concatenate([dq, self._accelerations(M, F, J, u), rates, (diss, sup)])
+        s = tau / self._h
+        return np.concatenate([dq, self._accelerations(M, F, J, u), rates, (diss, sup),
+                               np.concatenate([v, s * v, (s * s) * v]).view(float)])
 
     def _switch(self, t, y):
         if self._last_switch[0] is y:        # the RHS was just evaluated at this state
@@ -164,17 +173,18 @@ class MultibodySubsystem(Subsystem):
                          in self._embedded_state(t, x, v)])
 
     def _step_impl(self, t, h, inputs: StepInput | None):
-        self._t0 = t
-        self.aux[2:-2:3] = 0.0          # first moments are per step
-        y0 = np.concatenate([self.x, self.aux])
+        self._t0, self._h = t, h
+        self.aux[2:-2:4] = 0.0          # first moments are per step
+        y0 = np.concatenate([self.x, self.aux, np.zeros(6 * self.n_ports)])
         switch = self._switch if self._embedded else None
         self.switch_log = []
         self.impact_log = []
         y1 = self.integrator.integrate(lambda tt, yy: self._rhs(tt, yy, inputs), t, y0, t + h,
                                        switch, self._on_switch)
-        n2 = 2 * self.n_dof
+        n2, na = 2 * self.n_dof, self.aux.size
         self.x[:] = y1[:n2]
-        self.aux[:] = y1[n2:]
+        self.aux[:] = y1[n2:n2 + na]
+        self.port_moments = y1[n2 + na:].view(complex).reshape(3, self.n_ports)
         self._last_switch = (None, None)
 
     def _on_switch(self, t, j, on, y):
@@ -241,9 +251,11 @@ class MultibodySubsystem(Subsystem):
         for i, k in enumerate(part):
             p_i = float(res.normal_impulse[i])
             if y.size > 2 * n:           # the stepping state carries the quadratures
-                out[2 * n + 3 * k] += p_i
-                out[2 * n + 3 * k + 1] += res.energy_loss * (p_i / total if total else 0.0)
-                out[2 * n + 3 * k + 2] += p_i * (t - self._t0)
+                share = res.energy_loss * (p_i / total if total else 0.0)
+                out[2 * n + 4 * k] += p_i
+                out[2 * n + 4 * k + 1] += share
+                out[2 * n + 4 * k + 2] += p_i * (t - self._t0)
+                out[2 * n + 4 * k + 3] -= share       # the kinetic energy the impact took
             if k != slot:
                 self.switch_log.append((t, k, True))
             self.impact_log.append({

@@ -84,6 +84,7 @@ class Recorder:
         self.supplied = 0.0
         self.max_drift = 0.0
         self.last = None
+        self._d0 = None
 
     def edge(self, c: int, t: float, on: bool) -> None:
         """Report an exactly located contact onset (``on``) or release."""
@@ -94,11 +95,14 @@ class Recorder:
             self._open[c] = None
 
     def record(self, t: float, d: np.ndarray, dd: np.ndarray, f: np.ndarray,
-               impulse: np.ndarray, dissipated: np.ndarray, internal=(0.0, 0.0)) -> None:
+               impulse: np.ndarray, dissipated: np.ndarray, internal=(0.0, 0.0),
+               work: np.ndarray | None = None) -> None:
         """Add a sample; subsystem states are read from the system.
 
         ``dissipated`` is per contact; ``internal`` is the energy dissipated
-        inside the subsystems and supplied to them by drives, in total."""
+        inside the subsystems and supplied to them by drives, in total;
+        ``work`` is per contact, the work its forces did on the subsystems so
+        far (as the scheme applied them)."""
         energy = self.system.energy(d)
         diss_total = float(np.sum(dissipated)) + internal[0]
         if self.e0 is None:
@@ -124,7 +128,10 @@ class Recorder:
             for c in np.flatnonzero(active):
                 self.edge(int(c), t, True)
         self._prev = (t, d.copy(), dd.copy(), active)
-        self.last = (t, impulse.copy(), dissipated.copy(), energy, diss_total)
+        self.last = (t, impulse.copy(), dissipated.copy(), energy, diss_total,
+                     None if work is None else np.array(work, float), d.copy())
+        if self._d0 is None:
+            self._d0 = d.copy()
         if self._count % self.every == 0:
             self._store(t, d, f, energy, diss_total)
         self._count += 1
@@ -193,8 +200,16 @@ class Recorder:
         dissipated = self.last[2] if self.last else np.zeros(sysm.n_contacts)
         contacts = {}
         events = []
+        work = self.last[5] if self.last else None
         for c, name in enumerate(sysm.contact_names):
             iv = intervals[c]
+            ledger = {}
+            if work is not None:
+                law = self._laws[c]
+                stored = float(law.potential(self.last[6][c]))
+                stored0 = float(law.potential(self._d0[c]))
+                ledger = {"work": float(work[c]), "stored": stored,
+                          "coupling_error": float(work[c] + stored - stored0 + dissipated[c])}
             contacts[name] = {
                 "peak_penetration": float(self.peak[c]),
                 "intervals": [[float(a), float(b)] for a, b in iv],
@@ -203,6 +218,7 @@ class Recorder:
                 "impulse": float(impulse[c]),
                 "dissipated": float(dissipated[c]),
                 "placement": sysm.links[c].placement,
+                **ledger,
             }
             events += [{"contact": name, "t_on": float(a), "t_off": float(b)} for a, b in iv]
         events.sort(key=lambda e: e["t_on"])

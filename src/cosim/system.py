@@ -111,6 +111,7 @@ class CoupledSystem:
                 if partner == s:
                     mask[c] = 1.0
             self._Gc.append(G * mask)
+        self._applied: dict[int, np.ndarray] = {}      # force polynomials of the step
         #: the contacts whose force a scheme hands over (coupler and hosted)
         self.exchanged = np.array(sorted(set(self.coupler.tolist()) | set(self.hosted)),
                                   dtype=int)
@@ -156,8 +157,30 @@ class CoupledSystem:
         """Port forces of subsystem ``s`` from contact-force polynomial
         coefficients ``coeffs`` (order + 1, n_contacts)."""
         sub = self.subsystems[s]
+        self._applied[s] = coeffs
         c = coeffs @ self._Gc[s].T
         return StepInput(t0, h, c.reshape(len(coeffs), sub.n_ports, 2))
+
+    def exchange_work(self) -> np.ndarray:
+        """(n_contacts,) work [J] the exchanged contact forces did on the
+        subsystems over their last steps: per side, the force polynomial it
+        was handed against its ports' velocity moments, exact for the
+        polynomial.  Contacts embedded in a host add the host's own side
+        through :meth:`embedded_work`."""
+        work = np.zeros(self.n_contacts)
+        for s, coeffs in self._applied.items():
+            mom = self.subsystems[s].port_moments.view(float).reshape(3, -1)
+            p = coeffs.shape[0]
+            work += np.einsum("jc,jc->c", coeffs, mom[:p] @ self._Gc[s])
+        self._applied = {}
+        return work
+
+    def embedded_work(self) -> np.ndarray:
+        """(n_contacts,) work [J] embedded contacts did on their hosts so far."""
+        out = np.zeros(self.n_contacts)
+        for c, (s, slot) in self.embedded.items():
+            out[c] = self.subsystems[s].embedded_quadratures()[slot, 3]
+        return out
 
     def embedded_quadratures(self):
         """(n_contacts, 2) impulse and dissipated energy of embedded contacts."""
@@ -184,7 +207,7 @@ class CoupledSystem:
         projection of the force history on linear functions.  The partner
         side receives it, so momentum passes over exactly."""
         host, slot = self.embedded[c]
-        imp, _, mom = self.subsystems[host].embedded_quadratures()[slot]
+        imp, _, mom, _ = self.subsystems[host].embedded_quadratures()[slot]
         m0 = (imp - impulse_before) / h          # int_0^1 f ds
         m1 = mom / (h * h)                       # int_0^1 f s ds
         return np.array([4.0 * m0 - 6.0 * m1, 12.0 * m1 - 6.0 * m0])

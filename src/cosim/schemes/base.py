@@ -153,10 +153,10 @@ class CoSimulationScheme(CouplingScheme):
         f = system.forces(d, dd)
         self._outs, self._f = outs, f
         self._hist = [f]
-        impulse, diss = np.zeros(nc), np.zeros(nc)
+        impulse, diss, work = np.zeros(nc), np.zeros(nc), np.zeros(nc)
         law = [ln.contact.law for ln in system.links]
         p_prev = np.array([float(law[c].dissipation_rate(f[c], d[c], dd[c])) for c in coupler])
-        recorder.record(0.0, d, dd, f, impulse, diss, self._internal(system))
+        recorder.record(0.0, d, dd, f, impulse, diss, self._internal(system), work)
         controlled = self.contact_step is not None and len(system.exchanged) > 0
         n = max(1, math.ceil(t_end / H - 1e-9))
         h_prev = H
@@ -208,6 +208,7 @@ class CoSimulationScheme(CouplingScheme):
             k += 1
             self._outs, self._f = outs, f
             self._hist = (self._hist + [f])[-3:]
+            work += system.exchange_work()
             if len(coupler):
                 j = np.arange(coeffs.shape[0])[:, None]
                 impulse[coupler] += h * np.sum(coeffs[:, coupler] / (j + 1), axis=0)
@@ -230,7 +231,8 @@ class CoSimulationScheme(CouplingScheme):
                 recorder.impacts += getattr(system.subsystems[s], "impact_log", [])
             if not (np.all(np.isfinite(d)) and np.all(np.isfinite(dd))):
                 raise CouplingError(f"non-finite state at t = {t + h:.6g} s")
-            recorder.record(t + h, d, dd, f, impulse, diss, self._internal(system))
+            recorder.record(t + h, d, dd, f, impulse, diss, self._internal(system),
+                            work + system.embedded_work())
             if controlled:
                 t = t + h
         return {"n_windows": k, "n_iterations": self.n_iterations, "n_rejected": n_rejected}

@@ -65,7 +65,7 @@ class Monolithic(CouplingScheme):
                      for s, sub in enumerate(subs)]
             diss = [float(laws[c].dissipation_rate(f[c], d[c], dd[c])) for c in range(nc)]
             led = np.sum([sub.ledger_rates(t, xs[s]) for s, sub in enumerate(subs)], axis=0)
-            return np.concatenate(parts + [f, diss, led])
+            return np.concatenate(parts + [f, diss, -f * dd, led])
 
         def make_switch(c):
             def ev(t, y):
@@ -84,7 +84,7 @@ class Monolithic(CouplingScheme):
 
         switches = [make_switch(c) for c in range(nc)]
         peaks = [make_peak(c) for c in range(nc)]
-        y = np.concatenate([s.x for s in subs] + [np.zeros(2 * nc + 2)])
+        y = np.concatenate([s.x for s in subs] + [np.zeros(3 * nc + 2)])
         dt_out = self.output_interval or t_end / 1000.0
 
         def record(t, yy):
@@ -94,7 +94,7 @@ class Monolithic(CouplingScheme):
                 sub.t = t
             _, d, dd, f = contact_state(yy)
             recorder.record(t, d, dd, f, yy[n_x:n_x + nc], yy[n_x + nc:n_x + 2 * nc],
-                            (yy[-2], yy[-1]))
+                            (yy[-2], yy[-1]), yy[n_x + 2 * nc:n_x + 3 * nc])
 
         # Contacts already closed at t = 0.
         _, d0, dd0, _ = contact_state(y)
@@ -158,6 +158,7 @@ class Monolithic(CouplingScheme):
             k = system.contact_names.index(imp["contact"])
             y[n_x + k] += imp["normal_impulse"]
             y[n_x + nc + k] += imp["energy_loss"]
+            y[n_x + 2 * nc + k] -= imp["energy_loss"]
             recorder.impacts.append(imp)
             recorder.edge(k, t, True)
             recorder.edge(k, t, False)
