@@ -162,6 +162,19 @@ def build_system(scene: Scene, scheme: str | None = None):
         if unknown or sorted(n for n in seq if n in moving) != sorted(moving):
             raise SceneError(scene.path, "scheme.sequence",
                              f"must list every moving subsystem once ({moving}), got {seq!r}")
+    sub_steps = opts.get("substeps") or {}
+    moving = [s.name for s in subs if not s.rigid]
+    for sname, m in sub_steps.items():
+        if sname not in moving:
+            raise SceneError(scene.path, f"scheme.substeps.{sname}",
+                             f"names no moving subsystem; moving subsystems are {moving}")
+        hosts = [system.links[c].contact.name for c, (h, *_) in system.hosted.items()
+                 if subs[h].name == sname]
+        if m > 1 and hosts:
+            raise SceneError(scene.path, f"scheme.substeps.{sname}",
+                             f"`{sname}` hosts contacts {hosts}, which its integrator "
+                             f"resolves continuously; sub-steps would only cut its step, so "
+                             f"give it 1 (got {m}) or a smaller integrator step")
     try:
         sch = cls(**opts)
     except (TypeError, ValueError) as exc:

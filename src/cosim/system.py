@@ -112,6 +112,7 @@ class CoupledSystem:
                     mask[c] = 1.0
             self._Gc.append(G * mask)
         self._applied: dict[int, np.ndarray] = {}      # force polynomials of the step
+        self._work = np.zeros(self.n_contacts)
         #: the contacts whose force a scheme hands over (coupler and hosted)
         self.exchanged = np.array(sorted(set(self.coupler.tolist()) | set(self.hosted)),
                                   dtype=int)
@@ -161,19 +162,30 @@ class CoupledSystem:
         c = coeffs @ self._Gc[s].T
         return StepInput(t0, h, c.reshape(len(coeffs), sub.n_ports, 2))
 
+    def collect_work(self, s: int) -> None:
+        """Add the work the exchanged forces did on subsystem ``s`` over its
+        last step (the force polynomial it was handed against its ports'
+        velocity moments: exact for the polynomial)."""
+        coeffs = self._applied.pop(s, None)
+        if coeffs is None:
+            return
+        mom = self.subsystems[s].port_moments.view(float).reshape(3, -1)
+        p = coeffs.shape[0]
+        self._work += np.einsum("jc,jc->c", coeffs, mom[:p] @ self._Gc[s])
+
     def exchange_work(self) -> np.ndarray:
         """(n_contacts,) work [J] the exchanged contact forces did on the
-        subsystems over their last steps: per side, the force polynomial it
-        was handed against its ports' velocity moments, exact for the
-        polynomial.  Contacts embedded in a host add the host's own side
-        through :meth:`embedded_work`."""
-        work = np.zeros(self.n_contacts)
-        for s, coeffs in self._applied.items():
-            mom = self.subsystems[s].port_moments.view(float).reshape(3, -1)
-            p = coeffs.shape[0]
-            work += np.einsum("jc,jc->c", coeffs, mom[:p] @ self._Gc[s])
-        self._applied = {}
+        subsystems since the last call, and reset.  Contacts embedded in a
+        host add the host's own side through :meth:`embedded_work`."""
+        for s in list(self._applied):
+            self.collect_work(s)
+        work, self._work = self._work, np.zeros(self.n_contacts)
         return work
+
+    def discard_work(self) -> None:
+        """Forget the work of steps that are being rolled back."""
+        self._applied = {}
+        self._work = np.zeros(self.n_contacts)
 
     def embedded_work(self) -> np.ndarray:
         """(n_contacts,) work [J] embedded contacts did on their hosts so far."""

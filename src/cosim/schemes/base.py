@@ -45,6 +45,24 @@ def extrapolation_coeffs(hist: list, order: int, ratio: float = 1.0) -> np.ndarr
                      0.5 * (fn - 2 * f1 + f2) * ratio * ratio])
 
 
+def reparametrised(coeffs: np.ndarray, a: float, b: float) -> np.ndarray:
+    """Coefficients in ``sigma`` of the polynomials ``sum_i coeffs[i] s**i``
+    (rows lowest first) under ``s = a + b sigma``."""
+    from math import comb
+    p = coeffs.shape[0]
+    out = np.zeros_like(coeffs, dtype=float)
+    for i in range(p):
+        for k in range(i + 1):
+            out[k] += comb(i, k) * a ** (i - k) * b ** k * coeffs[i]
+    return out
+
+
+def _substeps_ok(v) -> bool:
+    return isinstance(v, dict) and all(
+        isinstance(k, str) and isinstance(n, int) and not isinstance(n, bool) and n >= 1
+        for k, n in v.items())
+
+
 class CouplingScheme(ABC):
     """A way of advancing a :class:`~cosim.system.CoupledSystem` in time.
 
@@ -91,6 +109,8 @@ class CoSimulationScheme(CouplingScheme):
         "accept_unsafe_step": Option(bool, False, lambda v: True, "true or false"),
         "contact_step": Option(float, None, _pos, "> 0 s"),
         "interface_tolerance": Option(float, None, _pos, "> 0 (relative)"),
+        "substeps": Option(dict, None, _substeps_ok,
+                           "a table of subsystem name = number of sub-steps (>= 1)"),
     }
 
     def preflight(self, system) -> None:
@@ -135,9 +155,9 @@ class CoSimulationScheme(CouplingScheme):
 
     @abstractmethod
     def advance(self, system, t: float, h: float, ratio: float) -> np.ndarray:
-        """Step every subsystem over [t, t + h]; return the polynomial
-        coefficients (order + 1, n_contacts) of the coupler forces applied to
-        the contacts' side ``a``, for the impulse ledger."""
+        """Step every subsystem over [t, t + h]; return the impulse [N s] the
+        coupler forces gave each contact's side ``a`` (n_contacts,), for the
+        impulse ledger."""
 
     def run(self, system, t_end, recorder):
         H = self.macro_step
@@ -178,7 +198,7 @@ class CoSimulationScheme(CouplingScheme):
                 system.update_followers(self._outs)
             predicted = self._predicted_end_forces(system, h / h_prev) if self.interface_tolerance \
                 and controlled else None
-            coeffs = self.advance(system, t, h, h / h_prev)
+            stepped = self.advance(system, t, h, h / h_prev)
             outs = system.outputs()
             d1, dd1 = system.penetrations(outs)
             f = system.forces(d1, dd1)
@@ -188,6 +208,7 @@ class CoSimulationScheme(CouplingScheme):
                 h_new = self._error_control(f, predicted, h)
                 if h_new is not None:           # the interface error is too large
                     system.set_state(saved)
+                    system.discard_work()
                     n_rejected += 1
                     self._h_next = h_new
                     self._outs = system.outputs()
@@ -196,6 +217,7 @@ class CoSimulationScheme(CouplingScheme):
                 onset = self._onset(d, dd, d1, dd1, t, h)
                 if onset is not None:           # a contact closed inside a long step
                     system.set_state(saved)
+                    system.discard_work()
                     n_rejected += 1
                     self._h_next, self._aimed = onset, True
                     self._outs = system.outputs()
@@ -210,8 +232,7 @@ class CoSimulationScheme(CouplingScheme):
             self._hist = (self._hist + [f])[-3:]
             work += system.exchange_work()
             if len(coupler):
-                j = np.arange(coeffs.shape[0])[:, None]
-                impulse[coupler] += h * np.sum(coeffs[:, coupler] / (j + 1), axis=0)
+                impulse[coupler] += stepped[coupler]
                 p_now = np.array([float(law[c].dissipation_rate(f[c], d[c], dd[c]))
                                   for c in coupler])
                 diss[coupler] += 0.5 * h * (p_prev + p_now)
@@ -379,6 +400,79 @@ class CoSimulationScheme(CouplingScheme):
         """Impulse so far of each hosted contact, before a step."""
         return {c: system.subsystems[host].embedded_quadratures()[slot, 0]
                 for c, (host, slot, _, _, _) in system.hosted.items()}
+
+    def _predicted_outputs(self, system, s: int, tau: float, t: float, h: float, after: dict,
+                           own_ahead: float = 0.0):
+        """Every subsystem's port outputs at ``tau`` in ``[t, t + h]`` as
+        subsystem ``s`` sees them: its own now (moved on by ``own_ahead``
+        seconds at its velocity), a subsystem that has stepped to ``t + h``
+        by cubic Hermite between ``t`` and ``t + h``, one that has not
+        extrapolated from ``t`` (with the acceleration of the last two
+        velocities at order >= 1), a rigid one as it is."""
+        out = []
+        sg = (tau - t) / h
+        for p, sub in enumerate(system.subsystems):
+            if p == s or sub.rigid:
+                pos, vel = sub.outputs(sub.t, sub.x)
+                if p == s and own_ahead:
+                    pos = pos + own_ahead * vel
+                out.append((pos, vel))
+                continue
+            x0, v0 = self._outs[p]
+            if p in after:
+                x1, v1 = after[p]
+                dx = x1 - x0
+                c2, c3 = 3 * dx - h * (2 * v0 + v1), -2 * dx + h * (v0 + v1)
+                out.append((x0 + sg * (h * v0 + sg * (c2 + sg * c3)),
+                            v0 + sg * (2 * c2 + 3 * sg * c3) / h))
+                continue
+            a = 0.0
+            if self.extrapolation_order > 0 and self._outs_prev is not None:
+                a = (v0 - self._outs_prev[p][1]) / self._h_prev_step
+            dt = tau - t
+            out.append((x0 + dt * v0 + 0.5 * dt * dt * a, v0 + dt * a))
+        return out
+
+    def _step_side(self, system, s: int, t: float, h: float, coeffs: np.ndarray,
+                   after: dict) -> np.ndarray:
+        """Step subsystem ``s`` over ``[t, t + h]`` under the force polynomials
+        ``coeffs`` (order + 1, n_contacts).  With ``substeps`` m > 1 for it
+        (multirate), it takes m steps of ``h / m``, and at each its coupler
+        contacts' forces are evaluated anew from its own outputs and its
+        partners' predicted ones (:meth:`_predicted_outputs`): held at
+        order 0, linear towards its own motion extrapolated over the
+        sub-step otherwise.  Returns the impulse [N s] each contact gave it."""
+        sub = system.subsystems[s]
+        m = (self.substeps or {}).get(system.names[s], 1)
+        if m == 1:
+            sub.step(t, h, system.step_input(s, t, h, coeffs))
+            system.collect_work(s)
+            j = np.arange(coeffs.shape[0])[:, None]
+            return h * np.sum(coeffs / (j + 1), axis=0)
+        hk = h / m
+        mine = [c for c in system.coupler
+                if s in (system.links[c].sub_a, system.links[c].sub_b)]
+        width = max(2, coeffs.shape[0])
+        impulse = np.zeros(system.n_contacts)
+        j = np.arange(width)[:, None]
+        for k in range(m):
+            tk = t + k * hk
+            cf = np.zeros((width, system.n_contacts))
+            cf[:coeffs.shape[0]] = reparametrised(coeffs, k / m, 1.0 / m)
+            if mine:
+                d0, dd0 = system.penetrations(self._predicted_outputs(system, s, tk, t, h, after))
+                f0 = system.forces(d0, dd0, mine)
+                f1 = f0
+                if self.extrapolation_order > 0:
+                    d1, dd1 = system.penetrations(self._predicted_outputs(
+                        system, s, tk + hk, t, h, after, own_ahead=hk))
+                    f1 = system.forces(d1, dd1, mine)
+                cf[:, mine] = 0.0
+                cf[0, mine], cf[1, mine] = f0, f1 - f0
+            sub.step(tk, hk, system.step_input(s, tk, hk, cf))
+            system.collect_work(s)
+            impulse += hk * np.sum(cf / (j + 1), axis=0)
+        return impulse
 
     def _moving(self, system):
         return [s for s, sub in enumerate(system.subsystems) if not sub.rigid]

@@ -22,9 +22,12 @@ class Jacobi(CoSimulationScheme):
         coeffs = self._extrapolated(ratio)
         for c in system.hosted:
             self._set_partner_motion(system, c, t, h)
+        impulse = np.zeros(system.n_contacts)
         for s in self._moving(system):
-            system.subsystems[s].step(t, h, system.step_input(s, t, h, coeffs))
-        return coeffs
+            got = self._step_side(system, s, t, h, coeffs, {})
+            side_a = [c for c in system.coupler if system.links[c].sub_a == s]
+            impulse[side_a] = got[side_a]
+        return impulse
 
 
 class GaussSeidel(CoSimulationScheme):
@@ -54,15 +57,14 @@ class GaussSeidel(CoSimulationScheme):
     def advance(self, system, t, h, ratio):
         base = self._extrapolated(ratio)
         width = max(2, base.shape[0])
-        # per contact, the force polynomial that side `a` (else `b`) receives
-        applied = np.zeros((width, system.n_contacts))
-        applied[:base.shape[0]] = base
+        # per contact, the impulse that side `a` (else `b`) receives
+        applied = np.zeros(system.n_contacts)
         done = {s for s, sub in enumerate(system.subsystems) if sub.rigid}
         outs_n = self._outs
         after = {}                      # outputs at t + h of the subsystems done
         imp0 = self._hosted_impulses(system)
         for s in self._order(system):
-            coeffs = np.zeros_like(applied)
+            coeffs = np.zeros((width, system.n_contacts))
             coeffs[:base.shape[0]] = base
             for c, (host, _, partner, _, _) in system.hosted.items():
                 if host == s:           # the partner's motion: its own if it has stepped
@@ -87,10 +89,12 @@ class GaussSeidel(CoSimulationScheme):
                     coeffs[:, c] = 0.0
                     coeffs[0, c] = self._f[c]
                     coeffs[1, c] = ftilde - self._f[c]
-                if ln.sub_a == s or system.subsystems[ln.sub_a].rigid:
-                    applied[:, c] = coeffs[:, c]
             sub = system.subsystems[s]
-            sub.step(t, h, system.step_input(s, t, h, coeffs))
+            got = self._step_side(system, s, t, h, coeffs, after)
+            for c in mine:
+                ln = system.links[c]
+                if ln.sub_a == s or system.subsystems[ln.sub_a].rigid:
+                    applied[c] = got[c]
             done.add(s)
             after[s] = sub.outputs(sub.t, sub.x)
         return applied

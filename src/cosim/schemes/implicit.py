@@ -48,14 +48,14 @@ class Implicit(CoSimulationScheme):
                 system.subsystems[s].step(t, h, system.step_input(s, t, h, coeffs))
             if not len(coupler):
                 self.n_iterations += it
-                return coeffs
+                return h * (f_n + 0.5 * (guess - f_n))
             d, dd = system.penetrations(system.outputs())
             f_new = system.forces(d, dd)
             r = (f_new - guess)[coupler]
             scale = np.maximum(np.abs(f_new[coupler]), np.abs(guess[coupler]))
             if np.all(np.abs(r) <= self.force_tolerance + self.tolerance * scale):
                 self.n_iterations += it
-                return coeffs
+                return h * (f_n + 0.5 * (guess - f_n))
             if r_prev is not None:
                 dr = r - r_prev
                 denom = float(dr @ dr)
