@@ -7,7 +7,158 @@ import numpy as np
 
 from .base import CoSimulationScheme, CouplingError, Option, _pos
 
-__all__ = ["Implicit"]
+__all__ = ["Implicit", "Aitken", "IQNILS", "ACCELERATIONS"]
+
+
+class Aitken:
+    """Relaxation ``x + omega r`` with Aitken's dynamic factor.
+
+    ``omega`` starts at ``relaxation`` in every macro step and is updated
+    from two successive residuals, ``omega_k = -omega_{k-1} r_{k-1}.dr / dr.dr``
+    (Irons and Tuck 1969; Kuettler and Wall 2008, eq. 44).  One scalar for
+    all contacts: it is the secant method when there is one.
+
+    Parameters
+    ----------
+    relaxation : float
+        Factor of the first iteration of each step, in (0, 1].
+    """
+
+    name: ClassVar[str] = "aitken"
+
+    def __init__(self, relaxation: float, **_):
+        self.relaxation = relaxation
+
+    def start(self, key) -> None:
+        """Begin a macro step (``key`` is ignored: nothing is kept)."""
+        self._omega = self.relaxation
+        self._r_prev = None
+
+    def update(self, x: np.ndarray, hx: np.ndarray, r: np.ndarray) -> np.ndarray:
+        """Next guess from the guess ``x``, its image ``hx = H(x)`` and the
+        residual ``r = hx - x``."""
+        if self._r_prev is not None:
+            dr = r - self._r_prev
+            denom = float(dr @ dr)
+            if denom > 0:
+                self._omega = -self._omega * float(self._r_prev @ dr) / denom
+        self._r_prev = r
+        return x + self._omega * r
+
+    def finish(self) -> None:
+        """The macro step converged."""
+
+
+class IQNILS:
+    """Interface quasi-Newton with an inverse Jacobian from a least-squares
+    model (IQN-ILS).
+
+    For the fixed-point operator ``H`` (guessed end-of-step coupler forces to
+    the forces the law gives on the resulting outputs) with residual
+    ``r = H(x) - x``, the columns of ``V`` are differences of successive
+    residuals and those of ``W`` the matching differences of ``H``.  The
+    next guess is ``H(x_k) + W alpha`` with ``alpha`` the least-squares
+    solution of ``V alpha = -r_k`` (Degroote et al. 2009, eqs. 17-21), found
+    by an economy QR factorisation of ``V``.  Without a column (the first
+    iteration of a step, unless columns are reused) the guess is relaxed by
+    the constant ``relaxation``.
+
+    Columns are ordered newest first.  Before each solve, columns whose part
+    orthogonal to the newer ones is below ``filter_tolerance`` times their
+    norm (the QR filter QR2 of Haelterman et al. 2016, relative form) are
+    dropped, and at most as many columns as there are coupler contacts are
+    kept: more are linearly dependent.
+
+    ``reuse`` keeps the columns of that many previous converged macro
+    steps.  They are dropped whole when the step length changes or when
+    the set of closed coupler contacts differs from that of the step they
+    came from: the interface Jacobian of a penalty law jumps when a contact
+    opens or closes and scales with the step.
+
+    Parameters
+    ----------
+    relaxation : float
+        Constant relaxation of an iteration without columns, in (0, 1].
+    reuse : int
+        Number of previous macro steps whose columns are kept, >= 0.
+    filter_tolerance : float
+        Relative QR-filter threshold, > 0.
+
+    References
+    ----------
+    J. Degroote, K.-J. Bathe and J. Vierendeels, "Performance of a new
+    partitioned procedure versus a monolithic procedure in fluid-structure
+    interaction", Computers & Structures 87 (2009) 793-801.
+
+    R. Haelterman, A. Bogaers, K. Scheufele, B. Uekermann and M. Mehl,
+    "Improving the performance of the partitioned QN-ILS procedure for
+    fluid-structure interaction problems: filtering", Computers & Structures
+    171 (2016) 9-17.
+    """
+
+    name: ClassVar[str] = "iqn_ils"
+
+    def __init__(self, relaxation: float, reuse: int = 0, filter_tolerance: float = 1e-6):
+        self.relaxation = relaxation
+        self.reuse = reuse
+        self.filter_tolerance = filter_tolerance
+        self._old: list[tuple[np.ndarray, np.ndarray]] = []   # (V, W) per step, newest first
+        self._key = None
+
+    def start(self, key) -> None:
+        """Begin a macro step; ``key`` (step length, closed contacts) decides
+        whether the columns of earlier steps still apply."""
+        if key != self._key:
+            self._old = []
+        self._key = key
+        self._V: list[np.ndarray] = []
+        self._W: list[np.ndarray] = []
+        self._r_prev = self._hx_prev = None
+
+    def update(self, x: np.ndarray, hx: np.ndarray, r: np.ndarray) -> np.ndarray:
+        """Next guess from the guess ``x``, its image ``hx = H(x)`` and the
+        residual ``r = hx - x``."""
+        if self._r_prev is not None:
+            self._V.insert(0, r - self._r_prev)
+            self._W.insert(0, hx - self._hx_prev)
+        self._r_prev, self._hx_prev = r, hx
+        V, W = self._columns(len(r))
+        if V is None:
+            return x + self.relaxation * r
+        Q, R = np.linalg.qr(V)
+        alpha = np.linalg.solve(R, -(Q.T @ r))
+        return hx + W @ alpha
+
+    def finish(self) -> None:
+        """The macro step converged: keep its columns for the next steps."""
+        if self.reuse and self._V:
+            block = (np.column_stack(self._V), np.column_stack(self._W))
+            self._old = ([block] + self._old)[:self.reuse]
+
+    def _columns(self, n: int):
+        """``V`` and ``W`` after the QR filter, at most ``n`` columns; None if
+        no column is left."""
+        blocks_v = ([np.column_stack(self._V)] if self._V else []) + [v for v, _ in self._old]
+        blocks_w = ([np.column_stack(self._W)] if self._W else []) + [w for _, w in self._old]
+        if not blocks_v:
+            return None, None
+        V, W = np.hstack(blocks_v), np.hstack(blocks_w)
+        while V.shape[1]:
+            head = V[:, :n]
+            R = np.linalg.qr(head, mode="r")
+            norms = np.linalg.norm(head, axis=0)
+            # not (>=) also drops zero or non-finite columns
+            bad = np.flatnonzero(~(np.abs(np.diag(R)) >= self.filter_tolerance * norms))
+            if not bad.size:
+                break
+            V, W = np.delete(V, bad[0], axis=1), np.delete(W, bad[0], axis=1)
+        if not V.shape[1]:
+            return None, None
+        return V[:, :n], W[:, :n]
+
+
+#: name -> acceleration of the implicit scheme's fixed-point iteration
+ACCELERATIONS: dict[str, type] = {cls.name: cls for cls in (Aitken, IQNILS)}
 
 
 class Implicit(CoSimulationScheme):
@@ -15,10 +166,43 @@ class Implicit(CoSimulationScheme):
 
     Each pass restores the saved states, steps every subsystem with the
     force interpolated linearly from ``f(t)`` to the current guess of
-    ``f(t + h)``, and compares the guess with the law evaluated on the new
-    outputs.  The guess is relaxed with Aitken's dynamic factor (Irons and
-    Tuck 1969; Kuettler and Wall 2008, eq. 44).  The predictor is the force
+    ``f(t + h)``, and evaluates the law on the new outputs: that is the
+    fixed-point operator ``H(guess)``.  The iteration stops when every
+    coupler contact's residual ``H(guess) - guess`` is within
+    ``force_tolerance + tolerance * |force|``.  The predictor is the force
     extrapolated at ``extrapolation_order``.
+
+    The next guess comes from ``acceleration``:
+
+    ``"aitken"`` (default)
+        Relaxation with Aitken's dynamic factor (Irons and Tuck 1969;
+        Kuettler and Wall 2008, eq. 44), one scalar for all contacts.
+    ``"iqn_ils"``
+        Interface quasi-Newton, inverse Jacobian from a least-squares model
+        of past secants (Degroote et al. 2009), with a QR filter
+        (``filter_tolerance``, Haelterman et al. 2016) and the secants of
+        ``reuse`` earlier steps.  See :class:`IQNILS`.
+
+    With a single coupler contact both are the secant method.  With several
+    contacts of different stiffness or mobility at once, Aitken's single
+    factor cannot suit every direction of the residual, while IQN-ILS
+    learns one per direction.
+
+    References
+    ----------
+    B. M. Irons and R. C. Tuck, "A version of the Aitken accelerator for
+    computer iteration", Int. J. Numer. Meth. Engng 1 (1969) 275-277.
+
+    U. Kuettler and W. A. Wall, "Fixed-point fluid-structure interaction
+    solvers with dynamic relaxation", Comput. Mech. 43 (2008) 61-72.
+
+    J. Degroote, K.-J. Bathe and J. Vierendeels, "Performance of a new
+    partitioned procedure versus a monolithic procedure in fluid-structure
+    interaction", Computers & Structures 87 (2009) 793-801.
+
+    R. Haelterman et al., "Improving the performance of the partitioned
+    QN-ILS procedure for fluid-structure interaction problems: filtering",
+    Computers & Structures 171 (2016) 9-17.
     """
 
     name: ClassVar[str] = "implicit"
@@ -30,7 +214,24 @@ class Implicit(CoSimulationScheme):
         "tolerance": Option(float, 1e-8, _pos, "> 0 (relative)"),
         "force_tolerance": Option(float, 1e-9, _pos, "> 0 N"),
         "relaxation": Option(float, 0.5, lambda v: 0 < v <= 1, "in (0, 1]"),
+        "acceleration": Option(str, "aitken", lambda v: v in ACCELERATIONS,
+                               f"one of {sorted(ACCELERATIONS)}"),
+        "reuse": Option(int, 0, lambda v: v >= 0, ">= 0 (macro steps)"),
+        # Relative: a column is dropped when the sine of its angle to the
+        # newer columns is below this.  Near convergence a residual
+        # difference is known only to about 1e-8 of itself (it is a
+        # difference of forces converged to `tolerance` 1e-8), so an
+        # independent part much below that is noise; 1e-6 keeps the
+        # least-squares solve well away from it.
+        "filter_tolerance": Option(float, 1e-6, lambda v: _pos(v) and v < 1, "in (0, 1)"),
     }
+
+    def run(self, system, t_end, recorder):
+        kw = {"relaxation": self.relaxation}
+        if self.acceleration == "iqn_ils":
+            kw.update(reuse=self.reuse, filter_tolerance=self.filter_tolerance)
+        self._accel = ACCELERATIONS[self.acceleration](**kw)
+        return super().run(system, t_end, recorder)
 
     def advance(self, system, t, h, ratio):
         coupler = system.coupler
@@ -38,8 +239,8 @@ class Implicit(CoSimulationScheme):
         f_n = self._f
         guess = np.sum(self._extrapolated(ratio), axis=0)
         saved = system.get_state()
-        omega = self.relaxation
-        r_prev = None
+        accel = self._accel
+        accel.start((h, tuple(f_n[coupler] > 0)))
         for it in range(1, self.max_iterations + 1):
             if it > 1:
                 system.set_state(saved)
@@ -55,15 +256,10 @@ class Implicit(CoSimulationScheme):
             scale = np.maximum(np.abs(f_new[coupler]), np.abs(guess[coupler]))
             if np.all(np.abs(r) <= self.force_tolerance + self.tolerance * scale):
                 self.n_iterations += it
+                accel.finish()
                 return coeffs
-            if r_prev is not None:
-                dr = r - r_prev
-                denom = float(dr @ dr)
-                if denom > 0:
-                    omega = -omega * float(r_prev @ dr) / denom
-            r_prev = r
             guess = guess.copy()
-            guess[coupler] += omega * r
+            guess[coupler] = accel.update(guess[coupler], f_new[coupler], r)
         worst = int(coupler[np.argmax(np.abs(r))])
         raise CouplingError(
             f"implicit coupling did not converge at t = {t:.6g} s within "
