@@ -184,3 +184,9 @@ def test_acceleration_must_be_a_string():
             "`scheme.acceleration` must be a string, got an integer 1")):
         cosim.load_scene(CASES / "spring_drop.toml", None, ["scheme.acceleration=1"],
                          "implicit")
+
+
+def test_iqn_options_without_iqn_ils_warn():
+    with pytest.warns(UserWarning, match=re.escape(
+            "scheme `implicit` with `acceleration` 'aitken' ignores the options ['reuse']")):
+        Implicit(macro_step=1e-4, reuse=2)

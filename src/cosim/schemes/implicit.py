@@ -1,6 +1,7 @@
 """Implicit co-simulation: repeat the macro step until the forces agree."""
 from __future__ import annotations
 
+import warnings
 from typing import ClassVar
 
 import numpy as np
@@ -226,10 +227,20 @@ class Implicit(CoSimulationScheme):
         "filter_tolerance": Option(float, 1e-6, lambda v: _pos(v) and v < 1, "in (0, 1)"),
     }
 
+    #: options that only IQN-ILS reads
+    _IQN_OPTIONS: ClassVar[tuple] = ("reuse", "filter_tolerance")
+
+    def __init__(self, **opts):
+        super().__init__(**opts)
+        ignored = sorted(k for k in self._IQN_OPTIONS if k in opts)
+        if ignored and self.acceleration != "iqn_ils":
+            warnings.warn(f"scheme `implicit` with `acceleration` {self.acceleration!r} "
+                          f"ignores the options {ignored}", stacklevel=2)
+
     def run(self, system, t_end, recorder):
         kw = {"relaxation": self.relaxation}
         if self.acceleration == "iqn_ils":
-            kw.update(reuse=self.reuse, filter_tolerance=self.filter_tolerance)
+            kw.update({k: getattr(self, k) for k in self._IQN_OPTIONS})
         self._accel = ACCELERATIONS[self.acceleration](**kw)
         return super().run(system, t_end, recorder)
 
