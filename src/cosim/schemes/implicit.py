@@ -1,6 +1,7 @@
 """Implicit co-simulation: repeat the macro step until the forces agree."""
 from __future__ import annotations
 
+import math
 import warnings
 from typing import ClassVar
 
@@ -59,16 +60,16 @@ class IQNILS:
     ``r = H(x) - x``, the columns of ``V`` are differences of successive
     residuals and those of ``W`` the matching differences of ``H``.  The
     next guess is ``H(x_k) + W alpha`` with ``alpha`` the least-squares
-    solution of ``V alpha = -r_k`` (Degroote et al. 2009, eqs. 17-21), found
-    by an economy QR factorisation of ``V``.  Without a column (the first
+    solution of ``V alpha = -r_k`` (Degroote et al. 2009), found by an
+    economy QR factorisation of ``V``.  Without a column (the first
     iteration of a step, unless columns are reused) the guess is relaxed by
     the constant ``relaxation``.
 
     Columns are ordered newest first.  Before each solve, columns whose part
     orthogonal to the newer ones is below ``filter_tolerance`` times their
-    norm (the QR filter QR2 of Haelterman et al. 2016, relative form) are
-    dropped, and at most as many columns as there are coupler contacts are
-    kept: more are linearly dependent.
+    norm are dropped (filter QR2 of Haelterman et al. 2016), and at most as
+    many columns as there are coupler contacts are kept: more are linearly
+    dependent.
 
     ``reuse`` keeps the columns of that many previous converged macro
     steps.  They are dropped whole when the step length changes or when
@@ -107,9 +108,11 @@ class IQNILS:
         self._key = None
 
     def start(self, key) -> None:
-        """Begin a macro step; ``key`` (step length, closed contacts) decides
-        whether the columns of earlier steps still apply."""
-        if key != self._key:
+        """Begin a macro step; ``key`` (step length [s], closed contacts)
+        decides whether the columns of earlier steps still apply."""
+        h, closed = key
+        if self._key is None or not (math.isclose(h, self._key[0], rel_tol=1e-9)
+                                     and closed == self._key[1]):
             self._old = []
         self._key = key
         self._V: list[np.ndarray] = []
