@@ -128,3 +128,22 @@ def test_interface_error_control_refines_the_contact_steps():
     assert e_ctrl["count"] == 0
     assert e_ctrl["peak"] < 2e-3 and e_ctrl["exit_velocity"] < 3e-3, e_ctrl
     assert e_ctrl["peak"] < e_coarse["peak"] / 4, (e_ctrl, e_coarse)
+
+
+def test_implicit_iterates_the_partner_motion_to_agreement(tmp_path):
+    """Under `implicit` the host's partner motion (its end position and
+    velocity) is iterated until the partner's own step agrees with it: the
+    exit-speed error falls far below Gauss-Seidel's at the same step
+    (observed 1.3e-10 against 1.3e-6 m/s), and momentum still passes over
+    exactly (hosts step first in each pass)."""
+    exact = 2 * 5.0 * 2.0 / 5.2
+    gs = pair(tmp_path, overrides=['scheme.sequence=["light", "heavy"]'])
+    imp = pair(tmp_path, scheme="implicit")
+    e_gs = abs(velocities(gs)[1] - exact)
+    e_imp = abs(velocities(imp)[1] - exact)
+    assert e_imp < e_gs / 1000, (e_imp, e_gs)
+    v_heavy, v_light = velocities(imp)
+    assert 5.0 * v_heavy + 0.2 * v_light == pytest.approx(10.0, rel=1e-12)
+    assert imp.n_iterations > imp.n_windows          # it did iterate
+    assert abs(imp.summary["contacts"]["C"]["coupling_error"]) < \
+        abs(gs.summary["contacts"]["C"]["coupling_error"]) / 20

@@ -253,7 +253,7 @@ class StructureSubsystem(Subsystem):
             y1 = np.concatenate([q1, dq1])
             if not self._embedded or not np.any(self._switch(t + h, y1) > 0):
                 self._account_damping(h, self.x, y1)
-                self._gauss_moments(h, G, inputs is not None)
+                self._gauss_moments(h, G, inputs is not None and bool(np.any(inputs.coeffs)))
                 self.x[:] = y1
                 if a1 is not None:
                     self._acc = a1
@@ -276,7 +276,8 @@ class StructureSubsystem(Subsystem):
     def _gauss_moments(self, h, G, loaded):
         """Port velocity moments of a step without closed contacts, by
         three-point Gauss-Legendre on the exact modal solution (error
-        O((omega h)^6)); zero when no port is loaded (nobody asks then)."""
+        O((omega h)^6)); zero when no port is loaded, for a zero force does
+        no work whatever the moments."""
         if not loaded:
             self.port_moments = np.zeros((3, self.n_ports), complex)
             return
