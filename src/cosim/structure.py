@@ -24,8 +24,10 @@ import math
 
 import numpy as np
 
+from fem.response import undamped_response
+
 from .integrators import RK4
-from .subsystem import EmbeddedContact, StepInput, Subsystem
+from .subsystem import EmbeddedContact, StepInput, Subsystem, reparametrised
 
 __all__ = ["StructureSubsystem"]
 
@@ -97,6 +99,7 @@ class StructureSubsystem(Subsystem):
         self._acc = self._modal_acceleration(self.x, None, 0.0)
         self.aux = np.zeros(2)
         self._embedded = []
+        self._bases: dict = {}
         self._t0, self._h = 0.0, 1.0
         #: ``int v_p(t) s^j dt`` over the last step, (3, n_ports) complex [m]
         self.port_moments = np.zeros((3, self.n_ports), complex)
@@ -239,6 +242,9 @@ class StructureSubsystem(Subsystem):
         self.switch_log = []
         self._t0, self._h = t, h
         self.aux[2:-2:4] = 0.0          # first moments are per step
+        if self._closed_form:
+            self._step_closed_form(t, h, inputs)
+            return
         closed = self._embedded and bool(np.any(self._switch(t, self.x) > 0))
         if not closed:
             G = (self._modal_force(inputs.coeffs) if inputs is not None
@@ -268,6 +274,159 @@ class StructureSubsystem(Subsystem):
         self.port_moments = y1[2 * m + na:].view(complex).reshape(3, self.n_ports)
         if self._ts is not None:
             self._acc = self._modal_acceleration(self.x, inputs, t + h)
+
+    # ------------------------------- closed-form stepping with linear springs
+    @property
+    def _closed_form(self) -> bool:
+        """Undamped, stepped exactly, every embedded contact a linear spring:
+        each set of closed contacts is again a linear system under a
+        polynomial load, stepped in closed form with its switches located
+        on the exact solution."""
+        if self._closed_ok is None:
+            from couplers import LinearLaw
+            self._closed_ok = bool(self._embedded) and self._ts is None \
+                and not np.any(self.modal_damping) \
+                and all(type(e.law) is LinearLaw for e in self._embedded)
+        return self._closed_ok
+
+    _closed_ok = None
+
+    def _active_basis(self, active: tuple):
+        """Modes (lam, Psi) of the modal equations with the springs of the
+        closed contacts ``active`` added: ``K = diag(omega^2) + sum k c^2 r r^T``."""
+        basis = self._bases.get(active)
+        if basis is None:
+            K = np.diag(self.omega ** 2)
+            for on, e in zip(active, self._embedded):
+                if on:
+                    r = self._R[e.port]
+                    c = (e.normal.conjugate() * complex(*self._dir)).real
+                    K += e.law.contact_stiffness * c * c * np.outer(r, r)
+            lam, Psi = np.linalg.eigh(K)
+            basis = (np.maximum(lam, 0.0), Psi, math.sqrt(max(float(lam.max()), 0.0)))
+            self._bases[active] = basis
+        return basis
+
+    def _segment_load(self, t, h, tc, Gin, active):
+        """Modal load over a segment starting at ``tc``, in powers of the time
+        since ``tc`` [s] (4, m): the port loads and weight, and each closed
+        spring's pull towards its partner's moving point."""
+        m = self.n_modes
+        a = np.zeros((4, m))
+        a[:Gin.shape[0]] = reparametrised(Gin, (tc - t) / h, 1.0 / h)
+        dirc = complex(*self._dir)
+        for on, e in zip(active, self._embedded):
+            if not on:
+                continue
+            k, r, nc = e.law.contact_stiffness, self._R[e.port], e.normal.conjugate()
+            c = (nc * dirc).real
+            ref = complex(*self._ref[e.port])
+            xp = (nc * reparametrised(e.motion, (tc - e.t0) / e.h, 1.0 / e.h)).real
+            a[0] += e.side * c * k * (e.offset - e.side * (nc * ref).real) * r
+            a[:xp.size] += c * k * np.outer(xp, r)
+        return a
+
+    def _segment_states(self, lam, Psi, q, dq, a, taus):
+        z, dz = undamped_response(lam, Psi.T @ q, Psi.T @ dq, a @ Psi, taus)
+        return z @ Psi.T, dz @ Psi.T
+
+    def _gaps(self, tc, taus, Q, DQ):
+        """Penetration and rate of each embedded contact at ``tc + taus``
+        for modal states ``Q``, ``DQ`` (k, m): (k, n_embedded) each."""
+        dirc = complex(*self._dir)
+        T = tc + np.asarray(taus, float)
+        d = np.empty((len(T), len(self._embedded)))
+        dd = np.empty_like(d)
+        for j, e in enumerate(self._embedded):
+            r = self._R[e.port]
+            d[:, j], dd[:, j] = e.penetrations(T, complex(*self._ref[e.port]) + (Q @ r) * dirc,
+                                               (DQ @ r) * dirc)
+        return d, dd
+
+    #: Gauss-Legendre nodes and weights on [0, 1] (six points) for the quadratures
+    _GL6 = (0.5 * (np.polynomial.legendre.leggauss(6)[0] + 1.0),
+            0.5 * np.polynomial.legendre.leggauss(6)[1])
+
+    def _segment_quadratures(self, t, h, tc, L, lam, Psi, q, dq, a, active, wmax, inputs):
+        """Add the impulse, first moment and work of the closed springs, and
+        the ports' velocity moments, over ``[tc, tc + L]`` (Gauss-Legendre
+        panels no longer than three radians of the fastest mode)."""
+        n = max(1, math.ceil(L * wmax / 3.0))      # error ~ 3e-10 per panel
+        nodes, weights = self._GL6
+        taus = (np.arange(n)[:, None] + nodes[None, :]).ravel() * (L / n)
+        wts = np.tile(weights, n) * (L / n)
+        Q, DQ = self._segment_states(lam, Psi, q, dq, a, taus)
+        d, _ = self._gaps(tc, taus, Q, DQ)
+        dirc = complex(*self._dir)
+        ne = len(self._embedded)
+        quad = self.aux[:4 * ne].reshape(ne, 4)
+        for j, (on, e) in enumerate(zip(active, self._embedded)):
+            if not on:
+                continue
+            f = e.law.contact_stiffness * d[:, j]
+            c = (e.normal.conjugate() * dirc).real
+            quad[j, 0] += wts @ f
+            quad[j, 2] += wts @ (f * (tc + taus - t))
+            quad[j, 3] += wts @ (e.side * c * f * (DQ @ self._R[e.port]))
+        if inputs is not None and np.any(inputs.coeffs):
+            sv = (tc + taus - t) / h
+            V = (DQ @ self._R.T) * dirc                        # (k, n_ports)
+            for jj in range(3):
+                self.port_moments[jj] += (wts * sv ** jj) @ V
+
+    def _step_closed_form(self, t, h, inputs):
+        m = self.n_modes
+        Gin = self._modal_force(inputs.coeffs) if inputs is not None else np.zeros((1, m))
+        Gin = Gin.copy()
+        Gin[0] += self._g_modal
+        q, dq = self.x[:m].copy(), self.x[m:].copy()
+        self.port_moments = np.zeros((3, self.n_ports), complex)
+        tc, t1 = t, t + h
+        eps = 1e-13 * max(1.0, abs(t1))
+        while t1 - tc > eps:
+            L = t1 - tc
+            d0, dd0 = self._gaps(tc, [0.0], q[None], dq[None])
+            active = tuple(bool(x > 0 or (x == 0 and v > 0)) for x, v in zip(d0[0], dd0[0]))
+            for j in np.flatnonzero((d0[0] == 0) & (dd0[0] > 0)):
+                self.switch_log.append((tc, int(j), True))     # touching and closing now
+            lam, Psi, wmax = self._active_basis(active)
+            a = self._segment_load(t, h, tc, Gin, active)
+            n = int(min(max(math.ceil(2.0 * L * wmax), 2), 512))
+            taus = L * np.arange(1, n + 1) / n
+            Q, DQ = self._segment_states(lam, Psi, q, dq, a, taus)
+            d, _ = self._gaps(tc, taus, Q, DQ)
+            flips = (d > 0) != np.array(active)
+            rows = np.flatnonzero(flips.any(axis=1))
+            if not len(rows):
+                self._segment_quadratures(t, h, tc, L, lam, Psi, q, dq, a, active, wmax, inputs)
+                q, dq = Q[-1], DQ[-1]
+                break
+            i = int(rows[0])
+            lo0, hi0 = (taus[i - 1] if i else 0.0), taus[i]
+            best, who = hi0, []
+            for j in np.flatnonzero(flips[i]):
+                lo, hi = lo0, hi0
+                for _ in range(80):
+                    mid = 0.5 * (lo + hi)
+                    Qm, DQm = self._segment_states(lam, Psi, q, dq, a, [mid])
+                    dm, _ = self._gaps(tc, [mid], Qm, DQm)
+                    if (dm[0, j] > 0) == active[j]:
+                        lo = mid
+                    else:
+                        hi = mid
+                    if hi - lo <= 1e-15 * max(1.0, abs(tc)):
+                        break
+                if hi < best - 1e-15:
+                    best, who = hi, [j]
+                elif abs(hi - best) <= 1e-15:
+                    who.append(j)
+            self._segment_quadratures(t, h, tc, best, lam, Psi, q, dq, a, active, wmax, inputs)
+            Qb, DQb = self._segment_states(lam, Psi, q, dq, a, [best])
+            q, dq = Qb[0], DQb[0]
+            tc += best
+            for j in who:
+                self.switch_log.append((tc, int(j), not active[j]))
+        self.x[:m], self.x[m:] = q, dq
 
     #: Gauss-Legendre nodes and weights on [0, 1] (three points)
     _GAUSS = (np.array([0.5 - math.sqrt(15) / 10, 0.5, 0.5 + math.sqrt(15) / 10]),

@@ -15,7 +15,21 @@ from abc import ABC, abstractmethod
 
 import numpy as np
 
-__all__ = ["StepInput", "Subsystem", "RigidReference", "SubsystemState", "EmbeddedContact"]
+__all__ = ["StepInput", "Subsystem", "RigidReference", "SubsystemState", "EmbeddedContact",
+           "reparametrised"]
+
+
+def reparametrised(coeffs, a: float, b: float) -> np.ndarray:
+    """Coefficients in ``sigma`` of the polynomials ``sum_i coeffs[i] s**i``
+    (rows lowest first, real or complex) under ``s = a + b sigma``."""
+    from math import comb
+    coeffs = np.asarray(coeffs)
+    p = coeffs.shape[0]
+    out = np.zeros(coeffs.shape, dtype=np.result_type(coeffs.dtype, float))
+    for i in range(p):
+        for k in range(i + 1):
+            out[k] += comb(i, k) * a ** (i - k) * b ** k * coeffs[i]
+    return out
 
 
 class StepInput:
@@ -94,6 +108,15 @@ class EmbeddedContact:
         for c in self._dmotion[::-1]:
             v = v * s + c
         return x, v
+
+    def penetrations(self, t, x, v):
+        """:meth:`penetration` at many instants ``t`` (arrays, vectorised)."""
+        s = (np.asarray(t, float) - self.t0) / self.h
+        xp = np.polyval(self.motion[::-1], s)
+        vp = np.polyval(self._dmotion[::-1], s)
+        nc = self.normal.conjugate()
+        return (self.offset - self.side * (nc * (x - xp)).real,
+                -self.side * (nc * (v - vp)).real)
 
     def penetration(self, t: float, x: complex, v: complex) -> tuple[float, float]:
         """Penetration [m] and its rate [m/s] for host port position ``x``

@@ -9,6 +9,7 @@ import numpy as np
 
 from .. import preflight
 from ..errors import CouplingError, UnsafeStepError
+from ..subsystem import reparametrised
 
 __all__ = ["Option", "CouplingScheme", "CoSimulationScheme", "UnsafeStepError", "CouplingError",
            "extrapolation_coeffs"]
@@ -43,18 +44,6 @@ def extrapolation_coeffs(hist: list, order: int, ratio: float = 1.0) -> np.ndarr
     f1, f2 = hist[-2], hist[-3]
     return np.stack([fn, 0.5 * (3 * fn - 4 * f1 + f2) * ratio,
                      0.5 * (fn - 2 * f1 + f2) * ratio * ratio])
-
-
-def reparametrised(coeffs: np.ndarray, a: float, b: float) -> np.ndarray:
-    """Coefficients in ``sigma`` of the polynomials ``sum_i coeffs[i] s**i``
-    (rows lowest first) under ``s = a + b sigma``."""
-    from math import comb
-    p = coeffs.shape[0]
-    out = np.zeros_like(coeffs, dtype=float)
-    for i in range(p):
-        for k in range(i + 1):
-            out[k] += comb(i, k) * a ** (i - k) * b ** k * coeffs[i]
-    return out
 
 
 def _substeps_ok(v) -> bool:
