@@ -1,0 +1,180 @@
+"""Coupling schemes on the linear two-mass oscillator: convergence order,
+energy error and exact rollback.
+
+The two-mass oscillator is the standard benchmark of co-simulation
+(Kuebler and Schiehlen 2000; Busch 2016): two masses on prismatic joints,
+each tied to the ground by a joint spring, coupled by a spring.  Here the
+coupling spring is a `linear` contact placed `coupler` and preloaded so that
+it never opens (penetration between 0.12 and 0.16 m against oscillations of
+a few cm), so the problem is linear and smooth, and
+:func:`cosim.analytic.two_mass_oscillator` gives the exact answer.
+"""
+import math
+import warnings
+
+import numpy as np
+import pytest
+
+import cosim
+from analytic import two_mass_oscillator
+
+MASSES = (1.0, 2.0)              # [kg]
+GROUND_K = (100.0, 200.0)        # [N/m]
+COUPLING_K = 400.0               # [N/m]
+PRELOAD = 1.0                    # [m] penetration at q = 0 (the contact's offset)
+Q0 = (0.55, -0.30)               # [m], near the static deflection (0.571, -0.286)
+STARTS = {
+    # d'(0) = -(dq1 - dq2) = -0.5 m/s: the contact force starts with a slope
+    "generic": (0.30, -0.20),
+    # d'(0) = 0: the force starts flat, so holding it over the first window
+    # costs only O(H^2) in force
+    "flat": (0.30, 0.30),
+}
+T_END = 0.5                      # [s], 2.1 periods of the fast mode
+HS = np.array([5e-3, 2.5e-3, 1.25e-3, 6.25e-4])   # macro steps [s], halving
+SUB_STEPS = 2                    # RK4 sub-steps per macro step in each mass
+
+SCENE = """\
+name = "two_mass"
+t_end = {t_end}
+
+[scheme]
+name = "jacobi"
+macro_step = 1e-3
+
+[subsystems.left]
+type = "multibody"
+integrator = {{ method = "rk4", max_step = 5e-4 }}
+
+[subsystems.left.bodies.mass]
+mass = {m1}
+points = {{ p = [0.0, 0.0] }}
+joint = {{ name = "x", type = "prismatic", axis = [1.0, 0.0], q0 = {q1}, dq0 = {v1}, spring = {{ stiffness = {k1}, rest = 0.0 }} }}
+
+[subsystems.right]
+type = "multibody"
+integrator = {{ method = "rk4", max_step = 5e-4 }}
+
+[subsystems.right.bodies.mass]
+mass = {m2}
+points = {{ p = [0.0, 0.0] }}
+joint = {{ name = "x", type = "prismatic", axis = [1.0, 0.0], q0 = {q2}, dq0 = {v2}, spring = {{ stiffness = {k2}, rest = 0.0 }} }}
+
+[contacts.spring]                  # d = offset - (x_left - x_right) > 0 throughout
+a = "left.p"
+b = "right.p"
+normal = [1.0, 0.0]
+offset = {preload}
+placement = "coupler"
+law = {{ type = "linear", contact_stiffness = {kc} }}
+"""
+
+
+def _exact(start, t):
+    return two_mass_oscillator(MASSES, GROUND_K, COUPLING_K, PRELOAD, Q0, STARTS[start], t)
+
+
+OMEGA = _exact("generic", 0.0)[2]          # (10, 26.46) rad/s
+W = float(OMEGA[-1])
+
+
+def _vibration(start):
+    """Distance of the initial state from the static deflection, as the
+    norm of (q - q_s, dq / omega_2) [m], and the vibration energy [J]."""
+    K = np.array([[GROUND_K[0] + COUPLING_K, -COUPLING_K],
+                  [-COUPLING_K, GROUND_K[1] + COUPLING_K]])
+    q_s = np.linalg.solve(K, COUPLING_K * PRELOAD * np.array([1.0, -1.0]))
+    dq = np.asarray(STARTS[start])
+    dx = np.asarray(Q0) - q_s
+    amp = float(np.linalg.norm(np.concatenate([dx, dq / W])))
+    energy = 0.5 * dx @ K @ dx + 0.5 * dq @ np.diag(MASSES) @ dq
+    return amp, float(energy)
+
+
+@pytest.fixture(scope="module")
+def two_mass(tmp_path_factory):
+    """Runner of the two-mass scene: ``run(scheme, H, order, start, unsafe)``
+    returns the state error at ``T_END`` relative to the vibration amplitude,
+    the largest energy drift relative to the vibration energy, and the
+    result.  Runs are cached: the order and energy tests share them."""
+    root = tmp_path_factory.mktemp("two_mass")
+    files = {}
+    for start, (v1, v2) in STARTS.items():
+        files[start] = root / f"two_mass_{start}.toml"
+        files[start].write_text(SCENE.format(
+            t_end=T_END, m1=MASSES[0], m2=MASSES[1], k1=GROUND_K[0], k2=GROUND_K[1],
+            kc=COUPLING_K, preload=PRELOAD, q1=Q0[0], q2=Q0[1], v1=v1, v2=v2))
+    cache = {}
+
+    def run(scheme, H=1e-3, order=None, start="generic", unsafe=False):
+        key = (scheme, H, order, start, unsafe)
+        if key in cache:
+            return cache[key]
+        ov = [f"scheme.macro_step={H}"]
+        if scheme != "monolithic":
+            ov += [f"subsystems.{s}.integrator.max_step={H / SUB_STEPS}"
+                   for s in ("left", "right")]
+        if order is not None:
+            ov.append(f"scheme.extrapolation_order={order}")
+        if unsafe:
+            ov.append("scheme.accept_unsafe_step=true")
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")     # options the monolithic scheme ignores
+            scene = cosim.load_scene(files[start], overrides=ov, scheme=scheme)
+        res = cosim.simulate(scene)
+        assert res.success, res.message
+        assert res.summary["contacts"]["spring"]["count"] == 1     # closed throughout
+        fs = res.summary["final_state"]
+        q = np.array([fs["left"]["x"]["q"], fs["right"]["x"]["q"]])
+        dq = np.array([fs["left"]["x"]["dq"], fs["right"]["x"]["dq"]])
+        q_ex, dq_ex, _ = _exact(start, T_END)
+        amp, energy = _vibration(start)
+        err = float(np.linalg.norm(np.concatenate([q - q_ex, (dq - dq_ex) / W]))) / amp
+        drift = res.summary["energy"]["max_abs_drift"] / energy
+        cache[key] = (err, drift, res)
+        return cache[key]
+
+    return run
+
+
+def _slope(hs, errs):
+    return float(np.polyfit(np.log(hs), np.log(errs), 1)[0])
+
+
+# ------------------------------------------------------------ closed form
+@pytest.mark.parametrize("start", sorted(STARTS))
+def test_closed_form_solves_the_equations_and_keeps_the_contact_closed(start):
+    t = np.linspace(0.0, T_END, 5001)
+    q, dq, omega = _exact(start, t)
+    assert np.allclose(q[0], Q0, rtol=0, atol=1e-15)
+    assert np.allclose(dq[0], STARTS[start], rtol=0, atol=1e-15)
+    # M q'' = -k q + (+-) k_c d, checked with the exact velocity's central difference
+    d = PRELOAD - q[:, 0] + q[:, 1]
+    ddq = np.gradient(dq, t, axis=0)[1:-1]
+    rhs = np.stack([(-GROUND_K[0] * q[:, 0] + COUPLING_K * d) / MASSES[0],
+                    (-GROUND_K[1] * q[:, 1] - COUPLING_K * d) / MASSES[1]], axis=1)[1:-1]
+    assert np.max(np.abs(ddq - rhs)) < 1e-4 * np.max(np.abs(rhs))
+    # the two natural frequencies of the 2x2 problem, by hand
+    a = (GROUND_K[0] + COUPLING_K) / MASSES[0] + (GROUND_K[1] + COUPLING_K) / MASSES[1]
+    det = ((GROUND_K[0] + COUPLING_K) * (GROUND_K[1] + COUPLING_K) - COUPLING_K ** 2) / (
+        MASSES[0] * MASSES[1])
+    w2 = 0.5 * (a + np.array([-1.0, 1.0]) * math.sqrt(a * a - 4 * det))
+    assert omega == pytest.approx(np.sqrt(w2), rel=1e-12)
+    # the preloaded contact never opens: the problem is linear
+    assert d.min() > 0.1
+
+
+# ------------------------------------------------------------- monolithic
+@pytest.mark.parametrize("start", sorted(STARTS))
+def test_monolithic_matches_the_exact_solution(two_mass, start):
+    """DOP853 at rtol 1e-10 (the scheme's default): positions and velocities
+    to 1e-8 relative (as vectors: a velocity may pass near zero at t_end)."""
+    _, _, res = two_mass("monolithic", start=start)
+    q_ex, dq_ex, _ = _exact(start, T_END)
+    fs = res.summary["final_state"]
+    q = np.array([fs[s]["x"]["q"] for s in ("left", "right")])
+    dq = np.array([fs[s]["x"]["dq"] for s in ("left", "right")])
+    assert np.linalg.norm(q - q_ex) <= 1e-8 * np.linalg.norm(q_ex), (q, q_ex)
+    assert np.linalg.norm(dq - dq_ex) <= 1e-8 * np.linalg.norm(dq_ex), (dq, dq_ex)
+    e = res.summary["energy"]
+    assert e["max_abs_drift"] <= 1e-8 * _vibration(start)[1]
