@@ -184,7 +184,7 @@ class CoSimulationScheme(CouplingScheme):
                 if onset is not None:           # a contact closed inside a long step
                     system.set_state(saved)
                     n_rejected += 1
-                    self._h_next, self._aimed = onset, True
+                    self._h_next, self._aimed = onset
                     self._outs = system.outputs()
                     continue
             self._aimed = False
@@ -222,7 +222,7 @@ class CoSimulationScheme(CouplingScheme):
         return {"n_windows": k, "n_iterations": self.n_iterations, "n_rejected": n_rejected}
 
     _h_next = None
-    _aimed = False          # the current step was aimed at an onset: accept it
+    _aimed = False          # the current step ends at a predicted onset: accept it
     _dd_prev = None
     _h_prev_step = None
 
@@ -245,19 +245,24 @@ class CoSimulationScheme(CouplingScheme):
         return min(H, remaining)
 
     def _onset(self, d0, dd0, d1, dd1, h):
-        """Length of step that ends where the first coupler contact closes, or
-        None if none closed in the step.
+        """Length of the step to retry after a coupler contact closed inside
+        a step of length ``h``, and whether it ends at the predicted onset;
+        None if no contact closed in the step.
 
         The end state of the rejected step already holds the contact's
         response, so the onset is predicted from the free motion before it:
         ``d0 + dd0 tau + a tau^2 / 2 = 0``, the relative acceleration ``a``
-        from the last two outputs (exact under a constant push).  Without a
-        root inside the step, half the step."""
+        from the last two outputs (exact under a constant push).  When every
+        closing contact has a root inside the step, the retried step ends
+        at the earliest and is accepted as it is.  Otherwise (no history
+        yet, or no root) it is half the step, or the earliest root if
+        sooner, and it is checked again like any long step: a guess must
+        not carry a contact through its onset with the force still at zero."""
         c = self._system.coupler
         closing = c[(d0[c] <= 0) & (d1[c] > 0)]
         if not len(closing):
             return None
-        best = 0.5 * h
+        found, all_found = [], True
         for i in closing:
             a = 0.0
             if self._dd_prev is not None:
@@ -266,9 +271,11 @@ class CoSimulationScheme(CouplingScheme):
                 [-d0[i] / dd0[i]] if dd0[i] > 0 else [])
             tau = [r.real for r in np.atleast_1d(roots) if abs(r.imag) < 1e-12 and
                    0 < r.real < h]
-            if tau:
-                best = min(best, min(tau)) if best != 0.5 * h else min(tau)
-        return max(best, 1e-12 * h)
+            found += tau
+            all_found = all_found and bool(tau)
+        if all_found:
+            return max(min(found), 1e-12 * h), True
+        return max(min([0.5 * h, *found]), 1e-12 * h), False
 
     @staticmethod
     def _internal(system):
