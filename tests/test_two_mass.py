@@ -204,7 +204,8 @@ ORDER_CASES = [
     ("gauss_seidel", 2, "generic", 2, False, 0.65, 0.6),
     ("implicit", 1, "generic", 2, False, 0.5, 0.1),
 ]
-# the energy test needs no xfail: it asserts the order the state error shows
+# the energy test compares with the state error's fitted order; the xfail case,
+# still on its way from 3 to 2 (pairwise 1.50 .. 1.88), has none to compare with
 ENERGY_CASES = [c for c in ORDER_CASES if not hasattr(c, "marks")]
 
 
