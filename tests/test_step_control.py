@@ -83,7 +83,7 @@ def test_onset_is_landed_on_for_any_push_and_approach_speed(scheme, push, v0):
     """A constant push F towards the wall from x0 = 1 cm at speed v0 (< 0:
     towards it): touch-down at t_on = (v0 + sqrt(v0^2 + 2 a x0)) / a,
     a = F / m, free motion before it.  With 5 ms long steps and 12.5 us
-    contact steps the onset is located to 1e-9 s (observed 1e-11 or
+    contact steps the onset is located to 1e-9 s (observed 3.4e-11 or
     better), no force acts before it, and the first sample in contact is
     one contact step after touch-down: its penetration is at most
     v_on * contact_step (no step carries the body through the wall with
