@@ -368,6 +368,12 @@ SYSTEMS = {
     "three_mass-gauss_seidel": ("three_mass.toml", ["scheme.macro_step=2e-5"],
                                 "gauss_seidel", 1),
     "beam_impact-implicit": ("beam_impact.toml", [], "implicit", 1),
+    # C (0.556 m above its partner at t = 0) offset so that it starts closed:
+    # the coupler force on the chain and on the (followed) beam point
+    "three_mass-gauss_seidel-C_closed": ("three_mass.toml", [
+        "scheme.macro_step=2e-5", "contacts.C.offset=0.5565"], "gauss_seidel", 1),
+    "beam_impact-implicit-C_closed": ("beam_impact.toml", ["contacts.C.offset=0.557"],
+                                      "implicit", 1),
 }
 
 
@@ -413,3 +419,5 @@ def test_system_rollback_repeats_advance_bit_identically(two_mass, monkeypatch, 
     assert n[0] == plain.n_windows and n[0] > 10
     assert not mismatches, f"advance not repeatable at t = {mismatches[:5]} ({label})"
     assert doubled.summary["final_state"] == plain.summary["final_state"]
+    if label.endswith("C_closed"):
+        assert plain.summary["contacts"]["C"]["impulse"] > 0.0
