@@ -50,7 +50,14 @@ integrator = {{ method = "rk4", max_step = 5e-4 }}
 [subsystems.left.bodies.mass]
 mass = {m1}
 points = {{ p = [0.0, 0.0] }}
-joint = {{ name = "x", type = "prismatic", axis = [1.0, 0.0], q0 = {q1}, dq0 = {v1}, spring = {{ stiffness = {k1}, rest = 0.0 }} }}
+
+[subsystems.left.bodies.mass.joint]
+name = "x"
+type = "prismatic"
+axis = [1.0, 0.0]
+q0 = {q1}
+dq0 = {v1}
+spring = {{ stiffness = {k1}, rest = 0.0 }}
 
 [subsystems.right]
 type = "multibody"
@@ -59,7 +66,14 @@ integrator = {{ method = "rk4", max_step = 5e-4 }}
 [subsystems.right.bodies.mass]
 mass = {m2}
 points = {{ p = [0.0, 0.0] }}
-joint = {{ name = "x", type = "prismatic", axis = [1.0, 0.0], q0 = {q2}, dq0 = {v2}, spring = {{ stiffness = {k2}, rest = 0.0 }} }}
+
+[subsystems.right.bodies.mass.joint]
+name = "x"
+type = "prismatic"
+axis = [1.0, 0.0]
+q0 = {q2}
+dq0 = {v2}
+spring = {{ stiffness = {k2}, rest = 0.0 }}
 
 [contacts.spring]                  # d = offset - (x_left - x_right) > 0 throughout
 a = "left.p"
@@ -387,12 +401,11 @@ def test_system_rollback_repeats_advance_bit_identically(two_mass, monkeypatch, 
     from a rolled-back pass)."""
     case, overrides, scheme, order = SYSTEMS[label]
     path = two_mass.files["generic"] if case == "two_mass" else CASES / case
+    t_end = {"two_mass": 0.05, "spring_drop.toml": 0.014}.get(case, 4e-3)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         scene = cosim.load_scene(path, overrides=[
-            *overrides, f"scheme.extrapolation_order={order}",
-            f"t_end={0.014 if case == 'spring_drop.toml' else 0.05 if case == 'two_mass' else 4e-3}"],
-            scheme=scheme)
+            *overrides, f"scheme.extrapolation_order={order}", f"t_end={t_end}"], scheme=scheme)
     plain = cosim.simulate(scene)
     assert plain.success, plain.message
 

@@ -14,7 +14,8 @@ from couplers.restitution import (_checked, hunt_crossley_damping_for_restitutio
                                   hunt_crossley_restitution)
 
 __all__ = ["linear_contact", "kelvin_voigt_clipped", "held_force_rebound_factor",
-           "hertz_contact", "two_mass_oscillator", "hunt_crossley_restitution", "hunt_crossley_damping_for_restitution"]
+           "hertz_contact", "hunt_crossley_restitution", "hunt_crossley_damping_for_restitution",
+           "two_mass_oscillator"]
 
 
 def linear_contact(mass: float, contact_stiffness: float) -> float:
