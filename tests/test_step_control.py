@@ -3,6 +3,7 @@ contact stepped over blindly (rolled back and landed on its onset)."""
 import math
 import warnings
 
+import numpy as np
 import pytest
 
 import cosim
@@ -74,3 +75,28 @@ def test_preflight_judges_the_contact_step():
     with pytest.raises(cosim.UnsafeStepError, match=r"macro step 2e-05 s is too large"):
         run("jacobi", "scheme.macro_step=1e-3", "scheme.contact_step=2e-5", order=0,
             unsafe=False)
+
+
+@pytest.mark.parametrize("scheme", ["jacobi", "gauss_seidel", "implicit"])
+@pytest.mark.parametrize("push,v0", [(500.0, -0.5), (2000.0, 0.5), (8000.0, 0.0)])
+def test_onset_is_landed_on_for_any_push_and_approach_speed(scheme, push, v0):
+    """A constant push F towards the wall from x0 = 1 cm at speed v0 (< 0:
+    towards it): touch-down at t_on = (v0 + sqrt(v0^2 + 2 a x0)) / a,
+    a = F / m, free motion before it.  With 5 ms long steps and 12.5 us
+    contact steps the onset is located to 1e-9 s (observed 3.4e-11 or
+    better), no force acts before it, and the first sample in contact is
+    one contact step after touch-down: its penetration is at most
+    v_on * contact_step (no step carries the body through the wall with
+    the force still at zero)."""
+    a = push / 1.0
+    t_on = (v0 + math.sqrt(v0 * v0 + 2 * a * 0.01)) / a
+    v_on = math.sqrt(v0 * v0 + 2 * a * 0.01)
+    res = run(scheme, "scheme.macro_step=5e-3", "scheme.contact_step=1.25e-5",
+              f"subsystems.body.bodies.mass.joint.drive={{type=\"constant\", torque={-push}}}",
+              f"subsystems.body.bodies.mass.joint.dq0={v0}", "t_end=0.01")
+    on = res.summary["contacts"]["wall"]["intervals"][0][0]
+    assert on == pytest.approx(t_on, abs=1e-9), (on, t_on)
+    t, gap, force = res.series["t"], res.series["gap/wall"], res.series["force/wall"]
+    assert np.all(force[t < t_on - 1e-9] == 0.0)
+    first = np.flatnonzero(gap < 0)[0]
+    assert -gap[first] <= v_on * 1.25e-5, (t[first], -gap[first], v_on * 1.25e-5)

@@ -7,13 +7,15 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 from scipy.special import beta as _beta
 
 from couplers.restitution import (_checked, hunt_crossley_damping_for_restitution,
                                   hunt_crossley_restitution)
 
 __all__ = ["linear_contact", "kelvin_voigt_clipped", "held_force_rebound_factor",
-           "hertz_contact", "hunt_crossley_restitution", "hunt_crossley_damping_for_restitution"]
+           "hertz_contact", "hunt_crossley_restitution", "hunt_crossley_damping_for_restitution",
+           "two_mass_oscillator"]
 
 
 def linear_contact(mass: float, contact_stiffness: float) -> float:
@@ -114,3 +116,78 @@ def hertz_contact(mass: float, contact_stiffness: float, impact_speed: float,
     x_max = (0.5 * (n + 1.0)) ** (1.0 / (n + 1.0))
     tau_c = 2.0 * x_max * float(_beta(1.0 / (n + 1.0), 0.5)) / (n + 1.0)
     return tau_c * length / v0, x_max * length
+
+
+def two_mass_oscillator(masses, stiffnesses, coupling_stiffness: float, preload: float,
+                        q0, dq0, t):
+    """Exact motion of two grounded masses coupled by a preloaded linear spring.
+
+    Mass ``i`` moves along x at ``q_i``, tied to the ground by a spring of
+    stiffness ``k_i`` (rest at 0).  The coupling spring pushes mass 1 by
+    ``+k_c d`` and mass 2 by ``-k_c d``, with ``d = preload - q_1 + q_2``
+    (a contact of normal +x, offset ``preload``, that stays closed):
+
+    ``M q'' + K q = k_c preload (1, -1)``,
+    ``M = diag(m_1, m_2)``,
+    ``K = [[k_1 + k_c, -k_c], [-k_c, k_2 + k_c]]``.
+
+    The motion is the static deflection ``q_s = K^-1 k_c preload (1, -1)``
+    plus the free vibration about it, summed over the two modes of
+    ``K phi = omega^2 M phi`` (mass-normalised, ``phi^T M phi = 1``):
+    ``q(t) = q_s + sum_j phi_j (a_j cos(omega_j t) + b_j / omega_j sin(omega_j t))``,
+    ``a_j = phi_j^T M (q0 - q_s)``, ``b_j = phi_j^T M dq0``.  This is the
+    linear two-mass benchmark of co-simulation (Kuebler and Schiehlen 2000;
+    Busch 2016).  It holds only while ``d > 0``; check ``d`` along the
+    returned motion.
+
+    Parameters
+    ----------
+    masses : (2,) sequence of float
+        ``m_1, m_2`` [kg], > 0.
+    stiffnesses : (2,) sequence of float
+        Ground springs ``k_1, k_2`` [N/m], >= 0.
+    coupling_stiffness : float
+        ``k_c`` [N/m], > 0.
+    preload : float
+        Penetration at ``q = 0`` [m].
+    q0, dq0 : (2,) sequence of float
+        Initial positions [m] and velocities [m/s].
+    t : float or array of float
+        Times [s].
+
+    Returns
+    -------
+    q, dq : ndarray, shape ``t.shape + (2,)``
+        Positions [m] and velocities [m/s] at ``t``.
+    omega : ndarray, shape (2,)
+        Natural angular frequencies [rad/s], ascending.
+
+    References
+    ----------
+    Kuebler, R., Schiehlen, W. (2000). Two methods of simulator coupling.
+    Mathematical and Computer Modelling of Dynamical Systems 6, 93-113.
+    Busch, M. (2016). Zur effizienten Kopplung von Simulationsprogrammen.
+    Kassel University Press.
+    """
+    from scipy.linalg import eigh
+
+    m = np.asarray(masses, float)
+    k = np.asarray(stiffnesses, float)
+    kc = float(coupling_stiffness)
+    if m.shape != (2,) or np.any(m <= 0):
+        raise ValueError(f"`masses` must be two values > 0 kg, got {masses!r}")
+    if k.shape != (2,) or np.any(k < 0):
+        raise ValueError(f"`stiffnesses` must be two values >= 0 N/m, got {stiffnesses!r}")
+    if not kc > 0:
+        raise ValueError(f"`coupling_stiffness` must be > 0 N/m, got {coupling_stiffness!r}")
+    M = np.diag(m)
+    K = np.array([[k[0] + kc, -kc], [-kc, k[1] + kc]])
+    q_s = np.linalg.solve(K, kc * preload * np.array([1.0, -1.0]))
+    omega2, phi = eigh(K, M)               # mass-normalised: phi^T M phi = I
+    omega = np.sqrt(omega2)
+    a = phi.T @ M @ (np.asarray(q0, float) - q_s)
+    b = phi.T @ M @ np.asarray(dq0, float)
+    wt = np.multiply.outer(np.asarray(t, float), omega)
+    modal_q = a * np.cos(wt) + b / omega * np.sin(wt)
+    modal_dq = -a * omega * np.sin(wt) + b * np.cos(wt)
+    return q_s + modal_q @ phi.T, modal_dq @ phi.T, omega

@@ -161,7 +161,7 @@ class CoSimulationScheme(CouplingScheme):
         d, dd = system.penetrations(outs)
         f = system.forces(d, dd)
         self._outs, self._f = outs, f
-        self._hist = [f]
+        self._hist = self._starting_history(system, d, dd, f, H)
         impulse, diss, work = np.zeros(nc), np.zeros(nc), np.zeros(nc)
         law = [ln.contact.law for ln in system.links]
         p_prev = np.array([float(law[c].dissipation_rate(f[c], d[c], dd[c])) for c in coupler])
@@ -208,7 +208,7 @@ class CoSimulationScheme(CouplingScheme):
                     system.set_state(saved)
                     system.discard_work()
                     n_rejected += 1
-                    self._h_next, self._aimed = onset, True
+                    self._h_next, self._aimed = onset
                     self._outs = system.outputs()
                     continue
             self._aimed = False
@@ -248,7 +248,7 @@ class CoSimulationScheme(CouplingScheme):
         return {"n_windows": k, "n_iterations": self.n_iterations, "n_rejected": n_rejected}
 
     _h_next = None
-    _aimed = False          # the current step was aimed at an onset: accept it
+    _aimed = False          # the current step ends at a predicted onset: accept it
     _dd_prev = None
     _h_prev_step = None
     _outs_prev = None       # outputs at the communication point before the last
@@ -313,25 +313,31 @@ class CoSimulationScheme(CouplingScheme):
         return min(H, remaining)
 
     def _onset(self, d0, dd0, d1, dd1, t, h):
-        """Length of step that ends where the first exchanged contact closes,
-        or None if none closed in the step.
+        """Length of the step to retry after an exchanged contact closed
+        inside a step of length ``h``, and whether it ends at the onset;
+        None if no contact closed in the step.
 
-        A hosted contact's onset was located by its host's integrator.  For a
-        coupler contact, the end state of the rejected step already holds the
-        contact's response, so the onset is predicted from the free motion
-        before it: ``d0 + dd0 tau + a tau^2 / 2 = 0``, the relative
-        acceleration ``a`` from the last two outputs (exact under a constant
-        push).  Without a root inside the step, half the step."""
+        A hosted contact's onset was located by its host's integrator: the
+        retried step ends there and is accepted.  For a coupler contact, the
+        end state of the rejected step already holds the contact's response,
+        so the onset is predicted from the free motion before it:
+        ``d0 + dd0 tau + a tau^2 / 2 = 0``, the relative acceleration ``a``
+        from the last two outputs (exact under a constant push).  When every
+        closing contact has a root inside the step, the retried step ends
+        at the earliest and is accepted as it is.  Otherwise (no history
+        yet, or no root) it is half the step, or the earliest root if
+        sooner, and it is checked again like any long step: a guess must
+        not carry a contact through its onset with the force still at zero."""
         system = self._system
         hosted = [ts - t for c, (host, slot, _, _, _) in system.hosted.items()
                   for ts, j, on in system.subsystems[host].switch_log if j == slot and on]
         if hosted:
-            return max(min(hosted), 1e-12 * h)
+            return max(min(hosted), 1e-12 * h), True
         c = system.coupler
         closing = c[(d0[c] <= 0) & (d1[c] > 0)]
         if not len(closing):
             return None
-        best = 0.5 * h
+        found, all_found = [], True
         for i in closing:
             a = 0.0
             if self._dd_prev is not None:
@@ -340,9 +346,29 @@ class CoSimulationScheme(CouplingScheme):
                 [-d0[i] / dd0[i]] if dd0[i] > 0 else [])
             tau = [r.real for r in np.atleast_1d(roots) if abs(r.imag) < 1e-12 and
                    0 < r.real < h]
-            if tau:
-                best = min(best, min(tau)) if best != 0.5 * h else min(tau)
-        return max(best, 1e-12 * h)
+            found += tau
+            all_found = all_found and bool(tau)
+        if all_found:
+            return max(min(found), 1e-12 * h), True
+        return max(min([0.5 * h, *found]), 1e-12 * h), False
+
+    def _starting_history(self, system, d, dd, f, H):
+        """Force history to extrapolate the first steps from.  A contact
+        closed at the start has a force rate ``df/dt = f'(d) d'`` (taken by a
+        central difference of the law along the motion), so a point one
+        step back, ``f - H df/dt``, lets the first window extrapolate
+        linearly instead of holding the force: held, its O(H) error would
+        cap quadratic extrapolation at second order from a generic start."""
+        if self.extrapolation_order == 0 or not np.any(f):
+            return [f]
+        rate = np.zeros_like(f)
+        for c in np.flatnonzero(f):
+            law = system.links[c].contact.law
+            eps = 1e-6 * max(abs(d[c]), 1e-12)
+            fp = float(law.force_active(d[c] + eps, dd[c]))
+            fm = float(law.force_active(d[c] - eps, dd[c]))
+            rate[c] = (fp - fm) / (2 * eps) * dd[c]
+        return [f - H * rate, f]
 
     @staticmethod
     def _internal(system):
