@@ -83,6 +83,29 @@ class MultibodySubsystem(Subsystem):
                                complex(xp[0], xp[1]), complex(vp[0], vp[1])))
         self.aux = np.zeros(2 * len(self._embedded) + 2)
 
+    #: embedded slot -> cosim.connections.EmbeddedConnection (grasp, friction)
+    _connections: dict = {}
+
+    def attach_connection(self, slot: int, connection) -> None:
+        """Evaluate embedded contact ``slot`` through ``connection`` (a
+        :class:`cosim.connections.EmbeddedConnection`: its mode's normal and
+        tangential forces, friction, and a grasp on the located touch)."""
+        self._connections = {**self._connections, int(slot): connection}
+
+    def _connection_switch(self, t, j, on, y):
+        """A located switch of connection ``j``: grasp on touch.  Returns the
+        same state (a copy) when the mode changed, so the integrator
+        re-evaluates the right-hand side in the new mode."""
+        n = self.n_dof
+        q, dq = y[:n], y[n:2 * n]
+        x, v, _, _ = self.model.points_c(self.model.frames(q, dq), dq, self._port_body,
+                                        self._port_local_c)
+        _, port, _, _, xp, _ = self._embedded[j]
+        d, dd = list(self._embedded_state(x, v))[j][4:]
+        if self._connections[j].on_switch(t, on, x[port] - xp, d, dd):
+            return y.copy()
+        return None
+
     def embedded_quadratures(self) -> np.ndarray:
         """(n_embedded, 2): impulse [N s] and dissipated energy [J] so far."""
         return self.aux[:-2].reshape(-1, 2)
@@ -141,7 +164,14 @@ class MultibodySubsystem(Subsystem):
             ur = inputs(t)
             u = ur[:, 0] + 1j * ur[:, 1]
         rates, switch = [], []
-        for contact, port, side, n, d, dd in self._embedded_state(x, v):
+        for k, (contact, port, side, n, d, dd) in enumerate(self._embedded_state(x, v)):
+            if k in self._connections:          # a grasp or friction: cosim.connections
+                uk, f, p, sw = self._connections[k].evaluate(
+                    x[port] - self._embedded[k][4], v[port] - self._embedded[k][5], d, dd)
+                u[port] += uk
+                rates += [f, p]
+                switch.append(sw)
+                continue
             law = contact.law
             f = float(law.force(d, dd))
             u[port] += side * f * n
@@ -157,8 +187,9 @@ class MultibodySubsystem(Subsystem):
         q, dq = y[:n], y[n:2 * n]
         x, v, _, _ = self.model.points_c(self.model.frames(q, dq), dq, self._port_body,
                                         self._port_local_c)
-        return np.array([float(c.law.switch(d, dd)) for c, _, _, _, d, dd
-                         in self._embedded_state(x, v)])
+        return np.array([self._connections[k].conns.switch(self._connections[k].c, d, dd)
+                         if k in self._connections else float(c.law.switch(d, dd))
+                         for k, (c, _, _, _, d, dd) in enumerate(self._embedded_state(x, v))])
 
     def _step_impl(self, t, h, inputs: StepInput | None):
         y0 = np.concatenate([self.x, self.aux])
@@ -174,6 +205,8 @@ class MultibodySubsystem(Subsystem):
 
     def _on_switch(self, t, j, on, y):
         self.switch_log.append((t, j, on))
+        if j in self._connections:
+            return self._connection_switch(t, j, on, y)
         if on and self._embedded[j][0].law.rigid:
             return self.rigid_impact(t, y, j)
         return None

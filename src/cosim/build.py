@@ -122,7 +122,8 @@ def build_system(scene: Scene, scheme: str | None = None):
         placement = ("coupler" if name == "monolithic" and not c["law"].rigid
                      else c["placement"])
         links.append(ContactLink(contact, sa, subs[sa].port_index(c["a"][1]), sb,
-                                 subs[sb].port_index(c["b"][1]), placement, c["follow"]))
+                                 subs[sb].port_index(c["b"][1]), placement, c["follow"],
+                                 c.get("connection")))
     system = CoupledSystem(subs, links)
     for c, ln in enumerate(links):
         if ln.placement != "embedded":

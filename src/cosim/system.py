@@ -5,8 +5,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from couplers import PointContact
+from couplers import Connection, PointContact
+from couplers.connection import GRASPED
 
+from .connections import ConnectionSet, EmbeddedConnection
 from .subsystem import StepInput, Subsystem
 
 __all__ = ["ContactLink", "CoupledSystem", "PLACEMENTS"]
@@ -32,6 +34,8 @@ class ContactLink:
     port_b: int
     placement: str
     follow: bool = False
+    #: grasp and friction beyond the unilateral law (None: a plain contact)
+    connection: Connection | None = None
 
 
 class CoupledSystem:
@@ -39,6 +43,16 @@ class CoupledSystem:
 
     Contacts placed ``"embedded"`` are handed to their moving side at
     construction; the others are the scheme's to exchange.
+
+    Forces are exchanged as scalar **rows**: row ``c < n_contacts`` is
+    contact ``c``'s normal force (on side ``a`` along its normal); a contact
+    with a grasp or with friction has a second, tangential row
+    (``tangent_row[c]``, after all normal rows) along ``t = (-n_y, n_x)``.
+    ``penetrations`` gives per row the penetration and its rate (normal rows)
+    or the tangential coordinate of ``x_a - x_b`` from the grasp anchor and
+    its rate (tangential rows); ``forces`` maps them to row forces in the
+    connections' current modes (:attr:`connections`, None when no contact
+    has a connection, so plain contacts run no connection code).
     """
 
     def __init__(self, subsystems: list[Subsystem], links: list[ContactLink]):
@@ -49,6 +63,7 @@ class CoupledSystem:
         self.n_contacts = len(self.links)
         self.coupler = np.array([i for i, ln in enumerate(self.links)
                                  if ln.placement == "coupler"], dtype=int)
+        self._init_rows()
         # embedded: contact index -> (subsystem index, slot in its aux)
         self.embedded: dict[int, tuple[int, int]] = {}
         slots = [0] * len(self.subsystems)
@@ -68,6 +83,13 @@ class CoupledSystem:
             self.subsystems[own].embed_contact(ln.contact, own_port, side, ppos[partner_port],
                                                pvel[partner_port])
             self.embedded[i] = (own, slots[own])
+            if ln.connection is not None:
+                if not hasattr(self.subsystems[own], "attach_connection"):
+                    raise ValueError(f"contact `{ln.contact.name}`: subsystem "
+                                     f"`{self.subsystems[own].name}` cannot carry an embedded "
+                                     f"grasp or friction; use placement `coupler`")
+                self.subsystems[own].attach_connection(
+                    slots[own], EmbeddedConnection(self.connections, i, ln.contact.normal, side))
             slots[own] += 1
         self._followers = [ln for ln in self.links if ln.follow]
         for ln in self._followers:
@@ -76,22 +98,96 @@ class CoupledSystem:
                                  f"side b")
         self._normals = np.array([ln.contact.normal for ln in self.links]).reshape(-1, 2)
         self._offsets = np.array([ln.contact.offset for ln in self.links])
-        # Port-force maps: flat port forces of subsystem s = G[s] @ contact forces.
+        # Port-force maps: flat port forces of subsystem s = G[s] @ row forces.
         self._G = []
         for s, sub in enumerate(self.subsystems):
-            G = np.zeros((sub.n_ports * 2, self.n_contacts))
-            for c, ln in enumerate(self.links):
-                n = np.asarray(ln.contact.normal)
+            G = np.zeros((sub.n_ports * 2, self.n_rows))
+            for r, c in enumerate(self.row_contact):
+                ln = self.links[c]
+                n = self._row_dir[r]
                 if ln.sub_a == s:
-                    G[2 * ln.port_a:2 * ln.port_a + 2, c] += n
+                    G[2 * ln.port_a:2 * ln.port_a + 2, r] += n
                 if ln.sub_b == s:
-                    G[2 * ln.port_b:2 * ln.port_b + 2, c] -= n
+                    G[2 * ln.port_b:2 * ln.port_b + 2, r] -= n
             self._G.append(G)
         # Co-simulation exchanges only the coupler contacts' forces.
-        mask = np.zeros(self.n_contacts)
-        mask[self.coupler] = 1.0
+        mask = np.zeros(self.n_rows)
+        mask[self.coupler_rows] = 1.0
         self._Gc = [G * mask for G in self._G]
-        self.touches = [bool(np.any(G[:, self.coupler])) for G in self._G]
+        self.touches = [bool(np.any(G[:, self.coupler_rows])) for G in self._G]
+        if self.connections is not None:
+            self._close_at_start()
+
+    # ------------------------------------------------------------------ rows
+    def _init_rows(self) -> None:
+        nc = self.n_contacts
+        conns = [ln.connection for ln in self.links]
+        self.connections = None
+        if any(k is not None for k in conns):
+            self.connections = ConnectionSet(self.contact_names,
+                                             [ln.contact.law for ln in self.links], conns)
+        self.tangent_row = np.full(nc, -1, dtype=int)
+        extra = [c for c, k in enumerate(conns) if k is not None and k.tangential]
+        self.tangent_row[extra] = nc + np.arange(len(extra))
+        self.n_rows = nc + len(extra)
+        #: the contact each row belongs to
+        self.row_contact = np.array(list(range(nc)) + extra, dtype=int)
+        normals = [np.asarray(ln.contact.normal, float) for ln in self.links]
+        self._row_dir = np.array(normals + [np.array([-normals[c][1], normals[c][0]])
+                                            for c in extra]).reshape(-1, 2)
+        #: names of the rows: the contact's name, NAME.t for a tangential row
+        self.row_names = list(self.contact_names) + [f"{self.contact_names[c]}.t"
+                                                     for c in extra]
+        coupler = set(int(c) for c in self.coupler)
+        self.coupler_rows = np.array([r for r, c in enumerate(self.row_contact) if c in coupler],
+                                     dtype=int)
+
+    def _close_at_start(self) -> None:
+        cs = self.connections
+        d, dd = self.penetrations(self.outputs())
+        for c in cs.index:
+            conn = cs.connections[c]
+            if conn.grasp is not None and conn.close.kind == "start":
+                self._set_mode(c, 0.0, GRASPED, d, dd)
+        self.switch_modes(0.0, d, dd)
+
+    def _set_mode(self, c, t, mode, d, dd) -> None:
+        r = self.tangent_row[c]
+        s = self.connections.anchor[c] + (d[r] if r >= 0 else 0.0)
+        self.connections.set_mode(c, t, mode, float(d[c]), float(dd[c]), float(s))
+
+    def switch_modes(self, t: float, d, dd, touch: bool = True) -> bool:
+        """Switch the connections whose trigger has come at ``t`` (a
+        communication point): ``touch`` grasps of contacts whose law gives a
+        force (unless ``touch`` is False), then ``time`` and ``after``
+        triggers until none is due.  ``d``, ``dd`` are the rows at ``t``.
+        True when a mode changed (the caller recomputes rows and forces:
+        a grasp moves the tangential anchor)."""
+        cs = self.connections
+        if cs is None:
+            return False
+        changed = False
+        if touch:
+            for c in cs.index:
+                law = self.links[c].contact.law
+                if cs.closes_on_touch(c) and float(law.switch(d[c], dd[c])) > 0:
+                    self._set_mode(c, t, GRASPED, d, dd)
+                    changed = True
+        for _ in range(2 * len(cs.index) + 1):       # chains of `after` conditions
+            due = cs.due(t)
+            if not due:
+                break
+            for c, mode in due:
+                self._set_mode(c, t, mode, d, dd)
+            changed = True
+        return changed
+
+    def in_touch(self, f) -> np.ndarray:
+        """Per contact: carries force (or is grasped)."""
+        on = np.asarray(f[:self.n_contacts]) > 0
+        if self.connections is not None:
+            on = on | (self.connections.mode == GRASPED)
+        return on
 
     # ---------------------------------------------------- moving surface points
     def update_followers(self, outs) -> None:
@@ -116,15 +212,56 @@ class CoupledSystem:
         n = self._normals
         d = self._offsets - np.einsum("cx,cx->c", xa - xb, n)
         dd = -np.einsum("cx,cx->c", va - vb, n)
+        if self.n_rows > self.n_contacts:
+            nc, ct = self.n_contacts, self.row_contact[self.n_contacts:]
+            t = self._row_dir[nc:]
+            e = np.einsum("cx,cx->c", (xa - xb)[ct], t) - self.connections.anchor[ct]
+            de = np.einsum("cx,cx->c", (va - vb)[ct], t)
+            d, dd = np.concatenate([d, e]), np.concatenate([dd, de])
         return d, dd
 
     def forces(self, d, dd, which=None):
-        """Penalty forces of the contacts ``which`` (all by default)."""
-        idx = range(self.n_contacts) if which is None else which
-        return np.array([float(self.links[c].contact.law.force(d[c], dd[c])) for c in idx])
+        """Forces of the rows ``which`` (all by default), in the current modes."""
+        if self.connections is None:
+            idx = range(self.n_contacts) if which is None else which
+            return np.array([float(self.links[c].contact.law.force(d[c], dd[c])) for c in idx])
+        f = np.zeros(self.n_rows)
+        cs = self.connections
+        for c, ln in enumerate(self.links):
+            if ln.connection is None:
+                f[c] = float(ln.contact.law.force(d[c], dd[c]))
+                continue
+            r = self.tangent_row[c]
+            fn, ft = cs.forces(c, d[c], dd[c], *((d[r], dd[r]) if r >= 0 else (0.0, 0.0)))
+            f[c] = fn
+            if r >= 0:
+                f[r] = ft
+        return f if which is None else f[np.asarray(which, dtype=int)]
+
+    def dissipation_rates(self, f, d, dd) -> np.ndarray:
+        """Power dissipated by each contact [W] (normal and tangential rows)."""
+        out = np.zeros(self.n_contacts)
+        cs = self.connections
+        for c, ln in enumerate(self.links):
+            if ln.connection is None:
+                out[c] = float(ln.contact.law.dissipation_rate(f[c], d[c], dd[c]))
+                continue
+            r = self.tangent_row[c]
+            ft, e, de = (f[r], d[r], dd[r]) if r >= 0 else (0.0, 0.0, 0.0)
+            out[c] = cs.power(c, f[c], ft, d[c], dd[c], e, de)
+        return out
 
     def contact_potential(self, d) -> float:
-        return float(sum(ln.contact.law.potential(d[c]) for c, ln in enumerate(self.links)))
+        if self.connections is None:
+            return float(sum(ln.contact.law.potential(d[c]) for c, ln in enumerate(self.links)))
+        total = 0.0
+        for c, ln in enumerate(self.links):
+            if ln.connection is None:
+                total += float(ln.contact.law.potential(d[c]))
+            else:
+                r = self.tangent_row[c]
+                total += self.connections.potential(c, d[c], d[r] if r >= 0 else 0.0)
+        return total
 
     def energy(self, d) -> float:
         """Energy of the subsystems plus the elastic energy of the contacts [J]."""
@@ -132,7 +269,7 @@ class CoupledSystem:
 
     def step_input(self, s: int, t0: float, h: float, coeffs: np.ndarray) -> StepInput:
         """Port forces of subsystem ``s`` from contact-force polynomial
-        coefficients ``coeffs`` (order + 1, n_contacts)."""
+        coefficients ``coeffs`` (order + 1, n_rows)."""
         sub = self.subsystems[s]
         c = coeffs @ self._Gc[s].T
         return StepInput(t0, h, c.reshape(len(coeffs), sub.n_ports, 2))
@@ -145,11 +282,17 @@ class CoupledSystem:
         return out
 
     def get_state(self):
-        return [s.get_state() for s in self.subsystems]
+        """Snapshot of every subsystem and of the connections' modes."""
+        states = [s.get_state() for s in self.subsystems]
+        if self.connections is not None:
+            states.append(self.connections.snapshot())
+        return states
 
     def set_state(self, states):
         for s, st in zip(self.subsystems, states):
             s.set_state(st)
+        if self.connections is not None:
+            self.connections.restore(states[len(self.subsystems)])
 
     # ----------------------------------------------- monolithic (stacked) face
     def stacked(self):

@@ -153,8 +153,7 @@ class CoSimulationScheme(CouplingScheme):
         self._outs, self._f = outs, f
         self._hist = [f]
         impulse, diss = np.zeros(nc), np.zeros(nc)
-        law = [ln.contact.law for ln in system.links]
-        p_prev = np.array([float(law[c].dissipation_rate(f[c], d[c], dd[c])) for c in coupler])
+        p_prev = system.dissipation_rates(f, d, dd)[coupler]
         recorder.record(0.0, d, dd, f, impulse, diss, self._internal(system))
         controlled = self.contact_step is not None and len(coupler) > 0
         n = max(1, math.ceil(t_end / H - 1e-9))
@@ -190,6 +189,9 @@ class CoSimulationScheme(CouplingScheme):
             self._aimed = False
             self._dd_prev, self._h_prev_step = dd.copy(), h
             d, dd = d1, dd1
+            if system.connections is not None and system.switch_modes(t + h, d, dd):
+                d, dd = system.penetrations(outs)       # a grasp moves the tangential anchor
+                f = system.forces(d, dd)
             h_prev = h
             k += 1
             self._outs, self._f = outs, f
@@ -197,8 +199,7 @@ class CoSimulationScheme(CouplingScheme):
             if len(coupler):
                 j = np.arange(coeffs.shape[0])[:, None]
                 impulse[coupler] += h * np.sum(coeffs[:, coupler] / (j + 1), axis=0)
-                p_now = np.array([float(law[c].dissipation_rate(f[c], d[c], dd[c]))
-                                  for c in coupler])
+                p_now = system.dissipation_rates(f, d, dd)[coupler]
                 diss[coupler] += 0.5 * h * (p_prev + p_now)
                 p_prev = p_now
             emb = system.embedded_quadratures()
@@ -240,7 +241,7 @@ class CoSimulationScheme(CouplingScheme):
         # extrapolation history is clear of force before the step grows), or
         # would close within a long step
         recent = len(self._hist) > 1 and np.any(self._hist[-2][c] > 0)
-        if np.any(f[c] > 0) or recent or np.any(d[c] + H * dd[c] > 0):
+        if np.any(self._system.in_touch(f)[c]) or recent or np.any(d[c] + H * dd[c] > 0):
             return min(self.contact_step, remaining)
         return min(H, remaining)
 

@@ -53,15 +53,16 @@ class GaussSeidel(CoSimulationScheme):
         base = self._extrapolated(ratio)
         width = max(2, base.shape[0])
         # per contact, the force polynomial that side `a` (else `b`) receives
-        applied = np.zeros((width, system.n_contacts))
+        applied = np.zeros((width, system.n_rows))
         applied[:base.shape[0]] = base
         done = {s for s, sub in enumerate(system.subsystems) if sub.rigid}
         outs_n = self._outs
         for s in self._order(system):
             coeffs = np.zeros_like(applied)
             coeffs[:base.shape[0]] = base
-            mine = [c for c in system.coupler
-                    if s in (system.links[c].sub_a, system.links[c].sub_b)]
+            mine = [r for r in system.coupler_rows   # rows: normal, then tangential
+                    if s in (system.links[system.row_contact[r]].sub_a,
+                             system.links[system.row_contact[r]].sub_b)]
             if mine:
                 pred = list(system.outputs())
                 pos, vel = outs_n[s]
@@ -69,11 +70,12 @@ class GaussSeidel(CoSimulationScheme):
                     pos = pos + h * vel
                 pred[s] = (pos, vel)
                 d, dd = system.penetrations(pred)
+                f_pred = system.forces(d, dd)
             for c in mine:
-                ln = system.links[c]
+                ln = system.links[system.row_contact[c]]
                 other = ln.sub_b if ln.sub_a == s else ln.sub_a
                 if other in done:
-                    ftilde = float(ln.contact.law.force(d[c], dd[c]))
+                    ftilde = float(f_pred[c])
                     coeffs[:, c] = 0.0
                     coeffs[0, c] = self._f[c]
                     coeffs[1, c] = ftilde - self._f[c]

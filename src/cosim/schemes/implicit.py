@@ -33,7 +33,7 @@ class Implicit(CoSimulationScheme):
     }
 
     def advance(self, system, t, h, ratio):
-        coupler = system.coupler
+        coupler = system.coupler_rows      # normal and tangential rows exchanged
         moving = self._moving(system)
         f_n = self._f
         guess = np.sum(self._extrapolated(ratio), axis=0)
@@ -67,6 +67,6 @@ class Implicit(CoSimulationScheme):
         worst = int(coupler[np.argmax(np.abs(r))])
         raise CouplingError(
             f"implicit coupling did not converge at t = {t:.6g} s within "
-            f"{self.max_iterations} iterations: contact `{system.contact_names[worst]}` "
+            f"{self.max_iterations} iterations: contact `{system.row_names[worst]}` "
             f"has a force residual of {abs(r).max():.3g} N. Reduce `scheme.macro_step` or "
             f"raise `scheme.max_iterations`.")
