@@ -150,6 +150,7 @@ class CoupledSystem:
             if conn.grasp is not None and conn.close.kind == "start":
                 self._set_mode(c, 0.0, GRASPED, d, dd)
         self.switch_modes(0.0, d, dd)
+        cs.lost[:] = 0.0        # switches at t = 0 make the initial state: nothing is lost
 
     def _set_mode(self, c, t, mode, d, dd) -> None:
         r = self.tangent_row[c]
