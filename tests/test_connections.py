@@ -402,3 +402,29 @@ def test_grasp_of_a_chain_top_between_two_moving_sides(tmp_path, scheme, overrid
     # dampers' power is integrated by the trapezoidal rule over 2 ms steps)
     bound = 1e-8 if scheme == "monolithic" else 3e-3
     assert r.summary["energy"]["max_abs_drift"] < bound * r.summary["energy"]["dissipated"]
+
+
+def test_coupler_touch_grasps_at_the_communication_point_after_the_onset(tmp_path):
+    """Exchanged by the scheme, the touch is seen at the first communication
+    point at which the law gives a force."""
+    h, H = 0.01, 1e-4
+    text = scene_text(DROP.format(k=1e6, c=100.0, release=""), t_end=0.06, q0=(0.0, h))
+    r = run(tmp_path, text, "implicit", [f"scheme.macro_step={H}",
+                                         'contacts.floor.placement="coupler"'])
+    (sw,) = r.summary["switches"]
+    t_touch = math.sqrt(2 * h / G)
+    assert t_touch < sw["time"] <= t_touch + H * (1 + 1e-9)
+    assert sw["time"] / H == pytest.approx(round(sw["time"] / H), abs=1e-6)
+    gap = r.series["gap/floor"][r.t > sw["time"]]
+    assert np.max(np.abs(gap)) < math.sqrt(2 * G * h) / math.sqrt(1e6 / MASS) + MASS * G / 1e6
+
+
+def test_preflight_judges_a_grasp_stiffer_than_its_law(tmp_path):
+    from cosim.errors import UnsafeStepError
+    hang = HANG.format(k=1e6, c=0.0, kt=0.0, ct=0.0, release="").replace(
+        "contact_stiffness = 1e6", "contact_stiffness = 1e2")
+    text = scene_text(hang, t_end=0.01)
+    with pytest.raises(UnsafeStepError, match=r"contact `hold`: macro step 0\.001 s .*"
+                                              r"omega = 707\.1 rad/s"):
+        run(tmp_path, text, "gauss_seidel", ["scheme.macro_step=1e-3",
+                                             'contacts.hold.placement="coupler"'])

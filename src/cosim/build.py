@@ -10,6 +10,7 @@ from couplers import PointContact
 from multibody import Body, Joint, JointEffects, TreeModel
 
 from .bodies import MultibodySubsystem
+from .connections import stiffest_normal
 from .integrators import get_integrator
 from .scene import Scene, SceneError
 from .schemes import get_scheme
@@ -133,7 +134,7 @@ def build_system(scene: Scene, scheme: str | None = None):
         if ln.contact.law.rigid:
             continue
         mob = subs[s].port_mobility(port, ln.contact.normal)
-        omega = math.sqrt(ln.contact.law.stiffness * mob)
+        omega = math.sqrt(stiffest_normal(ln)[0] * mob)
         if isinstance(subs[s], MultibodySubsystem):
             if subs[s].integrator.name != "rk4":
                 continue

@@ -8,6 +8,7 @@ from typing import Any, Callable, ClassVar, NamedTuple
 import numpy as np
 
 from .. import preflight
+from ..connections import stiffest_normal
 from ..errors import CouplingError, UnsafeStepError
 
 __all__ = ["Option", "CouplingScheme", "CoSimulationScheme", "UnsafeStepError", "CouplingError",
@@ -104,7 +105,7 @@ class CoSimulationScheme(CouplingScheme):
                    + system.subsystems[ln.sub_b].port_mobility(ln.port_b, n))
             if mob <= 0:
                 continue
-            m, k, cd = 1.0 / mob, ln.contact.law.stiffness, ln.contact.law.damping
+            m, (k, cd) = 1.0 / mob, stiffest_normal(ln)     # the law's, or a grasp's
             if not (math.isfinite(k) and math.isfinite(cd)):
                 raise UnsafeStepError(
                     f"contact `{ln.contact.name}`: law `{ln.contact.law.name}` has no "
