@@ -148,11 +148,12 @@ class CoupledSystem:
         for c in cs.index:
             conn = cs.connections[c]
             if conn.grasp is not None and conn.close.kind == "start":
-                self._set_mode(c, 0.0, GRASPED, d, dd)
+                self.set_mode(c, 0.0, GRASPED, d, dd)
         self.switch_modes(0.0, d, dd)
         cs.lost[:] = 0.0        # switches at t = 0 make the initial state: nothing is lost
 
-    def _set_mode(self, c, t, mode, d, dd) -> None:
+    def set_mode(self, c: int, t: float, mode: int, d, dd) -> None:
+        """Switch contact ``c`` to ``mode`` at ``t``, given the rows ``d``, ``dd`` there."""
         r = self.tangent_row[c]
         s = self.connections.anchor[c] + (d[r] if r >= 0 else 0.0)
         self.connections.set_mode(c, t, mode, float(d[c]), float(dd[c]), float(s))
@@ -172,14 +173,14 @@ class CoupledSystem:
             for c in cs.index:
                 law = self.links[c].contact.law
                 if cs.closes_on_touch(c) and float(law.switch(d[c], dd[c])) > 0:
-                    self._set_mode(c, t, GRASPED, d, dd)
+                    self.set_mode(c, t, GRASPED, d, dd)
                     changed = True
         for _ in range(2 * len(cs.index) + 1):       # chains of `after` conditions
             due = cs.due(t)
             if not due:
                 break
             for c, mode in due:
-                self._set_mode(c, t, mode, d, dd)
+                self.set_mode(c, t, mode, d, dd)
             changed = True
         return changed
 

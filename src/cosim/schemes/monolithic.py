@@ -184,20 +184,24 @@ class Monolithic(CouplingScheme):
                     active[c] = not active[c]
                     recorder.edge(c, t, bool(active[c]))
                     if conns is not None and active[c] and conns.closes_on_touch(c):
-                        self._switch_modes(system, t, y, contact_state, active, laws, True)
+                        self._switch_modes(system, t, y, contact_state, active, laws, c)
                         record(t, y)
             elif t >= t_end * (1 - 1e-14):
                 record(t, y)
         return {"n_windows": n_segments, "n_iterations": 0, "n_rejected": 0}
 
     @staticmethod
-    def _switch_modes(system, t, y, contact_state, active, laws, touch) -> bool:
-        """Switch connections at ``t`` (a located touch or time event); a
-        released contact goes on unilaterally from the state it is in."""
+    def _switch_modes(system, t, y, contact_state, active, laws, touched) -> bool:
+        """Switch connections at ``t``: grasp contact ``touched`` (its located
+        onset; False at a time event), then the time and ``after`` triggers
+        due.  A released contact goes on unilaterally from the state it is in."""
+        from couplers.connection import GRASPED
         _, d, dd, _ = contact_state(y)
         log = system.connections.log
         n_log = len(log)
-        if not system.switch_modes(t, d, dd, touch):
+        if touched is not False:          # the located root, whatever side it fell on
+            system.set_mode(touched, t, GRASPED, d, dd)
+        if not system.switch_modes(t, d, dd, touch=False) and touched is False:
             return False
         for entry in log[n_log:]:
             if entry["to"] == "released":
