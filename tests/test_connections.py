@@ -428,3 +428,24 @@ def test_preflight_judges_a_grasp_stiffer_than_its_law(tmp_path):
                                               r"omega = 707\.1 rad/s"):
         run(tmp_path, text, "gauss_seidel", ["scheme.macro_step=1e-3",
                                              'contacts.hold.placement="coupler"'])
+
+
+def test_co_simulated_friction_row_under_the_implicit_scheme(tmp_path):
+    """The tangential row is exchanged like the normal one.  The fixed point
+    converges while the friction's damping near rest, mu f_n / v_s, is soft
+    against the step (here mu m g H / (m v_s) = 0.29); with v_s = 1e-4 and
+    H = 1e-3 it does not (README)."""
+    mu, vs, v0, k, H = 0.3, 1e-2, 1.0, 1e6, 1e-3
+    fr = f"friction = {{ coefficient = {mu}, slip_velocity = {vs} }}"
+    text = scene_text(SLIDE.format(k=k, friction=fr), t_end=0.4, dq0=(v0, 0.0),
+                      q0=(0.0, -MASS * G / k), max_step=2e-4)
+    r = run(tmp_path, text, "implicit", [f"scheme.macro_step={H}",
+                                         'contacts.floor.placement="coupler"'])
+    t, v = r.t, r.series["dq/robot/x"]
+    sliding = (t > 0.02) & (t < v0 / (mu * G) - 0.02)
+    assert np.max(np.abs(v[sliding] - (v0 - mu * G * t[sliding]))) < 1e-3 * v0
+    assert r.summary["final_state"]["robot"]["x"]["q"] == pytest.approx(
+        v0 ** 2 / (2 * mu * G), rel=1e-3)
+    assert abs(v[-1]) < 1e-6
+    lost = 0.5 * MASS * v0 ** 2
+    assert r.summary["contacts"]["floor"]["dissipated"] == pytest.approx(lost, rel=1e-3)
