@@ -433,7 +433,7 @@ def test_preflight_judges_a_grasp_stiffer_than_its_law(tmp_path):
 def test_co_simulated_friction_row_under_the_implicit_scheme(tmp_path):
     """The tangential row is exchanged like the normal one.  The fixed point
     converges while the friction's damping near rest, mu f_n / v_s, is soft
-    against the step (here mu m g H / (m v_s) = 0.29); with v_s = 1e-4 and
+    against the step (here mu g H / v_s = 0.29); with v_s = 1e-4 and
     H = 1e-3 it does not (README)."""
     mu, vs, v0, k, H = 0.3, 1e-2, 1.0, 1e6, 1e-3
     fr = f"friction = {{ coefficient = {mu}, slip_velocity = {vs} }}"
@@ -449,3 +449,85 @@ def test_co_simulated_friction_row_under_the_implicit_scheme(tmp_path):
     assert abs(v[-1]) < 1e-6
     lost = 0.5 * MASS * v0 ** 2
     assert r.summary["contacts"]["floor"]["dissipated"] == pytest.approx(lost, rel=1e-3)
+
+
+# CASES.md section 7 in miniature: a two-link robot hangs from a tensioned
+# cable by gripper 1, swings gripper 2 up onto the cable 0.8 m further, which
+# grasps on touch; gripper 1 lets go 50 ms later.  (Not the scene itself: no
+# drive, a coarse cable with 12 modes.)
+BRACHIATION = """name = "brachiation_step"
+t_end = 0.4
+[scheme]
+name = "monolithic"
+rtol = 1e-8
+atol = 1e-10
+[effects]
+gravity = 9.81
+[subsystems.cable]
+type = "cable"
+length = 4.0
+youngs_modulus = 100e9
+density = 7850.0
+section = { diameter = 0.01 }
+tension = 2000.0
+elements = 40
+left = "pinned"
+right = "pinned"
+origin = [0.0, 0.0]
+axis = [1.0, 0.0]
+direction = [0.0, 1.0]
+points = { g1 = 1.6, g2 = 2.4 }
+modes = { count = 12 }
+static_equilibrium = true
+[subsystems.robot]
+type = "multibody"
+integrator = { method = "rk4", max_step = 2e-5 }
+[subsystems.robot.bodies.sx]
+mass = 0.0
+joint = { name = "x", type = "prismatic", parent = "ground", axis = [1.0, 0.0], q0 = 1.6 }
+[subsystems.robot.bodies.sy]
+mass = 0.0
+joint = { name = "y", type = "prismatic", parent = "sx", axis = [0.0, 1.0], q0 = -0.0 }
+[subsystems.robot.bodies.link1]
+mass = 1.5
+inertia = 0.03125
+com = [0.25, 0.0]
+points = { g1 = [0.0, 0.0] }
+joint = { name = "shoulder", type = "revolute", parent = "sy", q0 = -0.6435 }
+[subsystems.robot.bodies.link2]
+mass = 1.5
+inertia = 0.03125
+com = [0.25, 0.0]
+points = { g2 = [0.5, 0.0] }
+joint = { name = "elbow", type = "revolute", parent = "link1", offset = [0.5, 0.0], q0 = 1.2, dq0 = 3.0 }
+[contacts.gripper1]
+a = "robot.g1"
+b = "cable.g1"
+normal = [0.0, -1.0]
+law = { type = "linear", contact_stiffness = 1e5 }
+grasp = { stiffness = 1e5, damping = 50.0, tangential_stiffness = 1e5, tangential_damping = 50.0, close = "start", release = { after = "gripper2.grasp", delay = 0.05 } }
+[contacts.gripper2]
+a = "robot.g2"
+b = "cable.g2"
+normal = [0.0, -1.0]
+law = { type = "linear", contact_stiffness = 1e5 }
+grasp = { stiffness = 1e5, damping = 50.0, tangential_stiffness = 1e5, tangential_damping = 50.0, close = "touch" }
+"""
+
+
+def test_brachiation_step_hands_over_from_one_gripper_to_the_other(tmp_path):
+    r = run(tmp_path, BRACHIATION)
+    log = [(s["contact"], s["to"]) for s in r.summary["switches"]]
+    assert log == [("gripper1", "grasped"), ("gripper2", "grasped"), ("gripper1", "released")]
+    t2 = r.summary["switches"][1]["time"]
+    assert 0.0 < t2 < 0.1
+    assert r.summary["switches"][2]["time"] == pytest.approx(t2 + 0.05, abs=1e-12)
+    assert r.summary["contacts"]["gripper2"]["intervals"][0][0] == pytest.approx(t2, abs=1e-12)
+    # gripper 2 holds the swinging robot: its gap stays within a few weights / k
+    held = r.t > t2
+    assert np.max(np.abs(r.series["gap/gripper2"][held])) < 2e-3
+    assert np.max(np.abs(r.series["gap/gripper2.t"][held])) < 2e-3
+    # the robot swings about gripper 2, its links' length (1 m) from it
+    x, y = r.summary["final_state"]["robot"]["x"]["q"], r.summary["final_state"]["robot"]["y"]["q"]
+    assert math.hypot(2.4 - x, y) == pytest.approx(1.0, abs=5e-3)
+    assert r.summary["energy"]["max_abs_drift"] < 1e-5 * r.summary["energy"]["dissipated"]
