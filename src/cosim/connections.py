@@ -32,8 +32,8 @@ import math
 
 import numpy as np
 
-from couplers.connection import (GRASPED, MODES, OPEN, RELEASED, connection_forces, connection_potential, connection_power,
-                                 connection_switch)
+from couplers.connection import (GRASPED, MODES, OPEN, RELEASED, connection_forces,
+                                 connection_potential, connection_power, connection_switch)
 
 __all__ = ["ConnectionSet", "EmbeddedConnection", "stiffest_normal"]
 
