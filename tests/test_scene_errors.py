@@ -388,7 +388,8 @@ CASES_BAD = [
     ([f"{C}.offset=x"], at(f"{C}.offset", "must be a number [m], got a string 'x'")),
     ([f"{C}.placement=inside"], at(f"{C}.placement", "must be one of ['coupler', 'embedded'], "
                                                      "got 'inside'")),
-    ([f"{C}.friction=0.3"], at(f"{C}.friction", f"is not a known key of {C}")),
+    # friction is a table since connections (coefficient, slip_velocity)
+    ([f"{C}.friction=0.3"], at(f"{C}.friction", "must be a table, got a number 0.3")),
     (['subsystems.wall2={type="rigid", points={p=[0.0, 0.0]}}', f"{C}.a=wall2.p"],
      at(f"{C}.b", "a contact between two rigid subsystems has nothing to simulate")),
     ([ARM, f"{C}.b=arm.hand", f"{C}.placement=embedded", f'{C}.host="wall"'],

@@ -88,6 +88,29 @@ class MultibodySubsystem(Subsystem):
         self.aux = np.zeros(4 * len(self._embedded) + 2)
         return e
 
+    #: embedded slot -> cosim.connections.EmbeddedConnection (grasp, friction)
+    _connections: dict = {}
+
+    def attach_connection(self, slot: int, connection) -> None:
+        """Evaluate embedded contact ``slot`` through ``connection`` (a
+        :class:`cosim.connections.EmbeddedConnection`: its mode's normal and
+        tangential forces, friction, and a grasp on the located touch)."""
+        self._connections = {**self._connections, int(slot): connection}
+
+    def _connection_switch(self, t, j, on, y):
+        """A located switch of connection ``j``: grasp on touch.  Returns the
+        same state (a copy) when the mode changed, so the integrator
+        re-evaluates the right-hand side in the new mode."""
+        n = self.n_dof
+        q, dq = y[:n], y[n:2 * n]
+        x, v, _, _ = self.model.points_c(self.model.frames(q, dq), dq, self._port_body,
+                                        self._port_local_c)
+        e = self._embedded[j]
+        d, dd = e.penetration(t, x[e.port], v[e.port])
+        if self._connections[j].on_switch(t, on, x[e.port] - e.partner(t)[0], d, dd):
+            return y.copy()
+        return None
+
     def embedded_quadratures(self) -> np.ndarray:
         """(n_embedded, 4): impulse [N s], dissipated energy [J] and work done on
         this subsystem [J] so far, and the current step's first moment of the
@@ -149,7 +172,15 @@ class MultibodySubsystem(Subsystem):
             u = ur[:, 0] + 1j * ur[:, 1]
         rates, switch = [], []
         tau = t - self._t0
-        for e, d, dd in self._embedded_state(t, x, v):
+        for k, (e, d, dd) in enumerate(self._embedded_state(t, x, v)):
+            if k in self._connections:          # a grasp or friction: cosim.connections
+                xp, vp = e.partner(t)
+                uk, f, p, sw = self._connections[k].evaluate(x[e.port] - xp, v[e.port] - vp,
+                                                             d, dd)
+                u[e.port] += uk
+                rates += [f, p, f * tau, (uk.conjugate() * v[e.port]).real]
+                switch.append(sw)
+                continue
             law = e.law
             f = float(law.force(d, dd))
             fn = e.side * f * e.normal
@@ -169,8 +200,9 @@ class MultibodySubsystem(Subsystem):
         q, dq = y[:n], y[n:2 * n]
         x, v, _, _ = self.model.points_c(self.model.frames(q, dq), dq, self._port_body,
                                         self._port_local_c)
-        return np.array([float(e.law.switch(d, dd)) for e, d, dd
-                         in self._embedded_state(t, x, v)])
+        return np.array([self._connections[k].conns.switch(self._connections[k].c, d, dd)
+                         if k in self._connections else float(e.law.switch(d, dd))
+                         for k, (e, d, dd) in enumerate(self._embedded_state(t, x, v))])
 
     def _step_impl(self, t, h, inputs: StepInput | None):
         self._t0, self._h = t, h
@@ -189,6 +221,8 @@ class MultibodySubsystem(Subsystem):
 
     def _on_switch(self, t, j, on, y):
         self.switch_log.append((t, j, on))
+        if j in self._connections:
+            return self._connection_switch(t, j, on, y)
         if on and self._embedded[j].law.rigid:
             return self.rigid_impact(t, y, j)
         return None

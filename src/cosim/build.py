@@ -10,6 +10,7 @@ from couplers import PointContact
 from multibody import Body, Joint, JointEffects, TreeModel
 
 from .bodies import MultibodySubsystem
+from .connections import stiffest_normal
 from .integrators import get_integrator
 from .scene import Scene, SceneError
 from .schemes import get_scheme
@@ -131,7 +132,8 @@ def build_system(scene: Scene, scheme: str | None = None):
                 mob_a = subs[sa].port_mobility(pa, contact.normal)
                 mob_b = subs[sb].port_mobility(pb, contact.normal)
                 host = sa if mob_a >= mob_b else sb
-        links.append(ContactLink(contact, sa, pa, sb, pb, placement, c["follow"], host))
+        links.append(ContactLink(contact, sa, pa, sb, pb, placement, c["follow"], host,
+                                 c.get("connection")))
     system = CoupledSystem(subs, links)
     for c, ln in enumerate(links):
         if ln.placement != "embedded":
@@ -141,7 +143,7 @@ def build_system(scene: Scene, scheme: str | None = None):
         if ln.contact.law.rigid:
             continue
         mob = subs[s].port_mobility(port, ln.contact.normal)
-        omega = math.sqrt(ln.contact.law.stiffness * mob)
+        omega = math.sqrt(stiffest_normal(ln)[0] * mob)
         if isinstance(subs[s], MultibodySubsystem):
             if subs[s].integrator.name != "rk4":
                 continue

@@ -36,6 +36,8 @@ def _print_summary(s: dict, out: Path | None) -> None:
               + (f" ({imp['slip_end']})" if imp["slip_end"] else ""))
         after = ", ".join(f"{k} {v:.5g}" for k, v in imp["dq_after"].items())
         print(f"    joint velocities after [rad/s]: {after}")
+    for sw in s.get("switches", []):
+        print(f"  switch {sw['contact']} at t = {sw['time']:.6g} s: {sw['from']} -> {sw['to']}")
     for sub, joints in s["final_state"].items():
         if len(joints) > 12:
             print(f"  final {sub}: {len(joints)} DOFs (in summary.json)")

@@ -4,6 +4,7 @@ from __future__ import annotations
 import math
 
 from . import preflight
+from .connections import stiffest_normal
 from .schemes import COUPLING_SCHEMES
 
 __all__ = ["scene_info"]
@@ -23,7 +24,11 @@ def _contact_info(system, c, scene) -> dict:
     n = ln.contact.normal
     mob = (system.subsystems[ln.sub_a].port_mobility(ln.port_a, n)
            + system.subsystems[ln.sub_b].port_mobility(ln.port_b, n))
-    k, cd = law.stiffness, law.damping
+    k, cd = stiffest_normal(ln)      # a grasp stiffer than the law sets the frequency
+    conn = ln.connection
+    if conn is not None:
+        out.update(grasp=conn.grasp is not None,
+                   friction=None if conn.friction is None else conn.friction.coefficient)
     m = 1.0 / mob
     if not (math.isfinite(k) and math.isfinite(cd)):
         out.update(reduced_mass=m, frequency_hz=None, contact_time_s=None,

@@ -85,6 +85,8 @@ class Recorder:
         self.max_drift = 0.0
         self.last = None
         self._d0 = None
+        self._n_log = 0              # switches of connections already turned into edges
+        self._modes = []
 
     def edge(self, c: int, t: float, on: bool) -> None:
         """Report an exactly located contact onset (``on``) or release."""
@@ -104,31 +106,44 @@ class Recorder:
         ``work`` is per contact, the work its forces did on the subsystems so
         far (as the scheme applied them)."""
         energy = self.system.energy(d)
+        cs = self.system.connections
+        if cs is not None:           # energy set free by connection switches
+            dissipated = dissipated + cs.lost
         diss_total = float(np.sum(dissipated)) + internal[0]
         if self.e0 is None:
             self.e0 = energy
         self.supplied = internal[1]
         drift = energy + diss_total - internal[1] - self.e0
         self.max_drift = max(self.max_drift, abs(drift))
-        active = f > 0.0
+        active = self.system.in_touch(f)
+        nc = self.system.n_contacts
+        switched, released = [], set()
+        if cs is not None:
+            switched = cs.log[self._n_log:]
+            self._n_log = len(cs.log)
+            released = {self.system.contact_names.index(e["contact"]) for e in switched
+                        if e["to"] == "released"}
         prev = self._prev
         if prev is not None:
             tp, dp, ddp, ap = prev
             h = t - tp
-            for c in range(len(d)):
+            for c in range(nc):
                 if h > 0 and (ap[c] or active[c]) and ddp[c] > 0 >= dd[c]:
                     self.peak[c] = max(self.peak[c], hermite_cubic_max(dp[c], ddp[c], d[c],
                                                                        dd[c], h)[0])
-                if self.auto_edges[c] and ap[c] != active[c]:
+                if self.auto_edges[c] and ap[c] != active[c] and c not in released:
                     self.edge(c, self._crossing(c, tp, dp[c], ddp[c], t, d[c], dd[c], ap[c]),
                               bool(active[c]))
-        if len(d):
-            self.peak = np.maximum(self.peak, np.where(active, d, 0.0))
+        for e in switched:           # a grasp holds from its switch; a release frees
+            c = self.system.contact_names.index(e["contact"])
+            self.edge(c, e["time"], e["to"] == "grasped" or e["closed"])
+        if nc:
+            self.peak = np.maximum(self.peak, np.where(active, d[:nc], 0.0))
         if prev is None:
             for c in np.flatnonzero(active):
                 self.edge(int(c), t, True)
         self._prev = (t, d.copy(), dd.copy(), active)
-        self.last = (t, impulse.copy(), dissipated.copy(), energy, diss_total,
+        self.last = (t, impulse.copy(), np.array(dissipated, float), energy, diss_total,
                      None if work is None else np.array(work, float), d.copy())
         if self._d0 is None:
             self._d0 = d.copy()
@@ -143,6 +158,8 @@ class Recorder:
         self._f.append(f.copy())
         self._e.append(energy)
         self._diss.append(diss_total)
+        if self.system.connections is not None:
+            self._modes.append(self.system.connections.mode.copy())
 
     def _crossing(self, c, t0, d0, v0, t1, d1, v1, was_active):
         law, h = self._laws[c], t1 - t0
@@ -174,6 +191,15 @@ class Recorder:
         for c, name in enumerate(sysm.contact_names):
             series[f"gap/{name}"] = -D[:, c]
             series[f"force/{name}"] = Fc[:, c]
+        for r in range(sysm.n_contacts, getattr(sysm, "n_rows", sysm.n_contacts)):
+            # tangential rows: coordinate of a - b along t from the grasp anchor, force on a
+            series[f"gap/{sysm.row_names[r]}"] = D[:, r]
+            series[f"force/{sysm.row_names[r]}"] = Fc[:, r]
+        if sysm.connections is not None:
+            modes = np.array(self._modes).reshape(len(t), -1)
+            for c in sysm.connections.index:
+                if sysm.links[c].connection.grasp is not None:
+                    series[f"mode/{sysm.contact_names[c]}"] = modes[:, c]
         offsets = sysm.stacked()
         final_state = {}
         for s, sub in enumerate(sysm.subsystems):
@@ -205,9 +231,8 @@ class Recorder:
             iv = intervals[c]
             ledger = {}
             if work is not None:
-                law = self._laws[c]
-                stored = float(law.potential(self.last[6][c]))
-                stored0 = float(law.potential(self._d0[c]))
+                stored = float(sysm.contact_potentials(self.last[6])[c])
+                stored0 = float(sysm.contact_potentials(self._d0)[c])
                 ledger = {"work": float(work[c]), "stored": stored,
                           "coupling_error": float(work[c] + stored - stored0 + dissipated[c])}
             contacts[name] = {
@@ -242,6 +267,8 @@ class Recorder:
             },
             "contacts": contacts,
             "impacts": sorted(self.impacts, key=lambda i: i["time"]),
+            "switches": [{k: e[k] for k in ("time", "contact", "from", "to")}
+                         for e in (sysm.connections.log if sysm.connections else [])],
             "final_state": final_state,
         }
         return SimulationResult(

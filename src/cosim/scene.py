@@ -365,6 +365,7 @@ def _validate(data: dict, file, variant) -> Scene:
     contacts = []
     for cname, ct in top.tables("contacts", {}):
         contacts.append(_contact_spec(cname, ct, subs))
+    _check_conditions(contacts, file)
     top.finish()
     return Scene(name=name, path=str(file), variant=variant, t_end=t_end, scheme=scheme_name,
                  scheme_options=opts, output_every=every, subsystems=tuple(subs),
@@ -664,9 +665,109 @@ def _contact_spec(name: str, t: _Table, subs: list[dict]) -> dict:
     if follow and kinds[b[0]] not in ("beam", "cable", "string", "rod"):
         t.error("follow", f"moves side b's point along a line structure; `{b[0]}` is a "
                           f"{kinds[b[0]]}")
+    connection = _connection_spec(t, law)
+    if connection is not None and placement == "embedded" and (
+            kinds[a[0]] in STRUCTURE_TYPES or kinds[b[0]] in STRUCTURE_TYPES):
+        t.error("placement", "a grasp or friction against a rigid side is not evaluated inside "
+                             "a structure; set placement `coupler`")
     spec = {"name": name, "a": a, "b": b, "normal": t.vec2("normal", unit="1", nonzero=True),
             "follow": follow,
             "offset": t.number("offset", 0.0, unit="m"), "law": law, "placement": placement,
-            "host": host, "key": t.key()}
+            "host": host, "key": t.key(), "connection": connection}
     t.finish()
     return spec
+
+
+_TRIGGER_FORMS = ('"start", "touch", { time = T } or { after = "CONTACT.grasp" (or '
+                  '".release"), delay = D }')
+_RELEASE_FORMS = '{ time = T } or { after = "CONTACT.grasp" (or ".release"), delay = D }'
+
+
+def _trigger(t: _Table, k: str, release: bool):
+    """``close`` or ``release`` of a grasp (see :class:`couplers.Trigger`)."""
+    from couplers import Trigger
+    forms = _RELEASE_FORMS if release else _TRIGGER_FORMS
+    v = t.raw(k, None)
+    if v is None:
+        return None
+    if isinstance(v, str):
+        if release or v not in ("start", "touch"):
+            t.error(k, f"must be {forms}, got {v!r}")
+        return Trigger(v)
+    if not isinstance(v, dict):
+        t.error(k, f"must be {forms}, got {_type_name(v)} {v!r}")
+    tt = t.table(k)
+    if tt.has("time") == tt.has("after"):
+        tt.error("", f"must be {forms}: give one of `time` and `after`, got {v!r}")
+    if tt.has("time"):
+        trig = Trigger("time", time=tt.number("time", rule=">=0", unit="s"))
+    else:
+        event = tt.string("after")
+        cname, _, what = event.rpartition(".")
+        if not cname or what not in ("grasp", "release"):
+            tt.error("after", f"must read CONTACT.grasp or CONTACT.release, got {event!r}")
+        trig = Trigger("after", event=event, delay=tt.number("delay", 0.0, rule=">=0", unit="s"))
+    tt.finish()
+    return trig
+
+
+def _connection_spec(t: _Table, law):
+    """A contact's ``grasp`` and ``friction`` tables, or None when it has neither
+    (a friction coefficient of 0 builds no friction)."""
+    from couplers import Connection, Friction, Grasp
+    grasp = close = release = friction = None
+    if t.has("grasp"):
+        gt = t.table("grasp")
+        if law.rigid:
+            t.error("grasp", "needs a penalty law: a `rigid` law is an impulse, it cannot hold")
+        params = {k: gt.number(k, rule=">0" if k == "stiffness" else ">=0", unit=unit)
+                  for k, unit in (("stiffness", "N/m"), ("damping", "N s/m"),
+                                  ("tangential_stiffness", "N/m"),
+                                  ("tangential_damping", "N s/m"))}
+        grasp = _model(gt, Grasp, **params)
+        close = _trigger(gt, "close", release=False)
+        if close is None:
+            gt.error("close", f"is required: when the grasp closes, {_TRIGGER_FORMS}")
+        release = _trigger(gt, "release", release=True)
+        if (close.kind == "time" and release is not None and release.kind == "time"
+                and release.time <= close.time):
+            gt.error("release", f"time {release.time!r} s must come after the close time "
+                                f"{close.time!r} s")
+        gt.finish()
+    if t.has("friction"):
+        ft = t.table("friction")
+        if law.rigid:
+            t.error("friction", "does not apply to a `rigid` law, which has its own Coulomb "
+                                "friction in impulse space (`law.friction`)")
+        mu = ft.number("coefficient", rule=">=0", unit="1")
+        if mu > 0:
+            friction = _model(ft, Friction, coefficient=mu,
+                              slip_velocity=ft.number("slip_velocity", rule=">0", unit="m/s"))
+        else:
+            ft.number("slip_velocity", None, rule=">0", unit="m/s")
+        ft.finish()
+    if grasp is None and friction is None:
+        return None
+    return Connection(grasp, friction, close, release)
+
+
+def _check_conditions(contacts: list[dict], file) -> None:
+    """Every ``after`` names an event of a contact that can have it."""
+    grasps = {c["name"] for c in contacts
+              if c["connection"] is not None and c["connection"].grasp is not None}
+    for c in contacts:
+        conn = c["connection"]
+        if conn is None or conn.grasp is None:
+            continue
+        for which, trig in (("close", conn.close), ("release", conn.release)):
+            if trig is None or trig.kind != "after":
+                continue
+            other = trig.event.rpartition(".")[0]
+            key = f"{c['key']}.grasp.{which}.after"
+            if other not in grasps:
+                raise SceneError(file, key, f"names {trig.event!r}, but no contact named "
+                                            f"`{other}` has a grasp; contacts with a grasp are "
+                                            f"{sorted(grasps)}")
+            if which == "close" and other == c["name"]:
+                raise SceneError(file, key, f"cannot wait for an event of its own grasp, got "
+                                            f"{trig.event!r}")

@@ -5,8 +5,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from couplers import PointContact
+from couplers import Connection, PointContact
+from couplers.connection import GRASPED
 
+from .connections import ConnectionSet, EmbeddedConnection
 from .subsystem import StepInput, Subsystem
 
 __all__ = ["ContactLink", "CoupledSystem", "PLACEMENTS"]
@@ -34,6 +36,8 @@ class ContactLink:
     placement: str
     follow: bool = False
     host: int | None = None
+    #: grasp and friction beyond the unilateral law (None: a plain contact)
+    connection: Connection | None = None
 
 
 class CoupledSystem:
@@ -41,6 +45,16 @@ class CoupledSystem:
 
     Contacts placed ``"embedded"`` are handed to their moving side at
     construction; the others are the scheme's to exchange.
+
+    Forces are exchanged as scalar **rows**: row ``c < n_contacts`` is
+    contact ``c``'s normal force (on side ``a`` along its normal); a contact
+    with a grasp or with friction has a second, tangential row
+    (``tangent_row[c]``, after all normal rows) along ``t = (-n_y, n_x)``.
+    ``penetrations`` gives per row the penetration and its rate (normal rows)
+    or the tangential coordinate of ``x_a - x_b`` from the grasp anchor and
+    its rate (tangential rows); ``forces`` maps them to row forces in the
+    connections' current modes (:attr:`connections`, None when no contact
+    has a connection, so plain contacts run no connection code).
     """
 
     def __init__(self, subsystems: list[Subsystem], links: list[ContactLink]):
@@ -51,6 +65,7 @@ class CoupledSystem:
         self.n_contacts = len(self.links)
         self.coupler = np.array([i for i, ln in enumerate(self.links)
                                  if ln.placement == "coupler"], dtype=int)
+        self._init_rows()
         # embedded: contact index -> (subsystem index, slot in its aux)
         self.embedded: dict[int, tuple[int, int]] = {}
         # hosted (embedded against a moving partner): contact index ->
@@ -81,7 +96,18 @@ class CoupledSystem:
                                                      ppos[partner_port], pvel[partner_port])
             self.embedded[i] = (own, slots[own])
             if not psub.rigid:
+                if ln.connection is not None:
+                    raise ValueError(f"contact `{ln.contact.name}`: a grasp or friction "
+                                     f"between two moving sides is exchanged by the scheme; "
+                                     f"use placement `coupler`")
                 self.hosted[i] = (own, slots[own], partner, partner_port, emb)
+            if ln.connection is not None:
+                if not hasattr(self.subsystems[own], "attach_connection"):
+                    raise ValueError(f"contact `{ln.contact.name}`: subsystem "
+                                     f"`{self.subsystems[own].name}` cannot carry an embedded "
+                                     f"grasp or friction; use placement `coupler`")
+                self.subsystems[own].attach_connection(
+                    slots[own], EmbeddedConnection(self.connections, i, ln.contact.normal, side))
             slots[own] += 1
         self._followers = [ln for ln in self.links if ln.follow]
         for ln in self._followers:
@@ -90,32 +116,108 @@ class CoupledSystem:
                                  f"side b")
         self._normals = np.array([ln.contact.normal for ln in self.links]).reshape(-1, 2)
         self._offsets = np.array([ln.contact.offset for ln in self.links])
-        # Port-force maps: flat port forces of subsystem s = G[s] @ contact forces.
+        # Port-force maps: flat port forces of subsystem s = G[s] @ row forces.
         self._G = []
         for s, sub in enumerate(self.subsystems):
-            G = np.zeros((sub.n_ports * 2, self.n_contacts))
-            for c, ln in enumerate(self.links):
-                n = np.asarray(ln.contact.normal)
+            G = np.zeros((sub.n_ports * 2, self.n_rows))
+            for r, c in enumerate(self.row_contact):
+                ln = self.links[c]
+                n = self._row_dir[r]
                 if ln.sub_a == s:
-                    G[2 * ln.port_a:2 * ln.port_a + 2, c] += n
+                    G[2 * ln.port_a:2 * ln.port_a + 2, r] += n
                 if ln.sub_b == s:
-                    G[2 * ln.port_b:2 * ln.port_b + 2, c] -= n
+                    G[2 * ln.port_b:2 * ln.port_b + 2, r] -= n
             self._G.append(G)
-        # Co-simulation exchanges the coupler contacts' forces, and hands a
-        # hosted contact's force to its partner side.
+        # Co-simulation exchanges the coupler contacts' rows, and hands a
+        # hosted contact's (normal) force to its partner side.
         self._Gc = []
         for s, G in enumerate(self._G):
-            mask = np.zeros(self.n_contacts)
-            mask[self.coupler] = 1.0
+            mask = np.zeros(self.n_rows)
+            mask[self.coupler_rows] = 1.0
             for c, (_, _, partner, _, _) in self.hosted.items():
                 if partner == s:
                     mask[c] = 1.0
             self._Gc.append(G * mask)
         self._applied: dict[int, np.ndarray] = {}      # force polynomials of the step
-        self._work = np.zeros(self.n_contacts)
-        #: the contacts whose force a scheme hands over (coupler and hosted)
-        self.exchanged = np.array(sorted(set(self.coupler.tolist()) | set(self.hosted)),
+        self._work = np.zeros(self.n_rows)
+        #: the rows whose force a scheme hands over (coupler rows, hosted contacts)
+        self.exchanged = np.array(sorted(set(self.coupler_rows.tolist()) | set(self.hosted)),
                                   dtype=int)
+        if self.connections is not None:
+            self._close_at_start()
+
+    # ------------------------------------------------------------------ rows
+    def _init_rows(self) -> None:
+        nc = self.n_contacts
+        conns = [ln.connection for ln in self.links]
+        self.connections = None
+        if any(k is not None for k in conns):
+            self.connections = ConnectionSet(self.contact_names,
+                                             [ln.contact.law for ln in self.links], conns)
+        self.tangent_row = np.full(nc, -1, dtype=int)
+        extra = [c for c, k in enumerate(conns) if k is not None and k.tangential]
+        self.tangent_row[extra] = nc + np.arange(len(extra))
+        self.n_rows = nc + len(extra)
+        #: the contact each row belongs to
+        self.row_contact = np.array(list(range(nc)) + extra, dtype=int)
+        normals = [np.asarray(ln.contact.normal, float) for ln in self.links]
+        self._row_dir = np.array(normals + [np.array([-normals[c][1], normals[c][0]])
+                                            for c in extra]).reshape(-1, 2)
+        #: names of the rows: the contact's name, NAME.t for a tangential row
+        self.row_names = list(self.contact_names) + [f"{self.contact_names[c]}.t"
+                                                     for c in extra]
+        coupler = set(int(c) for c in self.coupler)
+        self.coupler_rows = np.array([r for r, c in enumerate(self.row_contact) if c in coupler],
+                                     dtype=int)
+
+    def _close_at_start(self) -> None:
+        cs = self.connections
+        d, dd = self.penetrations(self.outputs())
+        for c in cs.index:
+            conn = cs.connections[c]
+            if conn.grasp is not None and conn.close.kind == "start":
+                self.set_mode(c, 0.0, GRASPED, d, dd)
+        self.switch_modes(0.0, d, dd)
+        cs.lost[:] = 0.0        # switches at t = 0 make the initial state: nothing is lost
+
+    def set_mode(self, c: int, t: float, mode: int, d, dd) -> None:
+        """Switch contact ``c`` to ``mode`` at ``t``, given the rows ``d``, ``dd`` there."""
+        r = self.tangent_row[c]
+        s = self.connections.anchor[c] + (d[r] if r >= 0 else 0.0)
+        self.connections.set_mode(c, t, mode, float(d[c]), float(dd[c]), float(s))
+
+    def switch_modes(self, t: float, d, dd, touch: bool = True) -> bool:
+        """Switch the connections whose trigger has come at ``t`` (a
+        communication point): ``touch`` grasps of contacts whose law gives a
+        force (unless ``touch`` is False), then ``time`` and ``after``
+        triggers until none is due.  ``d``, ``dd`` are the rows at ``t``.
+        True when a mode changed (the caller recomputes rows and forces:
+        a grasp moves the tangential anchor)."""
+        cs = self.connections
+        if cs is None:
+            return False
+        changed = False
+        if touch:
+            for c in cs.index:
+                law = self.links[c].contact.law
+                if cs.closes_on_touch(c) and float(law.switch(d[c], dd[c])) > 0:
+                    self.set_mode(c, t, GRASPED, d, dd)
+                    changed = True
+        for _ in range(2 * len(cs.index) + 1):       # chains of `after` conditions
+            due = cs.due(t)
+            if not due:
+                break
+            for c, mode in due:
+                self.set_mode(c, t, mode, d, dd)
+            changed = True
+        return changed
+
+    def in_touch(self, f) -> np.ndarray:
+        """Per contact: carries force (or is grasped)."""
+        on = np.asarray(f[:self.n_contacts]) > 0
+        if self.connections is not None:
+            on = on | (self.connections.mode == GRASPED)
+        return on
 
     # ---------------------------------------------------- moving surface points
     def update_followers(self, outs) -> None:
@@ -140,15 +242,61 @@ class CoupledSystem:
         n = self._normals
         d = self._offsets - np.einsum("cx,cx->c", xa - xb, n)
         dd = -np.einsum("cx,cx->c", va - vb, n)
+        if self.n_rows > self.n_contacts:
+            nc, ct = self.n_contacts, self.row_contact[self.n_contacts:]
+            t = self._row_dir[nc:]
+            e = np.einsum("cx,cx->c", (xa - xb)[ct], t) - self.connections.anchor[ct]
+            de = np.einsum("cx,cx->c", (va - vb)[ct], t)
+            d, dd = np.concatenate([d, e]), np.concatenate([dd, de])
         return d, dd
 
     def forces(self, d, dd, which=None):
-        """Penalty forces of the contacts ``which`` (all by default)."""
-        idx = range(self.n_contacts) if which is None else which
-        return np.array([float(self.links[c].contact.law.force(d[c], dd[c])) for c in idx])
+        """Forces of the rows ``which`` (all by default), in the current modes."""
+        if self.connections is None:
+            idx = range(self.n_contacts) if which is None else which
+            return np.array([float(self.links[c].contact.law.force(d[c], dd[c])) for c in idx])
+        f = np.zeros(self.n_rows)
+        cs = self.connections
+        for c, ln in enumerate(self.links):
+            if ln.connection is None:
+                f[c] = float(ln.contact.law.force(d[c], dd[c]))
+                continue
+            r = self.tangent_row[c]
+            fn, ft = cs.forces(c, d[c], dd[c], *((d[r], dd[r]) if r >= 0 else (0.0, 0.0)))
+            f[c] = fn
+            if r >= 0:
+                f[r] = ft
+        return f if which is None else f[np.asarray(which, dtype=int)]
+
+    def dissipation_rates(self, f, d, dd) -> np.ndarray:
+        """Power dissipated by each contact [W] (normal and tangential rows)."""
+        out = np.zeros(self.n_contacts)
+        cs = self.connections
+        for c, ln in enumerate(self.links):
+            if ln.connection is None:
+                out[c] = float(ln.contact.law.dissipation_rate(f[c], d[c], dd[c]))
+                continue
+            r = self.tangent_row[c]
+            ft, e, de = (f[r], d[r], dd[r]) if r >= 0 else (0.0, 0.0, 0.0)
+            out[c] = cs.power(c, f[c], ft, d[c], dd[c], e, de)
+        return out
+
+    def contact_potentials(self, d) -> np.ndarray:
+        """(n_contacts,) elastic energy stored in each contact [J] (its law's,
+        or its connection's in the current mode), from the rows ``d``."""
+        out = np.zeros(self.n_contacts)
+        for c, ln in enumerate(self.links):
+            if ln.connection is None:
+                out[c] = float(ln.contact.law.potential(d[c]))
+            else:
+                r = self.tangent_row[c]
+                out[c] = self.connections.potential(c, d[c], d[r] if r >= 0 else 0.0)
+        return out
 
     def contact_potential(self, d) -> float:
-        return float(sum(ln.contact.law.potential(d[c]) for c, ln in enumerate(self.links)))
+        if self.connections is None:
+            return float(sum(ln.contact.law.potential(d[c]) for c, ln in enumerate(self.links)))
+        return float(np.sum(self.contact_potentials(d)))
 
     def energy(self, d) -> float:
         """Energy of the subsystems plus the elastic energy of the contacts [J]."""
@@ -156,7 +304,7 @@ class CoupledSystem:
 
     def step_input(self, s: int, t0: float, h: float, coeffs: np.ndarray) -> StepInput:
         """Port forces of subsystem ``s`` from contact-force polynomial
-        coefficients ``coeffs`` (order + 1, n_contacts)."""
+        coefficients ``coeffs`` (order + 1, n_rows)."""
         sub = self.subsystems[s]
         self._applied[s] = coeffs
         c = coeffs @ self._Gc[s].T
@@ -174,18 +322,19 @@ class CoupledSystem:
         self._work += np.einsum("jc,jc->c", coeffs, mom[:p] @ self._Gc[s])
 
     def exchange_work(self) -> np.ndarray:
-        """(n_contacts,) work [J] the exchanged contact forces did on the
-        subsystems since the last call, and reset.  Contacts embedded in a
+        """(n_contacts,) work [J] the exchanged contact forces (all rows of a
+        contact) did on the subsystems since the last call, and reset.  Contacts embedded in a
         host add the host's own side through :meth:`embedded_work`."""
         for s in list(self._applied):
             self.collect_work(s)
-        work, self._work = self._work, np.zeros(self.n_contacts)
+        work = np.bincount(self.row_contact, weights=self._work, minlength=self.n_contacts)
+        self._work = np.zeros(self.n_rows)
         return work
 
     def discard_work(self) -> None:
         """Forget the work of steps that are being rolled back."""
         self._applied = {}
-        self._work = np.zeros(self.n_contacts)
+        self._work = np.zeros(self.n_rows)
 
     def embedded_work(self) -> np.ndarray:
         """(n_contacts,) work [J] embedded contacts did on their hosts so far."""
@@ -225,11 +374,17 @@ class CoupledSystem:
         return np.array([4.0 * m0 - 6.0 * m1, 12.0 * m1 - 6.0 * m0])
 
     def get_state(self):
-        return [s.get_state() for s in self.subsystems]
+        """Snapshot of every subsystem and of the connections' modes."""
+        states = [s.get_state() for s in self.subsystems]
+        if self.connections is not None:
+            states.append(self.connections.snapshot())
+        return states
 
     def set_state(self, states):
         for s, st in zip(self.subsystems, states):
             s.set_state(st)
+        if self.connections is not None:
+            self.connections.restore(states[len(self.subsystems)])
 
     # ----------------------------------------------- monolithic (stacked) face
     def stacked(self):

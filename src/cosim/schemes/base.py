@@ -8,6 +8,7 @@ from typing import Any, Callable, ClassVar, NamedTuple
 import numpy as np
 
 from .. import preflight
+from ..connections import stiffest_normal
 from ..errors import CouplingError, UnsafeStepError
 from ..subsystem import reparametrised
 
@@ -114,7 +115,7 @@ class CoSimulationScheme(CouplingScheme):
                    + system.subsystems[ln.sub_b].port_mobility(ln.port_b, n))
             if mob <= 0:
                 continue
-            m, k, cd = 1.0 / mob, ln.contact.law.stiffness, ln.contact.law.damping
+            m, (k, cd) = 1.0 / mob, stiffest_normal(ln)     # the law's, or a grasp's
             if not (math.isfinite(k) and math.isfinite(cd)):
                 raise UnsafeStepError(
                     f"contact `{ln.contact.name}`: law `{ln.contact.law.name}` has no "
@@ -163,8 +164,7 @@ class CoSimulationScheme(CouplingScheme):
         self._outs, self._f = outs, f
         self._hist = self._starting_history(system, d, dd, f, H)
         impulse, diss, work = np.zeros(nc), np.zeros(nc), np.zeros(nc)
-        law = [ln.contact.law for ln in system.links]
-        p_prev = np.array([float(law[c].dissipation_rate(f[c], d[c], dd[c])) for c in coupler])
+        p_prev = system.dissipation_rates(f, d, dd)[coupler]
         recorder.record(0.0, d, dd, f, impulse, diss, self._internal(system), work)
         controlled = self.contact_step is not None and len(system.exchanged) > 0
         n = max(1, math.ceil(t_end / H - 1e-9))
@@ -215,6 +215,9 @@ class CoSimulationScheme(CouplingScheme):
             self._dd_prev, self._h_prev_step = dd.copy(), h
             self._outs_prev = self._outs
             d, dd = d1, dd1
+            if system.connections is not None and system.switch_modes(t + h, d, dd):
+                d, dd = system.penetrations(outs)       # a grasp moves the tangential anchor
+                f = system.forces(d, dd)
             h_prev = h
             k += 1
             self._outs, self._f = outs, f
@@ -222,8 +225,7 @@ class CoSimulationScheme(CouplingScheme):
             work += system.exchange_work()
             if len(coupler):
                 impulse[coupler] += stepped[coupler]
-                p_now = np.array([float(law[c].dissipation_rate(f[c], d[c], dd[c]))
-                                  for c in coupler])
+                p_now = system.dissipation_rates(f, d, dd)[coupler]
                 diss[coupler] += 0.5 * h * (p_prev + p_now)
                 p_prev = p_now
             emb = system.embedded_quadratures()
@@ -274,7 +276,7 @@ class CoSimulationScheme(CouplingScheme):
         stays between ``contact_step / 64`` and ``contact_step``."""
         c = self._system.exchanged
         if self._f_scale is None:
-            self._f_scale = np.zeros(self._system.n_contacts)
+            self._f_scale = np.zeros(self._system.n_rows)
         self._f_scale[c] = np.maximum(self._f_scale[c], np.abs(f[c]))
         scale = np.maximum(self._f_scale[c], 1e-300)
         err = float(np.max(np.abs(f[c] - predicted[c]) / scale)) if len(c) else 0.0
@@ -303,8 +305,10 @@ class CoSimulationScheme(CouplingScheme):
         # short steps while a contact is closed, was closed a step ago (so the
         # extrapolation history is clear of force before the step grows), or
         # would close within a long step
-        recent = len(self._hist) > 1 and np.any(self._hist[-2][c] > 0)
-        if np.any(f[c] > 0) or recent or np.any(d[c] + H * dd[c] > 0):
+        recent = len(self._hist) > 1 and np.any(self._hist[-2][c] != 0)
+        normal = c[c < self._system.n_contacts]
+        if np.any(self._system.in_touch(f)[self._system.row_contact[c]]) or recent \
+                or np.any(d[normal] + H * dd[normal] > 0):
             h = self.contact_step
             if self.interface_tolerance and self._h_adapt is not None:
                 h = self._h_adapt
@@ -362,7 +366,9 @@ class CoSimulationScheme(CouplingScheme):
         if self.extrapolation_order == 0 or not np.any(f):
             return [f]
         rate = np.zeros_like(f)
-        for c in np.flatnonzero(f):
+        for c in np.flatnonzero(f[:system.n_contacts]):
+            if system.links[c].connection is not None:
+                continue                # a grasp or friction: held for the first step
             law = system.links[c].contact.law
             eps = 1e-6 * max(abs(d[c]), 1e-12)
             fp = float(law.force_active(d[c] + eps, dd[c]))
@@ -448,6 +454,13 @@ class CoSimulationScheme(CouplingScheme):
             out.append((x0 + dt * v0 + 0.5 * dt * dt * a, v0 + dt * a))
         return out
 
+    @staticmethod
+    def _rows_of(system, s: int) -> list:
+        """The coupler rows (normal, then tangential) with subsystem ``s`` on a side."""
+        return [r for r in system.coupler_rows
+                if s in (system.links[system.row_contact[r]].sub_a,
+                         system.links[system.row_contact[r]].sub_b)]
+
     def _step_side(self, system, s: int, t: float, h: float, coeffs: np.ndarray,
                    after: dict) -> np.ndarray:
         """Step subsystem ``s`` over ``[t, t + h]`` under the force polynomials
@@ -456,7 +469,7 @@ class CoSimulationScheme(CouplingScheme):
         contacts' forces are evaluated anew from its own outputs and its
         partners' predicted ones (:meth:`_predicted_outputs`): held at
         order 0, linear towards its own motion extrapolated over the
-        sub-step otherwise.  Returns the impulse [N s] each contact gave it."""
+        sub-step otherwise.  Returns the impulse [N s] each row gave it."""
         sub = system.subsystems[s]
         m = (self.substeps or {}).get(system.names[s], 1)
         if m == 1:
@@ -465,14 +478,13 @@ class CoSimulationScheme(CouplingScheme):
             j = np.arange(coeffs.shape[0])[:, None]
             return h * np.sum(coeffs / (j + 1), axis=0)
         hk = h / m
-        mine = [c for c in system.coupler
-                if s in (system.links[c].sub_a, system.links[c].sub_b)]
+        mine = self._rows_of(system, s)
         width = max(2, coeffs.shape[0])
-        impulse = np.zeros(system.n_contacts)
+        impulse = np.zeros(system.n_rows)
         j = np.arange(width)[:, None]
         for k in range(m):
             tk = t + k * hk
-            cf = np.zeros((width, system.n_contacts))
+            cf = np.zeros((width, system.n_rows))
             cf[:coeffs.shape[0]] = reparametrised(coeffs, k / m, 1.0 / m)
             if mine:
                 d0, dd0 = system.penetrations(self._predicted_outputs(system, s, tk, t, h, after))

@@ -22,10 +22,11 @@ class Jacobi(CoSimulationScheme):
         coeffs = self._extrapolated(ratio)
         for c in system.hosted:
             self._set_partner_motion(system, c, t, h)
-        impulse = np.zeros(system.n_contacts)
+        impulse = np.zeros(system.n_rows)
         for s in self._moving(system):
             got = self._step_side(system, s, t, h, coeffs, {})
-            side_a = [c for c in system.coupler if system.links[c].sub_a == s]
+            side_a = [r for r in system.coupler_rows
+                      if system.links[system.row_contact[r]].sub_a == s]
             impulse[side_a] = got[side_a]
         return impulse
 
@@ -57,14 +58,14 @@ class GaussSeidel(CoSimulationScheme):
     def advance(self, system, t, h, ratio):
         base = self._extrapolated(ratio)
         width = max(2, base.shape[0])
-        # per contact, the impulse that side `a` (else `b`) receives
-        applied = np.zeros(system.n_contacts)
+        # per row, the impulse that side `a` (else `b`) receives
+        applied = np.zeros(system.n_rows)
         done = {s for s, sub in enumerate(system.subsystems) if sub.rigid}
         outs_n = self._outs
         after = {}                      # outputs at t + h of the subsystems done
         imp0 = self._hosted_impulses(system)
         for s in self._order(system):
-            coeffs = np.zeros((width, system.n_contacts))
+            coeffs = np.zeros((width, system.n_rows))
             coeffs[:base.shape[0]] = base
             for c, (host, _, partner, _, _) in system.hosted.items():
                 if host == s:           # the partner's motion: its own if it has stepped
@@ -72,8 +73,7 @@ class GaussSeidel(CoSimulationScheme):
                 elif partner == s and host in done:     # the force the host exerted
                     coeffs[:, c] = 0.0
                     coeffs[:2, c] = system.hosted_force(c, h, imp0[c])
-            mine = [c for c in system.coupler
-                    if s in (system.links[c].sub_a, system.links[c].sub_b)]
+            mine = self._rows_of(system, s)
             if mine:
                 pred = list(system.outputs())
                 pos, vel = outs_n[s]
@@ -81,18 +81,19 @@ class GaussSeidel(CoSimulationScheme):
                     pos = pos + h * vel
                 pred[s] = (pos, vel)
                 d, dd = system.penetrations(pred)
+                f_pred = system.forces(d, dd)
             for c in mine:
-                ln = system.links[c]
+                ln = system.links[system.row_contact[c]]
                 other = ln.sub_b if ln.sub_a == s else ln.sub_a
                 if other in done:
-                    ftilde = float(ln.contact.law.force(d[c], dd[c]))
+                    ftilde = float(f_pred[c])
                     coeffs[:, c] = 0.0
                     coeffs[0, c] = self._f[c]
                     coeffs[1, c] = ftilde - self._f[c]
             sub = system.subsystems[s]
             got = self._step_side(system, s, t, h, coeffs, after)
             for c in mine:
-                ln = system.links[c]
+                ln = system.links[system.row_contact[c]]
                 if ln.sub_a == s or system.subsystems[ln.sub_a].rigid:
                     applied[c] = got[c]
             done.add(s)

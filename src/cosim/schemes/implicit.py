@@ -248,7 +248,7 @@ class Implicit(CoSimulationScheme):
         return super().run(system, t_end, recorder)
 
     def advance(self, system, t, h, ratio):
-        coupler = system.coupler
+        coupler = system.coupler_rows      # normal and tangential rows exchanged
         hosted = list(system.hosted)
         hosts = {system.hosted[c][0] for c in hosted}
         # hosts step first in each pass, so their partners get this pass's force
@@ -313,7 +313,7 @@ class Implicit(CoSimulationScheme):
         worst = int(coupler[min(int(np.argmax(np.abs(r))), len(coupler) - 1)])
         raise CouplingError(
             f"implicit coupling did not converge at t = {t:.6g} s within "
-            f"{self.max_iterations} iterations: contact `{system.contact_names[worst]}` "
+            f"{self.max_iterations} iterations: contact `{system.row_names[worst]}` "
             f"has a force residual of {abs(r).max():.3g} N. Reduce `scheme.macro_step` or "
             f"raise `scheme.max_iterations`.")
 

@@ -10,6 +10,25 @@ from .base import CouplingError, CouplingScheme, Option, _pos
 
 __all__ = ["Monolithic"]
 
+
+def _connection_forces(system, d, dd, f_normal):
+    """Row forces with connections: the located branch ``f_normal`` for open
+    and released contacts, the grasp's springs while grasped, friction on
+    the normal force."""
+    from couplers.connection import GRASPED
+    cs = system.connections
+    f = np.zeros(system.n_rows)
+    f[:system.n_contacts] = f_normal
+    for c in cs.index:
+        conn, r = cs.connections[c], system.tangent_row[c]
+        e, de = (d[r], dd[r]) if r >= 0 else (0.0, 0.0)
+        if cs.mode[c] == GRASPED:
+            f[c] = conn.grasp.normal_force(d[c], dd[c])
+            f[r] = conn.grasp.tangential_force(e, de)
+        elif conn.friction is not None and f[c] > 0:
+            f[r] = conn.friction.force(f[c], de)
+    return f
+
 _METHODS = ("RK45", "RK23", "DOP853", "Radau", "BDF", "LSODA")
 
 
@@ -44,6 +63,7 @@ class Monolithic(CouplingScheme):
         nc = system.n_contacts
         laws = [ln.contact.law for ln in system.links]
         active = np.zeros(nc, dtype=bool)
+        conns = system.connections
 
         def split(y):
             return [y[off[s]:off[s + 1]] for s in range(len(subs))]
@@ -57,22 +77,39 @@ class Monolithic(CouplingScheme):
             d, dd = system.penetrations(outs)
             f = np.array([max(float(laws[c].force_active(d[c], dd[c])), 0.0) if active[c]
                           else 0.0 for c in range(nc)])
+            if conns is not None:
+                f = _connection_forces(system, d, dd, f)
             return xs, d, dd, f
 
         def rhs(t, y):
             xs, d, dd, f = contact_state(y)
             parts = [sub.derivatives(t, xs[s], system.port_forces(s, f))
                      for s, sub in enumerate(subs)]
-            diss = [float(laws[c].dissipation_rate(f[c], d[c], dd[c])) for c in range(nc)]
+            if conns is None:
+                diss = [float(laws[c].dissipation_rate(f[c], d[c], dd[c])) for c in range(nc)]
+            else:
+                diss = system.dissipation_rates(f, d, dd)
             led = np.sum([sub.ledger_rates(t, xs[s]) for s, sub in enumerate(subs)], axis=0)
-            return np.concatenate(parts + [f, diss, -f * dd, led])
+            work = -f[:nc] * dd[:nc]
+            if system.n_rows > nc:      # tangential rows: force on a along t, times de
+                np.add.at(work, system.row_contact[nc:], f[nc:] * dd[nc:])
+            return np.concatenate(parts + [f[:nc], diss, work, led])
 
         def make_switch(c):
             def ev(t, y):
                 _, d, dd, _ = contact_state(y)
+                if conns is not None and system.links[c].connection is not None:
+                    return float(conns.switch(c, d[c], dd[c]))   # none while grasped
                 return float(laws[c].switch(d[c], dd[c]))
             ev.terminal = True
             return ev
+
+        t_next = [math.inf]                 # the next time trigger of a connection
+
+        def timer(t, y):
+            return 1.0 if math.isinf(t_next[0]) else t - t_next[0]
+        timer.terminal = True
+        timer.direction = 1.0
 
         def make_peak(c):
             def ev(t, y):
@@ -109,9 +146,15 @@ class Monolithic(CouplingScheme):
         while t < t_end * (1 - 1e-14):
             for c, ev in enumerate(switches):
                 ev.direction = -1.0 if active[c] else 1.0   # a rigid one is never active
+            extra = []
+            if conns is not None:
+                if self._switch_modes(system, t, y, contact_state, active, laws, False):
+                    record(t, y)
+                t_next[0] = conns.next_time(t)
+                extra = [timer]
             sol = solve_ivp(rhs, (t, t_end), y, method=self.method, rtol=self.rtol,
                             atol=self.atol, max_step=self.max_step, dense_output=True,
-                            events=switches + peaks)
+                            events=switches + peaks + extra)
             n_segments += 1
             if sol.status == -1:
                 raise CouplingError(f"monolithic solver failed at t = {sol.t[-1]:.6g} s: "
@@ -129,7 +172,11 @@ class Monolithic(CouplingScheme):
             next_out = (math.floor(t_seg / dt_out + 1e-9) + 1) * dt_out
             y = sol.y[:, -1].copy()
             t = t_seg
-            if sol.status == 1:
+            if sol.status == 1 and extra and len(sol.t_events[2 * nc]) and not any(
+                    len(sol.t_events[i]) for i in range(nc)):       # a time trigger
+                self._switch_modes(system, t, y, contact_state, active, laws, False)
+                record(t, y)
+            elif sol.status == 1:
                 c = min(range(nc), key=lambda i: sol.t_events[i][0]
                         if len(sol.t_events[i]) else math.inf)
                 record(t, y)
@@ -139,9 +186,30 @@ class Monolithic(CouplingScheme):
                 else:
                     active[c] = not active[c]
                     recorder.edge(c, t, bool(active[c]))
+                    if conns is not None and active[c] and conns.closes_on_touch(c):
+                        self._switch_modes(system, t, y, contact_state, active, laws, c)
+                        record(t, y)
             elif t >= t_end * (1 - 1e-14):
                 record(t, y)
         return {"n_windows": n_segments, "n_iterations": 0, "n_rejected": 0}
+
+    @staticmethod
+    def _switch_modes(system, t, y, contact_state, active, laws, touched) -> bool:
+        """Switch connections at ``t``: grasp contact ``touched`` (its located
+        onset; False at a time event), then the time and ``after`` triggers
+        due.  A released contact goes on unilaterally from the state it is in."""
+        from couplers.connection import GRASPED
+        _, d, dd, _ = contact_state(y)
+        log = system.connections.log
+        n_log = len(log)
+        if touched is not False:          # the located root, whatever side it fell on
+            system.set_mode(touched, t, GRASPED, d, dd)
+        if not system.switch_modes(t, d, dd, touch=False) and touched is False:
+            return False
+        for entry in log[n_log:]:
+            if entry["to"] == "released":
+                active[system.contact_names.index(entry["contact"])] = entry["closed"]
+        return True
 
     @staticmethod
     def _impact(system, c, t, y, off, n_x, nc, recorder):
