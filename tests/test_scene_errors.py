@@ -394,6 +394,10 @@ CASES_BAD = [
      at(f"{C}.b", "a contact between two rigid subsystems has nothing to simulate")),
     ([ARM, f"{C}.b=arm.hand", f"{C}.placement=embedded", f'{C}.host="wall"'],
      at(f"{C}.host", "must be one of ['arm', 'body'], got 'wall'")),
+    ([ARM, f"{C}.b=arm.hand", f"{C}.placement=embedded",
+      f"{C}.friction={{coefficient=0.3, slip_velocity=1e-3}}"],
+     at(f"{C}.placement", "a grasp or friction between two moving sides is exchanged by the "
+                          "scheme, not hosted by one side; set placement `coupler`")),
     ([f'{C}.host="body"'],
      at(f"{C}.host", "names the side that integrates an `embedded` contact between two "
                      "moving sides; here there is nothing to choose")),

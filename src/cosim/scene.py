@@ -670,6 +670,9 @@ def _contact_spec(name: str, t: _Table, subs: list[dict]) -> dict:
             kinds[a[0]] in STRUCTURE_TYPES or kinds[b[0]] in STRUCTURE_TYPES):
         t.error("placement", "a grasp or friction against a rigid side is not evaluated inside "
                              "a structure; set placement `coupler`")
+    if connection is not None and placement == "embedded" and not rigid_side:
+        t.error("placement", "a grasp or friction between two moving sides is exchanged by the "
+                             "scheme, not hosted by one side; set placement `coupler`")
     spec = {"name": name, "a": a, "b": b, "normal": t.vec2("normal", unit="1", nonzero=True),
             "follow": follow,
             "offset": t.number("offset", 0.0, unit="m"), "law": law, "placement": placement,
