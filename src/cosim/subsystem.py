@@ -16,7 +16,15 @@ from abc import ABC, abstractmethod
 import numpy as np
 
 __all__ = ["StepInput", "Subsystem", "RigidReference", "SubsystemState", "EmbeddedContact",
-           "reparametrised"]
+           "reparametrised", "hermite_coefficients"]
+
+
+def hermite_coefficients(x0, v0, x1, v1, h: float) -> tuple:
+    """Coefficients in ``s = (t - t0) / h`` (lowest first) of the cubic
+    Hermite through positions ``x0``, ``x1`` with velocities ``v0``, ``v1``
+    at the two ends of a step ``h`` (scalars or arrays, real or complex)."""
+    dx = x1 - x0
+    return x0, h * v0, 3 * dx - h * (2 * v0 + v1), -2 * dx + h * (v0 + v1)
 
 
 def reparametrised(coeffs, a: float, b: float) -> np.ndarray:

@@ -10,7 +10,7 @@ import numpy as np
 from .. import preflight
 from ..connections import stiffest_normal
 from ..errors import CouplingError, UnsafeStepError
-from ..subsystem import reparametrised
+from ..subsystem import hermite_coefficients, reparametrised
 
 __all__ = ["Option", "CouplingScheme", "CoSimulationScheme", "UnsafeStepError", "CouplingError",
            "extrapolation_coeffs"]
@@ -407,9 +407,7 @@ class CoSimulationScheme(CouplingScheme):
         x0, v0 = complex(*pos[port]), complex(*vel[port])
         if after is not None:
             x1, v1 = complex(*after[0][port]), complex(*after[1][port])
-            dx = x1 - x0
-            emb.set_motion(t, h, (x0, h * v0, 3 * dx - h * (2 * v0 + v1),
-                                  -2 * dx + h * (v0 + v1)))
+            emb.set_motion(t, h, hermite_coefficients(x0, v0, x1, v1, h))
             return
         a = 0j
         if self.extrapolation_order > 0 and self._outs_prev is not None:
@@ -441,11 +439,9 @@ class CoSimulationScheme(CouplingScheme):
                 continue
             x0, v0 = self._outs[p]
             if p in after:
-                x1, v1 = after[p]
-                dx = x1 - x0
-                c2, c3 = 3 * dx - h * (2 * v0 + v1), -2 * dx + h * (v0 + v1)
-                out.append((x0 + sg * (h * v0 + sg * (c2 + sg * c3)),
-                            v0 + sg * (2 * c2 + 3 * sg * c3) / h))
+                _, c1, c2, c3 = hermite_coefficients(x0, v0, *after[p], h)
+                out.append((x0 + sg * (c1 + sg * (c2 + sg * c3)),
+                            (c1 + sg * (2 * c2 + 3 * sg * c3)) / h))
                 continue
             a = 0.0
             if self.extrapolation_order > 0 and self._outs_prev is not None:

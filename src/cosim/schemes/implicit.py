@@ -7,6 +7,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from ..subsystem import hermite_coefficients
 from .base import CoSimulationScheme, CouplingError, Option, _pos
 
 __all__ = ["Implicit", "Aitken", "IQNILS", "ACCELERATIONS"]
@@ -331,8 +332,7 @@ class Implicit(CoSimulationScheme):
         _, _, partner, port, emb = system.hosted[c]
         pos, vel = self._outs[partner]
         x0, v0 = complex(*pos[port]), complex(*vel[port])
-        dx = x1 - x0
-        emb.set_motion(t, h, (x0, h * v0, 3 * dx - h * (2 * v0 + v1), -2 * dx + h * (v0 + v1)))
+        emb.set_motion(t, h, hermite_coefficients(x0, v0, x1, v1, h))
 
     @staticmethod
     def _partner_end(system, c, outs):
