@@ -122,6 +122,8 @@ class StructureSubsystem(Subsystem):
         self._R[port] = w @ self.Phi[dofs]
         self._ref[port] = st.reference_position(s)
         self.port_coordinates[port] = s
+        if any(e.port == port for e in self._embedded):
+            self._bases = {}            # the springs' modes hang on the port's shape row
 
     def material_coordinate(self, point) -> float:
         """Material coordinate ``s`` of the structure below a world point."""
