@@ -106,7 +106,8 @@ def _cmd_info(args) -> int:
                 f"{f:.4g}" for f in s["natural_frequencies_hz"][:6])
         print(line)
     for name, c in info["contacts"].items():
-        print(f"  contact {name}: {c['law']} ({c['placement']}) between {c['between'][0]} and "
+        where = c["placement"] + (f" in {c['host']}" if "host" in c else "")
+        print(f"  contact {name}: {c['law']} ({where}) between {c['between'][0]} and "
               f"{c['between'][1]}")
         if c.get("frequency_hz") is not None:
             print(f"    reduced mass {c['reduced_mass']:.4g} kg, frequency {c['frequency_hz']:.4g}"

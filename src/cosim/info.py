@@ -49,7 +49,14 @@ def _contact_info(system, c, scene) -> dict:
                 name == "gauss_seidel" and order > 0)
     out["max_macro_step_s"] = steps
     if ln.placement == "embedded":
-        out["max_integrator_step_s"] = {"rk4": RK4_LIMIT / omega}
+        host = system.embedded[c][0]
+        if c in system.hosted:   # the host's spring runs against a prescribed point
+            out["host"] = system.names[host]
+            own = ln.port_a if host == ln.sub_a else ln.port_b
+            omega = math.sqrt(k * system.subsystems[host].port_mobility(own, n))
+        closed_form = getattr(system.subsystems[host], "_closed_form", False)
+        out["max_integrator_step_s"] = ({"closed_form": None} if closed_form
+                                       else {"rk4": RK4_LIMIT / omega})
     return out
 
 
