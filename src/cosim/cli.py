@@ -120,6 +120,61 @@ def _cmd_info(args) -> int:
     return 0
 
 
+def _floats(text: str) -> list[float]:
+    try:
+        return [float(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected numbers separated by commas, got {text!r}")
+
+
+def _machine() -> str:
+    import os
+    import platform
+    return (f"{platform.machine()} {platform.processor() or ''}".strip()
+            + f", {os.cpu_count()} cores, Python {platform.python_version()}, "
+            f"{platform.system()} {platform.release()}")
+
+
+def _cmd_bench(args) -> int:
+    import math
+
+    from .bench import plot, run_bench, write_csv
+
+    out = Path(args.out) if args.out else Path("runs") / (
+        Path(args.scene).stem + (f"-{args.variant}" if args.variant else "") + "-bench")
+    out.mkdir(parents=True, exist_ok=True)
+    print(f"bench {args.scene}" + (f" --variant {args.variant}" if args.variant else "")
+          + f" on {_machine()}")
+    print(f"{'scheme':<14}{'step [s]':>10}{'rtol':>9}{'CPU [s]':>9}{'peak':>10}{'count':>7}"
+          f"{'exit vel.':>11}{'energy':>10}  status")
+
+    def fmt(x, spec):
+        width = int(spec.split(".")[0])
+        return "-".rjust(width) if isinstance(x, float) and math.isnan(x) else format(x, spec)
+
+    def show(r):
+        print(f"{r.label:<14}{fmt(r.macro_step, '10.1e')}{fmt(r.tolerance, '9.0e')}"
+              f"{fmt(r.cpu_time_s, '9.2f')}{fmt(r.err_peak, '10.2e')}{fmt(r.err_count, '7.0f')}"
+              f"{fmt(r.err_exit_velocity, '11.2e')}{fmt(r.err_energy, '10.2e')}  {r.status}",
+              flush=True)
+
+    ref, rows = run_bench(args.scene, args.variant, args.schemes, args.steps, args.contact,
+                          args.joint, args.set or (), cache_dir=Path("runs") / ".bench-cache",
+                          progress=show)
+    print(f"reference (monolithic DOP853, rtol 1e-11): {ref['count']} contacts of "
+          f"{args.contact}, peak {ref['peak']:.6g} m, exit velocity {ref['exit_velocity']:.6g}, "
+          f"CPU {ref['cpu_time_s']:.2f} s")
+    write_csv(rows, out / "bench.csv")
+    print(f"wrote {out / 'bench.csv'}")
+    try:
+        plot(rows, out / "bench.png", title=f"{Path(args.scene).stem} {args.variant or ''}")
+        print(f"wrote {out / 'bench.png'}")
+    except ImportError:
+        print('no plot: matplotlib is not installed (pip install "cosim[plot]")',
+              file=sys.stderr)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="cosim", description="Co-simulation of impacts between "
                                 "robots and vibrating structures.")
@@ -140,6 +195,19 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("--set", action="append", metavar="KEY=VALUE")
     i.add_argument("--json", action="store_true", help="print JSON")
     i.set_defaults(func=_cmd_info)
+    bn = sub.add_parser("bench", help="work-precision: error against CPU time over schemes "
+                                      "and steps, against a cached monolithic reference")
+    bn.add_argument("scene")
+    bn.add_argument("--variant")
+    bn.add_argument("--schemes", type=lambda t: [x for x in t.split(",") if x],
+                    help="co-simulation schemes, comma separated")
+    bn.add_argument("--steps", type=_floats, help="step sizes [s], comma separated")
+    bn.add_argument("--contact", default="C", help="contact compared (default C)")
+    bn.add_argument("--joint", default="robot/arm",
+                    help="SUBSYSTEM/JOINT whose rate at the last release is compared")
+    bn.add_argument("--set", action="append", metavar="KEY=VALUE")
+    bn.add_argument("--out")
+    bn.set_defaults(func=_cmd_bench)
     v = sub.add_parser("verify", help="run the verification cases; exit 1 if any fails")
     v.add_argument("--cases", default="cases", help="folder of the scene files (default cases)")
     v.set_defaults(func=_cmd_verify)

@@ -1,0 +1,17 @@
+"""The work-precision study of three_mass f100 (the README's picture):
+``cosim bench`` over Gauss-Seidel, Jacobi and implicit at four step sizes,
+the paper's RK45 and the monolithic reference at three tolerances.
+
+Run from the project root: ``python benchmarks/work_precision.py [--out DIR]``
+(needs the `plot` extra for the picture).  The table it prints starts with
+the machine it ran on.
+"""
+import sys
+
+from cosim.cli import main
+
+if __name__ == "__main__":
+    out = sys.argv[sys.argv.index("--out") + 1] if "--out" in sys.argv else "runs/work-precision"
+    sys.exit(main(["bench", "cases/three_mass.toml", "--variant", "f100", "--schemes",
+                   "gauss_seidel,jacobi,implicit", "--steps", "1e-4,5e-5,2e-5,1e-5",
+                   "--out", out]))
