@@ -181,13 +181,11 @@ class MultibodySubsystem(Subsystem):
                 rates += [f, p, f * tau, (uk.conjugate() * v[e.port]).real]
                 switch.append(sw)
                 continue
-            law = e.law
-            f = float(law.force(d, dd))
+            f, p, sw = e.law.evaluate(d, dd)
             fn = e.side * f * e.normal
             u[e.port] += fn
-            rates += [f, float(law.dissipation_rate(f, d, dd)), f * tau,
-                      (fn.conjugate() * v[e.port]).real]
-            switch.append(float(law.switch(d, dd)))
+            rates += [f, p, f * tau, (fn.conjugate() * v[e.port]).real]
+            switch.append(sw)
         self._last_switch = (y, np.array(switch))
         s = tau / self._h
         return np.concatenate([dq, self._accelerations(M, F, J, u), rates, (diss, sup),

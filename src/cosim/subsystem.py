@@ -87,7 +87,7 @@ class EmbeddedContact:
     """
 
     __slots__ = ("contact", "law", "port", "side", "normal", "offset", "t0", "h", "motion",
-                 "_dmotion")
+                 "_dmotion", "_still", "_x0")
 
     def __init__(self, contact, port: int, side: float, partner_position,
                  partner_velocity=(0.0, 0.0)):
@@ -104,10 +104,14 @@ class EmbeddedContact:
         coefficients in ``s`` (lowest first)."""
         c = np.asarray(coeffs, complex)
         self.t0, self.h, self.motion = float(t0), float(h), c
+        self._still = not np.any(c[1:])             # a rigid partner: one fixed point
+        self._x0 = complex(c[0])
         self._dmotion = (c[1:] * np.arange(1, c.size)) / h if c.size > 1 else np.zeros(1, complex)
 
     def partner(self, t: float) -> tuple[complex, complex]:
         """Partner port position and velocity at ``t`` (complex)."""
+        if self._still:
+            return self._x0, 0j
         s = (t - self.t0) / self.h
         x = 0j
         for c in self.motion[::-1]:

@@ -84,6 +84,12 @@ class ContactLaw(ABC):
         """Power dissipated [W] when the contact carries force ``f``."""
         return (f - self.potential_slope(d)) * dd
 
+    def evaluate(self, d: float, dd: float) -> tuple[float, float, float]:
+        """Force [N], dissipated power [W] and switch value [m] at one state
+        (scalars): what an integrator asks at every evaluation."""
+        f = float(self.force(d, dd))
+        return f, float(self.dissipation_rate(f, d, dd)), float(self.switch(d, dd))
+
     @property
     @abstractmethod
     def stiffness(self) -> float:
@@ -122,6 +128,10 @@ class LinearLaw(ContactLaw):
     def potential_slope(self, d):
         return self.contact_stiffness * np.maximum(d, 0.0)
 
+    def evaluate(self, d, dd):
+        # the spring stores all it takes: no dissipation
+        return (self.contact_stiffness * d if d > 0.0 else 0.0), 0.0, d
+
     @property
     def stiffness(self) -> float:
         return self.contact_stiffness
@@ -151,6 +161,8 @@ class KelvinVoigtLaw(LinearLaw):
         super().__post_init__()
         object.__setattr__(self, "contact_damping",
                            _positive(self.contact_damping, "contact_damping", "N s/m", True))
+
+    evaluate = ContactLaw.evaluate      # not the undamped spring's shortcut
 
     def force_active(self, d, dd):
         return self.contact_stiffness * d + self.contact_damping * dd
