@@ -47,7 +47,7 @@ def _print_summary(s: dict, out: Path | None) -> None:
     if s["message"]:
         print(f"  message: {s['message']}")
     if out is not None:
-        print(f"  wrote {out / 'summary.json'} and {out / 'series.npz'}")
+        print(f"  wrote {out / 'summary.json'}, {out / 'series.npz'} and {out / 'scene.toml'}")
 
 
 def _cmd_run(args) -> int:
@@ -59,7 +59,7 @@ def _cmd_run(args) -> int:
     res = simulate(scene)
     out = Path(args.out) if args.out else Path("runs") / (
         scene.name + (f"-{scene.variant}" if scene.variant else ""))
-    write_outputs(res, out)
+    write_outputs(res, out, scene)
     _print_summary(res.summary, out)
     if scene.export:
         from .export import export_structures
