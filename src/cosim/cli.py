@@ -50,13 +50,58 @@ def _print_summary(s: dict, out: Path | None) -> None:
         print(f"  wrote {out / 'summary.json'}, {out / 'series.npz'} and {out / 'scene.toml'}")
 
 
+#: wall-clock time a run goes on before its progress line appears [s]
+PROGRESS_DELAY_S = 1.0
+
+
+class _ProgressLine:
+    """Renders :class:`cosim.recorder.Progress` on one carriage-return line of
+    ``stream``: done fraction, simulated time, rate (simulated seconds per
+    wall second), contact intervals begun, and the time left.  Nothing shows
+    for a run shorter than :data:`PROGRESS_DELAY_S`; :meth:`close` wipes the
+    line so the summary starts clean."""
+
+    def __init__(self, stream):
+        self.stream = stream
+        self._width = 0
+
+    def __call__(self, p) -> None:
+        if p.elapsed_s < PROGRESS_DELAY_S:
+            return
+        rate = p.t / p.elapsed_s if p.elapsed_s > 0 else 0.0
+        frac = min(max(p.t / p.t_end, 0.0), 1.0) if p.t_end > 0 else 1.0
+        left = f"~{(p.t_end - p.t) / rate:.0f} s left" if rate > 0 else "time left unknown"
+        line = (f"{100 * frac:3.0f}% [{'#' * int(20 * frac):<20}] t {p.t:.4g}/{p.t_end:.4g} s, "
+                f"{rate:.3g} s/s, contacts {p.contacts}, {left}")
+        self.stream.write("\r" + line.ljust(self._width))
+        self.stream.flush()
+        self._width = len(line)
+
+    def close(self) -> None:
+        if self._width:
+            self.stream.write("\r" + " " * self._width + "\r")
+            self.stream.flush()
+
+
+def _progress_line(quiet: bool):
+    """A progress renderer, or None when quiet or not talking to a terminal."""
+    if quiet or not (sys.stdout.isatty() and sys.stderr.isatty()):
+        return None
+    return _ProgressLine(sys.stderr)
+
+
 def _cmd_run(args) -> int:
     from .result import write_outputs
     from .run import simulate
     from .scene import load_scene
 
     scene = load_scene(args.scene, args.variant, args.set or (), args.scheme)
-    res = simulate(scene)
+    progress = _progress_line(args.quiet)
+    try:
+        res = simulate(scene, progress=progress)
+    finally:
+        if progress is not None:
+            progress.close()
     out = Path(args.out) if args.out else Path("runs") / (
         scene.name + (f"-{scene.variant}" if scene.variant else ""))
     write_outputs(res, out, scene)
@@ -132,6 +177,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--set", action="append", metavar="KEY=VALUE",
                    help="override a scene value (after the variant); repeatable")
     r.add_argument("--out", help="output directory (default runs/SCENE[-VARIANT])")
+    r.add_argument("--quiet", action="store_true",
+                   help="no progress line (it shows only on a terminal, after a second)")
     r.set_defaults(func=_cmd_run)
     i = sub.add_parser("info", help="what a run will meet: DOFs, frequencies, stable steps")
     i.add_argument("scene", help="scene file (TOML)")
