@@ -164,6 +164,30 @@ def _cmd_info(args) -> int:
     return 0
 
 
+def _cmd_plot(args) -> int:
+    try:
+        from . import plot
+    except ImportError as exc:
+        if (exc.name or "").split(".")[0] != "matplotlib":
+            raise
+        print('error: `cosim plot` needs matplotlib: pip install "cosim[plot]"', file=sys.stderr)
+        return 2
+    try:
+        run = plot.load_run(args.run_dir)
+        paths = plot.plot_run(run, args.out, args.format)
+        if args.animate:
+            paths.append(plot.animate_run(run, args.out, max_frames=args.frames,
+                                          magnify=args.magnify))
+    except plot.PlotError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    if run.incomplete:
+        print(f"incomplete run: {run.incomplete}")
+    for path in paths:
+        print(f"wrote {path}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="cosim", description="Co-simulation of impacts between "
                                 "robots and vibrating structures.")
@@ -186,6 +210,20 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("--set", action="append", metavar="KEY=VALUE")
     i.add_argument("--json", action="store_true", help="print JSON")
     i.set_defaults(func=_cmd_info)
+    pl = sub.add_parser("plot", help="draw a run directory (finished or interrupted): "
+                                     "penetrations, forces, velocities, energy")
+    pl.add_argument("run_dir", help="directory written by `cosim run`")
+    pl.add_argument("--format", choices=("png", "svg", "pdf"), default="png",
+                    help="figure format (default png)")
+    pl.add_argument("--animate", action="store_true",
+                    help="also write an animation of the robot and the structure (GIF with "
+                         "Pillow, else MP4 with ffmpeg); needs the run's scene.toml")
+    pl.add_argument("--frames", type=int, default=200,
+                    help="most frames in the animation (default 200)")
+    pl.add_argument("--magnify", type=float, default=1.0,
+                    help="scale of the structures' deflection in the animation (default 1)")
+    pl.add_argument("--out", help="output directory (default RUN_DIR)")
+    pl.set_defaults(func=_cmd_plot)
     v = sub.add_parser("verify", help="run the verification cases; exit 1 if any fails")
     v.add_argument("--cases", default="cases", help="folder of the scene files (default cases)")
     v.set_defaults(func=_cmd_verify)
