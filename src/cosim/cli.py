@@ -83,9 +83,13 @@ class _ProgressLine:
             self.stream.flush()
 
 
+def _on_terminal() -> bool:
+    return sys.stdout.isatty() and sys.stderr.isatty()
+
+
 def _progress_line(quiet: bool):
     """A progress renderer, or None when quiet or not talking to a terminal."""
-    if quiet or not (sys.stdout.isatty() and sys.stderr.isatty()):
+    if quiet or not _on_terminal():
         return None
     return _ProgressLine(sys.stderr)
 
