@@ -212,3 +212,24 @@ def test_plot_without_matplotlib_names_the_extra(spring_run):
                           cwd=ROOT, timeout=120)
     assert proc.returncode == 2
     assert proc.stderr.strip() == 'error: `cosim plot` needs matplotlib: pip install "cosim[plot]"'
+
+
+@pytest.mark.parametrize("path", sorted(CASES.glob("*.toml")), ids=lambda p: p.stem)
+def test_scene_toml_round_trips_every_variant(path):
+    """What `cosim run` writes as scene.toml reads back to the table that ran."""
+    from cosim.result import resolved_scene_text
+
+    for variant in [None, *tomllib.loads(path.read_text()).get("variants", {})]:
+        scene = load_scene(path, variant)
+        back = tomllib.loads(resolved_scene_text(scene))
+        assert back == {"name": scene.name, **scene.data}, variant
+
+
+def test_toml_writer_quotes_and_refuses():
+    from cosim.tomlwrite import dumps
+
+    data = {"a.b": {"x y": [1, 2.5e-07, "q\"uote\n"], "inf": float("inf"), "t": True},
+            "top": [{"k": 1}, {"k": 2}], "empty": {}}
+    assert tomllib.loads(dumps(data)) == data
+    with pytest.raises(TypeError, match="cannot write"):
+        dumps({"when": object()})
