@@ -331,6 +331,36 @@ class MultibodySubsystem(Subsystem):
         jn = (complex(direction[0], direction[1]).conjugate() * J[port]).real
         return float(jn @ np.linalg.solve(M, jn))
 
+    def skeleton(self, x) -> tuple[np.ndarray, np.ndarray]:
+        """The tree drawn as lines, for pictures.
+
+        Parameters
+        ----------
+        x : (2 n,) array
+            State ``[q, dq]``.
+
+        Returns
+        -------
+        lines : (m,) complex array
+            World points [m] of a polyline broken by NaN: each body's origin
+            joined to its children's origins and to its ports.
+        joints : (n,) complex array
+            World positions of the joints (the body frames' origins) [m].
+        """
+        n = self.n_dof
+        q, dq = x[:n], x[n:2 * n]
+        fr = self.model.frames(q, dq)
+        origin = fr.origin
+        ports = origin[self._port_body] + fr.rot[self._port_body] * self._port_local_c
+        gap = complex(np.nan, np.nan)
+        pieces = []
+        for i, p in enumerate(self.model.parent):
+            if p >= 0:
+                pieces += [origin[p], origin[i], gap]
+        for k, b in enumerate(self._port_body):
+            pieces += [origin[b], ports[k], gap]
+        return np.array(pieces, complex), origin
+
     def coordinates(self):
         n = self.n_dof
         return {name: (i, n + i) for i, name in enumerate(self.model.joint_names)}

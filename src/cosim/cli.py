@@ -47,7 +47,51 @@ def _print_summary(s: dict, out: Path | None) -> None:
     if s["message"]:
         print(f"  message: {s['message']}")
     if out is not None:
-        print(f"  wrote {out / 'summary.json'} and {out / 'series.npz'}")
+        print(f"  wrote {out / 'summary.json'}, {out / 'series.npz'} and {out / 'scene.toml'}")
+
+
+#: wall-clock time a run goes on before its progress line appears [s]
+PROGRESS_DELAY_S = 1.0
+
+
+class _ProgressLine:
+    """Renders :class:`cosim.recorder.Progress` on one carriage-return line of
+    ``stream``: done fraction, simulated time, rate (simulated seconds per
+    wall second), contact intervals begun, and the time left.  Nothing shows
+    for a run shorter than :data:`PROGRESS_DELAY_S`; :meth:`close` wipes the
+    line so the summary starts clean."""
+
+    def __init__(self, stream):
+        self.stream = stream
+        self._width = 0
+
+    def __call__(self, p) -> None:
+        if p.elapsed_s < PROGRESS_DELAY_S:
+            return
+        rate = p.t / p.elapsed_s if p.elapsed_s > 0 else 0.0
+        frac = min(max(p.t / p.t_end, 0.0), 1.0) if p.t_end > 0 else 1.0
+        left = f"~{(p.t_end - p.t) / rate:.0f} s left" if rate > 0 else "time left unknown"
+        line = (f"{100 * frac:3.0f}% [{'#' * int(20 * frac):<20}] t {p.t:.4g}/{p.t_end:.4g} s, "
+                f"{rate:.3g} s/s, contacts {p.contacts}, {left}")
+        self.stream.write("\r" + line.ljust(self._width))
+        self.stream.flush()
+        self._width = len(line)
+
+    def close(self) -> None:
+        if self._width:
+            self.stream.write("\r" + " " * self._width + "\r")
+            self.stream.flush()
+
+
+def _on_terminal() -> bool:
+    return sys.stdout.isatty() and sys.stderr.isatty()
+
+
+def _progress_line(quiet: bool):
+    """A progress renderer, or None when quiet or not talking to a terminal."""
+    if quiet or not _on_terminal():
+        return None
+    return _ProgressLine(sys.stderr)
 
 
 def _cmd_run(args) -> int:
@@ -56,10 +100,15 @@ def _cmd_run(args) -> int:
     from .scene import load_scene
 
     scene = load_scene(args.scene, args.variant, args.set or (), args.scheme)
-    res = simulate(scene)
+    progress = _progress_line(args.quiet)
+    try:
+        res = simulate(scene, progress=progress)
+    finally:
+        if progress is not None:
+            progress.close()
     out = Path(args.out) if args.out else Path("runs") / (
         scene.name + (f"-{scene.variant}" if scene.variant else ""))
-    write_outputs(res, out)
+    write_outputs(res, out, scene)
     _print_summary(res.summary, out)
     if scene.export:
         from .export import export_structures
@@ -175,6 +224,30 @@ def _cmd_bench(args) -> int:
     return 0
 
 
+def _cmd_plot(args) -> int:
+    try:
+        from . import plot
+    except ImportError as exc:
+        if (exc.name or "").split(".")[0] != "matplotlib":
+            raise
+        print('error: `cosim plot` needs matplotlib: pip install "cosim[plot]"', file=sys.stderr)
+        return 2
+    try:
+        run = plot.load_run(args.run_dir)
+        paths = plot.plot_run(run, args.out, args.format)
+        if args.animate:
+            paths.append(plot.animate_run(run, args.out, max_frames=args.frames,
+                                          magnify=args.magnify))
+    except plot.PlotError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    if run.incomplete:
+        print(f"incomplete run: {run.incomplete}")
+    for path in paths:
+        print(f"wrote {path}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="cosim", description="Co-simulation of impacts between "
                                 "robots and vibrating structures.")
@@ -188,6 +261,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--set", action="append", metavar="KEY=VALUE",
                    help="override a scene value (after the variant); repeatable")
     r.add_argument("--out", help="output directory (default runs/SCENE[-VARIANT])")
+    r.add_argument("--quiet", action="store_true",
+                   help="no progress line (it shows only on a terminal, after a second)")
     r.set_defaults(func=_cmd_run)
     i = sub.add_parser("info", help="what a run will meet: DOFs, frequencies, stable steps")
     i.add_argument("scene", help="scene file (TOML)")
@@ -208,6 +283,20 @@ def build_parser() -> argparse.ArgumentParser:
     bn.add_argument("--set", action="append", metavar="KEY=VALUE")
     bn.add_argument("--out")
     bn.set_defaults(func=_cmd_bench)
+    pl = sub.add_parser("plot", help="draw a run directory (finished or interrupted): "
+                                     "penetrations, forces, velocities, energy")
+    pl.add_argument("run_dir", help="directory written by `cosim run`")
+    pl.add_argument("--format", choices=("png", "svg", "pdf"), default="png",
+                    help="figure format (default png)")
+    pl.add_argument("--animate", action="store_true",
+                    help="also write an animation of the robot and the structure (GIF with "
+                         "Pillow, else MP4 with ffmpeg); needs the run's scene.toml")
+    pl.add_argument("--frames", type=int, default=200,
+                    help="most frames in the animation (default 200)")
+    pl.add_argument("--magnify", type=float, default=1.0,
+                    help="scale of the structures' deflection in the animation (default 1)")
+    pl.add_argument("--out", help="output directory (default RUN_DIR)")
+    pl.set_defaults(func=_cmd_plot)
     v = sub.add_parser("verify", help="run the verification cases; exit 1 if any fails")
     v.add_argument("--cases", default="cases", help="folder of the scene files (default cases)")
     v.set_defaults(func=_cmd_verify)

@@ -9,12 +9,35 @@ located on it.
 from __future__ import annotations
 
 import math
+import time
+from typing import Callable, NamedTuple
 
 import numpy as np
 
 from .result import SimulationResult
 
-__all__ = ["Recorder", "hermite_cubic_max"]
+__all__ = ["Recorder", "Progress", "hermite_cubic_max"]
+
+
+class Progress(NamedTuple):
+    """How far a run is, as handed to a progress callback.
+
+    Attributes
+    ----------
+    t : float
+        Simulated time reached [s].
+    t_end : float
+        Simulated time the run ends at [s].
+    contacts : int
+        Contact intervals begun so far, all contacts together.
+    elapsed_s : float
+        Wall-clock time since recording began [s].
+    """
+
+    t: float
+    t_end: float
+    contacts: int
+    elapsed_s: float
 
 
 def _hcubic(d0, v0, d1, v1, h, th):
@@ -63,10 +86,22 @@ class Recorder:
         Locate contact onset/release between samples, for all contacts or
         those marked; a scheme (or an integrator) that locates them itself
         reports them with :meth:`edge`.
+    progress : callable, optional
+        Called with a :class:`Progress` from :meth:`record`, at most once per
+        ``progress_interval`` of wall-clock time (and at the first sample).
+        It must not raise; the library itself never prints.
+    progress_interval : float
+        Least wall-clock time between two progress calls [s].
+
+    Notes
+    -----
+    With ``progress`` unset, recording pays nothing for it; set, one clock
+    read per sample.
     """
 
     def __init__(self, system, scene: str, scheme: str, t_end: float, every: int = 1,
-                 auto_edges: bool = True):
+                 auto_edges: bool = True, *, progress: Callable[[Progress], None] | None = None,
+                 progress_interval: float = 0.2):
         self.system, self.scene, self.scheme, self.t_end = system, scene, scheme, t_end
         nc = system.n_contacts
         self.every = max(1, int(every))
@@ -87,6 +122,10 @@ class Recorder:
         self._d0 = None
         self._n_log = 0              # switches of connections already turned into edges
         self._modes = []
+        self._progress = progress
+        self._progress_interval = float(progress_interval)
+        self._wall0 = time.monotonic()
+        self._next_progress = -math.inf
 
     def edge(self, c: int, t: float, on: bool) -> None:
         """Report an exactly located contact onset (``on``) or release."""
@@ -150,6 +189,13 @@ class Recorder:
         if self._count % self.every == 0:
             self._store(t, d, f, energy, diss_total)
         self._count += 1
+        if self._progress is not None:
+            now = time.monotonic()
+            if now >= self._next_progress:
+                self._next_progress = now + self._progress_interval
+                begun = sum(map(len, self.intervals)) + sum(o is not None for o in self._open)
+                self._progress(Progress(float(t), float(self.t_end), int(begun),
+                                        now - self._wall0))
 
     def _store(self, t, d, f, energy, diss_total):
         self._t.append(t)

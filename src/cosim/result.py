@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["SimulationResult", "write_outputs"]
+__all__ = ["SimulationResult", "write_outputs", "resolved_scene_text"]
 
 
 @dataclass(frozen=True)
@@ -65,11 +65,40 @@ def _atomic_write(path: Path, writer, mode: str) -> None:
         raise
 
 
-def write_outputs(result: SimulationResult, out_dir) -> tuple[Path, Path]:
-    """Write ``summary.json`` and ``series.npz`` into ``out_dir`` atomically."""
+def write_outputs(result: SimulationResult, out_dir, scene=None) -> tuple[Path, Path]:
+    """Write ``summary.json`` and ``series.npz`` into ``out_dir`` atomically.
+
+    Parameters
+    ----------
+    result : SimulationResult
+    out_dir : path-like
+    scene : Scene, optional
+        The scene that ran; its merged table (variant, overrides and scheme
+        applied) is written as ``scene.toml`` too, a scene file of its own
+        that ``cosim plot --animate`` rebuilds the geometry from (and that
+        ``cosim run`` runs again).
+
+    Returns
+    -------
+    summary, series : Path
+    """
     out = Path(out_dir)
     summary = out / "summary.json"
     series = out / "series.npz"
+    if scene is not None:
+        text = resolved_scene_text(scene)
+        _atomic_write(out / "scene.toml", lambda fh: fh.write(text), "w")
     _atomic_write(series, lambda fh: np.savez(fh, **result.series), "wb")
     _atomic_write(summary, lambda fh: json.dump(result.summary, fh, indent=2), "w")
     return summary, series
+
+
+def resolved_scene_text(scene) -> str:
+    """``scene.toml`` of a run: the scene's merged table as TOML, its origin in a comment."""
+    from .tomlwrite import dumps
+
+    data = {"name": scene.name, **scene.data}
+    head = (f"# The scene as run: {Path(scene.path).name}"
+            + (f", variant {scene.variant!r}" if scene.variant else "")
+            + ", overrides and scheme applied (written by `cosim run`).\n")
+    return head + dumps(data)

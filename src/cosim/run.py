@@ -14,8 +14,21 @@ __all__ = ["simulate", "run_scene"]
 log = logging.getLogger(__name__)
 
 
-def simulate(scene: Scene, *, scheme: str | None = None):
+def simulate(scene: Scene, *, scheme: str | None = None, progress=None,
+             progress_interval: float = 0.2):
     """Run a validated scene and return its :class:`~cosim.result.SimulationResult`.
+
+    Parameters
+    ----------
+    scene : Scene
+    scheme : str, optional
+        Another coupling scheme than the scene's.
+    progress : callable, optional
+        Called with a :class:`~cosim.recorder.Progress` (simulated time,
+        end time, contact intervals begun, wall time) as the run goes, at most
+        once per ``progress_interval`` seconds of wall-clock time.
+    progress_interval : float
+        [s]
 
     Raises
     ------
@@ -29,7 +42,7 @@ def simulate(scene: Scene, *, scheme: str | None = None):
     else:                                  # embedded contacts: their integrator does
         auto = [c not in system.embedded for c in range(system.n_contacts)]
     rec = Recorder(system, scene.name, sch.name, scene.t_end, every=scene.output_every,
-                   auto_edges=auto)
+                   auto_edges=auto, progress=progress, progress_interval=progress_interval)
     cpu0 = time.process_time()
     status, message = "finished", ""
     counters = {}
