@@ -297,7 +297,12 @@ class StructureSubsystem(Subsystem):
         """Modes (lam, Psi) of the modal equations with the springs of the
         closed contacts ``active`` added: ``K = diag(omega^2) + sum k c^2 r r^T``."""
         basis = self._bases.get(active)
-        if basis is None:
+        if basis is None and not any(active):
+            # no spring closed: the structure's own modes, Psi = I (``None``),
+            # with no eigen-solve and no change of coordinates
+            basis = (self.omega ** 2, None, float(self.omega.max(initial=0.0)))
+            self._bases[active] = basis
+        elif basis is None:
             K = np.diag(self.omega ** 2)
             for on, e in zip(active, self._embedded):
                 if on:
@@ -329,6 +334,8 @@ class StructureSubsystem(Subsystem):
         return a
 
     def _segment_states(self, lam, Psi, q, dq, a, taus):
+        if Psi is None:                 # the structure's own modes
+            return undamped_response(lam, q, dq, a, taus)
         z, dz = undamped_response(lam, Psi.T @ q, Psi.T @ dq, a @ Psi, taus)
         return z @ Psi.T, dz @ Psi.T
 
