@@ -358,6 +358,10 @@ def _system_snapshot(system):
             + [np.concatenate([p.ravel(), v.ravel()]) for p, v in outs])
 
 
+#: beam_impact as it was before C was hosted by default: C a coupler contact
+BEAM_COUPLER = ['contacts.C.placement="coupler"', "scheme.macro_step=2e-5",
+                "scheme.contact_step=2e-5"]
+
 # scene, overrides, scheme: a coupler contact between two moving sides
 # (two_mass, three_mass's C on the chain, beam_impact's C on the beam, with
 # `follow`), or against a rigid wall (spring_drop), and embedded contacts
@@ -373,13 +377,17 @@ SYSTEMS = {
                              "implicit", 1),
     "three_mass-gauss_seidel": ("three_mass.toml", ["scheme.macro_step=2e-5"],
                                 "gauss_seidel", 1),
-    "beam_impact-implicit": ("beam_impact.toml", [], "implicit", 1),
+    "beam_impact-implicit": ("beam_impact.toml", BEAM_COUPLER, "implicit", 1),
     # C (0.556 m above its partner at t = 0) offset so that it starts closed:
     # the coupler force on the chain and on the (followed) beam point
     "three_mass-gauss_seidel-C_closed": ("three_mass.toml", [
         "scheme.macro_step=2e-5", "contacts.C.offset=0.5565"], "gauss_seidel", 1),
-    "beam_impact-implicit-C_closed": ("beam_impact.toml", ["contacts.C.offset=0.557"],
+    "beam_impact-implicit-C_closed": ("beam_impact.toml", [*BEAM_COUPLER,
+                                                           "contacts.C.offset=0.557"],
                                       "implicit", 1),
+    # the scene's default: C hosted by the followed beam point, closed-form steps
+    "beam_impact-gauss_seidel-C_hosted_closed": ("beam_impact.toml", ["contacts.C.offset=0.557"],
+                                                 "gauss_seidel", 1),
 }
 
 
