@@ -147,7 +147,7 @@ def test_energy_is_conserved_with_drives_and_dampers_off():
 @pytest.mark.parametrize("variant", [None, "rigid_cable"])
 def test_runs_from_the_command_line_with_its_default_scheme(tmp_path, variant):
     """`cosim run cases/brachiation.toml` in a fresh process (measured CPU on
-    this 2-core machine: 2.8 s for the flexible cable, 1.8 s for the rigid)."""
+    this 2-core machine: 1.7 s for the flexible cable, 1.9 s for the rigid)."""
     args = ["--variant", variant] if variant else []
     proc = subprocess.run([sys.executable, "-m", "cosim.cli", "run", str(SCENE), *args,
                            "--out", str(tmp_path / "o")],
