@@ -97,3 +97,17 @@ def test_ledger_closes_on_three_mass():
     assert total == pytest.approx(e["final"] - e["initial"], abs=1e-6)
     assert abs(c["A"]["coupling_error"]) < 1e-6 and abs(c["B"]["coupling_error"]) < 1e-6
     assert abs(c["C"]["coupling_error"]) > 1e-4      # the hosted contact's lag
+
+
+def test_ledger_of_a_contact_that_ends_in_another_mode():
+    """The stored energy at the start is the contact's in its mode then: the
+    body starts 1 cm off the wall (open, nothing stored) and ends grasped.
+    Evaluated with the final mode, the grasp spring stretched over the
+    initial 1 cm would have counted 0.5 k (1 cm)^2 = 50 J as stored at the
+    start.  The monolithic reference injects nothing."""
+    grasp = ('contacts.wall.grasp={ stiffness = 1e6, damping = 0.0, tangential_stiffness = 0.0,'
+             ' tangential_damping = 0.0, close = "touch" }')
+    res = run("spring_drop.toml", "undamped", [grasp], scheme="monolithic")
+    assert [s["to"] for s in res.summary["switches"]] == ["grasped"]
+    c = res.summary["contacts"]["wall"]
+    assert abs(c["coupling_error"]) < 1e-6

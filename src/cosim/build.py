@@ -58,10 +58,18 @@ def _structure(spec, scene: Scene):
     n = structure.n_dof
     u0 = None
     if spec["static_equilibrium"]:
-        if scene.gravity is None:
+        loads = spec.get("static_loads") or {}
+        if scene.gravity is None and not loads:
             raise SceneError(scene.path, f"{spec['key']}.static_equilibrium",
-                             "needs gravity (`effects.gravity`) to have a meaning")
-        u0 = structure.static_displacement(structure.gravity_load(np.asarray(scene.gravity)))
+                             "needs gravity (`effects.gravity`) or `static_loads` to have a "
+                             "meaning")
+        f = (structure.gravity_load(np.asarray(scene.gravity)) if scene.gravity is not None
+             else np.zeros(structure.n_dof))
+        # what the connections closed at the start carry: the structure starts
+        # at rest under them, so a grasp at t = 0 does not set it ringing
+        for port, force in loads.items():
+            f = f + structure.point_load(spec["ports"][port], force)
+        u0 = structure.static_displacement(f)
     v0 = np.full(n, spec["initial_velocity"]) if spec["initial_velocity"] else None
     try:
         sub = StructureSubsystem(spec["name"], structure, basis, spec["ports"], u0, v0,

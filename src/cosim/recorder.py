@@ -120,6 +120,7 @@ class Recorder:
         self.max_drift = 0.0
         self.last = None
         self._d0 = None
+        self._stored0 = None         # contacts' stored energy at the start, in their modes then
         self._n_log = 0              # switches of connections already turned into edges
         self._modes = []
         self._progress = progress
@@ -186,6 +187,9 @@ class Recorder:
                      None if work is None else np.array(work, float), d.copy())
         if self._d0 is None:
             self._d0 = d.copy()
+            # evaluated now: a connection's potential depends on its mode, and
+            # the mode at the end (grasped, released) need not be the start's
+            self._stored0 = self.system.contact_potentials(d)
         if self._count % self.every == 0:
             self._store(t, d, f, energy, diss_total)
         self._count += 1
@@ -278,7 +282,7 @@ class Recorder:
             ledger = {}
             if work is not None:
                 stored = float(sysm.contact_potentials(self.last[6])[c])
-                stored0 = float(sysm.contact_potentials(self._d0)[c])
+                stored0 = float(self._stored0[c])
                 ledger = {"work": float(work[c]), "stored": stored,
                           "coupling_error": float(work[c] + stored - stored0 + dissipated[c])}
             contacts[name] = {

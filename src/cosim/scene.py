@@ -609,10 +609,21 @@ def _structure_spec(t: _Table, kind: str) -> dict:
     if v0 and kind in ("beam", "cable"):
         t.error("initial_velocity", "a uniform initial velocity is offered for chains, "
                                     "strings and rods, whose DOFs are all translations")
+    static = t.boolean("static_equilibrium", False)
+    loads = {}
+    if t.has("static_loads"):
+        lt = t.table("static_loads")
+        if not static:
+            t.error("static_loads", "are point loads of the static state; they need "
+                                    "`static_equilibrium = true`")
+        for p in list(lt.data):
+            if p not in ports:
+                lt.error(p, f"names no point of this structure; its points are {sorted(ports)}")
+            loads[p] = lt.number(p, unit="N")
+        lt.finish()
     return {"model": model, "ports": ports, "modes": modes, "contact_step": contact_step,
             "integrator": method, "integrator_options": options,
-            "initial_velocity": v0,
-            "static_equilibrium": t.boolean("static_equilibrium", False)}
+            "initial_velocity": v0, "static_equilibrium": static, "static_loads": loads}
 
 
 def _contact_spec(name: str, t: _Table, subs: list[dict]) -> dict:
