@@ -79,3 +79,57 @@ def test_adaptive_error_follows_the_tolerance(name, reference):
 def test_options_are_checked(name, opts, match):
     with pytest.raises(ValueError, match=match):
         INTEGRATORS[name](**opts)
+
+
+# -- free_step: long sub-steps while every contact is open ----------------------------
+K_WALL, V_IN = 1e6, 1.0
+
+
+def _wall(counter):
+    """A unit mass flying at -1 m/s from x = 0.01 m onto a spring wall at x = 0
+    (closed where x < 0): touch at 10 ms, contact for pi/1000 s, exit at +1 m/s."""
+    def f(t, y):
+        counter[0] += 1
+        return np.array([y[1], K_WALL * max(-y[0], 0.0)])
+
+    def switch(t, y):
+        return np.array([-y[0]])
+    return f, switch
+
+
+@pytest.mark.parametrize("coarse", [False, True])
+def test_free_step_keeps_contacts_at_max_step(coarse):
+    from cosim.integrators import RK4
+    calls = [0]
+    f, switch = _wall(calls)
+    t_touch, t_c = 0.01, np.pi / np.sqrt(K_WALL)
+    t1 = t_touch + t_c + 2e-3
+    y = RK4(max_step=1e-5, free_step=1e-3).integrate(f, 0.0, np.array([0.01, -V_IN]), t1,
+                                                      switch, coarse=coarse)
+    # after the contact: free flight at +1 m/s from x = 0 at t_touch + t_c
+    assert y[1] == pytest.approx(V_IN, abs=1e-9)
+    assert y[0] == pytest.approx(V_IN * (t1 - t_touch - t_c), abs=1e-10)
+    fine_calls = 4 * round(t1 / 1e-5)
+    if coarse:   # 10 coarse sub-steps to the touch instead of 1000 fine ones
+        assert calls[0] < fine_calls - 3000
+    else:
+        assert calls[0] >= fine_calls
+
+
+def test_free_step_is_a_scene_option_of_rk4_only(tmp_path):
+    import cosim
+    from conftest import CASES
+    scene = cosim.load_scene(CASES / "spring_drop.toml", None,
+                             ["subsystems.body.integrator.free_step=1e-3",
+                              "scheme.macro_step=2e-3"])
+    res = cosim.simulate(scene)
+    (t_on, t_off), = res.summary["contacts"]["wall"]["intervals"]
+    assert t_off - t_on == pytest.approx(np.pi / 1e3, rel=1e-6)
+    assert res.summary["final_state"]["body"]["x"]["dq"] == pytest.approx(1.0, rel=1e-6)
+    with pytest.raises(cosim.SceneError, match="free_step"):
+        cosim.load_scene(CASES / "spring_drop.toml", None,
+                         ['subsystems.body.integrator.method="rk45"',
+                          "subsystems.body.integrator.free_step=1e-3"])
+    with pytest.raises(cosim.SceneError, match="free_step"):
+        cosim.load_scene(CASES / "spring_drop.toml", None,
+                         ["subsystems.body.integrator.free_step=-1.0"])

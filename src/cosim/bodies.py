@@ -209,8 +209,10 @@ class MultibodySubsystem(Subsystem):
         switch = self._switch if self._embedded else None
         self.switch_log = []
         self.impact_log = []
+        # laws' switch functions are positive where closed; a connection's
+        # are not, so a side with connections never takes coarse steps
         y1 = self.integrator.integrate(lambda tt, yy: self._rhs(tt, yy, inputs), t, y0, t + h,
-                                       switch, self._on_switch)
+                                       switch, self._on_switch, coarse=not self._connections)
         n2, na = 2 * self.n_dof, self.aux.size
         self.x[:] = y1[:n2]
         self.aux[:] = y1[n2:n2 + na]

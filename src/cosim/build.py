@@ -32,7 +32,7 @@ def _multibody(spec, scene: Scene, default_step):
         model = TreeModel(bodies, joints)
         cls = get_integrator(spec["integrator"])
         if spec["integrator"] == "rk4":
-            integ = cls(max_step=spec["max_step"] or default_step)
+            integ = cls(max_step=spec["max_step"] or default_step, **spec["integrator_options"])
         else:
             step = {"max_step": spec["max_step"]} if spec["max_step"] else {}
             integ = cls(**step, **spec["integrator_options"])

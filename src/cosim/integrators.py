@@ -33,16 +33,28 @@ class TimeStepper(ABC):
     max_step : float
         Largest sub-step [s]; a step of length ``h`` is cut into
         ``ceil(h / max_step)`` equal sub-steps.
+    free_step : float, optional
+        Largest sub-step [s] of a step that starts with every contact
+        evaluated inside open (``integrate(..., coarse=True)``): free flight
+        is smooth, so it may take longer sub-steps than a stiff contact.  A
+        coarse sub-step over which a contact switches is redone, and the rest
+        of the step taken, with ``max_step``, so contacts are always
+        integrated at ``max_step``.  Default: ``max_step``.
     """
 
     max_step: float
+    free_step: float | None = None
     order: ClassVar[int] = 0
     name: ClassVar[str] = ""
 
     def __post_init__(self):
-        if not (isinstance(self.max_step, (int, float)) and math.isfinite(self.max_step)
-                and self.max_step > 0):
-            raise ValueError(f"`max_step` must be > 0 s, got {self.max_step!r}")
+        for key in ("max_step", "free_step"):
+            v = getattr(self, key)
+            if key == "free_step" and v is None:
+                continue
+            if not (isinstance(v, (int, float)) and not isinstance(v, bool)
+                    and math.isfinite(v) and v > 0):
+                raise ValueError(f"`{key}` must be > 0 s, got {v!r}")
 
     @abstractmethod
     def _single(self, f, t, y, h, k1):
@@ -50,7 +62,7 @@ class TimeStepper(ABC):
 
     def integrate(self, f: Callable, t0: float, y0: np.ndarray, t1: float,
                   switch: Callable | None = None,
-                  on_switch: Callable | None = None) -> np.ndarray:
+                  on_switch: Callable | None = None, coarse: bool = False) -> np.ndarray:
         """Advance ``y0`` from ``t0`` to ``t1``.
 
         Parameters
@@ -66,12 +78,19 @@ class TimeStepper(ABC):
             index, its new sign and the state there.  It may return a new
             state (an impact's jump of the velocities); the integration then
             goes on from it.
+        coarse : bool
+            The switch functions are positive where a contact is closed: if
+            none is at ``t0``, sub-steps of ``free_step`` until one changes
+            sign (see the class).
         """
-        n = max(1, math.ceil((t1 - t0) / self.max_step - 1e-9))
-        dt = (t1 - t0) / n
         t, y = t0, y0
         k1 = f(t, y)
         s0 = None if switch is None else switch(t, y)
+        step = self.max_step
+        if coarse and self.free_step is not None and (s0 is None or not (s0 > 0).any()):
+            step = self.free_step
+        n = max(1, math.ceil((t1 - t0) / step - 1e-9))
+        dt = (t1 - t0) / n
         i = 0
         while i < n:
             te = t1 if i == n - 1 else t0 + (i + 1) * dt
@@ -81,6 +100,14 @@ class TimeStepper(ABC):
             if s0 is not None:
                 s1 = switch(te, y1)
                 flipped = (s0 > 0) != (s1 > 0)
+                if flipped.any() and step > self.max_step:
+                    # a contact switches within a coarse sub-step: from its
+                    # start, the rest of the step at max_step
+                    step = self.max_step
+                    t0, i = t, 0
+                    n = max(1, math.ceil((t1 - t0) / step - 1e-9))
+                    dt = (t1 - t0) / n
+                    continue
                 if flipped.any():
                     ts = self._locate(switch, t, y, k1, y1, k1n, h, s0, flipped)
                     if ts is not None:
@@ -178,7 +205,9 @@ class ScipyStepper(TimeStepper):
     def _single(self, f, t, y, h, k1):  # pragma: no cover - integrate() is overridden
         return self.integrate(f, t, y, t + h)
 
-    def integrate(self, f, t0, y0, t1, switch=None, on_switch=None):
+    def integrate(self, f, t0, y0, t1, switch=None, on_switch=None, coarse=False):
+        """See :meth:`TimeStepper.integrate`; ``coarse`` is ignored (the
+        error control chooses the steps)."""
         from scipy.integrate import solve_ivp
 
         t, y = t0, y0

@@ -408,7 +408,13 @@ def _subsystem_spec(name: str, t: _Table) -> dict:
         opts = {k: integ.number(k, rule=">0") for k in ("rtol", "atol") if integ.has(k)}
         if opts and spec["integrator"] == "rk4":
             integ.error(sorted(opts)[0], "is not an option of the fixed-step `rk4` (it takes "
-                                         "`max_step`); adaptive methods take `rtol` and `atol`")
+                                         "`max_step` and `free_step`); adaptive methods take "
+                                         "`rtol` and `atol`")
+        if integ.has("free_step"):
+            if spec["integrator"] != "rk4":
+                integ.error("free_step", "is an option of `rk4` only (adaptive methods choose "
+                                         "their steps)")
+            opts["free_step"] = integ.number("free_step", rule=">0", unit="s")
         spec["integrator_options"] = opts
         integ.finish()
         bodies, joints, ports = [], [], {}

@@ -417,18 +417,12 @@ class StructureSubsystem(Subsystem):
             i = int(rows[0])
             lo0, hi0 = (taus[i - 1] if i else 0.0), taus[i]
             best, who = hi0, []
+            tol = 1e-15 * max(1.0, abs(tc))
             for j in np.flatnonzero(flips[i]):
-                lo, hi = lo0, hi0
-                for _ in range(80):
-                    mid = 0.5 * (lo + hi)
-                    Qm, DQm = self._segment_states(lam, Psi, q, dq, a, [mid])
-                    dm, _ = self._gaps(tc, [mid], Qm, DQm)
-                    if (dm[0, j] > 0) == active[j]:
-                        lo = mid
-                    else:
-                        hi = mid
-                    if hi - lo <= 1e-15 * max(1.0, abs(tc)):
-                        break
+                hi = self._switch_time(j, active[j], lo0, hi0,
+                                       d[i - 1, j] if i else d0[0, j], d[i, j], tol,
+                                       lambda tau: self._gaps(tc, [tau], *self._segment_states(
+                                           lam, Psi, q, dq, a, [tau])))
                 if hi < best - 1e-15:
                     best, who = hi, [j]
                 elif abs(hi - best) <= 1e-15:
@@ -440,6 +434,40 @@ class StructureSubsystem(Subsystem):
             for j in who:
                 self.switch_log.append((tc, int(j), not active[j]))
         self.x[:m], self.x[m:] = q, dq
+
+    @staticmethod
+    def _switch_time(j, was_closed, lo, hi, d_lo, d_hi, tol, gaps):
+        """Earliest time in ``(lo, hi]`` just past where contact ``j``'s
+        penetration changes sign, within ``tol`` [s].
+
+        Safeguarded Newton on the exact solution (``gaps(tau)`` gives the
+        penetrations and their rates), started by regula falsi: a few
+        evaluations where bisection took fifty.  Each evaluation shrinks the
+        bracket ``[lo, hi]`` (``lo`` on the old side, ``hi`` on the new);
+        a Newton step that leaves it, or does not halve it, falls back to
+        bisection, and a converged iterate is nudged across the root so the
+        bracket closes.
+        """
+        x = lo + (hi - lo) * (d_lo / (d_lo - d_hi)) if d_lo != d_hi else 0.5 * (lo + hi)
+        for _ in range(100):
+            if not lo < x < hi:
+                x = 0.5 * (lo + hi)
+            width = hi - lo
+            dm, ddm = gaps(x)
+            dx, rate = dm[0, j], ddm[0, j]
+            if (dx > 0) == was_closed:
+                lo = x
+            else:
+                hi = x
+            if hi - lo <= tol:
+                break
+            xn = x - dx / rate if rate != 0.0 else 0.5 * (lo + hi)
+            if abs(xn - x) < tol:                   # at the root: step across it
+                xn = x + 0.5 * tol if x == lo else x - 0.5 * tol
+            elif not lo < xn < hi or hi - lo > 0.5 * width:
+                xn = 0.5 * (lo + hi)
+            x = xn
+        return hi
 
     #: Gauss-Legendre nodes and weights on [0, 1] (three points)
     _GAUSS = (np.array([0.5 - math.sqrt(15) / 10, 0.5, 0.5 + math.sqrt(15) / 10]),
