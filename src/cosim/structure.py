@@ -23,8 +23,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.linalg import eigh
 
+from fem.integrators import SMALL_DENSE
 from fem.response import undamped_response
 
 from .integrators import RK4
@@ -313,7 +313,11 @@ class StructureSubsystem(Subsystem):
             # scipy's LAPACK, not numpy's: on a loaded machine numpy's
             # threaded dsyevd took 1-20 ms for these 28 x 28 matrices against
             # 0.06 ms here, and follow = true asks for one basis per step
-            lam, Psi = eigh(K, check_finite=False, driver="evd")
+            if K.shape[0] <= SMALL_DENSE:           # a chain: no scipy import
+                lam, Psi = np.linalg.eigh(K)
+            else:
+                from scipy.linalg import eigh
+                lam, Psi = eigh(K, check_finite=False, driver="evd")
             basis = (np.maximum(lam, 0.0), Psi, math.sqrt(max(float(lam.max()), 0.0)))
             self._bases[active] = basis
         return basis

@@ -13,7 +13,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
 
 from .structures import LinearStructure, _place, _positive
 
@@ -128,16 +127,13 @@ class Chain:
         else:                   # first: (ceiling, 0), spring i: (i-1, i)
             upper = np.append(-1, np.arange(n - 1))
             lower = np.arange(n)
-        rows, cols, vals = [], [], []
+        # dense: a chain is small, and a dense model needs no scipy.sparse
+        stiffness = np.zeros((n, n))
         for a, b in ((upper, upper), (lower, lower), (upper, lower), (lower, upper)):
             ok = (a >= 0) & (b >= 0)
-            rows.append(a[ok])
-            cols.append(b[ok])
-            vals.append(k[ok] if a is b else -k[ok])
-        stiffness = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows),
-                                                          np.concatenate(cols))), shape=(n, n))
+            np.add.at(stiffness, (a[ok], b[ok]), k[ok] if a is b else -k[ok])
         return ChainStructure(
-            mass=sp.diags(m).tocsr(), stiffness=stiffness,
+            mass=np.diag(m), stiffness=stiffness,
             dof_names=tuple(f"m{i + 1}" for i in range(n)),
             positions=self.reference_positions(), direction=self.direction,
             inertia_load=m, rayleigh=self.rayleigh)

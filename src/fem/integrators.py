@@ -29,9 +29,6 @@ from abc import ABC, abstractmethod
 from typing import ClassVar
 
 import numpy as np
-import scipy.linalg as sla
-import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 __all__ = ["StructuralIntegrator", "Newmark", "HHTAlpha", "GeneralizedAlpha",
            "CentralDifference", "ExactModal", "STRUCTURAL_INTEGRATORS",
@@ -50,9 +47,21 @@ def _real(name, value, lo=-math.inf, hi=math.inf, rule=""):
     return float(value)
 
 
+def _issparse(A) -> bool:
+    """A scipy.sparse matrix (told without importing scipy.sparse)."""
+    return hasattr(A, "tocsr")
+
+
+def _dense(A):
+    return A.toarray() if _issparse(A) else A
+
+
 def _factorize(A):
     """Solver ``b -> A^{-1} b``: sparse LU, dense Cholesky if SPD, else dense LU."""
-    if sp.issparse(A):
+    import scipy.linalg as sla
+    if _issparse(A):
+        import scipy.sparse as sp
+        import scipy.sparse.linalg as spla
         return spla.splu(sp.csc_matrix(A)).solve
     if np.array_equal(A, A.T):
         try:
@@ -62,6 +71,25 @@ def _factorize(A):
             pass
     lu = sla.lu_factor(A, check_finite=False)
     return lambda b: sla.lu_solve(lu, b, check_finite=False)
+
+
+#: below this size a dense symmetric eigenproblem is solved by numpy, with no
+#: scipy import: what a discrete chain needs
+SMALL_DENSE = 32
+
+
+def generalized_eigh(K, M):
+    """Eigenvalues (ascending) and M-normalised vectors of ``K x = lam M x``
+    for dense symmetric ``K`` and SPD ``M``: numpy's ``eigh`` after a
+    Cholesky reduction when small (:data:`SMALL_DENSE`), scipy's otherwise."""
+    n = K.shape[0]
+    if n > SMALL_DENSE:
+        from scipy.linalg import eigh
+        return eigh(K, M)
+    L = np.linalg.cholesky(M)
+    Li = np.linalg.inv(L)
+    lam, Y = np.linalg.eigh(Li @ K @ Li.T)
+    return lam, Li.T @ Y
 
 
 class StructuralIntegrator(ABC):
@@ -85,14 +113,18 @@ class StructuralIntegrator(ABC):
 
     def __init__(self, M, C, K):
         mats = {"M": M, "C": C, "K": K}
-        sparse = any(sp.issparse(x) for x in mats.values())
+        sparse = any(_issparse(x) for x in mats.values())
         n = None
         for key, x in mats.items():
             if x is None and key == "C":
                 continue
             if x is None:
                 raise ValueError(f"`{key}` must be a square matrix, got None")
-            x = sp.csr_matrix(x, dtype=float) if sparse else np.asarray(x, dtype=float)
+            if sparse:
+                import scipy.sparse as sp
+                x = sp.csr_matrix(x, dtype=float)
+            else:
+                x = np.asarray(x, dtype=float)
             if x.ndim != 2 or x.shape[0] != x.shape[1] or (n is not None and x.shape[0] != n):
                 want = "a square matrix" if n is None else f"shape ({n}, {n}) like `M`"
                 raise ValueError(f"`{key}` must be {want}, got shape {x.shape}")
@@ -169,11 +201,13 @@ class StructuralIntegrator(ABC):
         (dense ``eigh``; for sparse n > 200 ``eigsh`` to a relative 1e-6, a Ritz
         value that errs low by ~1e-8 on a 3000-mass chain); computed once."""
         if self._omega_max is None:
-            if sp.issparse(self.K) and self.n > 200:
+            if _issparse(self.K) and self.n > 200:
+                import scipy.sparse.linalg as spla
                 lam = spla.eigsh(self.K, k=1, M=self.M, which="LA", tol=1e-6,
                                  ncv=min(self.n - 1, 40), return_eigenvectors=False)[0]
             else:
-                dense = [x.toarray() if sp.issparse(x) else x for x in (self.K, self.M)]
+                import scipy.linalg as sla
+                dense = [_dense(x) for x in (self.K, self.M)]
                 lam = sla.eigh(*dense, eigvals_only=True,
                                subset_by_index=[self.n - 1, self.n - 1])[0]
             self._omega_max = math.sqrt(max(float(lam), 0.0))
@@ -386,8 +420,7 @@ class ExactModal(StructuralIntegrator):
     def __init__(self, M, C, K, *, basis=None, n_modes=None, cutoff=None):
         super().__init__(M, C, K)
         if basis is None:
-            w2, Phi = sla.eigh(*[x.toarray() if sp.issparse(x) else x
-                                 for x in (self.K, self.M)])
+            w2, Phi = generalized_eigh(_dense(self.K), _dense(self.M))
             if w2[0] < -1e-8 * max(abs(w2[-1]), 1e-300):
                 raise ValueError(f"`K` must be positive semi-definite, got eigenvalue "
                                  f"{w2[0]:g} (rad/s)^2")
@@ -440,7 +473,8 @@ class ExactModal(StructuralIntegrator):
         A[:, 0, 1] = A[:, 1, 2] = A[:, 2, 3] = A[:, 3, 4] = 1.0
         A[:, 1, 0] = -(self.omega * h) ** 2
         A[:, 1, 1] = -self.damping * h
-        E = sla.expm(A)
+        from scipy.linalg import expm
+        E = expm(A)
         T = np.stack([E[:, 0, 0], h * E[:, 0, 1], E[:, 1, 0] / h, E[:, 1, 1]])
         fact = np.array([1.0, 1.0, 2.0])[:, None]     # s^2 = 2 (s^2 / 2)
         P = np.concatenate([h * h * fact * E[:, 0, 2:].T, h * fact * E[:, 1, 2:].T])

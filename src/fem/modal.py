@@ -113,9 +113,9 @@ def _elastic_solver(structure: LinearStructure):
 
 
 def _dense_modes(s: LinearStructure):
-    from scipy.linalg import eigh
+    from .integrators import _dense, generalized_eigh
 
-    lam, phi = eigh(s.stiffness.toarray(), s.mass.toarray())
+    lam, phi = generalized_eigh(_dense(s.stiffness), _dense(s.mass))
     nr = s.rigid_body_modes().shape[1]
     lam[:nr] = 0.0
     return np.maximum(lam, 0.0), phi, nr

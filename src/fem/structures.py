@@ -25,7 +25,6 @@ import math
 from abc import ABC, abstractmethod
 
 import numpy as np
-import scipy.sparse as sp
 
 __all__ = ["LinearStructure", "LineStructure"]
 
@@ -115,6 +114,13 @@ def _choice(value, name: str, allowed) -> str:
     return value
 
 
+def _as_matrix(a):
+    """A scipy.sparse matrix as CSR, anything else as a dense float array."""
+    if hasattr(a, "tocsr"):
+        return a.tocsr().astype(float)
+    return np.array(a, dtype=float)
+
+
 def _mass_orthonormal(vectors: np.ndarray, mass) -> np.ndarray:
     """Columns of ``vectors`` made M-orthonormal (same span)."""
     if vectors.shape[1] == 0:
@@ -157,8 +163,10 @@ class LinearStructure(ABC):
 
     def __init__(self, *, mass, stiffness, dof_names, origin, axis, direction,
                  inertia_load, rayleigh=None, rigid_modes=None):
-        self.mass = sp.csr_matrix(mass)
-        self.stiffness = sp.csr_matrix(stiffness)
+        # a sparse model (a mesh) stays sparse CSR; a small dense one (a
+        # chain) stays a dense array, and needs no scipy.sparse
+        self.mass = _as_matrix(mass)
+        self.stiffness = _as_matrix(stiffness)
         self.dof_names = tuple(dof_names)
         n = self.mass.shape[0]
         if self.mass.shape != (n, n) or self.stiffness.shape != (n, n) or len(self.dof_names) != n:
@@ -166,7 +174,8 @@ class LinearStructure(ABC):
                              f"{self.mass.shape}, {self.stiffness.shape}, {len(self.dof_names)}")
         self.rayleigh = _rayleigh(rayleigh)
         self.damping = (None if self.rayleigh is None else
-                        (self.rayleigh[0] * self.mass + self.rayleigh[1] * self.stiffness).tocsr())
+                        _as_matrix(self.rayleigh[0] * self.mass
+                                   + self.rayleigh[1] * self.stiffness))
         self.origin = np.array(origin, dtype=float)
         self.axis = np.array(axis, dtype=float)
         self.direction = np.array(direction, dtype=float)
@@ -289,9 +298,13 @@ class LinearStructure(ABC):
             raise ValueError(f"the structure has {self._rigid.shape[1]} rigid-body mode(s) and "
                              "no static equilibrium; support it to solve for a static state")
         if self._lu is None:
-            from scipy.sparse.linalg import splu
-            self._lu = splu(self.stiffness.tocsc())
-        return self._lu.solve(f)
+            if isinstance(self.stiffness, np.ndarray):
+                K = self.stiffness
+                self._lu = lambda b: np.linalg.solve(K, b)
+            else:
+                from scipy.sparse.linalg import splu
+                self._lu = splu(self.stiffness.tocsc()).solve
+        return self._lu(f)
 
 
 class LineStructure(LinearStructure):
