@@ -257,10 +257,17 @@ def run_series(series: str, sizes, window: float = WINDOW, budget: float = math.
                robot: dict | None = None, echo=None) -> list[Point]:
     """Run a series over ``sizes`` (ascending); stop after a run whose
     ``simulate`` CPU exceeds ``budget`` seconds, as larger ones cost more."""
+    from cosim.errors import SimulationError
+    from cosim.scene import SceneError
     robot = robot_state(series) if robot is None else robot
     points = []
     for n in sizes:
-        p = run_point(series, n, robot, window)
+        try:
+            p = run_point(series, n, robot, window)
+        except (SceneError, SimulationError, ValueError) as exc:
+            nan = math.nan
+            p = Point(series, int(n), 0, 0, nan, float(window), 0, nan, nan, nan, nan, nan, nan,
+                      nan, 0, nan, f"error: {exc}")
         points.append(p)
         if echo:
             echo(p)
@@ -350,6 +357,9 @@ def machine() -> str:
 def _echo(p):
     if isinstance(p, str):
         print(p, flush=True)
+        return
+    if p.status.startswith("error"):
+        print(f"{p.series:<11}{p.size:>6}  {p.status}", flush=True)
         return
     print(f"{p.series:<11}{p.size:>6}{p.dofs:>6}{p.modes:>6}{p.omega_max:>10.3g}"
           f"{p.macro_steps:>6}{p.cpu_build_s:>9.3f}{p.cpu_simulate_s:>9.3f}"

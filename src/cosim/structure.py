@@ -337,30 +337,50 @@ class StructureSubsystem(Subsystem):
             a[:xp.size] += c * k * np.outer(xp, r)
         return a
 
-    def _segment_states(self, lam, Psi, q, dq, a, taus):
+    def _segment(self, lam, Psi, q, dq, a):
+        """A segment's start in the coordinates of its modes ``(lam, Psi)``:
+        ``(lam, z0, dz0, load, P)`` with ``P`` (m, n_ports) the ports' shape
+        rows in those coordinates.  One change of basis per segment (O(m^2));
+        the instants probed inside it then cost O(m) each, for only the
+        ports' motion is evaluated there."""
         if Psi is None:                 # the structure's own modes
-            return undamped_response(lam, q, dq, a, taus)
-        z, dz = undamped_response(lam, Psi.T @ q, Psi.T @ dq, a @ Psi, taus)
-        return z @ Psi.T, dz @ Psi.T
+            return lam, q, dq, a, self._R.T
+        return lam, Psi.T @ q, Psi.T @ dq, a @ Psi, Psi.T @ self._R.T
 
-    def _gaps(self, tc, taus, Q, DQ):
+    @staticmethod
+    def _port_states(seg, taus):
+        """Ports' displacements and velocities along the field at ``taus``
+        after a segment's start: (k, n_ports) each."""
+        lam, z0, dz0, a, P = seg
+        return undamped_response(lam, z0, dz0, a, taus, rows=P)
+
+    @staticmethod
+    def _end_state(seg, Psi, tau):
+        """Modal state ``(q, dq)`` at ``tau`` after a segment's start."""
+        lam, z0, dz0, a, _ = seg
+        z, dz = undamped_response(lam, z0, dz0, a, [tau])
+        if Psi is None:
+            return z[0], dz[0]
+        return Psi @ z[0], Psi @ dz[0]
+
+    def _gaps(self, tc, taus, W, DW):
         """Penetration and rate of each embedded contact at ``tc + taus``
-        for modal states ``Q``, ``DQ`` (k, m): (k, n_embedded) each."""
+        for port displacements ``W`` and velocities ``DW`` along the field
+        (k, n_ports): (k, n_embedded) each."""
         dirc = complex(*self._dir)
         T = tc + np.asarray(taus, float)
         d = np.empty((len(T), len(self._embedded)))
         dd = np.empty_like(d)
         for j, e in enumerate(self._embedded):
-            r = self._R[e.port]
-            d[:, j], dd[:, j] = e.penetrations(T, complex(*self._ref[e.port]) + (Q @ r) * dirc,
-                                               (DQ @ r) * dirc)
+            d[:, j], dd[:, j] = e.penetrations(
+                T, complex(*self._ref[e.port]) + W[:, e.port] * dirc, DW[:, e.port] * dirc)
         return d, dd
 
     #: Gauss-Legendre nodes and weights on [0, 1] (six points) for the quadratures
     _GL6 = (0.5 * (np.polynomial.legendre.leggauss(6)[0] + 1.0),
             0.5 * np.polynomial.legendre.leggauss(6)[1])
 
-    def _segment_quadratures(self, t, h, tc, L, lam, Psi, q, dq, a, active, wmax, inputs):
+    def _segment_quadratures(self, t, h, tc, L, seg, active, wmax, inputs):
         """Add the impulse, first moment and work of the closed springs, and
         the ports' velocity moments, over ``[tc, tc + L]`` (Gauss-Legendre
         panels no longer than three radians of the fastest mode)."""
@@ -368,8 +388,8 @@ class StructureSubsystem(Subsystem):
         nodes, weights = self._GL6
         taus = (np.arange(n)[:, None] + nodes[None, :]).ravel() * (L / n)
         wts = np.tile(weights, n) * (L / n)
-        Q, DQ = self._segment_states(lam, Psi, q, dq, a, taus)
-        d, _ = self._gaps(tc, taus, Q, DQ)
+        W, DW = self._port_states(seg, taus)
+        d, _ = self._gaps(tc, taus, W, DW)
         dirc = complex(*self._dir)
         ne = len(self._embedded)
         quad = self.aux[:4 * ne].reshape(ne, 4)
@@ -380,10 +400,10 @@ class StructureSubsystem(Subsystem):
             c = (e.normal.conjugate() * dirc).real
             quad[j, 0] += wts @ f
             quad[j, 2] += wts @ (f * (tc + taus - t))
-            quad[j, 3] += wts @ (e.side * c * f * (DQ @ self._R[e.port]))
+            quad[j, 3] += wts @ (e.side * c * f * DW[:, e.port])
         if inputs is not None and np.any(inputs.coeffs):
             sv = (tc + taus - t) / h
-            V = (DQ @ self._R.T) * dirc                        # (k, n_ports)
+            V = DW * dirc                                      # (k, n_ports)
             for jj in range(3):
                 self.port_moments[jj] += (wts * sv ** jj) @ V
 
@@ -398,21 +418,21 @@ class StructureSubsystem(Subsystem):
         eps = 1e-13 * max(1.0, abs(t1))
         while t1 - tc > eps:
             L = t1 - tc
-            d0, dd0 = self._gaps(tc, [0.0], q[None], dq[None])
+            d0, dd0 = self._gaps(tc, [0.0], (self._R @ q)[None], (self._R @ dq)[None])
             active = tuple(bool(x > 0 or (x == 0 and v > 0)) for x, v in zip(d0[0], dd0[0]))
             for j in np.flatnonzero((d0[0] == 0) & (dd0[0] > 0)):
                 self.switch_log.append((tc, int(j), True))     # touching and closing now
             lam, Psi, wmax = self._active_basis(active)
-            a = self._segment_load(t, h, tc, Gin, active)
+            seg = self._segment(lam, Psi, q, dq, self._segment_load(t, h, tc, Gin, active))
             n = int(min(max(math.ceil(2.0 * L * wmax), 2), 512))
             taus = L * np.arange(1, n + 1) / n
-            Q, DQ = self._segment_states(lam, Psi, q, dq, a, taus)
-            d, _ = self._gaps(tc, taus, Q, DQ)
+            W, DW = self._port_states(seg, taus)
+            d, _ = self._gaps(tc, taus, W, DW)
             flips = (d > 0) != np.array(active)
             rows = np.flatnonzero(flips.any(axis=1))
             if not len(rows):
-                self._segment_quadratures(t, h, tc, L, lam, Psi, q, dq, a, active, wmax, inputs)
-                q, dq = Q[-1], DQ[-1]
+                self._segment_quadratures(t, h, tc, L, seg, active, wmax, inputs)
+                q, dq = self._end_state(seg, Psi, taus[-1])
                 break
             i = int(rows[0])
             lo0, hi0 = (taus[i - 1] if i else 0.0), taus[i]
@@ -421,8 +441,8 @@ class StructureSubsystem(Subsystem):
                 lo, hi = lo0, hi0
                 for _ in range(80):
                     mid = 0.5 * (lo + hi)
-                    Qm, DQm = self._segment_states(lam, Psi, q, dq, a, [mid])
-                    dm, _ = self._gaps(tc, [mid], Qm, DQm)
+                    Wm, DWm = self._port_states(seg, [mid])
+                    dm, _ = self._gaps(tc, [mid], Wm, DWm)
                     if (dm[0, j] > 0) == active[j]:
                         lo = mid
                     else:
@@ -433,9 +453,8 @@ class StructureSubsystem(Subsystem):
                     best, who = hi, [j]
                 elif abs(hi - best) <= 1e-15:
                     who.append(j)
-            self._segment_quadratures(t, h, tc, best, lam, Psi, q, dq, a, active, wmax, inputs)
-            Qb, DQb = self._segment_states(lam, Psi, q, dq, a, [best])
-            q, dq = Qb[0], DQb[0]
+            self._segment_quadratures(t, h, tc, best, seg, active, wmax, inputs)
+            q, dq = self._end_state(seg, Psi, best)
             tc += best
             for j in who:
                 self.switch_log.append((tc, int(j), not active[j]))

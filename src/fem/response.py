@@ -16,7 +16,7 @@ __all__ = ["undamped_response"]
 _DEGREE = 3
 
 
-def undamped_response(lam, z0, dz0, a, tau):
+def undamped_response(lam, z0, dz0, a, tau, rows=None):
     """Modal displacements and velocities at times ``tau`` after the start.
 
     Parameters
@@ -31,9 +31,16 @@ def undamped_response(lam, z0, dz0, a, tau):
     tau : (k,) array
         Times after the start [s].
 
+    rows : (m, p) array, optional
+        Return only the combinations ``z @ rows`` and ``dz @ rows`` (for
+        instance the displacements of ``p`` points): the response is then
+        summed mode by mode without forming the ``(k, m)`` states, in chunks
+        of instants, so the memory stays bounded however many instants are
+        asked for.
+
     Returns
     -------
-    z, dz : (k, m) arrays
+    z, dz : (k, m) arrays, or (k, p) arrays with ``rows``
     """
     lam = np.asarray(lam, float)
     a = np.atleast_2d(np.asarray(a, float))
@@ -53,6 +60,9 @@ def undamped_response(lam, z0, dz0, a, tau):
     b0 = (c[0] - 2.0 * b2) / lam_e
     A = z0 - b0
     B = (dz0 - b1) / omega
+    if rows is not None:
+        return _combined(rows, rigid, omega, np.stack([b0, b1, b2, b3]), A, B,
+                         np.asarray(z0, float), np.asarray(dz0, float), c, tau)
     wt = tau * omega
     cs, sn = np.cos(wt), np.sin(wt)
     z = b0 + tau * (b1 + tau * (b2 + tau * b3)) + A * cs + B * sn
@@ -65,3 +75,48 @@ def undamped_response(lam, z0, dz0, a, tau):
         z = np.where(rigid, zr, z)
         dz = np.where(rigid, dzr, dz)
     return z, dz
+
+
+#: instants per chunk of :func:`_combined`: chunk x modes stays near 2**21 values
+_CHUNK_VALUES = 2 ** 21
+
+
+def _combined(rows, rigid, omega, b, A, B, z0, dz0, c, tau):
+    """``z @ rows`` and ``dz @ rows`` of :func:`undamped_response`, summed mode
+    by mode: the polynomial parts are combined once (O(m p)), the harmonic
+    ones by a product of the (chunk, m) cosines and sines with (m, p)
+    weights, so the cost is O(k m p) and the memory O(chunk m)."""
+    rows = np.asarray(rows, float)
+    if rows.ndim != 2 or rows.shape[0] != omega.size:
+        raise ValueError(f"`rows` must have shape ({omega.size}, p), got {rows.shape}")
+    el = ~rigid
+    Pe, we = rows[el], omega[el]
+    bp = b[:, el] @ Pe                                         # (4, p)
+    wc, ws = A[el, None] * Pe, B[el, None] * Pe                # (me, p)
+    vc, vs = we[:, None] * ws, -we[:, None] * wc
+    # rigid-body modes: the load integrated twice, powers 0..5 of tau
+    Pr = rows[rigid]
+    cr = c[:, rigid]
+    zr = np.stack([z0[rigid], dz0[rigid], cr[0] / 2, cr[1] / 6, cr[2] / 12, cr[3] / 20]) @ Pr
+    dzr = np.stack([dz0[rigid], cr[0], cr[1] / 2, cr[2] / 3, cr[3] / 4]) @ Pr
+    k, p = tau.shape[0], rows.shape[1]
+    z, dz = np.empty((k, p)), np.empty((k, p))
+    step = max(1, _CHUNK_VALUES // max(int(we.size), 1))
+    for i in range(0, k, step):
+        t = tau[i:i + step]
+        wt = t * we
+        cs, sn = np.cos(wt), np.sin(wt)
+        z[i:i + step] = bp[0] + t * (bp[1] + t * (bp[2] + t * bp[3])) + cs @ wc + sn @ ws
+        dz[i:i + step] = bp[1] + t * (2.0 * bp[2] + 3.0 * t * bp[3]) + cs @ vc + sn @ vs
+        if Pr.shape[0]:
+            z[i:i + step] += _powers(t, zr)
+            dz[i:i + step] += _powers(t, dzr)
+    return z, dz
+
+
+def _powers(t, coeffs):
+    """``sum_j coeffs[j] t**j`` for instants ``t`` (k, 1) and coeffs (n, p)."""
+    out = np.zeros((t.shape[0], coeffs.shape[1]))
+    for cj in coeffs[::-1]:
+        out = out * t + cj
+    return out

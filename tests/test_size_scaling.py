@@ -1,0 +1,140 @@
+"""The size-scaling benchmark: its log-log slope on synthetic costs with
+known exponents, its scenes, and its core on two small sizes (no timing is
+asserted: speed is the benchmark's own output).  Also the ports-only
+evaluation of ``fem.undamped_response`` that the closed-form contact steps
+use."""
+import csv
+import importlib.util
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fem import undamped_response
+from fem import response as fem_response
+
+_PATH = Path(__file__).resolve().parents[1] / "benchmarks" / "size_scaling.py"
+_spec = importlib.util.spec_from_file_location("size_scaling", _PATH)
+bench = importlib.util.module_from_spec(_spec)
+sys.modules.setdefault("size_scaling", bench)      # dataclasses look their module up
+_spec.loader.exec_module(bench)
+
+SIZES = np.array([16, 32, 64, 128, 256, 512, 1024], float)
+
+
+@pytest.mark.parametrize("p", [0.0, 0.5, 1.0, 2.0, 3.0])
+def test_slope_of_an_exact_power_law(p):
+    slope, intercept = bench.loglog_slope(SIZES, 3e-4 * SIZES ** p)
+    assert slope == pytest.approx(p, abs=1e-12)
+    assert intercept == pytest.approx(np.log(3e-4), abs=1e-10)
+
+
+@pytest.mark.parametrize("p", [1.0, 2.0])
+def test_slope_with_noise(p):
+    """5 % multiplicative noise over two decades of size moves the slope by
+    a few hundredths; the seed fixes the draw."""
+    rng = np.random.default_rng(12)
+    cost = 2e-3 * SIZES ** p * np.exp(rng.normal(0.0, 0.05, SIZES.size))
+    slope, _ = bench.loglog_slope(SIZES, cost)
+    assert abs(slope - p) < 0.05, f"slope {slope:.3f} for exponent {p}"
+
+
+def test_a_constant_offset_bends_the_full_fit_but_not_the_tail():
+    """cost = c0 + a n^2 with c0 = a 128^2: the full-range fit sees the flat
+    start and falls well below 2; the three largest sizes follow n^2."""
+    cost = 1.0 + SIZES ** 2 / 128.0 ** 2
+    full, _ = bench.loglog_slope(SIZES, cost)
+    tail, _ = bench.loglog_slope(SIZES, cost, tail=3)
+    assert full < 1.5, f"full-range slope {full:.3f}"
+    assert abs(tail - 2.0) < 0.15, f"tail slope {tail:.3f}"
+    # the order of the points does not matter
+    order = np.random.default_rng(0).permutation(SIZES.size)
+    assert bench.loglog_slope(SIZES[order], cost[order], tail=3)[0] == pytest.approx(tail)
+
+
+def test_slope_refuses_what_has_no_slope():
+    with pytest.raises(ValueError, match="at least two distinct sizes"):
+        bench.loglog_slope([8, 8], [1.0, 2.0])
+    with pytest.raises(ValueError, match="finite and > 0"):
+        bench.loglog_slope([8, 16], [1.0, 0.0])
+    with pytest.raises(ValueError, match="`tail` must be >= 2"):
+        bench.loglog_slope([8, 16, 32], [1.0, 2.0, 3.0], tail=1)
+    with pytest.raises(ValueError, match="same length"):
+        bench.loglog_slope([8, 16, 32], [1.0, 2.0])
+
+
+def test_chain_of_n_masses_starts_at_rest_with_its_top_at_zero():
+    """The benchmark's lift of the chain (its top's static sag, g m n(n+1)/2k)
+    puts the top at y = 0 in the static state, as in three_mass."""
+    from cosim import load_scene
+    robot = {j: {"q": 0.0, "dq": 0.0} for j in bench.JOINTS}
+    for n in (3, 7):
+        scene = load_scene(bench.CASES / "three_mass.toml", "f100",
+                           bench.overrides("chain", n, robot, 0.01))
+        system, _ = scene.build()
+        chain = system.subsystems[system.names.index("chain")]
+        assert chain.structure.n_dof == n
+        pos, vel = chain.outputs(0.0, chain.x)
+        assert pos[0, 1] == pytest.approx(0.0, abs=1e-12)
+        assert np.all(vel == 0.0)
+
+
+def test_beam_without_reduction_keeps_every_mode():
+    from cosim import load_scene
+    robot = {j: {"q": 0.0, "dq": 0.0} for j in bench.JOINTS}
+    for series, kept in (("beam_full", 32), ("beam_modal", None)):
+        scene = load_scene(bench.CASES / "beam_impact.toml", None,
+                           bench.overrides(series, 16, robot, 0.01))
+        system, _ = scene.build()
+        beam = system.subsystems[system.names.index("beam")]
+        assert beam.structure.n_dof == 32
+        if kept is None:    # the 20 kHz cutoff drops the mesh's top modes
+            assert beam.n_modes < 32 and beam.natural_frequencies_hz.max() < 2e4
+        else:
+            assert beam.n_modes == kept
+
+
+def test_core_on_two_small_sizes_writes_the_csv(tmp_path):
+    points = []
+    for series, sizes in (("chain", (3, 4)), ("beam_modal", (4, 8))):
+        points += bench.run_series(series, sizes, window=0.012)
+    path = bench.write_csv(points, tmp_path / "size_scaling.csv")
+    with path.open() as fh:
+        rows = list(csv.DictReader(fh))
+    assert tuple(rows[0]) == bench.COLUMNS
+    assert [(r["series"], int(r["size"])) for r in rows] == [
+        ("chain", 3), ("chain", 4), ("beam_modal", 4), ("beam_modal", 8)]
+    assert all(r["status"] == "finished" for r in rows)
+    assert [int(r["dofs"]) for r in rows] == [3, 4, 8, 16]
+    for r in rows:
+        assert float(r["window_s"]) == 0.012 and int(r["macro_steps"]) > 0
+        assert 0.0 < float(r["cpu_structure_s"]) <= float(r["cpu_solve_s"])
+        assert float(r["cpu_per_step_s"]) == pytest.approx(
+            float(r["cpu_solve_s"]) / int(r["macro_steps"]))
+    # C strikes within the window: the robot starts just before the impact
+    assert all(int(r["contacts_C"]) >= 1 and float(r["peak_C"]) > 0 for r in rows)
+    fits = bench.slopes(points)
+    assert set(fits) == {"chain", "beam_modal"}
+    assert set(fits["chain"]) == set(bench.SLOPE_METRICS)
+
+
+@pytest.mark.parametrize("n_rigid", [0, 2])
+def test_undamped_response_at_ports_equals_the_projected_states(n_rigid, monkeypatch):
+    """``rows`` gives ``z @ rows`` without forming the states, rigid-body
+    modes included, and in chunks of instants (forced small here)."""
+    rng = np.random.default_rng(3)
+    m = 40
+    lam = rng.uniform(1.0, 1e6, m)
+    lam[:n_rigid] = 0.0
+    z0, dz0 = rng.normal(size=m), rng.normal(size=m)
+    a = rng.normal(size=(4, m))
+    tau = np.linspace(0.0, 0.01, 37)
+    rows = rng.normal(size=(m, 3))
+    z, dz = undamped_response(lam, z0, dz0, a, tau)
+    monkeypatch.setattr(fem_response, "_CHUNK_VALUES", 5 * m)    # 5 instants a chunk
+    zp, dzp = undamped_response(lam, z0, dz0, a, tau, rows=rows)
+    np.testing.assert_allclose(zp, z @ rows, rtol=1e-12, atol=1e-12 * np.abs(zp).max())
+    np.testing.assert_allclose(dzp, dz @ rows, rtol=1e-12, atol=1e-12 * np.abs(dzp).max())
+    with pytest.raises(ValueError, match=r"`rows` must have shape \(40, p\)"):
+        undamped_response(lam, z0, dz0, a, tau, rows=rows[:5])
