@@ -138,3 +138,54 @@ def test_undamped_response_at_ports_equals_the_projected_states(n_rigid, monkeyp
     np.testing.assert_allclose(dzp, dz @ rows, rtol=1e-12, atol=1e-12 * np.abs(dzp).max())
     with pytest.raises(ValueError, match=r"`rows` must have shape \(40, p\)"):
         undamped_response(lam, z0, dz0, a, tau, rows=rows[:5])
+
+
+@pytest.mark.parametrize("scene_file,variant", [("three_mass.toml", "f100"),
+                                                ("beam_impact.toml", None)])
+def test_closed_form_segment_integrals_match_a_fine_quadrature(scene_file, variant):
+    """The closed spring's impulse, first moment and work on the host, and the
+    ports' velocity moments, over a segment of a hosted contact step (partner
+    moving along a cubic, port loaded along a line), against Gauss-Legendre on
+    1000 panels of the same exact response."""
+    from cosim import load_scene
+    from cosim.subsystem import StepInput
+    scene = load_scene(bench.CASES / scene_file, variant)
+    system, _ = scene.build()
+    sub = next(s for s in system.subsystems if hasattr(s, "_segment_quadratures"))
+    e = sub._embedded[0]
+    m, t, h, tc, L = sub.n_modes, 0.1, 2e-4, 0.10005, 1.2e-4
+    p0 = complex(*sub._ref[e.port])
+    # the partner sits 1 mm into the host's port and moves on a cubic in s
+    inward = e.side * e.normal * 1e-3
+    e.set_motion(t, h, np.array([p0 + inward, 0.3e-3 * e.normal, -0.2e-3, 0.1e-3j]))
+    coeffs = np.zeros((2, sub.n_ports, 2))
+    coeffs[:, e.port] = [[0.0, -3.0], [0.0, 5.0]]
+    inputs = StepInput(t, h, coeffs)
+    rng = np.random.default_rng(5)
+    q, dq = 1e-6 * rng.normal(size=m), 1e-4 * rng.normal(size=m)
+    active = (True,)
+    lam, Psi, _ = sub._active_basis(active)
+    Gin = sub._modal_force(inputs.coeffs).copy()
+    Gin[0] += sub._g_modal
+    seg = sub._segment(lam, Psi, q, dq, sub._segment_load(t, h, tc, Gin, active))
+    sub.aux[:] = 0.0
+    sub.port_moments = np.zeros((3, sub.n_ports), complex)
+    sub._segment_quadratures(t, h, tc, L, seg, active, inputs)
+    got = sub.aux[:4].copy(), sub.port_moments.copy()
+    x, w = np.polynomial.legendre.leggauss(8)
+    n = 1000
+    taus = ((np.arange(n)[:, None] + 0.5 * (x + 1.0)[None]) * (L / n)).ravel()
+    wts = np.tile(0.5 * w, n) * (L / n)
+    W, DW = sub._port_states(seg, taus)
+    d, _ = sub._gaps(tc, taus, W, DW)
+    assert d.min() > 0.0                       # closed over the whole segment
+    f = e.law.contact_stiffness * d[:, 0]
+    beta = e.side * (e.normal.conjugate() * complex(*sub._dir)).real
+    ref = [wts @ f, wts @ (f * (tc + taus - t)), wts @ (beta * f * DW[:, e.port])]
+    np.testing.assert_allclose(got[0][[0, 2, 3]], ref, rtol=1e-9)
+    assert got[0][1] == 0.0                    # dissipation: a linear spring has none
+    s = (tc + taus - t) / h
+    V = DW * complex(*sub._dir)
+    for j in range(3):
+        np.testing.assert_allclose(got[1][j], (wts * s ** j) @ V, rtol=1e-9,
+                                   atol=1e-12 * np.abs(V).max() * L)

@@ -25,7 +25,7 @@ import math
 import numpy as np
 from scipy.linalg import eigh
 
-from fem.response import undamped_response
+from fem.response import undamped_moments, undamped_response
 
 from .integrators import RK4
 from .subsystem import EmbeddedContact, StepInput, Subsystem, reparametrised
@@ -376,36 +376,53 @@ class StructureSubsystem(Subsystem):
                 T, complex(*self._ref[e.port]) + W[:, e.port] * dirc, DW[:, e.port] * dirc)
         return d, dd
 
-    #: Gauss-Legendre nodes and weights on [0, 1] (six points) for the quadratures
-    _GL6 = (0.5 * (np.polynomial.legendre.leggauss(6)[0] + 1.0),
-            0.5 * np.polynomial.legendre.leggauss(6)[1])
-
-    def _segment_quadratures(self, t, h, tc, L, seg, active, wmax, inputs):
+    def _segment_quadratures(self, t, h, tc, L, seg, active, inputs):
         """Add the impulse, first moment and work of the closed springs, and
-        the ports' velocity moments, over ``[tc, tc + L]`` (Gauss-Legendre
-        panels no longer than three radians of the fastest mode)."""
-        n = max(1, math.ceil(L * wmax / 3.0))      # error ~ 3e-10 per panel
-        nodes, weights = self._GL6
-        taus = (np.arange(n)[:, None] + nodes[None, :]).ravel() * (L / n)
-        wts = np.tile(weights, n) * (L / n)
-        W, DW = self._port_states(seg, taus)
-        d, _ = self._gaps(tc, taus, W, DW)
+        the ports' velocity moments, over ``[tc, tc + L]``, in closed form.
+
+        A closed spring's penetration is a polynomial (the partner's motion)
+        less ``beta w_p`` (the port's displacement along the field), so each
+        integral is a combination of the moments ``int tau^j w_p`` of the
+        ports' displacements (:func:`fem.undamped_moments`, O(m)) and of their
+        values at the segment's ends; the work ``int f w_p'`` and the velocity
+        moments are integrated by parts.  No instant is sampled, so the cost
+        does not grow with the fastest mode's frequency."""
+        loaded = inputs is not None and bool(np.any(inputs.coeffs))
+        if not loaded and not any(active):
+            return
+        lam, z0, dz0, a, P = seg
+        degree = max([3] + [e.motion.size - 2 for on, e in zip(active, self._embedded) if on])
+        Wm = undamped_moments(lam, z0, dz0, a, L, P, degree)      # (degree + 1, n_ports)
+        (W0, WL), _ = self._port_states(seg, [0.0, L])
         dirc = complex(*self._dir)
         ne = len(self._embedded)
         quad = self.aux[:4 * ne].reshape(ne, 4)
+        sig = tc - t
         for j, (on, e) in enumerate(zip(active, self._embedded)):
             if not on:
                 continue
-            f = e.law.contact_stiffness * d[:, j]
-            c = (e.normal.conjugate() * dirc).real
-            quad[j, 0] += wts @ f
-            quad[j, 2] += wts @ (f * (tc + taus - t))
-            quad[j, 3] += wts @ (e.side * c * f * DW[:, e.port])
-        if inputs is not None and np.any(inputs.coeffs):
-            sv = (tc + taus - t) / h
-            V = DW * dirc                                      # (k, n_ports)
-            for jj in range(3):
-                self.port_moments[jj] += (wts * sv ** jj) @ V
+            k, p, nc = e.law.contact_stiffness, e.port, e.normal.conjugate()
+            beta = e.side * (nc * dirc).real
+            # penetration d(tau) = alpha(tau) - beta w_p(tau)
+            alpha = e.side * (nc * reparametrised(e.motion, (tc - e.t0) / e.h, 1.0 / e.h)).real
+            alpha[0] += e.offset - e.side * (nc * complex(*self._ref[p])).real
+            q = np.arange(alpha.size)
+            ia0 = alpha @ (L ** (q + 1) / (q + 1))
+            ia1 = alpha @ (L ** (q + 2) / (q + 2))
+            quad[j, 0] += k * (ia0 - beta * Wm[0, p])
+            quad[j, 2] += k * (sig * ia0 + ia1 - beta * (sig * Wm[0, p] + Wm[1, p]))
+            # int f beta w_p' = beta k ([alpha w_p] - int alpha' w_p - beta [w_p^2] / 2)
+            dalpha = alpha[1:] * q[1:]
+            aL = float(np.polyval(alpha[::-1], L))
+            quad[j, 3] += beta * k * (aL * WL[p] - alpha[0] * W0[p] - dalpha @ Wm[:dalpha.size, p]
+                                      - 0.5 * beta * (WL[p] ** 2 - W0[p] ** 2))
+        if loaded:
+            # int s^j w_p' with s = (tc - t + tau) / h, by parts
+            s0, s1 = sig / h, (sig + L) / h
+            self.port_moments[0] += (WL - W0) * dirc
+            self.port_moments[1] += (s1 * WL - s0 * W0 - Wm[0] / h) * dirc
+            self.port_moments[2] += (s1 * s1 * WL - s0 * s0 * W0
+                                     - 2.0 * (sig * Wm[0] + Wm[1]) / (h * h)) * dirc
 
     def _step_closed_form(self, t, h, inputs):
         m = self.n_modes
@@ -431,7 +448,7 @@ class StructureSubsystem(Subsystem):
             flips = (d > 0) != np.array(active)
             rows = np.flatnonzero(flips.any(axis=1))
             if not len(rows):
-                self._segment_quadratures(t, h, tc, L, seg, active, wmax, inputs)
+                self._segment_quadratures(t, h, tc, L, seg, active, inputs)
                 q, dq = self._end_state(seg, Psi, taus[-1])
                 break
             i = int(rows[0])
@@ -453,7 +470,7 @@ class StructureSubsystem(Subsystem):
                     best, who = hi, [j]
                 elif abs(hi - best) <= 1e-15:
                     who.append(j)
-            self._segment_quadratures(t, h, tc, best, seg, active, wmax, inputs)
+            self._segment_quadratures(t, h, tc, best, seg, active, inputs)
             q, dq = self._end_state(seg, Psi, best)
             tc += best
             for j in who:
