@@ -189,3 +189,21 @@ def test_closed_form_segment_integrals_match_a_fine_quadrature(scene_file, varia
     for j in range(3):
         np.testing.assert_allclose(got[1][j], (wts * s ** j) @ V, rtol=1e-9,
                                    atol=1e-12 * np.abs(V).max() * L)
+
+
+def test_a_slow_mode_beside_a_very_fast_one_is_not_taken_for_rigid():
+    """A 512-element beam with all its modes spans 12 decades of omega^2 (its
+    first mode is 5.7e-13 of the top one).  Held at its static deflection
+    under a constant load, the slow mode stays there; it does not fall freely
+    as a rigid-body mode would (c0 tau^2 / 2 = 1.1e-3 here at 10 ms)."""
+    lam = np.array([2.2e4, 3.8e16])
+    c0 = np.array([-22.0, 5.0])
+    static = c0 / lam
+    tau = np.array([1e-3, 1e-2])
+    z, dz = undamped_response(lam, static, np.zeros(2), c0[None], tau)
+    np.testing.assert_allclose(z[:, 0], static[0], rtol=1e-9)
+    np.testing.assert_allclose(dz[:, 0], 0.0, atol=1e-9 * abs(static[0]) * np.sqrt(lam[0]))
+    # a genuinely rigid mode (omega^2 = 0) integrates the load twice
+    zr, dzr = undamped_response(np.array([0.0, 3.8e16]), [0.0, 0.0], [0.0, 0.0], c0[None], tau)
+    np.testing.assert_allclose(zr[:, 0], c0[0] * tau ** 2 / 2, rtol=1e-12)
+    np.testing.assert_allclose(dzr[:, 0], c0[0] * tau, rtol=1e-12)

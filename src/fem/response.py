@@ -36,7 +36,11 @@ def _split(lam, z0, dz0, a):
     c = np.zeros((_DEGREE + 1, lam.size))
     c[:a.shape[0]] = a
     z0, dz0 = np.asarray(z0, float), np.asarray(dz0, float)
-    rigid = lam <= 1e-12 * max(float(lam.max(initial=0.0)), 1e-300)
+    # an eigen-solver's round-off on lam is about eps * max(lam): values within
+    # 45 times that are rigid-body modes.  (A threshold of 1e-12 max(lam) took
+    # the first mode of a 512-element beam with all its modes, 5.7e-13
+    # max(lam), for a rigid one, which then fell freely under its weight.)
+    rigid = lam <= 1e-14 * max(float(lam.max(initial=0.0)), 1e-300)
     lam_e = np.where(rigid, 1.0, lam)
     omega = np.sqrt(lam_e)
     # particular polynomial b of P'' + lam P = a (elastic modes)
@@ -73,7 +77,7 @@ def undamped_response(lam, z0, dz0, a, tau, rows=None):
     ----------
     lam : (m,) array
         Squared circular frequencies [rad^2/s^2], >= 0 (a value below
-        ``1e-12 * max(lam)`` counts as a rigid-body mode).
+        ``1e-14 * max(lam)`` counts as a rigid-body mode).
     z0, dz0 : (m,) arrays
         State at ``tau = 0``.
     a : (p + 1, m) array
