@@ -282,6 +282,15 @@ def run_series(series: str, sizes, window: float = WINDOW, budget: float = math.
     return points
 
 
+def read_csv(path) -> list[Point]:
+    """Points of a CSV written by :func:`write_csv`."""
+    types = {f: t for f, t in Point.__annotations__.items()}
+    with Path(path).open() as fh:
+        return [Point(**{k: (v if types[k] == "str" else
+                             int(v) if types[k] == "int" else float(v))
+                         for k, v in row.items()}) for row in csv.DictReader(fh)]
+
+
 def write_csv(points, path) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -319,7 +328,7 @@ def plot(points, path) -> Path:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    fig, axes = plt.subplots(1, 2, figsize=(10, 4.2), constrained_layout=True)
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4.2), sharey=True, constrained_layout=True)
     style = {"beam_modal": ("C0", "modal (cutoff 20 kHz)"),
              "beam_full": ("C3", "all modes"), "chain": ("C2", "chain")}
     fits = slopes(points)
@@ -333,14 +342,14 @@ def plot(points, path) -> Path:
             n = [p.size for p in pts]
             slope = fits.get(series, {}).get("cpu_per_sim_s", (math.nan, math.nan))[1]
             ax.loglog(n, [p.cpu_per_sim_s for p in pts], "o-", color=color,
-                      label=f"{label}: run (slope {slope:.2f})")
+                      label=f"{label}: whole run (slope {slope:.2f}, larger half)")
             ax.loglog(n, [p.cpu_structure_s / p.window_s for p in pts], "s--", color=color,
                       alpha=0.7, label=f"{label}: structure's steps")
         ax.set_xlabel(xlabel)
         ax.set_ylabel("CPU per simulated second [s/s]")
         ax.grid(True, which="both", alpha=0.3)
         if ax.get_legend_handles_labels()[0]:
-            ax.legend(fontsize=8)
+            ax.legend(fontsize=8, loc="upper left")
     axes[0].set_title("beam_impact: C's two contacts")
     axes[1].set_title("three_mass f100: C's contact train")
     path = Path(path)
@@ -383,7 +392,13 @@ def main(argv=None):
     ap.add_argument("--blas-threads", default="1", help="BLAS threads (set before numpy loads)")
     ap.add_argument("--sizes", action="append", default=[], metavar="SERIES=N,N,...",
                     help="sizes of one series (repeatable)")
+    ap.add_argument("--from-csv", default=None, metavar="CSV",
+                    help="no runs: slopes and picture of an earlier CSV")
     args = ap.parse_args(argv)
+    if args.from_csv:
+        points = read_csv(args.from_csv)
+        _report(points, args.png or Path(args.from_csv).with_suffix(".png"))
+        return 0
     sizes = dict(QUICK_SIZES if args.quick else SIZES)
     for item in args.sizes:
         name, _, values = item.partition("=")
@@ -400,16 +415,19 @@ def main(argv=None):
         points += run_series(series, sizes[series], args.window, args.budget, echo=_echo)
     out = Path(args.out)
     print(f"CSV: {write_csv(points, out / 'size_scaling.csv')}")
+    _report(points, args.png or out / "size_scaling.png")
+    return 0
+
+
+def _report(points, png):
     print("log-log slopes (all sizes / larger half):")
     for series, fit in slopes(points).items():
         print(f"  {series:<11}" + "  ".join(f"{m} {a:.2f} / {b:.2f}" for m, (a, b)
                                              in fit.items()))
     try:
-        png = plot(points, args.png or out / "size_scaling.png")
-        print(f"plot: {png}")
+        print(f"plot: {plot(points, png)}")
     except ImportError:
         print("plot: skipped (matplotlib missing: pip install '.[plot]')")
-    return 0
 
 
 if __name__ == "__main__":
