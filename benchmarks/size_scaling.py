@@ -350,6 +350,8 @@ def plot(points, path) -> Path:
         ax.grid(True, which="both", alpha=0.3)
         if ax.get_legend_handles_labels()[0]:
             ax.legend(fontsize=8, loc="upper left")
+    top = max((p.cpu_per_sim_s for p in points if p.status == "finished"), default=1.0)
+    axes[0].set_ylim(top=20.0 * top)          # room for the legends above the data
     axes[0].set_title("beam_impact: C's two contacts")
     axes[1].set_title("three_mass f100: C's contact train")
     path = Path(path)
