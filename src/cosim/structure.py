@@ -25,6 +25,7 @@ import math
 import numpy as np
 from scipy.linalg import eigh
 
+from fem.rank_one import rank_one_eigh
 from fem.response import undamped_moments, undamped_response
 
 from .integrators import RK4
@@ -304,16 +305,24 @@ class StructureSubsystem(Subsystem):
             basis = (self.omega ** 2, None, float(self.omega.max(initial=0.0)))
             self._bases[active] = basis
         elif basis is None:
-            K = np.diag(self.omega ** 2)
+            springs = []
             for on, e in zip(active, self._embedded):
                 if on:
-                    r = self._R[e.port]
                     c = (e.normal.conjugate() * complex(*self._dir)).real
-                    K += e.law.contact_stiffness * c * c * np.outer(r, r)
-            # scipy's LAPACK, not numpy's: on a loaded machine numpy's
-            # threaded dsyevd took 1-20 ms for these 28 x 28 matrices against
-            # 0.06 ms here, and follow = true asks for one basis per step
-            lam, Psi = eigh(K, check_finite=False, driver="evd")
+                    springs.append(math.sqrt(e.law.contact_stiffness) * abs(c) * self._R[e.port])
+            # one spring: diag(omega^2) + z z^T by its secular equation, O(m^2)
+            # (follow = true asks for one basis per step in contact, and a
+            # dense solve is O(m^3)); several, or a case it declines: LAPACK
+            res = rank_one_eigh(self.omega ** 2, springs[0]) if len(springs) == 1 else None
+            if res is None:
+                K = np.diag(self.omega ** 2)
+                for z in springs:
+                    K += np.outer(z, z)
+                # scipy's LAPACK, not numpy's: on a loaded machine numpy's
+                # threaded dsyevd took 1-20 ms for these 28 x 28 matrices
+                # against 0.06 ms here
+                res = eigh(K, check_finite=False, driver="evd")
+            lam, Psi = res
             basis = (np.maximum(lam, 0.0), Psi, math.sqrt(max(float(lam.max()), 0.0)))
             self._bases[active] = basis
         return basis
