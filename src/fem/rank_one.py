@@ -111,25 +111,25 @@ def _secular(d, z, max_iterations):
     a_col = i                                       # pole d_i
     b_col = np.minimum(i + 1, n - 1)                # pole d_{i+1}
     last = i == n - 1
-    active = np.ones(n, bool)
+    rows = i                                        # roots still iterated
     for _ in range(max_iterations):
-        delta = G - tau[:, None]                    # d_j - lam_i
+        # only the rows of unconverged roots: most converge in a few passes
+        t = tau[rows]
+        delta = G[rows] - t[:, None]                # d_j - lam_i
         T = z2 / delta
         T2 = T / delta
-        psi = np.where(left_poles, T, 0.0).sum(axis=1)
-        dpsi = np.where(left_poles, T2, 0.0).sum(axis=1)
+        left = left_poles[rows]
+        psi = np.where(left, T, 0.0).sum(axis=1)
+        dpsi = np.where(left, T2, 0.0).sum(axis=1)
         phi = T.sum(axis=1) - psi
         dphi = T2.sum(axis=1) - dpsi
         f = 1.0 + psi + phi
-        scale = 1.0 + np.abs(psi) + np.abs(phi)
-        done = np.abs(f) <= 8.0 * _EPS * scale
-        active &= ~done
-        if not np.any(active):
-            break
-        lo = np.where(active & (f < 0.0), tau, lo)
-        hi = np.where(active & (f > 0.0), tau, hi)
-        a = delta[i, a_col]
-        b = delta[i, b_col]
+        go = np.abs(f) > 8.0 * _EPS * (1.0 + np.abs(psi) + np.abs(phi))
+        lo_r = np.where(f < 0.0, t, lo[rows])
+        hi_r = np.where(f > 0.0, t, hi[rows])
+        r = np.arange(rows.size)
+        a = delta[r, a_col[rows]]
+        b = delta[r, b_col[rows]]
         s, p = dpsi * a * a, psi - dpsi * a
         S, q = dphi * b * b, phi - dphi * b
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -142,14 +142,15 @@ def _secular(d, z, max_iterations):
             r1, r2 = qq / C, C2 / qq
             eta = np.where((r1 > a) & (r1 < b), r1, r2)
             # above the largest pole: C + s/(a - eta) = 0
-            eta = np.where(last, a + s / (1.0 + p), eta)
-        new = tau + eta
-        bad = ~np.isfinite(new) | (new <= lo) | (new >= hi)
-        new = np.where(bad, 0.5 * (lo + hi), new)
-        tau = np.where(active, new, tau)
-        narrow = np.abs(hi - lo) <= 4.0 * _EPS * np.maximum(np.abs(lo), np.abs(hi))
-        active &= ~narrow
-        if not np.any(active):
+            eta = np.where(last[rows], a + s / (1.0 + p), eta)
+        new = t + eta
+        bad = ~np.isfinite(new) | (new <= lo_r) | (new >= hi_r)
+        new = np.where(bad, 0.5 * (lo_r + hi_r), new)
+        narrow = np.abs(hi_r - lo_r) <= 4.0 * _EPS * np.maximum(np.abs(lo_r), np.abs(hi_r))
+        tau[rows] = np.where(go, new, t)
+        lo[rows], hi[rows] = lo_r, hi_r
+        rows = rows[go & ~narrow]
+        if not rows.size:
             break
     else:
         return None
