@@ -67,11 +67,8 @@ T_START = 0.095
 #: simulated window after ``T_START`` [s]
 WINDOW = 0.03
 
-#: beam_full stops at 512 elements: at 1024 (2048 modes) each step in contact
-#: makes a dense eigen-solve of 2048 x 2048 (`follow` moves C's point), minutes
-#: in all; ``--sizes beam_full=...,1024`` asks for it
 SIZES = {"beam_modal": (16, 32, 64, 128, 256, 512, 1024),
-         "beam_full": (16, 32, 64, 128, 256, 512),
+         "beam_full": (16, 32, 64, 128, 256, 512, 1024),
          "chain": (3, 6, 12, 25, 50, 100, 200, 300)}
 QUICK_SIZES = {"beam_modal": (16, 32), "beam_full": (16, 32), "chain": (3, 6)}
 
