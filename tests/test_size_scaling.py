@@ -246,3 +246,23 @@ def test_rank_one_eigh_declines_equal_coupled_entries():
     lam, V = rank_one_eigh(np.array([1.0, 2.0]), np.zeros(2))
     np.testing.assert_array_equal(lam, [1.0, 2.0])
     np.testing.assert_array_equal(V, np.eye(2))
+
+
+def test_rank_one_eigh_keeps_low_eigenvalues_accurate_beside_a_huge_one():
+    """diag(1e3, 2e3, 1e16) + z z^T with z = (sqrt(1e3), sqrt(1e3), 1): the two
+    low roots solve 1 + 1/(1 - mu) + 1/(2 - mu) = 0 (lam = 1e3 mu, the 1e16
+    pole shifts them by 1e-16 relative), mu = (5 -+ sqrt 5)/2.  A dense
+    solver's error is eps times the largest entry, about 2 here, which is
+    1e-3 of them; the secular equation keeps them to round-off."""
+    from fem.rank_one import rank_one_eigh
+    d = np.array([1e3, 2e3, 1e16])
+    z = np.array([np.sqrt(1e3), np.sqrt(1e3), 1.0])
+    lam, V = rank_one_eigh(d, z)
+    low = np.sort(lam)[:2]
+    np.testing.assert_allclose(low, 1e3 * (5.0 + np.array([-1.0, 1.0]) * np.sqrt(5.0)) / 2,
+                               rtol=1e-13)
+    # their eigenvectors satisfy the equations relative to their own size
+    A = np.diag(d) + np.outer(z, z)
+    for j in np.argsort(lam)[:2]:
+        r = A @ V[:, j] - lam[j] * V[:, j]
+        assert np.abs(r[:2]).max() <= 1e-12 * lam[j]
