@@ -25,7 +25,8 @@ import math
 import numpy as np
 
 from fem.integrators import SMALL_DENSE
-from fem.response import undamped_response
+from fem.rank_one import rank_one_eigh
+from fem.response import undamped_moments, undamped_response
 
 from .integrators import RK4
 from .subsystem import EmbeddedContact, StepInput, Subsystem, reparametrised
@@ -304,20 +305,28 @@ class StructureSubsystem(Subsystem):
             basis = (self.omega ** 2, None, float(self.omega.max(initial=0.0)))
             self._bases[active] = basis
         elif basis is None:
-            K = np.diag(self.omega ** 2)
+            springs = []
             for on, e in zip(active, self._embedded):
                 if on:
-                    r = self._R[e.port]
                     c = (e.normal.conjugate() * complex(*self._dir)).real
-                    K += e.law.contact_stiffness * c * c * np.outer(r, r)
-            # scipy's LAPACK, not numpy's: on a loaded machine numpy's
-            # threaded dsyevd took 1-20 ms for these 28 x 28 matrices against
-            # 0.06 ms here, and follow = true asks for one basis per step
-            if K.shape[0] <= SMALL_DENSE:           # a chain: no scipy import
-                lam, Psi = np.linalg.eigh(K)
-            else:
-                from scipy.linalg import eigh
-                lam, Psi = eigh(K, check_finite=False, driver="evd")
+                    springs.append(math.sqrt(e.law.contact_stiffness) * abs(c) * self._R[e.port])
+            # one spring: diag(omega^2) + z z^T by its secular equation, O(m^2)
+            # (follow = true asks for one basis per step in contact, and a
+            # dense solve is O(m^3)); several, or a case it declines: LAPACK
+            res = rank_one_eigh(self.omega ** 2, springs[0]) if len(springs) == 1 else None
+            if res is None:
+                K = np.diag(self.omega ** 2)
+                for z in springs:
+                    K += np.outer(z, z)
+                if K.shape[0] <= SMALL_DENSE:       # a chain: no scipy import
+                    res = np.linalg.eigh(K)
+                else:
+                    # scipy's LAPACK, not numpy's: on a loaded machine numpy's
+                    # threaded dsyevd took 1-20 ms for these 28 x 28 matrices
+                    # against 0.06 ms here
+                    from scipy.linalg import eigh
+                    res = eigh(K, check_finite=False, driver="evd")
+            lam, Psi = res
             basis = (np.maximum(lam, 0.0), Psi, math.sqrt(max(float(lam.max()), 0.0)))
             self._bases[active] = basis
         return basis
@@ -341,55 +350,92 @@ class StructureSubsystem(Subsystem):
             a[:xp.size] += c * k * np.outer(xp, r)
         return a
 
-    def _segment_states(self, lam, Psi, q, dq, a, taus):
+    def _segment(self, lam, Psi, q, dq, a):
+        """A segment's start in the coordinates of its modes ``(lam, Psi)``:
+        ``(lam, z0, dz0, load, P)`` with ``P`` (m, n_ports) the ports' shape
+        rows in those coordinates.  One change of basis per segment (O(m^2));
+        the instants probed inside it then cost O(m) each, for only the
+        ports' motion is evaluated there."""
         if Psi is None:                 # the structure's own modes
-            return undamped_response(lam, q, dq, a, taus)
-        z, dz = undamped_response(lam, Psi.T @ q, Psi.T @ dq, a @ Psi, taus)
-        return z @ Psi.T, dz @ Psi.T
+            return lam, q, dq, a, self._R.T
+        return lam, Psi.T @ q, Psi.T @ dq, a @ Psi, Psi.T @ self._R.T
 
-    def _gaps(self, tc, taus, Q, DQ):
+    @staticmethod
+    def _port_states(seg, taus):
+        """Ports' displacements and velocities along the field at ``taus``
+        after a segment's start: (k, n_ports) each."""
+        lam, z0, dz0, a, P = seg
+        return undamped_response(lam, z0, dz0, a, taus, rows=P)
+
+    @staticmethod
+    def _end_state(seg, Psi, tau):
+        """Modal state ``(q, dq)`` at ``tau`` after a segment's start."""
+        lam, z0, dz0, a, _ = seg
+        z, dz = undamped_response(lam, z0, dz0, a, [tau])
+        if Psi is None:
+            return z[0], dz[0]
+        return Psi @ z[0], Psi @ dz[0]
+
+    def _gaps(self, tc, taus, W, DW):
         """Penetration and rate of each embedded contact at ``tc + taus``
-        for modal states ``Q``, ``DQ`` (k, m): (k, n_embedded) each."""
+        for port displacements ``W`` and velocities ``DW`` along the field
+        (k, n_ports): (k, n_embedded) each."""
         dirc = complex(*self._dir)
         T = tc + np.asarray(taus, float)
         d = np.empty((len(T), len(self._embedded)))
         dd = np.empty_like(d)
         for j, e in enumerate(self._embedded):
-            r = self._R[e.port]
-            d[:, j], dd[:, j] = e.penetrations(T, complex(*self._ref[e.port]) + (Q @ r) * dirc,
-                                               (DQ @ r) * dirc)
+            d[:, j], dd[:, j] = e.penetrations(
+                T, complex(*self._ref[e.port]) + W[:, e.port] * dirc, DW[:, e.port] * dirc)
         return d, dd
 
-    #: Gauss-Legendre nodes and weights on [0, 1] (six points) for the quadratures
-    _GL6 = (0.5 * (np.polynomial.legendre.leggauss(6)[0] + 1.0),
-            0.5 * np.polynomial.legendre.leggauss(6)[1])
-
-    def _segment_quadratures(self, t, h, tc, L, lam, Psi, q, dq, a, active, wmax, inputs):
+    def _segment_quadratures(self, t, h, tc, L, seg, active, inputs):
         """Add the impulse, first moment and work of the closed springs, and
-        the ports' velocity moments, over ``[tc, tc + L]`` (Gauss-Legendre
-        panels no longer than three radians of the fastest mode)."""
-        n = max(1, math.ceil(L * wmax / 3.0))      # error ~ 3e-10 per panel
-        nodes, weights = self._GL6
-        taus = (np.arange(n)[:, None] + nodes[None, :]).ravel() * (L / n)
-        wts = np.tile(weights, n) * (L / n)
-        Q, DQ = self._segment_states(lam, Psi, q, dq, a, taus)
-        d, _ = self._gaps(tc, taus, Q, DQ)
+        the ports' velocity moments, over ``[tc, tc + L]``, in closed form.
+
+        A closed spring's penetration is a polynomial (the partner's motion)
+        less ``beta w_p`` (the port's displacement along the field), so each
+        integral is a combination of the moments ``int tau^j w_p`` of the
+        ports' displacements (:func:`fem.undamped_moments`, O(m)) and of their
+        values at the segment's ends; the work ``int f w_p'`` and the velocity
+        moments are integrated by parts.  No instant is sampled, so the cost
+        does not grow with the fastest mode's frequency."""
+        loaded = inputs is not None and bool(np.any(inputs.coeffs))
+        if not loaded and not any(active):
+            return
+        lam, z0, dz0, a, P = seg
+        degree = max([3] + [e.motion.size - 2 for on, e in zip(active, self._embedded) if on])
+        Wm = undamped_moments(lam, z0, dz0, a, L, P, degree)      # (degree + 1, n_ports)
+        (W0, WL), _ = self._port_states(seg, [0.0, L])
         dirc = complex(*self._dir)
         ne = len(self._embedded)
         quad = self.aux[:4 * ne].reshape(ne, 4)
+        sig = tc - t
         for j, (on, e) in enumerate(zip(active, self._embedded)):
             if not on:
                 continue
-            f = e.law.contact_stiffness * d[:, j]
-            c = (e.normal.conjugate() * dirc).real
-            quad[j, 0] += wts @ f
-            quad[j, 2] += wts @ (f * (tc + taus - t))
-            quad[j, 3] += wts @ (e.side * c * f * (DQ @ self._R[e.port]))
-        if inputs is not None and np.any(inputs.coeffs):
-            sv = (tc + taus - t) / h
-            V = (DQ @ self._R.T) * dirc                        # (k, n_ports)
-            for jj in range(3):
-                self.port_moments[jj] += (wts * sv ** jj) @ V
+            k, p, nc = e.law.contact_stiffness, e.port, e.normal.conjugate()
+            beta = e.side * (nc * dirc).real
+            # penetration d(tau) = alpha(tau) - beta w_p(tau)
+            alpha = e.side * (nc * reparametrised(e.motion, (tc - e.t0) / e.h, 1.0 / e.h)).real
+            alpha[0] += e.offset - e.side * (nc * complex(*self._ref[p])).real
+            q = np.arange(alpha.size)
+            ia0 = alpha @ (L ** (q + 1) / (q + 1))
+            ia1 = alpha @ (L ** (q + 2) / (q + 2))
+            quad[j, 0] += k * (ia0 - beta * Wm[0, p])
+            quad[j, 2] += k * (sig * ia0 + ia1 - beta * (sig * Wm[0, p] + Wm[1, p]))
+            # int f beta w_p' = beta k ([alpha w_p] - int alpha' w_p - beta [w_p^2] / 2)
+            dalpha = alpha[1:] * q[1:]
+            aL = float(np.polyval(alpha[::-1], L))
+            quad[j, 3] += beta * k * (aL * WL[p] - alpha[0] * W0[p] - dalpha @ Wm[:dalpha.size, p]
+                                      - 0.5 * beta * (WL[p] ** 2 - W0[p] ** 2))
+        if loaded:
+            # int s^j w_p' with s = (tc - t + tau) / h, by parts
+            s0, s1 = sig / h, (sig + L) / h
+            self.port_moments[0] += (WL - W0) * dirc
+            self.port_moments[1] += (s1 * WL - s0 * W0 - Wm[0] / h) * dirc
+            self.port_moments[2] += (s1 * s1 * WL - s0 * s0 * W0
+                                     - 2.0 * (sig * Wm[0] + Wm[1]) / (h * h)) * dirc
 
     def _step_closed_form(self, t, h, inputs):
         m = self.n_modes
@@ -402,21 +448,21 @@ class StructureSubsystem(Subsystem):
         eps = 1e-13 * max(1.0, abs(t1))
         while t1 - tc > eps:
             L = t1 - tc
-            d0, dd0 = self._gaps(tc, [0.0], q[None], dq[None])
+            d0, dd0 = self._gaps(tc, [0.0], (self._R @ q)[None], (self._R @ dq)[None])
             active = tuple(bool(x > 0 or (x == 0 and v > 0)) for x, v in zip(d0[0], dd0[0]))
             for j in np.flatnonzero((d0[0] == 0) & (dd0[0] > 0)):
                 self.switch_log.append((tc, int(j), True))     # touching and closing now
             lam, Psi, wmax = self._active_basis(active)
-            a = self._segment_load(t, h, tc, Gin, active)
+            seg = self._segment(lam, Psi, q, dq, self._segment_load(t, h, tc, Gin, active))
             n = int(min(max(math.ceil(2.0 * L * wmax), 2), 512))
             taus = L * np.arange(1, n + 1) / n
-            Q, DQ = self._segment_states(lam, Psi, q, dq, a, taus)
-            d, _ = self._gaps(tc, taus, Q, DQ)
+            W, DW = self._port_states(seg, taus)
+            d, _ = self._gaps(tc, taus, W, DW)
             flips = (d > 0) != np.array(active)
             rows = np.flatnonzero(flips.any(axis=1))
             if not len(rows):
-                self._segment_quadratures(t, h, tc, L, lam, Psi, q, dq, a, active, wmax, inputs)
-                q, dq = Q[-1], DQ[-1]
+                self._segment_quadratures(t, h, tc, L, seg, active, inputs)
+                q, dq = self._end_state(seg, Psi, taus[-1])
                 break
             i = int(rows[0])
             lo0, hi0 = (taus[i - 1] if i else 0.0), taus[i]
@@ -425,15 +471,13 @@ class StructureSubsystem(Subsystem):
             for j in np.flatnonzero(flips[i]):
                 hi = self._switch_time(j, active[j], lo0, hi0,
                                        d[i - 1, j] if i else d0[0, j], d[i, j], tol,
-                                       lambda tau: self._gaps(tc, [tau], *self._segment_states(
-                                           lam, Psi, q, dq, a, [tau])))
+                                       lambda tau: self._gaps(tc, [tau], *self._port_states(seg, [tau])))
                 if hi < best - 1e-15:
                     best, who = hi, [j]
                 elif abs(hi - best) <= 1e-15:
                     who.append(j)
-            self._segment_quadratures(t, h, tc, best, lam, Psi, q, dq, a, active, wmax, inputs)
-            Qb, DQb = self._segment_states(lam, Psi, q, dq, a, [best])
-            q, dq = Qb[0], DQb[0]
+            self._segment_quadratures(t, h, tc, best, seg, active, inputs)
+            q, dq = self._end_state(seg, Psi, best)
             tc += best
             for j in who:
                 self.switch_log.append((tc, int(j), not active[j]))

@@ -12,7 +12,8 @@ from .chain import Chain, ChainStructure
 from .integrators import (STRUCTURAL_INTEGRATORS, CentralDifference, ExactModal,
                           GeneralizedAlpha, HHTAlpha, Newmark, StructuralIntegrator,
                           get_structural_integrator)
-from .response import undamped_response
+from .rank_one import rank_one_eigh
+from .response import undamped_moments, undamped_response
 from .modal import DENSE_LIMIT, ModalBasis, modes, natural_frequencies, residual_compliance
 from .rod import ROD_ENDS, Rod
 from .structures import LinearStructure, LineStructure
@@ -22,4 +23,4 @@ __all__ = ["Beam", "String", "Section", "rectangular_section", "circular_section
            "natural_frequencies", "StructuralIntegrator", "Newmark", "HHTAlpha",
            "GeneralizedAlpha", "CentralDifference", "ExactModal", "STRUCTURAL_INTEGRATORS",
            "get_structural_integrator", "BEAM_ENDS", "ROD_ENDS", "DENSE_LIMIT",
-           "residual_compliance", "undamped_response"]
+           "residual_compliance", "undamped_response", "undamped_moments", "rank_one_eigh"]

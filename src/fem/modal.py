@@ -191,7 +191,10 @@ def modes(structure, n_modes: int | None = None, cutoff_hz: float | None = None)
     n = s.n_dof
     want = n if n_modes is None else min(n_modes, n)
     n_rigid = s.rigid_body_modes().shape[1]
-    if n <= DENSE_LIMIT or want >= n - n_rigid - 1 or (n_modes is None and cutoff_hz is None):
+    # (`want` is every DOF when only a cutoff is given: it then goes sparse, the
+    # count doubling below, unless the structure is small)
+    if n <= DENSE_LIMIT or (n_modes is None and cutoff_hz is None) \
+            or (n_modes is not None and want >= n - n_rigid - 1):
         lam, phi, nr = _dense_modes(s)
     elif n_modes is not None:
         lam, phi, nr = _sparse_modes(s, want)
