@@ -206,6 +206,19 @@ def test_absurd_values_are_refused_before_anything_is_assembled(case, override, 
     assert essence in str(exc.value)
 
 
+def test_a_missing_optional_package_is_a_scene_error(monkeypatch):
+    monkeypatch.setitem(sys.modules, "skfem", None)          # import skfem now fails
+    with pytest.raises(SceneError, match=re.escape(
+            '`subsystems.rod.type` `rod` needs skfem, which is not installed: '
+            'pip install "cosim[fem]"')):
+        load_scene(CASES / "rod_impact.toml").build()
+    import importlib.util
+    monkeypatch.setattr(importlib.util, "find_spec",
+                        lambda name, *a: None if name == "meshio" else object())
+    with pytest.raises(SceneError, match=re.escape("`output.export` needs meshio")):
+        load_scene(CASES / "three_mass.toml", overrides=['output.export=["chain"]']).build()
+
+
 def test_broken_toml_names_the_file_and_the_line(tmp_path):
     file = tmp_path / "broken.toml"
     file.write_text(TEXTS["spring_drop.toml"].replace("t_end = 0.02", "t_end = = 0.02"))

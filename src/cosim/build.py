@@ -76,6 +76,10 @@ def _structure(spec, scene: Scene):
         basis = fem.modes(structure, **{k: v for k, v in spec["modes"].items() if v})
     except ValueError as exc:
         raise SceneError(scene.path, spec["key"], str(exc)) from None
+    except ImportError as exc:        # scikit-fem is an optional extra
+        raise SceneError(scene.path, f"{spec['key']}.type",
+                         f"`{spec['type']}` needs {exc.name or 'a missing package'}, which is "
+                         f"not installed: pip install \"cosim[fem]\"") from None
     n = structure.n_dof
     u0 = None
     if spec["static_equilibrium"]:
@@ -119,6 +123,12 @@ def build_system(scene: Scene, scheme: str | None = None):
         the integrator step of the side that carries it.
     """
     name = scheme or scene.scheme
+    if scene.export:
+        import importlib.util
+        if importlib.util.find_spec("meshio") is None:
+            raise SceneError(scene.path, "output.export",
+                             'needs meshio, which is not installed: pip install "cosim[fem]", '
+                             'or drop `output.export`')
     try:
         cls = get_scheme(name)
     except ValueError as exc:
