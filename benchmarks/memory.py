@@ -36,7 +36,7 @@ print(len(res.t))
 
 
 def _measure(cmd, env) -> tuple[float, float, str]:
-    """Run ``cmd``; return its peak RSS [MB], CPU (user + sys) [s] and stdout."""
+    """Run ``cmd``; return its peak RSS [MiB], CPU (user + sys) [s] and stdout."""
     with tempfile.TemporaryFile("w+") as out:
         proc = subprocess.Popen(cmd, stdout=out, stderr=subprocess.DEVNULL, env=env, cwd=ROOT)
         _, status, usage = os.wait4(proc.pid, 0)
@@ -63,8 +63,8 @@ def main():
           + f", {os.cpu_count()} cores, Python {platform.python_version()}, "
           f"{platform.system()} {platform.release()}, numpy {np.__version__}")
     print(f"scene: {SCENE.relative_to(ROOT)} (default scheme)")
-    print(f"{'mode':<26}{'simulated [s]':>14}{'samples':>9}{'series.npz [MB]':>17}"
-          f"{'CPU [s]':>9}{'peak RSS [MB]':>15}")
+    print(f"{'mode':<26}{'simulated [s]':>14}{'samples':>9}{'series.npz [MiB]':>17}"
+          f"{'CPU [s]':>9}{'peak RSS [MiB]':>15}")
     for t_end in args.t_end:
         with tempfile.TemporaryDirectory() as tmp:
             out = Path(tmp) / "run"
