@@ -335,6 +335,9 @@ def main(argv=None) -> int:
         except (SceneError, UnsafeStepError, OutputExistsError) as exc:
             print(f"error: {exc}", file=sys.stderr)
             return 2
+        except KeyboardInterrupt:          # outside a run (a run's own is handled there)
+            print("error: interrupted", file=sys.stderr)
+            return 130
 
 
 if __name__ == "__main__":  # pragma: no cover - `python -m cosim.cli`

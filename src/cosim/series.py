@@ -136,12 +136,22 @@ class SeriesStore:
         self.length += rows
 
     def arrays(self) -> dict:
-        """Every column as one array (in memory: for a run without a spool)."""
+        """Every column as one array (in memory: for a run without a spool).
+
+        The blocks are freed as they are copied, so the peak is about one copy
+        of the series; the store is consumed."""
         if self._fh is not None:
             raise RuntimeError("a spooled store is read through write() and SeriesFile")
-        return {name: (np.concatenate([b[j] for b in self._blocks]) if self._blocks
-                       else np.zeros(0)).astype(self.dtypes[j], copy=False)
-                for j, name in enumerate(self.names)}
+        columns = [np.empty(self.length, dtype=d) for d in self.dtypes]
+        start = 0
+        for k, block in enumerate(self._blocks):    # each block freed once copied
+            rows = block.shape[1]
+            for j, col in enumerate(columns):
+                col[start:start + rows] = block[j]
+            start += rows
+            self._blocks[k] = None
+        self._blocks = None                          # consumed: a second call fails
+        return dict(zip(self.names, columns))
 
     def write(self, path) -> None:
         """Write ``series.npz`` at ``path``, column by column, copying the
