@@ -41,8 +41,29 @@ def _multibody(spec, scene: Scene, default_step):
     q0 = [j["q0"] for j in spec["joints"]]
     dq0 = [j["dq0"] for j in spec["joints"]]
     effects = [e for j in spec["joints"] for e in j["effects"]]
+    _check_mass_matrix(model, q0, spec, scene)
     return MultibodySubsystem(spec["name"], model, q0, dq0, spec["ports"], scene.gravity, integ,
                               JointEffects(model.n_dof, effects) if effects else None)
+
+
+def _check_mass_matrix(model, q0, spec, scene: Scene) -> None:
+    """Refuse a tree whose mass matrix at its initial pose is singular (or
+    not finite): some joint would move no mass, and no integrator can step it."""
+    M = model.mass_matrix(np.asarray(q0, float))
+    ok = bool(np.all(np.isfinite(M)))
+    if ok:
+        try:
+            np.linalg.cholesky(M)
+        except np.linalg.LinAlgError:
+            ok = False
+    if not ok:
+        scale = float(np.max(np.abs(np.diag(M)))) if np.all(np.isfinite(M)) else math.inf
+        raise SceneError(scene.path, f"{spec['key']}.bodies",
+                         f"must give a mass matrix that is regular at the initial joint "
+                         f"coordinates, got a singular one (largest diagonal entry {scale:.3g}): "
+                         f"some joint moves no mass (a massless body at a branch's end, or "
+                         f"prismatic joints along one axis); give the bodies mass and inertia, "
+                         f"or change the joints' axes")
 
 
 def _structure(spec, scene: Scene):
@@ -55,6 +76,10 @@ def _structure(spec, scene: Scene):
         basis = fem.modes(structure, **{k: v for k, v in spec["modes"].items() if v})
     except ValueError as exc:
         raise SceneError(scene.path, spec["key"], str(exc)) from None
+    except ImportError as exc:        # scikit-fem is an optional extra
+        raise SceneError(scene.path, f"{spec['key']}.type",
+                         f"`{spec['type']}` needs {exc.name or 'a missing package'}, which is "
+                         f"not installed: pip install \"cosim[fem]\"") from None
     n = structure.n_dof
     u0 = None
     if spec["static_equilibrium"]:
@@ -98,6 +123,12 @@ def build_system(scene: Scene, scheme: str | None = None):
         the integrator step of the side that carries it.
     """
     name = scheme or scene.scheme
+    if scene.export:
+        import importlib.util
+        if importlib.util.find_spec("meshio") is None:
+            raise SceneError(scene.path, "output.export",
+                             'needs meshio, which is not installed: pip install "cosim[fem]", '
+                             'or drop `output.export`')
     try:
         cls = get_scheme(name)
     except ValueError as exc:

@@ -95,25 +95,41 @@ def _progress_line(quiet: bool):
 
 
 def _cmd_run(args) -> int:
-    from .result import write_outputs
-    from .run import simulate
+    from .run import RunInterrupted, simulate
     from .scene import load_scene
 
     scene = load_scene(args.scene, args.variant, args.set or (), args.scheme)
+    out = Path(args.out) if args.out else Path("runs") / (
+        scene.name + (f"-{scene.variant}" if scene.variant else ""))
     progress = _progress_line(args.quiet)
+    code, crash = None, None
     try:
-        res = simulate(scene, progress=progress)
+        res = simulate(scene, progress=progress, out=out, overwrite=args.overwrite)
+    except RunInterrupted as exc:
+        res, code = exc.result, 130
+    except Exception as exc:
+        res = getattr(exc, "partial_result", None)
+        if res is None:
+            raise
+        code, crash = 1, exc
     finally:
         if progress is not None:
             progress.close()
-    out = Path(args.out) if args.out else Path("runs") / (
-        scene.name + (f"-{scene.variant}" if scene.variant else ""))
-    write_outputs(res, out, scene)
     _print_summary(res.summary, out)
     if scene.export:
         from .export import export_structures
         for path in export_structures(scene, res, out):
             print(f"  wrote {path} (open in ParaView)")
+    if res.status != "finished":
+        print(f"error: the run did not finish ({res.status}): {res.message}. Its series and "
+              f"summary up to t = {res.summary['t_end']:.6g} s are in {out}", file=sys.stderr)
+    if crash is not None:
+        import traceback
+        traceback.print_exception(crash, file=sys.stderr)
+        print("error: this is a bug of cosim, not of the scene: please report it with the "
+              "scene file and the lines above", file=sys.stderr)
+    if code is not None:
+        return code
     return 0 if res.success else 1
 
 
@@ -261,6 +277,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--set", action="append", metavar="KEY=VALUE",
                    help="override a scene value (after the variant); repeatable")
     r.add_argument("--out", help="output directory (default runs/SCENE[-VARIANT])")
+    r.add_argument("--overwrite", action="store_true",
+                   help="replace a run that the output directory already holds")
     r.add_argument("--quiet", action="store_true",
                    help="no progress line (it shows only on a terminal, after a second)")
     r.set_defaults(func=_cmd_run)
@@ -305,6 +323,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
+    from .errors import OutputExistsError
     from .scene import SceneError
     from .schemes import UnsafeStepError
 
@@ -313,9 +332,12 @@ def main(argv=None) -> int:
         warnings.showwarning = lambda msg, *a, **k: print(f"warning: {msg}", file=sys.stderr)
         try:
             return args.func(args)
-        except (SceneError, UnsafeStepError) as exc:
+        except (SceneError, UnsafeStepError, OutputExistsError) as exc:
             print(f"error: {exc}", file=sys.stderr)
             return 2
+        except KeyboardInterrupt:          # outside a run (a run's own is handled there)
+            print("error: interrupted", file=sys.stderr)
+            return 130
 
 
 if __name__ == "__main__":  # pragma: no cover - `python -m cosim.cli`

@@ -1,6 +1,6 @@
 """Errors of a run (the scene loader's SceneError lives in cosim.scene)."""
 
-__all__ = ["SimulationError", "CouplingError", "UnsafeStepError"]
+__all__ = ["SimulationError", "CouplingError", "UnsafeStepError", "OutputExistsError"]
 
 
 class SimulationError(RuntimeError):
@@ -13,3 +13,7 @@ class CouplingError(SimulationError):
 
 class UnsafeStepError(ValueError):
     """The macro step is too large for a contact's stiffness."""
+
+
+class OutputExistsError(FileExistsError):
+    """The output directory already holds a run, and overwriting was not asked for."""

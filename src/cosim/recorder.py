@@ -10,11 +10,13 @@ from __future__ import annotations
 
 import math
 import time
+from pathlib import Path
 from typing import Callable, NamedTuple
 
 import numpy as np
 
 from .result import SimulationResult
+from .series import SeriesFile, SeriesStore, chunk_rows
 
 __all__ = ["Recorder", "Progress", "hermite_cubic_max"]
 
@@ -92,22 +94,38 @@ class Recorder:
         It must not raise; the library itself never prints.
     progress_interval : float
         Least wall-clock time between two progress calls [s].
+    series_path : path-like, optional
+        Stream the series to disk and write them there (``series.npz``) when
+        the run finishes; the result then reads them from that file.  Without
+        it, the series stay in memory.
 
     Notes
     -----
     With ``progress`` unset, recording pays nothing for it; set, one clock
     read per sample.
+
+    Samples fill a preallocated chunk of rows (about 1 MB); a full chunk is
+    turned into the series' columns and handed to a
+    :class:`~cosim.series.SeriesStore`, which keeps it in memory or appends
+    it to a spool file beside ``series_path``.  With a ``series_path``, the
+    memory a run needs therefore does not grow with its length (contact
+    intervals and impacts aside).
     """
 
     def __init__(self, system, scene: str, scheme: str, t_end: float, every: int = 1,
                  auto_edges: bool = True, *, progress: Callable[[Progress], None] | None = None,
-                 progress_interval: float = 0.2):
+                 progress_interval: float = 0.2, series_path=None):
         self.system, self.scene, self.scheme, self.t_end = system, scene, scheme, t_end
         nc = system.n_contacts
         self.every = max(1, int(every))
         self.auto_edges = np.broadcast_to(np.asarray(auto_edges, dtype=bool), (nc,))
         self._laws = [ln.contact.law for ln in system.links]
-        self._t, self._x, self._d, self._f, self._e, self._diss = [], [], [], [], [], []
+        self._series_path = None if series_path is None else Path(series_path)
+        self._store_ = None          # SeriesStore, made at the first sample
+        self._buf = None             # (rows, width) chunk being filled
+        self._n_buf = 0
+        self._last_t = None          # time of the last stored sample
+        self._x_prev = None          # subsystem states at the last sample
         self._count = 0
         self._prev = None            # (t, d, dd, active)
         self.peak = np.zeros(nc)
@@ -122,7 +140,6 @@ class Recorder:
         self._d0 = None
         self._stored0 = None         # contacts' stored energy at the start, in their modes then
         self._n_log = 0              # switches of connections already turned into edges
-        self._modes = []
         self._progress = progress
         self._progress_interval = float(progress_interval)
         self._wall0 = time.monotonic()
@@ -190,8 +207,9 @@ class Recorder:
             # evaluated now: a connection's potential depends on its mode, and
             # the mode at the end (grasped, released) need not be the start's
             self._stored0 = self.system.contact_potentials(d)
+        self._x_prev = np.concatenate([sub.x for sub in self.system.subsystems])
         if self._count % self.every == 0:
-            self._store(t, d, f, energy, diss_total)
+            self._store(t, self._x_prev, d, f, energy, diss_total)
         self._count += 1
         if self._progress is not None:
             now = time.monotonic()
@@ -201,15 +219,94 @@ class Recorder:
                 self._progress(Progress(float(t), float(self.t_end), int(begun),
                                         now - self._wall0))
 
-    def _store(self, t, d, f, energy, diss_total):
-        self._t.append(t)
-        self._x.append(np.concatenate([s.x for s in self.system.subsystems]))
-        self._d.append(d.copy())
-        self._f.append(f.copy())
-        self._e.append(energy)
-        self._diss.append(diss_total)
-        if self.system.connections is not None:
-            self._modes.append(self.system.connections.mode.copy())
+    def _store(self, t, x, d, f, energy, diss_total):
+        sysm = self.system
+        if self._buf is None:
+            self._layout(len(x), len(d))
+        row = self._buf[self._n_buf]
+        row[0] = t
+        L = self._slices
+        row[L["x"]] = x
+        row[L["d"]] = d
+        row[L["f"]] = f
+        row[L["e"]] = energy
+        row[L["diss"]] = diss_total
+        if sysm.connections is not None:
+            row[L["mode"]] = sysm.connections.mode
+        self._last_t = t
+        self._n_buf += 1            # the row counts only once it is whole
+        if self._n_buf == len(self._buf):
+            self._flush()
+
+    def _layout(self, nx: int, nd: int) -> None:
+        """Row layout of the chunk buffer and the series' names, fixed at the
+        first sample."""
+        sysm = self.system
+        nm = len(sysm.connections.mode) if sysm.connections is not None else 0
+        edges = np.cumsum([1, nx, nd, nd, 1, 1, nm])
+        self._slices = {"x": slice(edges[0], edges[1]), "d": slice(edges[1], edges[2]),
+                        "f": slice(edges[2], edges[3]), "e": edges[3], "diss": edges[4],
+                        "mode": slice(edges[5], edges[6])}
+        width = int(edges[6])
+        names, dtypes = ["t"], [np.float64]
+        for name in sysm.contact_names:
+            names += [f"gap/{name}", f"force/{name}"]
+        for r in range(sysm.n_contacts, getattr(sysm, "n_rows", sysm.n_contacts)):
+            names += [f"gap/{sysm.row_names[r]}", f"force/{sysm.row_names[r]}"]
+        dtypes += [np.float64] * (len(names) - 1)
+        if sysm.connections is not None:
+            for c in sysm.connections.index:
+                if sysm.links[c].connection.grasp is not None:
+                    names.append(f"mode/{sysm.contact_names[c]}")
+                    dtypes.append(np.int64)
+        for sub in sysm.subsystems:
+            if hasattr(sub, "named_values"):
+                dof_names = sub.named_values(sub.x)[0]
+            else:
+                dof_names = list(sub.coordinates())
+            for dn in dof_names:
+                names += [f"q/{sub.name}/{dn}", f"dq/{sub.name}/{dn}"]
+                dtypes += [np.float64, np.float64]
+        names += ["energy/total", "energy/dissipated"]
+        dtypes += [np.float64, np.float64]
+        spool = None
+        if self._series_path is not None:
+            spool = self._series_path.with_name(f".{self._series_path.name}.spool")
+        self._store_ = SeriesStore(names, dtypes, spool)
+        self._buf = np.empty((chunk_rows(width), width))
+
+    def _columns(self, B: np.ndarray) -> np.ndarray:
+        """The series' columns (in the order of their names) of rows ``B``."""
+        sysm = self.system
+        L = self._slices
+        X, D, F = B[:, L["x"]], B[:, L["d"]], B[:, L["f"]]
+        cols = [B[:, 0]]
+        for c in range(sysm.n_contacts):
+            cols += [-D[:, c], F[:, c]]
+        for r in range(sysm.n_contacts, getattr(sysm, "n_rows", sysm.n_contacts)):
+            # tangential rows: coordinate of a - b along t from the grasp anchor, force on a
+            cols += [D[:, r], F[:, r]]
+        if sysm.connections is not None:
+            modes = B[:, L["mode"]]
+            for c in sysm.connections.index:
+                if sysm.links[c].connection.grasp is not None:
+                    cols.append(modes[:, c])
+        offsets = sysm.stacked()
+        for s, sub in enumerate(sysm.subsystems):
+            if hasattr(sub, "named_values"):      # a structure: physical DOFs of its modes
+                _, U, V = sub.named_values(X[:, offsets[s]:offsets[s + 1]])
+                for i in range(U.shape[1]):
+                    cols += [U[:, i], V[:, i]]
+                continue
+            for iq, idq in sub.coordinates().values():
+                cols += [X[:, offsets[s] + iq], X[:, offsets[s] + idq]]
+        cols += [B[:, L["e"]], B[:, L["diss"]]]
+        return np.array(cols).reshape(len(cols), len(B))
+
+    def _flush(self) -> None:
+        if self._n_buf:
+            self._store_.append(self._columns(self._buf[:self._n_buf]))
+            self._n_buf = 0
 
     def _crossing(self, c, t0, d0, v0, t1, d1, v1, was_active):
         law, h = self._laws[c], t1 - t0
@@ -225,53 +322,51 @@ class Recorder:
 
     # ----------------------------------------------------------------- result
     def finish(self, status: str, message: str, cpu_time: float, counters: dict) -> SimulationResult:
+        """The run's result, its series completed up to the last sample.
+
+        With a ``series_path``, ``series.npz`` is written there (atomically)
+        and the spool deleted; the result's ``series`` then read that file.
+        ``status`` other than ``"finished"`` takes the final state from the
+        last sample (a run stopped mid-step leaves its subsystems part-way).
+        """
         sysm = self.system
-        if self._count and self._t[-1] != self._prev[0]:
+        if self._count and self._last_t != self._prev[0]:
             tp, dp, _, _ = self._prev   # always keep the final sample
-            self._store(tp, dp, self.system.forces(dp, self._prev[2]), self.last[3],
-                        self.last[4])
+            self._store(tp, self._x_prev, dp, self.system.forces(dp, self._prev[2]),
+                        self.last[3], self.last[4])
+        if self._store_ is None:        # stopped before the first sample
+            self._layout(sum(len(sub.x) for sub in sysm.subsystems),
+                         getattr(sysm, "n_rows", sysm.n_contacts))
+        self._flush()
         t_last = self._prev[0] if self._prev else 0.0
         intervals = [list(iv) + ([[self._open[c], t_last]] if self._open[c] is not None else [])
                      for c, iv in enumerate(self.intervals)]
-        t = np.array(self._t)
-        X = np.array(self._x).reshape(len(t), -1)
-        D = np.array(self._d).reshape(len(t), -1)
-        Fc = np.array(self._f).reshape(len(t), -1)
-        series = {"t": t}
-        for c, name in enumerate(sysm.contact_names):
-            series[f"gap/{name}"] = -D[:, c]
-            series[f"force/{name}"] = Fc[:, c]
-        for r in range(sysm.n_contacts, getattr(sysm, "n_rows", sysm.n_contacts)):
-            # tangential rows: coordinate of a - b along t from the grasp anchor, force on a
-            series[f"gap/{sysm.row_names[r]}"] = D[:, r]
-            series[f"force/{sysm.row_names[r]}"] = Fc[:, r]
-        if sysm.connections is not None:
-            modes = np.array(self._modes).reshape(len(t), -1)
-            for c in sysm.connections.index:
-                if sysm.links[c].connection.grasp is not None:
-                    series[f"mode/{sysm.contact_names[c]}"] = modes[:, c]
+        store = self._store_
+        if self._series_path is not None:
+            try:
+                store.write(self._series_path)
+            finally:
+                store.close()
+            series = SeriesFile(self._series_path)
+        else:
+            series = store.arrays()
+        t = series["t"]
+        x_end = (np.concatenate([sub.x for sub in sysm.subsystems])
+                 if status == "finished" or self._x_prev is None else self._x_prev)
         offsets = sysm.stacked()
         final_state = {}
         for s, sub in enumerate(sysm.subsystems):
+            xs = x_end[offsets[s]:offsets[s + 1]]
             if hasattr(sub, "named_values"):      # a structure: physical DOFs of its modes
-                names, U, V = sub.named_values(X[:, offsets[s]:offsets[s + 1]])
-                _, uf, vf = sub.named_values(sub.x)
-                final_state[sub.name] = {}
-                for i, name in enumerate(names):
-                    series[f"q/{sub.name}/{name}"] = U[:, i]
-                    series[f"dq/{sub.name}/{name}"] = V[:, i]
-                    final_state[sub.name][name] = {"q": float(uf[i]), "dq": float(vf[i])}
+                names, uf, vf = sub.named_values(xs)
+                final_state[sub.name] = {name: {"q": float(uf[i]), "dq": float(vf[i])}
+                                         for i, name in enumerate(names)}
                 continue
             coords = sub.coordinates()
             if not coords:
                 continue
-            final_state[sub.name] = {}
-            for name, (iq, idq) in coords.items():
-                series[f"q/{sub.name}/{name}"] = X[:, offsets[s] + iq]
-                series[f"dq/{sub.name}/{name}"] = X[:, offsets[s] + idq]
-                final_state[sub.name][name] = {"q": float(sub.x[iq]), "dq": float(sub.x[idq])}
-        series["energy/total"] = np.array(self._e)
-        series["energy/dissipated"] = np.array(self._diss)
+            final_state[sub.name] = {name: {"q": float(xs[iq]), "dq": float(xs[idq])}
+                                     for name, (iq, idq) in coords.items()}
         impulse = self.last[1] if self.last else np.zeros(sysm.n_contacts)
         dissipated = self.last[2] if self.last else np.zeros(sysm.n_contacts)
         contacts = {}

@@ -3,13 +3,16 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
+import shutil
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["SimulationResult", "write_outputs", "resolved_scene_text"]
+from .errors import OutputExistsError
+from .series import atomic_write, write_npz
+
+__all__ = ["SimulationResult", "write_outputs", "check_output_dir", "resolved_scene_text"]
 
 
 @dataclass(frozen=True)
@@ -20,16 +23,23 @@ class SimulationResult:
     ----------
     t : (n,) array
         Sample times [s].
-    series : dict[str, array]
+    series : mapping of str to array
         Time series named as in ``series.npz`` (``gap/C``, ``force/C``,
-        ``q/SUB/JOINT``, ``dq/SUB/JOINT``, ``energy/total``, ...).
+        ``q/SUB/JOINT``, ``dq/SUB/JOINT``, ``energy/total``, ...): a dict,
+        or, for a run streamed to disk (``simulate(..., out=DIR)``), a
+        :class:`~cosim.series.SeriesFile` that reads each array from
+        ``DIR/series.npz`` when asked for.
     summary : dict
         The ``summary.json`` contract.
     contact_events : tuple of dict
         Contact intervals in time order: ``contact``, ``t_on``, ``t_off``.
     n_windows, n_iterations, n_rejected : int
         Macro steps, coupling iterations, rejected macro steps.
-    status : {"finished", "failed"}
+    status : {"finished", "failed", "interrupted", "error"}
+        ``failed``: the run could not go on (a :class:`SimulationError`);
+        ``interrupted``: stopped by Ctrl-C; ``error``: stopped by an
+        unexpected exception.  The series and summary then end at the last
+        sample.
     message : str
     success : bool
     """
@@ -54,18 +64,53 @@ class SimulationResult:
 
 
 def _atomic_write(path: Path, writer, mode: str) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, mode) as fh:
-            writer(fh)
-        os.replace(tmp, path)
-    except BaseException:
-        os.unlink(tmp)
-        raise
+    atomic_write(path, writer, mode)
 
 
-def write_outputs(result: SimulationResult, out_dir, scene=None) -> tuple[Path, Path]:
+#: files whose presence makes a directory hold a run
+RUN_FILES = ("summary.json", "series.npz")
+
+
+def check_output_dir(out_dir, overwrite: bool = False) -> Path:
+    """Refuse an output directory that already holds a run.
+
+    Parameters
+    ----------
+    out_dir : path-like
+    overwrite : bool
+        Allow replacing the run there (its files are replaced one by one,
+        each atomically; other files are left alone).
+
+    Raises
+    ------
+    OutputExistsError
+        If ``out_dir`` holds ``summary.json`` or ``series.npz`` and
+        ``overwrite`` is false.
+    """
+    out = Path(out_dir)
+    found = [name for name in RUN_FILES if (out / name).exists()]
+    if found and not overwrite:
+        raise OutputExistsError(
+            f"{out} already holds a run ({', '.join(found)}); choose another --out, "
+            f"or pass --overwrite (overwrite=True) to replace it")
+    return out
+
+
+def write_summary(summary: dict, path) -> None:
+    """Write ``summary.json`` atomically (keys in their order, two-space indent)."""
+    _atomic_write(Path(path), lambda fh: json.dump(summary, fh, indent=2), "w")
+
+
+def write_scene(scene, out_dir) -> Path:
+    """Write ``scene.toml``, the scene as run, atomically."""
+    path = Path(out_dir) / "scene.toml"
+    text = resolved_scene_text(scene)
+    _atomic_write(path, lambda fh: fh.write(text), "w")
+    return path
+
+
+def write_outputs(result: SimulationResult, out_dir, scene=None, *,
+                  overwrite: bool = False) -> tuple[Path, Path]:
     """Write ``summary.json`` and ``series.npz`` into ``out_dir`` atomically.
 
     Parameters
@@ -77,19 +122,42 @@ def write_outputs(result: SimulationResult, out_dir, scene=None) -> tuple[Path, 
         applied) is written as ``scene.toml`` too, a scene file of its own
         that ``cosim plot --animate`` rebuilds the geometry from (and that
         ``cosim run`` runs again).
+    overwrite : bool
+        Replace a run that ``out_dir`` already holds.
 
     Returns
     -------
     summary, series : Path
+
+    Raises
+    ------
+    OutputExistsError
+        If ``out_dir`` holds a run and ``overwrite`` is false.
+
+    Notes
+    -----
+    Each file goes to a temporary name beside it and is moved into place, so
+    no reader ever sees half a file.  ``series.npz`` has deterministic bytes
+    (see :mod:`cosim.series`).  A result whose series were streamed into
+    ``out_dir`` by :func:`cosim.simulate` (``out=``) is not written twice.
     """
     out = Path(out_dir)
     summary = out / "summary.json"
     series = out / "series.npz"
+    source = getattr(result.series, "path", None)
+    same = source is not None and series.exists() and os.path.samefile(source, series)
+    if not same:
+        check_output_dir(out, overwrite)
     if scene is not None:
-        text = resolved_scene_text(scene)
-        _atomic_write(out / "scene.toml", lambda fh: fh.write(text), "w")
-    _atomic_write(series, lambda fh: np.savez(fh, **result.series), "wb")
-    _atomic_write(summary, lambda fh: json.dump(result.summary, fh, indent=2), "w")
+        write_scene(scene, out)
+    if source is None:
+        write_npz(series, result.series)
+    elif not same:
+        def copy(fh):
+            with open(source, "rb") as src:
+                shutil.copyfileobj(src, fh)
+        _atomic_write(series, copy, "wb")
+    write_summary(result.summary, summary)
     return summary, series
 
 

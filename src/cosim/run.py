@@ -3,19 +3,31 @@ from __future__ import annotations
 
 import logging
 import time
+from pathlib import Path
 
 from .recorder import Recorder
 from .scene import Scene, load_scene
-from .errors import SimulationError
+from .errors import SimulationError, UnsafeStepError
 from .schemes import Monolithic
 
-__all__ = ["simulate", "run_scene"]
+__all__ = ["simulate", "run_scene", "RunInterrupted"]
 
 log = logging.getLogger(__name__)
 
 
+class RunInterrupted(KeyboardInterrupt):
+    """Ctrl-C stopped a run; its outputs up to then are in :attr:`result`.
+
+    A :class:`KeyboardInterrupt`, so a loop over runs still stops.
+    """
+
+    def __init__(self, result):
+        super().__init__(result.message)
+        self.result = result
+
+
 def simulate(scene: Scene, *, scheme: str | None = None, progress=None,
-             progress_interval: float = 0.2):
+             progress_interval: float = 0.2, out=None, overwrite: bool = False):
     """Run a validated scene and return its :class:`~cosim.result.SimulationResult`.
 
     Parameters
@@ -29,31 +41,109 @@ def simulate(scene: Scene, *, scheme: str | None = None, progress=None,
         once per ``progress_interval`` seconds of wall-clock time.
     progress_interval : float
         [s]
+    out : path-like, optional
+        Run directory.  ``scene.toml`` is written there before the run, the
+        series are streamed to disk as the run goes (memory does not grow
+        with its length), and ``series.npz`` and ``summary.json`` are written
+        when it ends, however it ends.  The result's ``series`` then read
+        ``out/series.npz``.  Without ``out`` nothing is written and the series
+        stay in memory (:func:`cosim.write_outputs` writes them).
+    overwrite : bool
+        Allow ``out`` to hold a previous run, which is replaced.
+
+    Returns
+    -------
+    SimulationResult
+        ``status`` is ``finished``, or ``failed`` when the run could not go
+        on (:class:`SimulationError`: the series end where it stopped and
+        ``message`` says why).
 
     Raises
     ------
     UnsafeStepError
         If an explicit scheme's macro step is too large for a contact (the
         pre-flight check); nothing has run then.
+    OutputExistsError
+        If ``out`` holds a run and ``overwrite`` is false; checked first.
+    RunInterrupted
+        On Ctrl-C (a :class:`KeyboardInterrupt`), after the result up to
+        that point, ``status`` ``interrupted``, is complete (and written to
+        ``out``); it is the exception's ``result``.
+    Exception
+        Any other exception during the run is re-raised after the result up
+        to that point, ``status`` ``error``, is complete (and written to
+        ``out``); it is the exception's ``partial_result``.
     """
+    from .result import check_output_dir, write_scene, write_summary
+
+    if out is not None:
+        out = check_output_dir(out, overwrite)
     system, sch = scene.build(scheme)
+    created = False
+    if out is not None:
+        if hasattr(sch, "preflight"):
+            sch.preflight(system)          # a refusal writes nothing
+        created = not out.exists()
+        write_scene(scene, out)
     if isinstance(sch, Monolithic):
         auto = False                       # it locates every switch itself
     else:                                  # embedded contacts: their integrator does
         auto = [c not in system.embedded for c in range(system.n_contacts)]
     rec = Recorder(system, scene.name, sch.name, scene.t_end, every=scene.output_every,
-                   auto_edges=auto, progress=progress, progress_interval=progress_interval)
+                   auto_edges=auto, progress=progress, progress_interval=progress_interval,
+                   series_path=None if out is None else Path(out) / "series.npz")
     cpu0 = time.process_time()
     status, message = "finished", ""
     counters = {}
+    stop = None
     try:
         counters = sch.run(system, scene.t_end, rec)
+    except UnsafeStepError:                # refused before the first step
+        _discard(rec, out, created)
+        raise
     except SimulationError as exc:
         status, message = "failed", str(exc)
         log.error("%s", exc)
-    return rec.finish(status, message, time.process_time() - cpu0, counters)
+    except KeyboardInterrupt as exc:
+        stop = exc
+        status, message = "interrupted", f"interrupted (Ctrl-C) at t = {_reached(rec):.6g} s"
+    except Exception as exc:       # a bug or a model's own error: keep what was done
+        stop = exc
+        status = "error"
+        message = (f"stopped by {type(exc).__name__} at t = {_reached(rec):.6g} s: {exc}")
+    if stop is not None:
+        counters = {"n_windows": max(0, rec._count - 1),
+                    "n_iterations": getattr(sch, "n_iterations", 0)}
+        log.error("%s", message)
+    res = rec.finish(status, message, time.process_time() - cpu0, counters)
+    if out is not None:
+        write_summary(res.summary, Path(out) / "summary.json")
+    if isinstance(stop, KeyboardInterrupt):
+        raise RunInterrupted(res) from stop
+    if stop is not None:
+        stop.partial_result = res
+        raise stop
+    return res
 
 
-def run_scene(path, *, variant=None, scheme=None, overrides=()):
-    """Load and run a scene file in one call."""
-    return simulate(load_scene(path, variant, overrides, scheme))
+def _discard(rec: Recorder, out, created: bool) -> None:
+    """Remove what a refused run wrote: the spool, ``scene.toml``, and the
+    output directory if the run made it."""
+    if rec._store_ is not None:
+        rec._store_.close()
+    if out is None:
+        return
+    (out / "scene.toml").unlink(missing_ok=True)
+    if created and not any(out.iterdir()):
+        out.rmdir()
+
+
+def _reached(rec: Recorder) -> float:
+    """Simulated time of the last sample."""
+    return rec._prev[0] if rec._prev is not None else 0.0
+
+
+def run_scene(path, *, variant=None, scheme=None, overrides=(), out=None,
+              overwrite: bool = False):
+    """Load and run a scene file in one call (see :func:`simulate`)."""
+    return simulate(load_scene(path, variant, overrides, scheme), out=out, overwrite=overwrite)

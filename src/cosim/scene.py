@@ -25,6 +25,11 @@ log = logging.getLogger(__name__)
 STRUCTURE_TYPES = ("chain", "beam", "cable", "string", "rod")
 SUBSYSTEM_TYPES = ("multibody", "rigid") + STRUCTURE_TYPES
 _MISSING = object()
+#: most elements (or masses) a structure may have: a mesh beyond it is refused
+#: when the scene is read, before anything is assembled
+MAX_ELEMENTS = 20_000
+#: most steps a run may ask for (end time over a macro or integrator step)
+MAX_STEPS = 10**9
 #: rule name -> (text, check)
 _RULES = {">0": ("> 0", lambda v: v > 0), ">=0": (">= 0", lambda v: v >= 0)}
 
@@ -85,7 +90,8 @@ class _Table:
             self.error(k, f"must be {_RULES[rule][0]}{' ' + unit if unit else ''}, got {v!r}")
         return v
 
-    def integer(self, k, default=_MISSING, *, low: int | None = None):
+    def integer(self, k, default=_MISSING, *, low: int | None = None,
+                high: int | None = None):
         v = self.raw(k, default)
         if v is default and default is not _MISSING:
             return v
@@ -93,6 +99,8 @@ class _Table:
             self.error(k, f"must be an integer, got {_type_name(v)} {v!r}")
         if low is not None and v < low:
             self.error(k, f"must be >= {low}, got {v!r}")
+        if high is not None and v > high:
+            self.error(k, f"must be <= {high}, got {v!r}")
         return v
 
     def string(self, k, default=_MISSING, *, choices=None):
@@ -334,6 +342,11 @@ def _validate(data: dict, file, variant) -> Scene:
     if "macro_step" in cls.options and "macro_step" not in opts:
         sch.error("macro_step", f"is required by scheme `{scheme_name}` [s]")
 
+    H = opts.get("macro_step")
+    if H is not None and t_end / H > MAX_STEPS:
+        sch.error("macro_step", f"is {H!r} s: {t_end!r} s would take {t_end / H:.3g} macro "
+                                f"steps, more than {MAX_STEPS:.0e}")
+
     out = top.table("output", {})
     every = out.integer("every", 1, low=1)
     export = out.raw("export", [])
@@ -355,6 +368,11 @@ def _validate(data: dict, file, variant) -> Scene:
     subs = []
     for sname, st in top.tables("subsystems"):
         subs.append(_subsystem_spec(sname, st))
+        step = subs[-1].get("max_step")
+        if step is not None and t_end / step > MAX_STEPS:
+            raise SceneError(file, f"subsystems.{sname}.integrator.max_step",
+                             f"is {step!r} s: {t_end!r} s would take {t_end / step:.3g} "
+                             f"steps, more than {MAX_STEPS:.0e}")
     if not subs:
         top.error("subsystems", "must declare at least one subsystem")
     structures = [s["name"] for s in subs if s["type"] in STRUCTURE_TYPES]
@@ -474,9 +492,9 @@ def _model(t: _Table, cls, **kw):
 
 def _model_error(t: _Table, exc: Exception) -> SceneError:
     msg = str(exc)
-    m = re.match(r"`(\w+)` (.*)", msg, re.S)
+    m = re.match(r"`(\w+)(\[\d+\])?` (.*)", msg, re.S)
     if m and m.group(1) in t.data:
-        return SceneError(t.file, t.key(m.group(1)), m.group(2))
+        return SceneError(t.file, t.key(m.group(1)) + (m.group(2) or ""), m.group(3))
     return SceneError(t.file, t.key(), msg)
 
 
@@ -543,6 +561,9 @@ def _structure_spec(t: _Table, kind: str) -> dict:
     kw = {}
     if kind == "chain":
         kw["masses"] = _floats(t, "masses")
+        if len(kw["masses"]) > MAX_ELEMENTS:
+            t.error("masses", f"must hold at most {MAX_ELEMENTS} masses, got "
+                              f"{len(kw['masses'])}")
         kw["stiffnesses"] = _floats(t, "stiffnesses")
         kw["ground_below"] = t.boolean("ground_below", True)
         kw["spacing"] = t.number("spacing", rule=">0", unit="m")
@@ -552,7 +573,7 @@ def _structure_spec(t: _Table, kind: str) -> dict:
     else:
         kw["length"] = t.number("length", rule=">0", unit="m")
         kw["density"] = t.number("density", rule=">0", unit="kg/m^3")
-        kw["n_elements"] = t.integer("elements", low=1)
+        kw["n_elements"] = t.integer("elements", low=1, high=MAX_ELEMENTS)
         kw["origin"] = t.vec2("origin", (0.0, 0.0))
         kw["axis"] = t.vec2("axis", (1.0, 0.0), nonzero=True)
         if kind in ("beam", "cable"):

@@ -1,0 +1,246 @@
+"""Property-based fuzzing of scene files: whatever a file holds, reading and
+building it ends in a scene, a :class:`SceneError` naming the file and the
+key, or a clean refusal (:class:`UnsafeStepError`) -- never another exception.
+
+The shipped scenes are mutated at two levels: the parsed table (drop a key,
+add an unknown one, put a value of another type, zero, negative, NaN,
+infinite or absurdly large) and the TOML text (delete, repeat or cut lines,
+break an assignment, replace a number or a string).  Structures are coarsened
+to 8 elements first, so that building one stays cheap; no example runs a
+simulation.
+"""
+import math
+import re
+import subprocess
+import sys
+import tomllib
+import warnings
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from conftest import CASES, ROOT
+from cosim import cli
+from cosim.scene import MAX_ELEMENTS, MAX_STEPS, SceneError, load_scene
+from cosim.schemes import UnsafeStepError
+from cosim.tomlwrite import dumps
+
+FILES = sorted(CASES.glob("*.toml"))
+FUZZ = settings(max_examples=250, deadline=None,
+                suppress_health_check=[HealthCheck.function_scoped_fixture,
+                                       HealthCheck.too_slow])
+
+
+def coarse_text(path) -> str:
+    return re.sub(r"(?m)^elements = \d+", "elements = 8", path.read_text())
+
+
+TEXTS = {p.name: coarse_text(p) for p in FILES}
+TABLES = {name: tomllib.loads(text) for name, text in TEXTS.items()}
+
+
+def key_paths(table, prefix=()):
+    for k, v in table.items():
+        yield prefix + (k,)
+        if isinstance(v, dict):
+            yield from key_paths(v, prefix + (k,))
+
+
+PATHS = {name: list(key_paths(t)) for name, t in TABLES.items()}
+
+SPECIAL = [0, -1, 0.0, -0.0, -1e-9, 1e-300, 1e308, 10**9, 2**64, -(2**70), math.nan,
+           math.inf, -math.inf, True, "", "x", "nan", [], [math.nan, 1.0], [1e400, 0.0],
+           [0.0, 0.0], [1.0], {}, {"type": "no_such_type"}, {"zz": 1}, "ground",
+           "robot.C", "no_such.point"]
+bad_values = st.one_of(
+    st.sampled_from(SPECIAL),
+    st.integers(min_value=-(2**80), max_value=2**80),
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.text(max_size=6),
+    st.booleans(),
+    st.lists(st.floats(allow_nan=True, allow_infinity=True), max_size=4),
+    st.dictionaries(st.sampled_from(["type", "name", "stiffness", "zz"]),
+                    st.one_of(st.floats(), st.text(max_size=4)), max_size=2),
+)
+
+
+def outcome(path, **kw) -> str:
+    """Read and build ``path``; ``"ok"`` or ``"refused"``, after checking
+    that a refusal names the file, the key and the rule."""
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            scene = load_scene(path, **kw)
+            scene.build()
+    except SceneError as exc:
+        text = str(exc)
+        assert exc.file == str(path) and text.startswith(f"{path}: "), text
+        rule = text[len(f"{path}: "):]
+        if exc.key:
+            assert rule.startswith(f"`{exc.key}` "), text
+            rule = rule[len(exc.key) + 3:]
+        assert len(rule) > 8, text                   # says what was expected
+        return "refused"
+    except UnsafeStepError as exc:
+        assert "macro step" in str(exc), str(exc)
+        return "refused"
+    return "ok"
+
+
+# ---------------------------------------------------------- table level
+@FUZZ
+@given(data=st.data())
+def test_mutated_tables_are_refused_with_file_and_key(data, tmp_path):
+    name = data.draw(st.sampled_from(sorted(TABLES)), label="scene")
+    table = tomllib.loads(TEXTS[name])
+    path = data.draw(st.sampled_from(PATHS[name]), label="key")
+    node = table
+    for k in path[:-1]:
+        node = node[k]
+    op = data.draw(st.sampled_from(["drop", "put", "put", "put", "unknown"]), label="op")
+    if op == "drop":
+        del node[path[-1]]
+    elif op == "unknown":
+        node[data.draw(st.sampled_from(["zz", "Mass", "stifness", "type_"]))] = 1.0
+    else:
+        node[path[-1]] = data.draw(bad_values, label="value")
+    file = tmp_path / "fuzzed.toml"
+    file.write_text(dumps(table))
+    result = outcome(file)
+    if op == "drop" and path == ("t_end",):
+        assert result == "refused"                   # a required key
+
+
+# ------------------------------------------------------------ text level
+def _mutate_text(data, text: str) -> str:
+    lines = text.splitlines()
+    op = data.draw(st.sampled_from(["delete", "repeat", "cut", "assign", "number",
+                                    "string"]), label="op")
+    if op == "delete":
+        del lines[data.draw(st.integers(0, len(lines) - 1))]
+    elif op == "repeat":
+        lines.insert(data.draw(st.integers(0, len(lines))),
+                     lines[data.draw(st.integers(0, len(lines) - 1))])
+    elif op == "cut":
+        return text[:data.draw(st.integers(0, len(text)))]
+    elif op == "assign":
+        j = data.draw(st.integers(0, len(lines) - 1))
+        lines[j] = lines[j].replace("=", data.draw(st.sampled_from(["", "==", "= =", "=["])), 1)
+    else:
+        pattern = r"(?<=[=\[, ])-?\d[\d.e+_-]*" if op == "number" else r'"[^"\n]*"'
+        spans = [m.span() for m in re.finditer(pattern, text)]
+        a, b = data.draw(st.sampled_from(spans))
+        token = data.draw(st.sampled_from(
+            ["nan", "inf", "-inf", "0", "-1", "1e308", "1e-320", "1_000_000_000", '"x"', "[]",
+             "{}", "true", "[nan, 1]", "-0.0", "99999999999999999999999",
+             '{ type = "linear" }', '"ground"', '"robot.C"', "[0.0, 0.0]", "1e999"]))
+        return text[:a] + token + text[b:]
+    return "\n".join(lines) + "\n"
+
+
+@FUZZ
+@given(data=st.data())
+def test_mutated_text_is_refused_with_file_and_key(data, tmp_path):
+    name = data.draw(st.sampled_from(sorted(TEXTS)), label="scene")
+    file = tmp_path / "fuzzed.toml"
+    file.write_text(_mutate_text(data, TEXTS[name]))
+    outcome(file)
+
+
+@settings(max_examples=100, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(key=st.sampled_from(["t_end", "scheme.macro_step", "scheme.name", "contacts.C.law",
+                            "contacts.C.a", "subsystems.chain.masses", "subsystems", "x.y.z",
+                            "subsystems.robot.bodies.arm.joint.type", "scheme", "effects",
+                            "contacts.A.normal", "output.every", "variants.f1"]),
+       value=st.one_of(st.sampled_from(["nan", "-inf", "0", "-1e-3", "[]", "{}", '"x"', "1e999",
+                                        "[1,", "= =", "", "true", "2e9"]),
+                       st.text(max_size=8)))
+def test_set_overrides_are_refused_with_file_and_key(key, value):
+    outcome(CASES / "three_mass.toml", overrides=[f"{key}={value}"])
+
+
+# ------------------------------------------------------------ pinned cases
+@pytest.mark.parametrize("case,override,key,essence", [
+    ("beam_impact.toml", "subsystems.beam.elements=1000000000", "subsystems.beam.elements",
+     f"must be <= {MAX_ELEMENTS}, got 1000000000"),
+    ("rod_impact.toml", "subsystems.rod.elements=0", "subsystems.rod.elements",
+     "must be >= 1, got 0"),
+    ("three_mass.toml", f"subsystems.chain.masses=[{', '.join(['0.1'] * (MAX_ELEMENTS + 1))}]",
+     "subsystems.chain.masses", f"must hold at most {MAX_ELEMENTS} masses"),
+    ("spring_drop.toml", "scheme.macro_step=1e-15", "scheme.macro_step",
+     f"would take 2e+13 macro steps, more than {MAX_STEPS:.0e}"),
+    ("spring_drop.toml", "subsystems.body.integrator.max_step=1e-20",
+     "subsystems.body.integrator.max_step", "would take 2e+18 steps"),
+    ("three_mass.toml", "subsystems.chain.masses=[0.15, -0.15, 0.15]",
+     "subsystems.chain.masses[1]", "must be > 0 kg, got -0.15"),
+    ("three_mass.toml", "contacts.C.law.contact_stiffness=nan",
+     "contacts.C.law.contact_stiffness", "must be finite, got nan"),
+    ("three_mass.toml", "t_end=inf", "t_end", "must be finite, got inf"),
+    ("spring_drop.toml", "subsystems.body.bodies.mass.mass=0",
+     "subsystems.body", "mass matrix is singular"),
+    ("ground_multicontact.toml", "subsystems.robot.bodies.slider_y.joint.axis=[1.0, 0.0]",
+     "subsystems.robot.bodies", "must give a mass matrix that is regular at the initial joint "
+                                "coordinates, got a singular one"),
+])
+def test_absurd_values_are_refused_before_anything_is_assembled(case, override, key, essence,
+                                                                monkeypatch):
+    import fem
+
+    def no_assembly(*a, **k):
+        raise AssertionError("assembled a structure of a scene that must be refused")
+    if "elements" in override or "max_step" in override or "macro_step" in override:
+        monkeypatch.setattr(fem.Beam, "assemble", no_assembly)
+        monkeypatch.setattr(fem.Rod, "assemble", no_assembly)
+    with pytest.raises(SceneError) as exc:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            load_scene(CASES / case, overrides=[override]).build()
+    assert exc.value.key.startswith(key), str(exc.value)
+    assert essence in str(exc.value)
+
+
+def test_a_missing_optional_package_is_a_scene_error(monkeypatch):
+    monkeypatch.setitem(sys.modules, "skfem", None)          # import skfem now fails
+    with pytest.raises(SceneError, match=re.escape(
+            '`subsystems.rod.type` `rod` needs skfem, which is not installed: '
+            'pip install "cosim[fem]"')):
+        load_scene(CASES / "rod_impact.toml").build()
+    import importlib.util
+    monkeypatch.setattr(importlib.util, "find_spec",
+                        lambda name, *a: None if name == "meshio" else object())
+    with pytest.raises(SceneError, match=re.escape("`output.export` needs meshio")):
+        load_scene(CASES / "three_mass.toml", overrides=['output.export=["chain"]']).build()
+
+
+def test_broken_toml_names_the_file_and_the_line(tmp_path):
+    file = tmp_path / "broken.toml"
+    file.write_text(TEXTS["spring_drop.toml"].replace("t_end = 0.02", "t_end = = 0.02"))
+    with pytest.raises(SceneError, match=re.escape(f"{file}: is not valid TOML")) as exc:
+        load_scene(file)
+    assert "line" in str(exc.value)
+
+
+# -------------------------------------------------------------- command line
+def test_command_line_prints_the_error_and_exits_2(tmp_path, capsys):
+    file = tmp_path / "bad.toml"
+    file.write_text(TEXTS["three_mass.toml"].replace("masses = [0.15, 0.15, 0.15]",
+                                                     "masses = [0.15, nan, 0.15]"))
+    assert cli.main(["run", str(file), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert err == f"error: {file}: `subsystems.chain.masses[1]` must be > 0 kg, got nan\n"
+    assert "Traceback" not in err and not (tmp_path / "o").exists()
+    assert cli.main(["info", str(file)]) == 2
+
+
+def test_command_line_in_a_fresh_process(tmp_path):
+    file = tmp_path / "bad.toml"
+    file.write_text(TEXTS["beam_impact.toml"].replace("elements = 8", "elements = 1000000000"))
+    proc = subprocess.run([sys.executable, "-m", "cosim.cli", "run", str(file), "--out",
+                           str(tmp_path / "o")], capture_output=True, text=True, cwd=ROOT,
+                          timeout=120)
+    assert proc.returncode == 2
+    assert proc.stderr.strip() == (f"error: {file}: `subsystems.beam.elements` must be <= "
+                                   f"{MAX_ELEMENTS}, got 1000000000")
+    assert not (tmp_path / "o").exists()
