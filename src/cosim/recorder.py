@@ -92,6 +92,9 @@ class Recorder:
         It must not raise; the library itself never prints.
     progress_interval : float
         Least wall-clock time between two progress calls [s].
+    guard : cosim.guard.Guard, optional
+        Checks every sample before it is kept and stops the run (raises)
+        on non-finite values or energy growth beyond its bound.
 
     Notes
     -----
@@ -101,8 +104,9 @@ class Recorder:
 
     def __init__(self, system, scene: str, scheme: str, t_end: float, every: int = 1,
                  auto_edges: bool = True, *, progress: Callable[[Progress], None] | None = None,
-                 progress_interval: float = 0.2):
+                 progress_interval: float = 0.2, guard=None):
         self.system, self.scene, self.scheme, self.t_end = system, scene, scheme, t_end
+        self.guard = guard           # a cosim.guard.Guard, checking every sample
         nc = system.n_contacts
         self.every = max(1, int(every))
         self.auto_edges = np.broadcast_to(np.asarray(auto_edges, dtype=bool), (nc,))
@@ -152,8 +156,10 @@ class Recorder:
         diss_total = float(np.sum(dissipated)) + internal[0]
         if self.e0 is None:
             self.e0 = energy
-        self.supplied = internal[1]
         drift = energy + diss_total - internal[1] - self.e0
+        if self.guard is not None:   # raises before the sample is kept
+            self.guard.check(t, d, dd, f, drift, internal[1], dissipated, work, self.peak)
+        self.supplied = internal[1]
         self.max_drift = max(self.max_drift, abs(drift))
         active = self.system.in_touch(f)
         nc = self.system.n_contacts

@@ -4,6 +4,7 @@ from __future__ import annotations
 import logging
 import time
 
+from .guard import Guard
 from .recorder import Recorder
 from .scene import Scene, load_scene
 from .errors import SimulationError
@@ -42,7 +43,8 @@ def simulate(scene: Scene, *, scheme: str | None = None, progress=None,
     else:                                  # embedded contacts: their integrator does
         auto = [c not in system.embedded for c in range(system.n_contacts)]
     rec = Recorder(system, scene.name, sch.name, scene.t_end, every=scene.output_every,
-                   auto_edges=auto, progress=progress, progress_interval=progress_interval)
+                   auto_edges=auto, progress=progress, progress_interval=progress_interval,
+                   guard=Guard(system, scene.guard))
     cpu0 = time.process_time()
     status, message = "finished", ""
     counters = {}

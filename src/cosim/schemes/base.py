@@ -10,6 +10,7 @@ import numpy as np
 from .. import preflight
 from ..connections import stiffest_normal
 from ..errors import CouplingError, UnsafeStepError
+from ..guard import GuardError, nonfinite_cause
 from ..subsystem import hermite_coefficients, reparametrised
 
 __all__ = ["Option", "CouplingScheme", "CoSimulationScheme", "UnsafeStepError", "CouplingError",
@@ -242,7 +243,10 @@ class CoSimulationScheme(CouplingScheme):
             for s in self._moving(system):
                 recorder.impacts += getattr(system.subsystems[s], "impact_log", [])
             if not (np.all(np.isfinite(d)) and np.all(np.isfinite(dd))):
-                raise CouplingError(f"non-finite state at t = {t + h:.6g} s")
+                cause = nonfinite_cause(system, d, dd, f)
+                raise GuardError(f"run stopped at t = {t + h:.6g} s: "
+                                 f"{cause[0] if cause else 'non-finite state'}", t + h,
+                                 cause[1] if cause else None, "non-finite")
             recorder.record(t + h, d, dd, f, impulse, diss, self._internal(system),
                             work + system.embedded_work())
             if controlled:
