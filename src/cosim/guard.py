@@ -16,14 +16,14 @@ time and the contact responsible, when
 - ``created`` exceeds ``energy_growth`` times the energy scale plus the
   energy supplied so far.  The energy scale is the sum of the magnitudes of
   each subsystem's energy and each contact's stored energy at the start.
-  Before it stops a run the guard looks again: the scale becomes the largest
-  of that sum at the start, the same sum now, and the most energy each
-  contact has stored (its law's energy at its peak penetration so far), and
-  the run is stopped only if the growth still exceeds the bound.  (A
-  subsystem's energy may be small while much is in play: a body pushed by a
-  constant drive from rest has kinetic energy and an equal and opposite
-  potential of the drive; the contact it strikes stores that kinetic energy.)
-  The scale found is kept for the following steps.
+  Before it stops a run the guard looks again: the scale becomes the larger
+  of that sum and the energy the contacts stored at their peak penetrations
+  so far, and the run is stopped only if the growth still exceeds the bound.
+  (A subsystem's energy may be small while much is in play: a body pushed
+  from rest by a constant drive has kinetic energy and an equal and opposite
+  potential of the drive; the contact it strikes stores that kinetic
+  energy.)  The scale found is kept for the following steps.  The energy now
+  is not part of the scale: it holds the energy created.
 
 The contact responsible is the one whose own ledger (the work its forces did
 on the subsystems, as the scheme applied them, plus the change of its stored
@@ -43,7 +43,8 @@ import numpy as np
 
 from .errors import SimulationError
 
-__all__ = ["GuardOptions", "Guard", "GuardError", "nonfinite_cause", "DEFAULT_ENERGY_GROWTH"]
+__all__ = ["GuardOptions", "Guard", "GuardError", "nonfinite_cause", "energy_scale",
+           "peak_stored_energy", "DEFAULT_ENERGY_GROWTH"]
 
 #: default bound on the created energy, relative to the energy scale
 DEFAULT_ENERGY_GROWTH = 0.1
@@ -95,11 +96,19 @@ class GuardOptions:
             raise TypeError(f"`energy_check` must be true or false, got {self.energy_check!r}")
 
 
-def _energy_scale(system, d) -> float:
+def energy_scale(system, d) -> float:
     """Sum of the magnitudes of each subsystem's energy and each contact's
     stored energy [J]."""
     return float(sum(abs(s.energy()) for s in system.subsystems)
                  + np.sum(np.abs(system.contact_potentials(d))))
+
+
+def peak_stored_energy(system, d, peak) -> float:
+    """Energy the contacts store at the penetrations ``peak`` (n_contacts,)
+    [J], all together; the rows ``d`` give the tangential rows."""
+    at_peak = np.array(d, float)
+    at_peak[:system.n_contacts] = peak
+    return float(np.sum(np.abs(system.contact_potentials(at_peak))))
 
 
 def nonfinite_cause(system, d, dd, f) -> tuple[str, str | None] | None:
@@ -196,7 +205,7 @@ class Guard:
         if cause is not None:
             raise GuardError(f"run stopped at t = {t:.6g} s: {cause[0]} at the start",
                              t, cause[1], "non-finite")
-        self.scale = _energy_scale(self.system, d)
+        self.scale = energy_scale(self.system, d)
         self._stored0 = self.system.contact_potentials(d)
 
     def _judge(self, t, d, dd, f, created, supplied, dissipated, work, peak):
@@ -209,11 +218,9 @@ class Guard:
         if not math.isfinite(created):
             raise GuardError(f"run stopped at t = {t:.6g} s: the energy ledger is not finite "
                              f"({created!r} J created)", t, None, "non-finite")
-        scale = max(self.scale, _energy_scale(system, d))
+        scale = self.scale
         if peak is not None and system.n_contacts:
-            at_peak = np.array(d, float)
-            at_peak[:system.n_contacts] = peak
-            scale = max(scale, float(np.sum(np.abs(system.contact_potentials(at_peak)))))
+            scale = max(scale, peak_stored_energy(system, d, peak))
         self.scale = scale
         bound = self._bound(scale, supplied)
         if created <= bound:

@@ -317,6 +317,12 @@ class Implicit(CoSimulationScheme):
             guess = guess.copy()
             guess[coupler] = z[:nc]
             motion = self._unscaled(z[nc:], k, h)
+        self.n_iterations += self.max_iterations
+        if self.contact_step is not None and h > self.contact_step * (1 + 1e-9):
+            # a long step over a contact that touches and leaves inside it (a
+            # vibrating side): no fixed point to find; the step is retried shorter
+            self._unconverged = True
+            return h * (f_n + 0.5 * (guess - f_n))
         nc = len(coupler)
         worst = np.concatenate([np.abs(r[:nc]), np.abs(r[nc:]).reshape(-1, 4).max(axis=1)])
         i = int(np.argmax(worst))
