@@ -14,11 +14,13 @@ time and the contact responsible, when
 
 - a penetration, rate, force or the energy is not finite, or
 - ``created`` exceeds ``energy_growth`` times the energy scale plus the
-  energy supplied so far.  The energy scale is the sum of the magnitudes of
+  energy supplied so far, and exceeds ``energy_floor`` (1 mJ by default: a
+  scene that starts at rest has almost no energy scale at its first step).  The energy scale is the sum of the magnitudes of
   each subsystem's energy and each contact's stored energy at the start.
-  Before it stops a run the guard looks again: the scale becomes the larger
-  of that sum and the energy the contacts stored at their peak penetrations
-  so far, and the run is stopped only if the growth still exceeds the bound.
+  Before it stops a run the guard looks again: the scale becomes the largest
+  of that sum, the energy the contacts stored at their peak penetrations so
+  far, and the energy they store now plus what they dissipated so far, and
+  the run is stopped only if the growth still exceeds the bound.
   (A subsystem's energy may be small while much is in play: a body pushed
   from rest by a constant drive has kinetic energy and an equal and opposite
   potential of the drive; the contact it strikes stores that kinetic
@@ -44,12 +46,12 @@ import numpy as np
 from .errors import SimulationError
 
 __all__ = ["GuardOptions", "Guard", "GuardError", "nonfinite_cause", "energy_scale",
-           "peak_stored_energy", "DEFAULT_ENERGY_GROWTH"]
+           "peak_stored_energy", "DEFAULT_ENERGY_GROWTH", "DEFAULT_ENERGY_FLOOR"]
 
 #: default bound on the created energy, relative to the energy scale
 DEFAULT_ENERGY_GROWTH = 0.1
-#: [J] the bound never falls below this (a scene that starts with no energy)
-_FLOOR = 1e-9
+#: [J] default least bound (a scene that starts with next to no energy)
+DEFAULT_ENERGY_FLOOR = 1e-3
 
 
 class GuardError(SimulationError):
@@ -82,16 +84,23 @@ class GuardOptions:
     energy_check : bool
         False turns the energy bound off; non-finite values stop a run
         whatever this says.
+    energy_floor : float
+        Created energy below this never stops a run [J], >= 0.
     """
 
     energy_growth: float = DEFAULT_ENERGY_GROWTH
     energy_check: bool = True
+    energy_floor: float = DEFAULT_ENERGY_FLOOR
 
     def __post_init__(self):
         g = self.energy_growth
         if isinstance(g, bool) or not isinstance(g, (int, float)) or not (
                 math.isfinite(g) and g > 0):
             raise ValueError(f"`energy_growth` must be a finite number > 0, got {g!r}")
+        e = self.energy_floor
+        if isinstance(e, bool) or not isinstance(e, (int, float)) or not (
+                math.isfinite(e) and e >= 0):
+            raise ValueError(f"`energy_floor` must be a finite number >= 0 J, got {e!r}")
         if not isinstance(self.energy_check, bool):
             raise TypeError(f"`energy_check` must be true or false, got {self.energy_check!r}")
 
@@ -198,7 +207,7 @@ class Guard:
     def _bound(self, scale: float, supplied: float) -> float:
         if self.growth == math.inf:
             return math.inf
-        return self.growth * (scale + abs(supplied)) + _FLOOR
+        return max(self.growth * (scale + abs(supplied)), self.options.energy_floor)
 
     def _start(self, t, d, dd, f):
         cause = nonfinite_cause(self.system, d, dd, f)
@@ -219,8 +228,11 @@ class Guard:
             raise GuardError(f"run stopped at t = {t:.6g} s: the energy ledger is not finite "
                              f"({created!r} J created)", t, None, "non-finite")
         scale = self.scale
-        if peak is not None and system.n_contacts:
-            scale = max(scale, peak_stored_energy(system, d, peak))
+        if system.n_contacts:
+            scale = max(scale, float(np.sum(np.abs(system.contact_potentials(d)))
+                                     + np.sum(np.abs(dissipated))))
+            if peak is not None:
+                scale = max(scale, peak_stored_energy(system, d, peak))
         self.scale = scale
         bound = self._bound(scale, supplied)
         if created <= bound:

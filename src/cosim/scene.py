@@ -17,7 +17,7 @@ import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .guard import DEFAULT_ENERGY_GROWTH, GuardOptions
+from .guard import DEFAULT_ENERGY_FLOOR, DEFAULT_ENERGY_GROWTH, GuardOptions
 
 
 __all__ = ["SceneError", "Scene", "load_scene", "parse_override", "SUBSYSTEM_TYPES"]
@@ -217,7 +217,7 @@ class Scene:
         The merged scene table (after variant and overrides).
     guard : GuardOptions
         The run guard's settings (``[guard]``: ``energy_growth``,
-        ``energy_check``), see :mod:`cosim.guard`.
+        ``energy_check``, ``energy_floor``), see :mod:`cosim.guard`.
     """
 
     name: str
@@ -361,7 +361,9 @@ def _validate(data: dict, file, variant) -> Scene:
     gd = top.table("guard", {})
     guard = GuardOptions(energy_growth=gd.number("energy_growth", DEFAULT_ENERGY_GROWTH,
                                                  rule=">0"),
-                         energy_check=gd.boolean("energy_check", True))
+                         energy_check=gd.boolean("energy_check", True),
+                         energy_floor=gd.number("energy_floor", DEFAULT_ENERGY_FLOOR,
+                                                rule=">=0", unit="J"))
     gd.finish()
 
     subs = []
