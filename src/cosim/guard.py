@@ -15,8 +15,9 @@ time and the contact responsible, when
 - a penetration, rate, force or the energy is not finite, or
 - ``created`` exceeds ``energy_growth`` times the energy scale plus the
   energy supplied so far, and exceeds ``energy_floor`` (1 mJ by default: a
-  scene that starts at rest has almost no energy scale at its first step).  The energy scale is the sum of the magnitudes of
-  each subsystem's energy and each contact's stored energy at the start.
+  scene that starts at rest has almost no energy scale at its first step).
+  The energy scale is the sum of the magnitudes of each subsystem's energy
+  and each contact's stored energy at the start.
   Before it stops a run the guard looks again: the scale becomes the largest
   of that sum, the energy the contacts stored at their peak penetrations so
   far, and the energy they store now plus what they dissipated so far, and
