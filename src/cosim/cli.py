@@ -137,7 +137,7 @@ def _cmd_verify(args) -> int:
     from .verify import run_checks
 
     failed = 0
-    for check in run_checks(args.cases):
+    for check in run_checks(args.cases, hard=args.hard):
         failed += not check.passed
         print(f"{'PASS' if check.passed else 'FAIL'}  {check.name}: {check.detail}", flush=True)
     print(f"{'all checks passed' if not failed else f'{failed} check(s) failed'}")
@@ -317,6 +317,9 @@ def build_parser() -> argparse.ArgumentParser:
     pl.set_defaults(func=_cmd_plot)
     v = sub.add_parser("verify", help="run the verification cases; exit 1 if any fails")
     v.add_argument("--cases", default="cases", help="folder of the scene files (default cases)")
+    v.add_argument("--hard", action="store_true",
+                   help="also run the hard-case matrix (three_mass f1000 and ms0.01, every "
+                        "scheme and placement of C, steps up to ten times the stability limit)")
     v.set_defaults(func=_cmd_verify)
     return p
 

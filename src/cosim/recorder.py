@@ -98,6 +98,9 @@ class Recorder:
         Stream the series to disk and write them there (``series.npz``) when
         the run finishes; the result then reads them from that file.  Without
         it, the series stay in memory.
+    guard : cosim.guard.Guard, optional
+        Checks every sample before it is kept and stops the run (raises)
+        on non-finite values or energy growth beyond its bound.
 
     Notes
     -----
@@ -114,8 +117,9 @@ class Recorder:
 
     def __init__(self, system, scene: str, scheme: str, t_end: float, every: int = 1,
                  auto_edges: bool = True, *, progress: Callable[[Progress], None] | None = None,
-                 progress_interval: float = 0.2, series_path=None):
+                 progress_interval: float = 0.2, series_path=None, guard=None):
         self.system, self.scene, self.scheme, self.t_end = system, scene, scheme, t_end
+        self.guard = guard           # a cosim.guard.Guard, checking every sample
         nc = system.n_contacts
         self.every = max(1, int(every))
         self.auto_edges = np.broadcast_to(np.asarray(auto_edges, dtype=bool), (nc,))
@@ -169,8 +173,10 @@ class Recorder:
         diss_total = float(np.sum(dissipated)) + internal[0]
         if self.e0 is None:
             self.e0 = energy
-        self.supplied = internal[1]
         drift = energy + diss_total - internal[1] - self.e0
+        if self.guard is not None:   # raises before the sample is kept
+            self.guard.check(t, d, dd, f, drift, internal[1], dissipated, work, self.peak)
+        self.supplied = internal[1]
         self.max_drift = max(self.max_drift, abs(drift))
         active = self.system.in_touch(f)
         nc = self.system.n_contacts

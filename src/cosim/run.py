@@ -5,6 +5,7 @@ import logging
 import time
 from pathlib import Path
 
+from .guard import Guard
 from .recorder import Recorder
 from .scene import Scene, load_scene
 from .errors import SimulationError, UnsafeStepError
@@ -91,7 +92,8 @@ def simulate(scene: Scene, *, scheme: str | None = None, progress=None,
         auto = [c not in system.embedded for c in range(system.n_contacts)]
     rec = Recorder(system, scene.name, sch.name, scene.t_end, every=scene.output_every,
                    auto_edges=auto, progress=progress, progress_interval=progress_interval,
-                   series_path=None if out is None else Path(out) / "series.npz")
+                   series_path=None if out is None else Path(out) / "series.npz",
+                   guard=Guard(system, scene.guard))
     cpu0 = time.process_time()
     status, message = "finished", ""
     counters = {}

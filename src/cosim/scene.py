@@ -17,6 +17,8 @@ import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from .guard import DEFAULT_ENERGY_FLOOR, DEFAULT_ENERGY_GROWTH, GuardOptions
+
 
 __all__ = ["SceneError", "Scene", "load_scene", "parse_override", "SUBSYSTEM_TYPES"]
 
@@ -221,6 +223,9 @@ class Scene:
         in a scene whose default is a co-simulation), validated.
     data : dict
         The merged scene table (after variant and overrides).
+    guard : GuardOptions
+        The run guard's settings (``[guard]``: ``energy_growth``,
+        ``energy_check``, ``energy_floor``), see :mod:`cosim.guard`.
     """
 
     name: str
@@ -237,6 +242,7 @@ class Scene:
     export: tuple = ()
     export_every: int = 1
     scheme_tables: dict = field(default_factory=dict)
+    guard: GuardOptions = GuardOptions()
 
     def build(self, scheme: str | None = None):
         """Make the coupled system and the scheme (optionally another one)."""
@@ -365,6 +371,14 @@ def _validate(data: dict, file, variant) -> Scene:
             gravity = (0.0, -eff.number("gravity", rule=">0", unit="m/s^2"))
     eff.finish()
 
+    gd = top.table("guard", {})
+    guard = GuardOptions(energy_growth=gd.number("energy_growth", DEFAULT_ENERGY_GROWTH,
+                                                 rule=">0"),
+                         energy_check=gd.boolean("energy_check", True),
+                         energy_floor=gd.number("energy_floor", DEFAULT_ENERGY_FLOOR,
+                                                rule=">=0", unit="J"))
+    gd.finish()
+
     subs = []
     for sname, st in top.tables("subsystems"):
         subs.append(_subsystem_spec(sname, st))
@@ -388,7 +402,8 @@ def _validate(data: dict, file, variant) -> Scene:
     return Scene(name=name, path=str(file), variant=variant, t_end=t_end, scheme=scheme_name,
                  scheme_options=opts, output_every=every, subsystems=tuple(subs),
                  contacts=tuple(contacts), gravity=gravity, data=data,
-                 export=tuple(export), export_every=export_every, scheme_tables=tables)
+                 export=tuple(export), export_every=export_every, scheme_tables=tables,
+                 guard=guard)
 
 
 def _scheme_option(sch: _Table, k, opt):

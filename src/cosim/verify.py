@@ -2,15 +2,19 @@
 from __future__ import annotations
 
 import math
+import re
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
 from . import analytic
+from .errors import UnsafeStepError
+from .guard import energy_scale, peak_stored_energy
 from .run import simulate
-from .scene import load_scene
+from .scene import SceneError, load_scene
 
-__all__ = ["Check", "run_checks", "CHECKS"]
+__all__ = ["Check", "run_checks", "CHECKS", "HardCase", "hard_matrix", "run_hard_case",
+           "hard_checks"]
 
 
 @dataclass(frozen=True)
@@ -67,8 +71,166 @@ CHECKS = {
 }
 
 
-def run_checks(cases_dir="cases"):
-    """Yield every :class:`Check` in turn."""
+# ------------------------------------------------------------- hard cases
+#: three_mass's hard variants (CASES.md section 5) and the matrix's axes
+HARD_VARIANTS = ("f1000", "ms0.01")
+HARD_SCHEMES = ("monolithic", "jacobi", "gauss_seidel", "implicit")
+HARD_PLACEMENTS = ("embedded", "coupler")
+#: macro steps in contact, as multiples of the reference step
+HARD_FACTORS = (0.5, 1.0, 2.0, 5.0, 10.0)
+_NUM = r"[-+0-9.e]+"
+
+
+@dataclass(frozen=True)
+class HardCase:
+    """One point of the hard-case matrix.
+
+    ``step`` is the step while C is in contact (``scheme.contact_step``;
+    ``scheme.macro_step`` stays 1 ms in free flight), None for the
+    monolithic reference; ``forced`` runs an explicit step the pre-flight
+    check refuses with ``scheme.accept_unsafe_step = true``."""
+
+    variant: str
+    scheme: str
+    placement: str
+    step: float | None = None
+    factor: float | None = None
+    forced: bool = False
+
+    @property
+    def label(self) -> str:
+        s = "-" if self.step is None else f"{self.step:.3g} s ({self.factor:g} x ref)"
+        return (f"three_mass/{self.variant}/{self.scheme}/{self.placement}/{s}"
+                + (" forced" if self.forced else ""))
+
+    def overrides(self, t_end: float | None = None) -> list:
+        ov = [f'contacts.C.placement="{self.placement}"']
+        if t_end is not None:
+            ov.append(f"t_end={t_end}")
+        if self.step is not None:
+            ov += [f"scheme.contact_step={self.step!r}",
+                   f"scheme.macro_step={max(1e-3, self.step)!r}"]
+        if self.forced:
+            ov.append("scheme.accept_unsafe_step=true")
+        return ov
+
+
+def reference_step(cases: Path, variant: str, scheme: str, placement: str) -> float:
+    """The matrix's reference step in contact [s]: for an explicit scheme with
+    C exchanged (``coupler``), the pre-flight check's largest safe step;
+    otherwise (C hosted by the chain, or the implicit scheme), which the
+    check does not limit, a tenth of C's contact time ``pi / omega``."""
+    from . import preflight
+    from .connections import stiffest_normal
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        scene = load_scene(cases / "three_mass.toml", variant,
+                           [f'contacts.C.placement="{placement}"'], scheme=scheme)
+    system, sch = scene.build()
+    c = system.contact_names.index("C")
+    ln = system.links[c]
+    n = ln.contact.normal
+    m = 1.0 / (system.subsystems[ln.sub_a].port_mobility(ln.port_a, n)
+               + system.subsystems[ln.sub_b].port_mobility(ln.port_b, n))
+    k, cd = stiffest_normal(ln)
+    if placement == "coupler" and sch.explicit:
+        return preflight.largest_safe_step(m, k, cd, 1e-3, sch.extrapolation_order,
+                                           sch.max_energy_gain, sch._partner_first(system, c))
+    return 0.1 * math.pi / math.sqrt(k / m)
+
+
+def hard_matrix(cases="cases", factors=HARD_FACTORS, variants=HARD_VARIANTS,
+                schemes=HARD_SCHEMES, placements=HARD_PLACEMENTS) -> list[HardCase]:
+    """Every point of the matrix: each variant, scheme and placement of C, at
+    each factor of the reference step (:func:`reference_step`); the
+    monolithic reference once per variant and placement; an explicit
+    coupler step the pre-flight check refuses is also run forced."""
+    cases = Path(cases)
+    out = []
+    for v in variants:
+        for s in schemes:
+            for p in placements:
+                if s == "monolithic":
+                    out.append(HardCase(v, s, p))
+                    continue
+                ref = reference_step(cases, v, s, p)
+                for fac in factors:
+                    # three digits, rounded down: 1 x the limit stays within it
+                    step = float(f"{ref * fac * (1 - 5e-3):.3g}")
+                    out.append(HardCase(v, s, p, step, fac))
+                    if p == "coupler" and s != "implicit" and fac > 1:
+                        out.append(HardCase(v, s, p, step, fac, True))
+    return out
+
+
+def run_hard_case(case: HardCase, cases="cases", t_end: float | None = None) -> dict:
+    """Run one point and judge its outcome.
+
+    Returns a dict with ``outcome`` (``"bounded"``, ``"refused"`` or
+    ``"stopped"``), ``ok`` (the outcome is one the issue allows, with its
+    evidence), ``detail``, ``created`` (largest energy created over the kept
+    samples [J]), ``bound`` [J] and ``cpu_s``.
+
+    - bounded: finished, every series value finite, and the energy created
+      (total + dissipated - supplied - initial) at every sample within
+      ``guard.energy_growth`` times the energy scale (the guard's, taken
+      anew from the scene and the contacts' peaks);
+    - refused: :class:`UnsafeStepError` or :class:`SceneError` before the
+      run, naming contact C and the step;
+    - stopped: status failed, a message naming a contact and the time, and
+      the series written up to there finite.
+    """
+    cases = Path(cases)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        scene = load_scene(cases / "three_mass.toml", case.variant, case.overrides(t_end),
+                           scheme=case.scheme)
+    try:
+        res = simulate(scene)
+    except (UnsafeStepError, SceneError) as exc:
+        msg = str(exc)
+        ok = "contact `C`" in msg and (case.step is None or f"{case.step:.3g} s" in msg)
+        return {"outcome": "refused", "ok": ok, "detail": msg, "created": math.nan,
+                "bound": math.nan, "cpu_s": 0.0}
+    import numpy as np
+    s = res.summary
+    finite = all(np.all(np.isfinite(a)) for a in res.series.values())
+    e = res.series["energy/total"] + res.series["energy/dissipated"] - s["energy"]["supplied"]
+    created = float(np.max(e - s["energy"]["initial"])) if len(e) else 0.0
+    system, _ = scene.build()
+    d0, _ = system.penetrations(system.outputs())
+    peaks = np.array([s["contacts"][n]["peak_penetration"] for n in system.contact_names])
+    scale = max(energy_scale(system, d0), peak_stored_energy(system, d0, peaks))
+    g = scene.guard
+    bound = max(g.energy_growth * (scale + abs(s["energy"]["supplied"])), g.energy_floor)
+    out = {"created": created, "bound": bound, "cpu_s": s["cpu_time_s"],
+           "detail": s["message"] or f"created {created:.3g} J of {bound:.3g} J allowed"}
+    if res.status == "finished":
+        out.update(outcome="bounded", ok=finite and created <= bound)
+    else:
+        msg = s["message"]
+        named = re.search(r"contact `[^`]+`", msg) is not None
+        timed = re.search(rf"t = {_NUM} s", msg) is not None
+        out.update(outcome="stopped", ok=finite and named and timed)
+    return out
+
+
+def hard_checks(cases="cases", t_end: float | None = None, matrix=None):
+    """Yield a :class:`Check` per point of the hard-case matrix; its detail
+    starts with the outcome."""
+    for case in (matrix if matrix is not None else hard_matrix(cases)):
+        r = run_hard_case(case, cases, t_end)
+        created = "" if math.isnan(r["created"]) else \
+            f" (created {r['created']:.3g} J, bound {r['bound']:.3g} J)"
+        yield Check(case.label, r["ok"], f"{r['outcome']}{created}: {r['detail']}")
+
+
+def run_checks(cases_dir="cases", hard: bool = False):
+    """Yield every :class:`Check` in turn; with ``hard``, the hard-case
+    matrix after them (:func:`hard_checks`)."""
     cases = Path(cases_dir)
     for fn in CHECKS.values():
         yield from fn(cases)
+    if hard:
+        yield from hard_checks(cases)

@@ -10,6 +10,7 @@ import numpy as np
 from .. import preflight
 from ..connections import stiffest_normal
 from ..errors import CouplingError, UnsafeStepError
+from ..guard import GuardError, nonfinite_cause
 from ..subsystem import hermite_coefficients, reparametrised
 
 __all__ = ["Option", "CouplingScheme", "CoSimulationScheme", "UnsafeStepError", "CouplingError",
@@ -187,6 +188,7 @@ class CoSimulationScheme(CouplingScheme):
                 system.update_followers(self._outs)
             predicted = self._predicted_end_forces(system, h / h_prev) if self.interface_tolerance \
                 and controlled else None
+            self._unconverged = False
             stepped = self.advance(system, t, h, h / h_prev)
             outs = system.outputs()
             d1, dd1 = system.penetrations(outs)
@@ -202,8 +204,15 @@ class CoSimulationScheme(CouplingScheme):
                     self._h_next = h_new
                     self._outs = system.outputs()
                     continue
-            if controlled and h > self.contact_step and not self._aimed:
-                onset = self._onset(d, dd, d1, dd1, t, h)
+            if controlled and h > self.contact_step:
+                if self._unconverged:           # an implicit step found no fixed point
+                    onset = 0.5 * h, False
+                elif not self._aimed:
+                    onset = self._onset(d, dd, d1, dd1, t, h)
+                    if onset is None and self._touched(stepped):
+                        onset = 0.5 * h, False
+                else:                           # the predicted onset may come too late
+                    onset = self._overshot(d, d1, dd1, h)
                 if onset is not None:           # a contact closed inside a long step
                     system.set_state(saved)
                     system.discard_work()
@@ -242,7 +251,10 @@ class CoSimulationScheme(CouplingScheme):
             for s in self._moving(system):
                 recorder.impacts += getattr(system.subsystems[s], "impact_log", [])
             if not (np.all(np.isfinite(d)) and np.all(np.isfinite(dd))):
-                raise CouplingError(f"non-finite state at t = {t + h:.6g} s")
+                cause = nonfinite_cause(system, d, dd, f)
+                raise GuardError(f"run stopped at t = {t + h:.6g} s: "
+                                 f"{cause[0] if cause else 'non-finite state'}", t + h,
+                                 cause[1] if cause else None, "non-finite")
             recorder.record(t + h, d, dd, f, impulse, diss, self._internal(system),
                             work + system.embedded_work())
             if controlled:
@@ -250,6 +262,7 @@ class CoSimulationScheme(CouplingScheme):
         return {"n_windows": k, "n_iterations": self.n_iterations, "n_rejected": n_rejected}
 
     _h_next = None
+    _unconverged = False    # the implicit scheme's last (long) step did not converge
     _aimed = False          # the current step ends at a predicted onset: accept it
     _dd_prev = None
     _h_prev_step = None
@@ -355,6 +368,29 @@ class CoSimulationScheme(CouplingScheme):
         if all_found:
             return max(min(found), 1e-12 * h), True
         return max(min([0.5 * h, *found]), 1e-12 * h), False
+
+    def _touched(self, stepped) -> bool:
+        """Whether a long step gave a coupler contact open at its start a
+        force: the contact touched inside the step, though it may be open
+        again at the end (Gauss-Seidel's force interpolated towards a partner
+        that has stepped, an implicit iterate), and the step must be
+        shortened like one over an onset."""
+        r = self._system.coupler_rows
+        return bool(np.any((self._f[r] == 0.0) & (stepped[r] != 0.0)))
+
+    def _overshot(self, d0, d1, dd1, h):
+        """Check a step aimed at a predicted coupler onset: the prediction
+        (free motion with a constant relative acceleration) can fall late when
+        a side vibrates, and the step then carries the contact closed with no
+        force in it.  When a coupler contact closed more than ``contact_step``
+        before the step's end (its penetration over its rate, the time since
+        touch-down at that rate), returns half the step, to be checked again
+        like any long step; else None."""
+        c = self._system.coupler
+        late = (d0[c] <= 0) & (d1[c] > np.maximum(dd1[c], 0.0) * self.contact_step)
+        if np.any(late):
+            return 0.5 * h, False
+        return None
 
     def _starting_history(self, system, d, dd, f, H):
         """Force history to extrapolate the first steps from.  A contact

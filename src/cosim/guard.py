@@ -1,0 +1,264 @@
+"""The run guard: stop a run that turns non-finite or creates energy.
+
+At every accepted step the recorder hands the guard the rows'
+penetrations, rates and forces and the energy the run has *created* so far,
+
+    created(t) = E(t) + D(t) - S(t) - E(0),
+
+with ``E`` the energy of the subsystems and the contacts' springs, ``D``
+what contacts and subsystems dissipated and ``S`` what drives supplied.  An
+exact run keeps ``created`` at zero; a coupling that lags (a force held or
+extrapolated over a step too long for a stiff contact) makes it grow with
+every impact.  The guard stops the run with a :class:`GuardError`, naming the
+time and the contact responsible, when
+
+- a penetration, rate, force or the energy is not finite, or
+- ``created`` exceeds ``energy_growth`` times the energy scale plus the
+  energy supplied so far, and exceeds ``energy_floor`` (1 mJ by default: a
+  scene that starts at rest has almost no energy scale at its first step).
+  The energy scale is the sum of the magnitudes of each subsystem's energy
+  and each contact's stored energy at the start.
+  Before it stops a run the guard looks again: the scale becomes the largest
+  of that sum, the energy the contacts stored at their peak penetrations so
+  far, and the energy they store now plus what they dissipated so far, and
+  the run is stopped only if the growth still exceeds the bound.
+  (A subsystem's energy may be small while much is in play: a body pushed
+  from rest by a constant drive has kinetic energy and an equal and opposite
+  potential of the drive; the contact it strikes stores that kinetic
+  energy.)  The scale found is kept for the following steps.  The energy now
+  is not part of the scale: it holds the energy created.
+
+The contact responsible is the one whose own ledger (the work its forces did
+on the subsystems, as the scheme applied them, plus the change of its stored
+energy plus what it dissipated: the summary's ``coupling_error``) holds the
+largest share of the created energy; when no contact holds half of it, the
+message says the rest came from inside the subsystems' integrators.
+
+The check costs three sums and two comparisons per step, and nothing else
+unless it trips.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import SimulationError
+
+__all__ = ["GuardOptions", "Guard", "GuardError", "nonfinite_cause", "energy_scale",
+           "peak_stored_energy", "DEFAULT_ENERGY_GROWTH", "DEFAULT_ENERGY_FLOOR"]
+
+#: default bound on the created energy, relative to the energy scale
+DEFAULT_ENERGY_GROWTH = 0.1
+#: [J] default least bound (a scene that starts with next to no energy)
+DEFAULT_ENERGY_FLOOR = 1e-3
+
+
+class GuardError(SimulationError):
+    """The run guard stopped a run.
+
+    Attributes
+    ----------
+    t : float
+        Time of the step that tripped the guard [s].
+    contact : str or None
+        The contact named responsible (None when none is).
+    cause : str
+        ``"non-finite"`` or ``"energy growth"``.
+    """
+
+    def __init__(self, message: str, t: float, contact: str | None, cause: str):
+        super().__init__(message)
+        self.t, self.contact, self.cause = t, contact, cause
+
+
+@dataclass(frozen=True)
+class GuardOptions:
+    """Settings of the run guard (the scene's ``[guard]`` table).
+
+    Parameters
+    ----------
+    energy_growth : float
+        Largest energy a run may create, relative to its energy scale
+        (see the module notes), > 0.
+    energy_check : bool
+        False turns the energy bound off; non-finite values stop a run
+        whatever this says.
+    energy_floor : float
+        Created energy below this never stops a run [J], >= 0.
+    """
+
+    energy_growth: float = DEFAULT_ENERGY_GROWTH
+    energy_check: bool = True
+    energy_floor: float = DEFAULT_ENERGY_FLOOR
+
+    def __post_init__(self):
+        g = self.energy_growth
+        if isinstance(g, bool) or not isinstance(g, (int, float)) or not (
+                math.isfinite(g) and g > 0):
+            raise ValueError(f"`energy_growth` must be a finite number > 0, got {g!r}")
+        e = self.energy_floor
+        if isinstance(e, bool) or not isinstance(e, (int, float)) or not (
+                math.isfinite(e) and e >= 0):
+            raise ValueError(f"`energy_floor` must be a finite number >= 0 J, got {e!r}")
+        if not isinstance(self.energy_check, bool):
+            raise TypeError(f"`energy_check` must be true or false, got {self.energy_check!r}")
+
+
+def energy_scale(system, d) -> float:
+    """Sum of the magnitudes of each subsystem's energy and each contact's
+    stored energy [J]."""
+    return float(sum(abs(s.energy()) for s in system.subsystems)
+                 + np.sum(np.abs(system.contact_potentials(d))))
+
+
+def peak_stored_energy(system, d, peak) -> float:
+    """Energy the contacts store at the penetrations ``peak`` (n_contacts,)
+    [J], all together; the rows ``d`` give the tangential rows."""
+    at_peak = np.array(d, float)
+    at_peak[:system.n_contacts] = peak
+    return float(np.sum(np.abs(system.contact_potentials(at_peak))))
+
+
+def nonfinite_cause(system, d, dd, f) -> tuple[str, str | None] | None:
+    """What is not finite, in words, and the contact to blame.
+
+    Looks at the rows' penetrations, rates and forces first, then at each
+    subsystem's state; returns None when all are finite.  A subsystem whose
+    state is not finite is blamed on the contact acting on it that carried
+    the largest finite force."""
+    for what, arr in (("penetration", d), ("penetration rate", dd), ("force", f)):
+        bad = np.flatnonzero(~np.isfinite(arr))
+        if bad.size:
+            r = int(bad[0])
+            name = system.row_names[r]
+            return (f"the {what} of contact `{name}` is {float(arr[r])!r}",
+                    system.contact_names[system.row_contact[r]])
+    for s, sub in enumerate(system.subsystems):
+        if np.all(np.isfinite(sub.x)):
+            continue
+        on = [c for c, ln in enumerate(system.links) if s in (ln.sub_a, ln.sub_b)]
+        blame = max(on, key=lambda c: abs(float(f[c])) if math.isfinite(f[c]) else -1.0,
+                    default=None)
+        names = ", ".join(f"`{system.contact_names[c]}`" for c in on) or "none"
+        text = f"the state of subsystem `{sub.name}` is not finite (contacts on it: {names}"
+        if blame is not None:
+            text += (f"; `{system.contact_names[blame]}` carried the largest force, "
+                     f"{float(f[blame]):.4g} N")
+            return text + ")", system.contact_names[blame]
+        return text + ")", None
+    return None
+
+
+class Guard:
+    """Stops a run on non-finite values or on energy growth beyond a bound.
+
+    Parameters
+    ----------
+    system : CoupledSystem
+    options : GuardOptions
+
+    Notes
+    -----
+    :meth:`check` must see the run's first sample first: the energy scale
+    and each contact's stored energy are taken then.
+    """
+
+    def __init__(self, system, options: GuardOptions = GuardOptions()):
+        self.system, self.options = system, options
+        self.growth = options.energy_growth if options.energy_check else math.inf
+        #: [J] energy scale at the start (None before the first sample)
+        self.scale: float | None = None
+        self._stored0 = None
+
+    def check(self, t: float, d: np.ndarray, dd: np.ndarray, f: np.ndarray, created: float,
+              supplied: float, dissipated: np.ndarray, work: np.ndarray | None = None,
+              peak: np.ndarray | None = None) -> None:
+        """Check one accepted sample.
+
+        Parameters
+        ----------
+        t : float
+            [s]
+        d, dd, f : (n_rows,) ndarray
+            Penetrations [m], their rates [m/s] and the row forces [N].
+        created : float
+            Energy created since the start [J] (see the module notes).
+        supplied : float
+            Energy supplied by drives so far [J].
+        dissipated : (n_contacts,) ndarray
+            Energy each contact dissipated so far [J].
+        work : (n_contacts,) ndarray, optional
+            Work each contact's forces did on the subsystems so far [J].
+        peak : (n_contacts,) ndarray, optional
+            Each contact's largest penetration so far [m].
+
+        Raises
+        ------
+        GuardError
+            When a value is not finite or the created energy exceeds the bound.
+        """
+        if self.scale is None:
+            self._start(t, d, dd, f)
+        s = d.sum() + dd.sum() + f.sum()
+        if s - s != 0 or not created <= self._bound(self.scale, supplied):
+            self._judge(t, d, dd, f, created, supplied, dissipated, work, peak)
+
+    def _bound(self, scale: float, supplied: float) -> float:
+        if self.growth == math.inf:
+            return math.inf
+        return max(self.growth * (scale + abs(supplied)), self.options.energy_floor)
+
+    def _start(self, t, d, dd, f):
+        cause = nonfinite_cause(self.system, d, dd, f)
+        if cause is not None:
+            raise GuardError(f"run stopped at t = {t:.6g} s: {cause[0]} at the start",
+                             t, cause[1], "non-finite")
+        self.scale = energy_scale(self.system, d)
+        self._stored0 = self.system.contact_potentials(d)
+
+    def _judge(self, t, d, dd, f, created, supplied, dissipated, work, peak):
+        """The slow path: find what tripped the check, and raise (or not)."""
+        system = self.system
+        cause = nonfinite_cause(system, d, dd, f)
+        if cause is not None:
+            raise GuardError(f"run stopped at t = {t:.6g} s: {cause[0]}", t, cause[1],
+                             "non-finite")
+        if not math.isfinite(created):
+            raise GuardError(f"run stopped at t = {t:.6g} s: the energy ledger is not finite "
+                             f"({created!r} J created)", t, None, "non-finite")
+        scale = self.scale
+        if system.n_contacts:
+            scale = max(scale, float(np.sum(np.abs(system.contact_potentials(d)))
+                                     + np.sum(np.abs(dissipated))))
+            if peak is not None:
+                scale = max(scale, peak_stored_energy(system, d, peak))
+        self.scale = scale
+        bound = self._bound(scale, supplied)
+        if created <= bound:
+            return                      # more energy is in play than at the start
+        text = (f"run stopped at t = {t:.6g} s: the energy grew by {created:.4g} J over the "
+                f"initial energy plus the energy supplied (bound {bound:.4g} J: "
+                f"`guard.energy_growth` = {self.growth:g} of the energy scale "
+                f"{scale + abs(supplied):.4g} J)")
+        blame = None
+        if work is not None and system.n_contacts:
+            ledger = (np.asarray(work, float) + system.contact_potentials(d) - self._stored0
+                      + np.asarray(dissipated, float))
+            c = int(np.argmax(ledger))
+            share = float(ledger[c])
+            if share >= 0.5 * created:
+                blame = system.contact_names[c]
+                text += (f"; contact `{blame}` created {share:.4g} J of it (the work of its "
+                         f"forces plus its change of stored energy plus what it dissipated)")
+            else:
+                text += (f"; no contact accounts for it (the largest share, contact "
+                         f"`{system.contact_names[c]}`: {share:.4g} J): the rest was created "
+                         f"inside the subsystems' own integrators")
+        else:
+            text += "; the scheme gave no per-contact ledger to attribute it"
+        text += (". Reduce the step (`scheme.contact_step` in contact, `scheme.macro_step`), "
+                 "use the `implicit` scheme, or, if the growth is physical, raise "
+                 "`guard.energy_growth`.")
+        raise GuardError(text, t, blame, "energy growth")

@@ -1,0 +1,228 @@
+"""Hard cases (issue 9, part 1): three_mass at f = 1000 and m_s = 0.01 kg under
+every scheme and placement of C, macro steps up to ten times the stability
+limit.  Each run stays within its energy bound, is refused before it starts
+with the reason, or is stopped by the run guard with a message naming the
+contact and the time: never NaN, never silent energy growth."""
+import math
+import warnings
+
+import numpy as np
+import pytest
+
+import cosim
+from conftest import CASES
+from cosim.guard import Guard, GuardError, GuardOptions
+from cosim.schemes import COUPLING_SCHEMES
+from cosim.verify import HardCase, hard_matrix, reference_step, run_hard_case
+
+
+def _spring_system():
+    scene = cosim.load_scene(CASES / "spring_drop.toml")
+    system, _ = scene.build()
+    return system
+
+
+def _zeros(system):
+    return np.zeros(system.n_rows), np.zeros(system.n_rows), np.zeros(system.n_rows)
+
+
+# ------------------------------------------------------------ the guard alone
+def test_guard_detects_growth_at_the_right_time_and_names_the_contact():
+    """spring_drop holds 0.5 J (the body's kinetic energy): with the default
+    bound of 0.1 of it, a coupling that creates 0.01 J per step through the
+    wall is stopped at the sixth step, the first above 0.05 J."""
+    system = _spring_system()
+    guard = Guard(system, GuardOptions())
+    d, dd, f = _zeros(system)
+    diss = np.zeros(1)
+    tripped = None
+    for k in range(20):
+        created = 0.01 * k
+        try:
+            guard.check(1e-3 * k, d, dd, f, created, 0.0, diss, work=np.array([created]))
+        except GuardError as exc:
+            tripped = (k, exc)
+            break
+    assert guard.scale == pytest.approx(0.5)
+    assert tripped is not None and tripped[0] == 6
+    exc = tripped[1]
+    assert exc.t == pytest.approx(6e-3) and exc.contact == "wall"
+    assert exc.cause == "energy growth"
+    assert isinstance(exc, cosim.SimulationError)
+    assert str(exc).startswith("run stopped at t = 0.006 s: the energy grew by 0.06 J")
+    assert "contact `wall` created 0.06 J" in str(exc)
+
+
+def test_guard_says_when_no_contact_holds_the_energy():
+    system = _spring_system()
+    guard = Guard(system)
+    d, dd, f = _zeros(system)
+    guard.check(0.0, d, dd, f, 0.0, 0.0, np.zeros(1), work=np.zeros(1))
+    with pytest.raises(GuardError, match=r"t = 0\.002 s.*no contact accounts for it .*"
+                                         r"`wall`: 0 J\): the rest was created inside the "
+                                         r"subsystems' own integrators") as info:
+        guard.check(2e-3, d, dd, f, 0.2, 0.0, np.zeros(1), work=np.zeros(1))
+    assert info.value.contact is None
+
+
+def test_guard_bound_grows_with_the_energy_supplied_and_can_be_turned_off():
+    system = _spring_system()
+    d, dd, f = _zeros(system)
+    guard = Guard(system)
+    guard.check(0.0, d, dd, f, 0.0, 0.0, np.zeros(1))
+    guard.check(1e-3, d, dd, f, 0.14, 1.0, np.zeros(1))     # bound 0.1 * (0.5 + 1) = 0.15
+    with pytest.raises(GuardError):
+        guard.check(2e-3, d, dd, f, 0.16, 1.0, np.zeros(1))
+    off = Guard(system, GuardOptions(energy_check=False))
+    off.check(0.0, d, dd, f, 0.0, 0.0, np.zeros(1))
+    off.check(1e-3, d, dd, f, 1e6, 0.0, np.zeros(1))       # any growth passes
+    with pytest.raises(GuardError, match="not finite"):   # but never a NaN
+        off.check(2e-3, d, dd, f, math.nan, 0.0, np.zeros(1))
+
+
+@pytest.mark.parametrize("row", ["d", "dd", "f"])
+def test_guard_stops_on_an_injected_nan_and_names_the_contact(row):
+    system = _spring_system()
+    guard = Guard(system)
+    d, dd, f = _zeros(system)
+    guard.check(0.0, d, dd, f, 0.0, 0.0, np.zeros(1))
+    {"d": d, "dd": dd, "f": f}[row][0] = math.nan
+    what = {"d": "penetration", "dd": "penetration rate", "f": "force"}[row]
+    with pytest.raises(GuardError, match=rf"run stopped at t = 0\.003 s: the {what} of "
+                                         rf"contact `wall` is nan") as info:
+        guard.check(3e-3, d, dd, f, 0.0, 0.0, np.zeros(1))
+    assert info.value.contact == "wall" and info.value.cause == "non-finite"
+
+
+def test_guard_blames_a_nan_state_on_the_contact_acting_on_it():
+    system = _spring_system()
+    guard = Guard(system)
+    d, dd, f = _zeros(system)
+    guard.check(0.0, d, dd, f, 0.0, 0.0, np.zeros(1))
+    body = system.subsystems[system.names.index("body")]
+    body.x[-1] = math.inf
+    with pytest.raises(GuardError, match=r"state of subsystem `body` is not finite "
+                                         r"\(contacts on it: `wall`"):
+        guard.check(1e-3, d, dd, f, math.nan, 0.0, np.zeros(1))
+
+
+def test_guard_options_are_checked():
+    with pytest.raises(ValueError, match=r"`energy_growth` must be a finite number > 0"):
+        GuardOptions(energy_growth=0.0)
+    with pytest.raises(ValueError, match=r"`energy_floor` must be"):
+        GuardOptions(energy_floor=-1.0)
+
+
+@pytest.mark.parametrize("setting,match", [
+    ("guard.energy_growth=-0.1", r"`guard.energy_growth` must be > 0"),
+    ("guard.energy_check=1", r"`guard.energy_check` must be true or false"),
+    ("guard.energy_floor=-1.0", r"`guard.energy_floor` must be >= 0"),
+    ("guard.typo=1", r"`guard.typo` is not a known key"),
+])
+def test_scene_guard_table_is_validated(setting, match):
+    with pytest.raises(cosim.SceneError, match=match):
+        cosim.load_scene(CASES / "spring_drop.toml", overrides=[setting])
+
+
+# ------------------------------------------------------- the guard in a run
+def test_a_nan_in_a_run_stops_it_with_time_and_contact(monkeypatch):
+    """A subsystem whose state turns NaN mid-run: the run ends failed at that
+    step, the message names the contact and the time, and the series kept
+    are finite."""
+    from cosim.schemes.explicit import Jacobi
+    original = Jacobi.advance
+
+    def poisoned(self, system, t, h, ratio):
+        out = original(self, system, t, h, ratio)
+        if t + h > 5e-3:
+            system.subsystems[system.names.index("body")].x[-1] = math.nan
+        return out
+
+    monkeypatch.setattr(Jacobi, "advance", poisoned)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        scene = cosim.load_scene(CASES / "spring_drop.toml", overrides=[
+            "scheme.macro_step=1e-4"], scheme="jacobi")
+    res = cosim.simulate(scene)
+    assert res.status == "failed"
+    assert res.message.startswith("run stopped at t = 0.0051 s: the penetration rate of "
+                                  "contact `wall` is nan"), res.message
+    assert all(np.all(np.isfinite(a)) for a in res.series.values())
+    assert res.t[-1] == pytest.approx(5e-3)
+
+
+def test_forced_unsafe_step_is_stopped_not_left_to_grow():
+    """spring_drop's wall exchanged by Jacobi at 16 times its safe step: the
+    pre-flight check refuses it; forced, the guard stops the run at the
+    impact, blaming the wall, where it used to gain 40 % energy silently."""
+    def load(*extra):
+        return cosim.load_scene(CASES / "spring_drop.toml", overrides=[
+            'contacts.wall.placement="coupler"', "scheme.macro_step=1e-4", *extra],
+            scheme="jacobi")
+    with pytest.raises(cosim.UnsafeStepError, match=r"contact `wall`: macro step 0\.0001 s"):
+        cosim.simulate(load())
+    res = cosim.simulate(load("scheme.accept_unsafe_step=true"))
+    assert res.status == "failed"
+    assert "contact `wall` created" in res.message
+    t_stop = float(res.message.split("t = ")[1].split(" s")[0])
+    assert 0.01 < t_stop < 0.01 + math.pi * 1e-3        # inside the contact
+    created = float(res.message.split("grew by ")[1].split(" J")[0])
+    # the samples kept stop before the step that tripped the guard
+    assert res.summary["energy"]["max_abs_drift"] < created
+
+
+def test_written_summary_of_a_stopped_run(tmp_path):
+    """`cosim run` of a run the guard stops: exit status 1, the summary is
+    written with status failed and the message."""
+    import json
+
+    from cosim.cli import main
+    code = main(["run", str(CASES / "spring_drop.toml"), "--scheme", "jacobi", "--quiet",
+                 "--set", 'contacts.wall.placement="coupler"', "--set", "scheme.macro_step=1e-4",
+                 "--set", "scheme.accept_unsafe_step=true", "--out", str(tmp_path / "r")])
+    assert code == 1
+    s = json.loads((tmp_path / "r" / "summary.json").read_text())
+    assert s["status"] == "failed" and s["message"].startswith("run stopped at t = ")
+
+
+# --------------------------------------------------------------- the matrix
+def test_reference_steps_are_the_preflight_limit_or_a_tenth_of_the_contact():
+    """Explicit coupler: the pre-flight's largest safe step (`cosim info`
+    says 2.873e-06 s for f1000); otherwise a tenth of pi / omega."""
+    assert reference_step(CASES, "f1000", "jacobi", "coupler") == pytest.approx(2.873e-6,
+                                                                                  rel=2e-3)
+    omega = 2 * math.pi * 5273.0
+    assert reference_step(CASES, "f1000", "gauss_seidel", "embedded") == pytest.approx(
+        0.1 * math.pi / omega, rel=1e-3)
+    m = hard_matrix(CASES)
+    assert {c.scheme for c in m} == set(COUPLING_SCHEMES)
+    assert {c.variant for c in m} == {"f1000", "ms0.01"}
+    assert max(c.factor or 0 for c in m) == 10.0
+
+
+# a few points of the matrix at t_end = 0.125 s (C's train lies in 0.1027-0.121 s)
+CI_POINTS = [
+    (HardCase("f1000", "gauss_seidel", "embedded", 9.48e-6, 1.0), "bounded"),
+    (HardCase("f1000", "gauss_seidel", "coupler", 2.87e-6, 1.0), "bounded"),
+    (HardCase("ms0.01", "implicit", "coupler", 7.85e-6, 1.0), "bounded"),
+    (HardCase("f1000", "jacobi", "coupler", 2.87e-5, 10.0), "refused"),
+    (HardCase("f1000", "jacobi", "coupler", 2.87e-5, 10.0, True), "stopped"),
+    (HardCase("f1000", "jacobi", "embedded", 9.48e-5, 10.0), "stopped"),
+]
+
+
+@pytest.mark.parametrize("case,outcome", CI_POINTS, ids=[c.label for c, _ in CI_POINTS])
+def test_hard_case_points(case, outcome):
+    r = run_hard_case(case, CASES, t_end=0.125)
+    assert r["outcome"] == outcome, r["detail"]
+    assert r["ok"], r["detail"]
+    if outcome == "stopped":
+        assert "contact `C`" in r["detail"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("case", hard_matrix(CASES), ids=lambda c: c.label)
+def test_hard_case_matrix(case):
+    """The whole matrix at the scene's t_end (also `cosim verify --hard`)."""
+    r = run_hard_case(case, CASES)
+    assert r["ok"], f"{r['outcome']}: {r['detail']}"
