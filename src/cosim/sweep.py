@@ -740,8 +740,15 @@ def plot_sweep(rows: list[dict], path, *, contact: str = "C", x: str | None = No
     xs, label, ticks = _axis(rows, x)
     xs = [v * x_scale for v in xs] if ticks is None else xs
     ok = [i for i, r in enumerate(rows) if r.get(f"contacts.{contact}.count") is not None]
-    fig, (ax1, ax2) = plt.subplots(2, 1, sharex=True, figsize=(6.4, 5.6),
-                                   constrained_layout=True)
+    ratio = [(rows[i].get("impact.rate_at_release"), rows[i].get("impact.rate_at_touch"))
+             for i in ok]
+    ratio = [a / b if isinstance(a, float) and isinstance(b, float) and b and a == a
+             else None for a, b in ratio]
+    has_ratio = any(v is not None for v in ratio)
+    fig, axes = plt.subplots(3 if has_ratio else 2, 1, sharex=True,
+                             figsize=(6.4, 7.6 if has_ratio else 5.6),
+                             constrained_layout=True)
+    ax1, ax2 = axes[0], axes[1]
     count = [rows[i][f"contacts.{contact}.count"] for i in ok]
     touch = [1e3 * rows[i][f"contacts.{contact}.in_touch_time"] for i in ok]
     span = []
@@ -760,6 +767,19 @@ def plot_sweep(rows: list[dict], path, *, contact: str = "C", x: str | None = No
         seen.add(reg)
         ax1.scatter([xi], [ci], marker=marker, color=colour, s=45, zorder=2, label=lab)
         ax2.scatter([xi], [ti], marker=marker, color=colour, s=30, zorder=2)
+    if has_ratio:
+        ax3 = axes[2]
+        pts = [(xi, v, reg) for xi, v, reg in zip(xo, ratio, regimes) if v is not None]
+        ax3.plot([p[0] for p in pts], [p[1] for p in pts], color="0.6", lw=1, zorder=1)
+        for xi, v, reg in pts:
+            marker, colour = _REGIME_STYLE.get(reg, ("o", "k"))
+            ax3.scatter([xi], [v], marker=marker, color=colour, s=30, zorder=2)
+        ax3.axhline(0.0, color="k", lw=0.8)
+        ax3.set_ylabel("striker's rate at 1st release\n/ its rate at touch", fontsize=8)
+        ax3.text(0.99, 0.04, "< 0: turned back within the first contact",
+                 transform=ax3.transAxes, ha="right", fontsize=7)
+        ax3.grid(alpha=0.3)
+    bottom = axes[-1]
     failed = [i for i, r in enumerate(rows) if r.get("status") != "finished"]
     for i in failed:
         ax1.axvline(xs[i], color="tab:red", lw=0.8, ls=":")
@@ -768,14 +788,14 @@ def plot_sweep(rows: list[dict], path, *, contact: str = "C", x: str | None = No
                  transform=ax1.transAxes, va="top", fontsize=8, color="tab:red")
     ax1.set_ylabel(f"contacts of {contact}")
     ax2.set_ylabel(f"time of {contact} [ms]")
-    ax2.set_xlabel(x_label or label)
+    bottom.set_xlabel(x_label or label)
     if any(r is not None for r in regimes):
         ax1.legend(title="impact regime", fontsize=8, title_fontsize=8)
     ax2.legend(fontsize=8)
     if ticks is not None:
-        ax2.set_xticks(xs, ticks, rotation=30, ha="right", fontsize=7)
+        bottom.set_xticks(xs, ticks, rotation=30, ha="right", fontsize=7)
     elif min(xs) > 0 and max(xs) / min(xs) >= 20:
-        ax2.set_xscale("log")
+        bottom.set_xscale("log")
     ax1.grid(alpha=0.3)
     ax2.grid(alpha=0.3)
     if title:
