@@ -266,8 +266,13 @@ def _cmd_sweep(args) -> int:
     elif args.scene:
         study = None
         scene, variants = args.scene, [v for v in (args.variants or "").split(",") if v]
+        grid = {}
         try:
-            grid = dict(sw.parse_grid_option(t) for t in args.set or ())
+            for text in args.set or ():
+                key, values = sw.parse_grid_option(text)
+                if key in grid:
+                    raise ValueError(f"`{key}` is given twice; give its values in one --set")
+                grid[key] = values
         except ValueError as exc:
             print(f"error: --set: {exc}", file=sys.stderr)
             return 2

@@ -287,10 +287,11 @@ def impact_regime(summary: dict, series, contact: str = "C", joint: str = "robot
 
 
 def _record(point: Point, spec: dict, summary: dict | None, series, contact, joint) -> dict:
-    """One row: the grid's values, variant, point, status, message, then the
+    """One row: the grid's values (``set.KEY``, apart from the summary's own
+    keys such as ``t_end``, the time a run reached), variant, point, status, message, then the
     flattened summary and the impact regime (when the scene has ``contact``
     and the series ``dq/joint``)."""
-    row = {k: v for k, v in point.params}
+    row = {f"set.{k}": v for k, v in point.params}
     row.update(variant=spec["variant"], point=point.name, status=spec["status"],
                message=spec["message"])
     if summary is None:
@@ -321,7 +322,7 @@ def _cell(v) -> str:
 
 
 def columns(rows: list[dict]) -> list[str]:
-    """The table's columns: the grid's keys, ``variant``, ``point``,
+    """The table's columns: the grid's keys (``set.KEY``), ``variant``, ``point``,
     ``status``, ``message``, then every other key in order of first
     appearance (rows in grid order), so the same rows give the same columns
     whatever order they were computed in."""
@@ -356,7 +357,8 @@ def write_table(rows: list[dict], path) -> Path:
 
 def read_table(path) -> list[dict]:
     """Read a sweep's CSV back: numbers as numbers, JSON lists as lists, empty
-    cells as None, everything else as text."""
+    cells (a missing value, or an empty message) as None, everything else as
+    text."""
     def value(s: str):
         if s == "":
             return None
@@ -567,7 +569,9 @@ def sweep(scene, *, variants=None, grid=None, scheme: str | None = None, workers
     Returns
     -------
     list of dict
-        One record per point, in grid order: the grid's keys, ``variant``,
+        One record per point, in grid order: the grid's values under
+        ``set.KEY`` (``set.t_end``: ``t_end`` is the time the run reached),
+        ``variant``,
         ``point`` (its directory's name), ``status``, ``message``, the
         flattened ``summary.json`` (``contacts.C.count``,
         ``energy.max_abs_drift``, ...) and ``impact.regime``,
@@ -681,7 +685,7 @@ def _finish(point, spec, out, res, scene, status, message, rows, contact, joint)
                 _atomic_write(d / "scene.toml", lambda fh: fh.write(text), "w")
         _atomic_write(d / "point.json", lambda fh: json.dump(meta, fh, indent=2), "w")
     if status not in ("finished",):
-        log.warning("point %s: %s: %s", point.name, status, message)
+        log.info("point %s: %s: %s", point.name, status, message)
     rows[point.index] = _record(point, meta, summary, series, contact, joint)
 
 
@@ -690,13 +694,15 @@ _NUMBER = re.compile(r"^(?P<prefix>.*?)(?P<value>[-+]?(\d+\.?\d*|\.\d+)([eE][-+]
 
 
 def _axis(rows: list[dict], x=None):
-    """The plot's abscissa: a grid key's numbers (``x`` names it), else the
+    """The plot's abscissa: a grid key's numbers (``x`` names the key), else the
     number that ends each variant's name under a shared prefix (``ms0.05`` ->
     0.05), else the points' places in grid order, labelled by name."""
     keys = _grid_keys(rows)
     if x is None:
         varying = [k for k in keys if len({_text(r[k]) for r in rows}) > 1]
         x = varying[0] if len(varying) == 1 else None
+    elif not x.startswith("set."):
+        x = f"set.{x}"
     if x is not None and all(isinstance(r.get(x), (int, float)) for r in rows):
         return [float(r[x]) for r in rows], x, None
     names = [r["variant"] or "" for r in rows]
