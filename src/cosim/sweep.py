@@ -616,7 +616,7 @@ def sweep(scene, *, variants=None, grid=None, scheme: str | None = None, workers
     out = Path(out) if out is not None else None
     total = len(points)
     rows: dict[int, dict] = {}
-    jobs, scenes, specs = {}, {}, {}
+    scenes, specs = {}, {}
     seen_warnings: set[str] = set()
 
     def report(point, status, message, skipped):
@@ -646,11 +646,10 @@ def sweep(scene, *, variants=None, grid=None, scheme: str | None = None, workers
                 seen_warnings.add(str(w.message))
                 warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
         scenes[p.index] = sc
-        jobs[p.index] = sc
 
-    if jobs:
+    if scenes:
         with _Runner(workers, scheduler) as runner:
-            for index, (kind, payload) in runner.run(jobs):
+            for index, (kind, payload) in runner.run(scenes):
                 p, spec = points[index], specs[index]
                 if kind == "ran":
                     res = payload
@@ -696,7 +695,9 @@ _NUMBER = re.compile(r"^(?P<prefix>.*?)(?P<value>[-+]?(\d+\.?\d*|\.\d+)([eE][-+]
 def _axis(rows: list[dict], x=None):
     """The plot's abscissa: a grid key's numbers (``x`` names the key), else the
     number that ends each variant's name under a shared prefix (``ms0.05`` ->
-    0.05), else the points' places in grid order, labelled by name."""
+    0.05), else the points' places in grid order, labelled by name.  Returns
+    the values, the axis label, the tick labels (None: a numeric axis) and
+    the record key the abscissa comes from (None: the points' places)."""
     keys = _grid_keys(rows)
     if x is None:
         varying = [k for k in keys if len({_text(r[k]) for r in rows}) > 1]
@@ -704,12 +705,12 @@ def _axis(rows: list[dict], x=None):
     elif not x.startswith("set."):
         x = f"set.{x}"
     if x is not None and all(isinstance(r.get(x), (int, float)) for r in rows):
-        return [float(r[x]) for r in rows], x, None
+        return [float(r[x]) for r in rows], x, None, x
     names = [r["variant"] or "" for r in rows]
     m = [_NUMBER.match(n) for n in names]
     if all(m) and len({g["prefix"] for g in m}) == 1 and len({r["variant"] for r in rows}) > 1:
-        return [float(g["value"]) for g in m], f"variant {m[0]['prefix']}…", None
-    return list(range(len(rows))), "point", [r["point"] for r in rows]
+        return [float(g["value"]) for g in m], f"variant {m[0]['prefix']}…", None, "variant"
+    return list(range(len(rows))), "point", [r["point"] for r in rows], None
 
 
 #: marker and colour of each regime in the plot
@@ -743,8 +744,12 @@ def plot_sweep(rows: list[dict], path, *, contact: str = "C", x: str | None = No
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    xs, label, ticks = _axis(rows, x)
+    xs, label, ticks, x_key = _axis(rows, x)
     xs = [v * x_scale for v in xs] if ticks is None else xs
+    if not any(f"contacts.{contact}.count" in r for r in rows):     # another scene's contact
+        named = [k.split(".")[1] for r in rows for k in r
+                 if k.startswith("contacts.") and k.endswith(".count")]
+        contact = named[0] if named else contact
     ok = [i for i, r in enumerate(rows) if r.get(f"contacts.{contact}.count") is not None]
     ratio = [(rows[i].get("impact.rate_at_release"), rows[i].get("impact.rate_at_touch"))
              for i in ok]
@@ -762,9 +767,20 @@ def plot_sweep(rows: list[dict], path, *, contact: str = "C", x: str | None = No
         iv = rows[i][f"contacts.{contact}.intervals"]
         span.append(1e3 * (iv[-1][1] - iv[0][0]) if iv else 0.0)
     xo = [xs[i] for i in ok]
-    ax1.plot(xo, count, color="0.6", lw=1, zorder=1)
-    ax2.plot(xo, span, color="0.6", lw=1, ls="--", label="first touch to last release")
-    ax2.plot(xo, touch, color="0.3", lw=1, label="in touch (sum of intervals)")
+    # one line through the points that differ in the abscissa alone
+    others = [k for k in ["variant", *_grid_keys(rows)] if k != x_key]
+    lines: dict = {}
+    for j, i in enumerate(ok):
+        lines.setdefault(tuple(_text(rows[i].get(k)) for k in others) if x_key
+                         else (), []).append(j)
+    for n, js in enumerate(lines.values()):
+        def pick(v):
+            return [v[j] for j in js]
+        ax1.plot(pick(xo), pick(count), color="0.6", lw=1, zorder=1)
+        ax2.plot(pick(xo), pick(span), color="0.6", lw=1, ls="--",
+                 label="first touch to last release" if n == 0 else None)
+        ax2.plot(pick(xo), pick(touch), color="0.3", lw=1,
+                 label="in touch (sum of intervals)" if n == 0 else None)
     regimes = [rows[i].get("impact.regime") for i in ok]
     seen = set()
     for xi, ci, ti, reg in zip(xo, count, touch, regimes):
@@ -775,9 +791,12 @@ def plot_sweep(rows: list[dict], path, *, contact: str = "C", x: str | None = No
         ax2.scatter([xi], [ti], marker=marker, color=colour, s=30, zorder=2)
     if has_ratio:
         ax3 = axes[2]
-        pts = [(xi, v, reg) for xi, v, reg in zip(xo, ratio, regimes) if v is not None]
-        ax3.plot([p[0] for p in pts], [p[1] for p in pts], color="0.6", lw=1, zorder=1)
-        for xi, v, reg in pts:
+        for js in lines.values():
+            js = [j for j in js if ratio[j] is not None]
+            ax3.plot([xo[j] for j in js], [ratio[j] for j in js], color="0.6", lw=1, zorder=1)
+        for xi, v, reg in zip(xo, ratio, regimes):
+            if v is None:
+                continue
             marker, colour = _REGIME_STYLE.get(reg, ("o", "k"))
             ax3.scatter([xi], [v], marker=marker, color=colour, s=30, zorder=2)
         ax3.axhline(0.0, color="k", lw=0.8)
