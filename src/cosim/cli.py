@@ -264,6 +264,116 @@ def _cmd_plot(args) -> int:
     return 0
 
 
+def _cmd_sweep(args) -> int:
+    from . import sweep as sw
+
+    if args.study:
+        path = Path(args.study)
+        if not path.is_file():
+            path = Path("studies") / f"{args.study}.toml"
+        study = sw.load_study(path)
+        if args.scene or args.variants or args.set:
+            print("error: --study fixes the scene, its variants and its values; give "
+                  "none of SCENE, --variants, --set with it", file=sys.stderr)
+            return 2
+        scene, variants, grid = study.scene, list(study.variants), study.grid
+        contact, joint = study.contact, study.joint
+        default_out = Path("runs") / study.name
+    elif args.scene:
+        study = None
+        scene, variants = args.scene, [v for v in (args.variants or "").split(",") if v]
+        grid = {}
+        try:
+            for text in args.set or ():
+                key, values = sw.parse_grid_option(text)
+                if key in grid:
+                    raise ValueError(f"`{key}` is given twice; give its values in one --set")
+                grid[key] = values
+        except ValueError as exc:
+            print(f"error: --set: {exc}", file=sys.stderr)
+            return 2
+        contact, joint = args.contact, args.joint
+        default_out = Path("runs") / f"{Path(scene).stem}-sweep"
+    else:
+        print("error: give a SCENE or --study", file=sys.stderr)
+        return 2
+    out = Path(args.out) if args.out else default_out
+    workers = args.workers or sw.default_workers()
+    where = (f"Dask scheduler {args.scheduler}" if args.scheduler
+             else f"{workers} process(es)" if workers > 1 else "this process")
+    n = len(sw.grid_points(variants or None, grid))
+    print(f"sweep {scene}: {n} point(s) on {where}, into {out}")
+    bar = _SweepProgress(args.quiet, n)
+    try:
+        rows = sw.sweep(scene, variants=variants or None, grid=grid, scheme=args.scheme,
+                        workers=workers, scheduler=args.scheduler, out=out,
+                        retry_failed=args.retry_failed, contact=contact, joint=joint,
+                        progress=bar)
+    except ImportError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    finally:
+        bar.close()
+    for r in rows:
+        count = r.get(f"contacts.{contact}.count")
+        line = f"  {r['point']:<40} {r['status']:<9}"
+        if count is not None:
+            line += f" {contact}: {count} contact(s)"
+        if r.get("impact.regime"):
+            line += f", {r['impact.regime']}"
+        if r["status"] != "finished" and r["message"]:
+            line += f"  ({r['message']})"
+        print(line)
+    skipped = bar.skipped
+    print(f"{sum(r['status'] == 'finished' for r in rows)} of {len(rows)} point(s) finished"
+          + (f", {skipped} done before (not run again)" if skipped else ""))
+    print(f"wrote {out / sw.TABLE}")
+    if not args.no_plot:
+        try:
+            png = sw.plot_sweep(rows, out / sw.PLOT, contact=contact,
+                                x=study.x if study else None,
+                                x_scale=study.x_scale if study else 1.0,
+                                x_label=study.x_label if study else None,
+                                title=study.title if study else f"{Path(scene).stem} sweep")
+            print(f"wrote {png}")
+        except ImportError:
+            print('no plot: matplotlib is not installed (pip install "cosim[plot]")',
+                  file=sys.stderr)
+    return 0 if all(r["status"] == "finished" for r in rows) else 1
+
+
+class _SweepProgress:
+    """A sweep's progress: a tqdm bar on a terminal when tqdm is installed,
+    else one line per point on stderr; nothing when quiet."""
+
+    def __init__(self, quiet: bool, total: int):
+        self.quiet, self.skipped, self._bar = quiet, 0, None
+        if not quiet and _on_terminal():
+            try:
+                from tqdm import tqdm
+                self._bar = tqdm(total=total, unit="point", file=sys.stderr)
+            except ImportError:
+                pass
+
+    def __call__(self, ev) -> None:
+        self.skipped += ev.skipped
+        if self.quiet:
+            return
+        note = "done before" if ev.skipped else ev.status
+        if self._bar is not None:
+            self._bar.set_postfix_str(f"{ev.point.name}: {note}", refresh=False)
+            self._bar.update(1)
+            if ev.status != "finished":
+                self._bar.write(f"{ev.point.name}: {ev.status}: {ev.message}")
+        else:
+            print(f"[{ev.done}/{ev.total}] {ev.point.name}: {note}", file=sys.stderr,
+                  flush=True)
+
+    def close(self) -> None:
+        if self._bar is not None:
+            self._bar.close()
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="cosim", description="Co-simulation of impacts between "
                                 "robots and vibrating structures.")
@@ -301,6 +411,32 @@ def build_parser() -> argparse.ArgumentParser:
     bn.add_argument("--set", action="append", metavar="KEY=VALUE")
     bn.add_argument("--out")
     bn.set_defaults(func=_cmd_bench)
+    sw = sub.add_parser("sweep", help="a parameter study: every combination of variants "
+                                      "and values, on a process pool or a Dask cluster; one "
+                                      "table")
+    sw.add_argument("scene", nargs="?", help="scene file (TOML); not with --study")
+    sw.add_argument("--study", help="a study file, or the name of one in studies/ "
+                                    "(fig8_stiffness, fig11_chain_mass)")
+    sw.add_argument("--variants", help="variants, comma separated (default: the scene's)")
+    sw.add_argument("--set", action="append", metavar="KEY=V1,V2,...",
+                    help="values of a scene key (TOML; commas inside [] and quotes stay); "
+                         "repeatable: every combination runs")
+    sw.add_argument("--scheme", help="coupling scheme of every point")
+    sw.add_argument("--workers", type=int, help="local processes (default: the CPUs; 1 runs "
+                                                "here); with --scheduler local, Dask workers")
+    sw.add_argument("--scheduler", metavar="ADDRESS",
+                    help="run on a Dask distributed cluster (tcp://host:8786), or `local` to "
+                         "start one here; needs the dask extra")
+    sw.add_argument("--out", help="sweep directory (default runs/SCENE-sweep or runs/STUDY)")
+    sw.add_argument("--retry-failed", action="store_true",
+                    help="run the points that failed or were refused before again")
+    sw.add_argument("--contact", default="C", help="contact whose regime is classified and "
+                                                   "drawn (default C)")
+    sw.add_argument("--joint", default="robot/arm",
+                    help="SUBSYSTEM/JOINT of the striker (default robot/arm)")
+    sw.add_argument("--no-plot", action="store_true", help="write the table only")
+    sw.add_argument("--quiet", action="store_true", help="no progress")
+    sw.set_defaults(func=_cmd_sweep)
     pl = sub.add_parser("plot", help="draw a run directory (finished or interrupted): "
                                      "penetrations, forces, velocities, energy")
     pl.add_argument("run_dir", help="directory written by `cosim run`")
