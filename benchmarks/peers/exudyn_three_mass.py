@@ -30,7 +30,7 @@ t = 0.105 s (the recommended step shrinks below it), so the smallest step is
 lowered to 1e-12 s; nothing else is tuned.
 
 Run: ``python benchmarks/peers/exudyn_three_mass.py [--variant f100]
-[--t-end T] [--out DIR]``.  It prints one JSON line: the CPU time of the
+[--t-end T] [--step H] [--lift DY] [--out DIR]``.  It prints one JSON line: the CPU time of the
 solve alone (``time.process_time`` around ``SolveDynamic``), the number of
 steps, and where the series went.  ``DIR/series.npz`` holds, at every
 accepted step, ``t``, ``gap/C`` [m] (negative in contact) and its rate
@@ -132,11 +132,28 @@ def chain_equilibrium(masses, stiffnesses, gravity: float) -> list[float]:
     return u[::-1]
 
 
-def build(exu, n: dict, t_end: float):
+def build(exu, n: dict, t_end: float, step: float = STEP, lift: float = 0.0):
     """The Exudyn system of scene 5 and its simulation settings.
 
-    Returns ``(mbs, settings, sensors, geometry)``; ``sensors`` maps names
-    to sensor numbers that store coordinates and their rates at every step.
+    Parameters
+    ----------
+    exu : module
+        ``exudyn``.
+    n : dict
+        :func:`scene_numbers`.
+    t_end : float
+        [s]
+    step : float
+        Largest step h [s].
+    lift : float
+        Raise the robot's initial height by this much [m] (a round-off-sized
+        lift, 1e-15 m, shows how much the run depends on its step sequence).
+
+    Returns
+    -------
+    tuple
+        ``(mbs, settings, sensors, geometry)``; ``sensors`` maps names to
+        sensor numbers that store coordinates and their rates at every step.
     """
     from exudyn.itemInterface import (CoordinateSpringDamper, LoadCoordinate, LoadForceVector,
                                       MarkerBodiesRelativeTranslationCoordinate,
@@ -146,6 +163,7 @@ def build(exu, n: dict, t_end: float):
                                       ObjectJointRevolute2D, ObjectRigidBody2D, SensorNode)
 
     g = n["gravity"]
+    n = {**n, "y0": n["y0"] + lift}
     sc = exu.SystemContainer()
     mbs = sc.AddSystem()
     # main body: mass centre on R3, at rest, horizontal
@@ -220,7 +238,7 @@ def build(exu, n: dict, t_end: float):
     s = exu.SimulationSettings()
     ti = s.timeIntegration
     ti.endTime = t_end
-    ti.numberOfSteps = max(1, round(t_end / STEP))
+    ti.numberOfSteps = max(1, round(t_end / step))
     ti.adaptiveStep = True
     ti.minimumStepSize = MIN_STEP
     ti.discontinuous.iterationTolerance = DISCONTINUOUS_TOLERANCE
@@ -230,7 +248,8 @@ def build(exu, n: dict, t_end: float):
     s.solution.sensors.writePeriod = 0.0     # every step
     s.show.statistics = False
     s.show.computationTime = False
-    geometry = {"body_ref": [0.0, n["y0"], 0.0], "arm_ref": [com[0], com[1], n["q_arm"]],
+    geometry = {"system_container": sc,      # keeps the system alive with the caller
+                "body_ref": [0.0, n["y0"], 0.0], "arm_ref": [com[0], com[1], n["q_arm"]],
                 "c_local": c_local[:2], "top_origin_y": n["chain_origin_y"]}
     return mbs, s, sensors, geometry
 
@@ -266,12 +285,15 @@ def main(argv=None) -> int:
     ap.add_argument("--variant", default="f100")
     ap.add_argument("--t-end", type=float, default=None, help="[s] (default: the scene's)")
     ap.add_argument("--out", default=None, help="directory for series.npz")
+    ap.add_argument("--step", type=float, default=STEP, help=f"largest step [s] (default {STEP})")
+    ap.add_argument("--lift", type=float, default=0.0,
+                    help="raise the robot's initial height by this much [m] (default 0)")
     a = ap.parse_args(argv)
     import exudyn as exu
 
     n = scene_numbers(a.scene, a.variant)
     t_end = a.t_end or n["t_end"]
-    mbs, settings, sensors, geometry = build(exu, n, t_end)
+    mbs, settings, sensors, geometry = build(exu, n, t_end, a.step, a.lift)
     cpu0 = time.process_time()
     try:
         ok = exu.SolveDynamic(mbs, settings,
@@ -288,6 +310,7 @@ def main(argv=None) -> int:
         np.savez(path, **s)
     print(json.dumps({"peer": "exudyn", "version": exu.__version__, "success": bool(ok),
                       "solve_cpu_s": cpu, "steps": int(len(s["t"]) - 1), "t_end": t_end,
+                      "step": a.step, "lift": a.lift,
                       "series": None if path is None else str(path)}))
     return 0 if ok else 1
 

@@ -34,6 +34,11 @@ The peers are small scripts run as subprocesses, each printing a JSON line:
   which needs ``pip install ".[peers]"``; it is left out, with a note, when
   exudyn is not installed.
 
+``--spread N`` adds N runs of the Exudyn model per largest step of
+``--exudyn-steps``, the robot lifted by k x 1e-15 m (k = 0 .. N-1): the
+physics is the same, the adaptive step sequence is not, and the table shows
+how far the errors move with it.
+
 ``--quick`` ends every run and the reference at 0.106 s (C's first two
 contacts) and repeats once: a check that everything runs, not a benchmark.
 The table goes to ``DIR/peers.csv`` and ``DIR/peers.md`` (default
@@ -43,7 +48,6 @@ from __future__ import annotations
 
 import argparse
 import csv
-import importlib.util
 import json
 import math
 import os
@@ -52,6 +56,7 @@ import resource
 import subprocess
 import sys
 import tempfile
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -65,6 +70,8 @@ JOINT = "robot/arm"
 #: end time of ``--quick`` [s]: C's first two contacts, both released
 QUICK_T_END = 0.106
 PEERS = ("cosim", "exudyn", "paper_rk45")
+#: the round-off-sized lift of the robot between the Exudyn runs of ``--spread`` [m]
+LIFT = 1e-15
 COLUMNS = ("peer", "method", "solve_cpu_s", "process_cpu_s", "repeat", "steps", "count",
            "err_count", "err_peak_steps", "err_peak_interp", "err_exit_velocity", "meets_1pc",
            "status")
@@ -168,8 +175,10 @@ def machine() -> dict:
         pass
     versions = {}
     for mod in ("numpy", "scipy", "exudyn"):
-        if importlib.util.find_spec(mod) is not None:
+        try:
             versions[mod] = __import__(mod).__version__
+        except ImportError:
+            pass
     load = os.getloadavg() if hasattr(os, "getloadavg") else None
     return {"cpu": model, "cores": os.cpu_count(), "system": platform.platform(),
             "python": platform.python_version(), "versions": versions,
@@ -186,11 +195,11 @@ def paper_args() -> list[str]:
     return out
 
 
-def command(peer: str, out: Path, t_end: float | None) -> list[str]:
+def command(peer: str, out: Path, t_end: float | None, extra=()) -> list[str]:
     end = ["--t-end", repr(t_end)] if t_end else []
     if peer == "exudyn":
         return [sys.executable, str(HERE / "exudyn_three_mass.py"), "--scene", str(SCENE),
-                "--variant", VARIANT, "--out", str(out)] + end
+                "--variant", VARIANT, "--out", str(out)] + end + list(extra)
     cmd = [sys.executable, str(HERE / "cosim_three_mass.py"), "--scene", str(SCENE),
            "--variant", VARIANT, "--out", str(out)] + end
     return cmd + (["--"] + paper_args() if peer == "paper_rk45" else [])
@@ -238,6 +247,40 @@ def measure(peer: str, work: Path, repeat: int, t_end: float | None, ref: dict) 
     return {**row, "count": m["count"], **errors(m, ref)}
 
 
+def spread(work: Path, steps, n: int, t_end: float | None, ref: dict,
+           lift: float = LIFT) -> list[dict]:
+    """How much the Exudyn run owes to its step sequence: ``n`` runs per
+    largest step h, the robot lifted by 0, ``lift``, 2 ``lift``, ... [m]
+    (round-off: the physics does not change, the adaptive steps do)."""
+    out = []
+    for h in steps:
+        runs = []
+        for k in range(n):
+            info, _ = run_once(command("exudyn", work / "spread", t_end,
+                                       ["--step", repr(h), "--lift", repr(k * lift)]))
+            if not info.get("success"):
+                runs.append(None)
+                continue
+            with np.load(info["series"]) as z:
+                m = series_metrics({key: z[key] for key in z.files})
+            runs.append({"solve_cpu_s": info["solve_cpu_s"], "steps": info["steps"],
+                         **errors(m, ref)})
+        ok = [r for r in runs if r is not None]
+        ev = [r["err_exit_velocity"] for r in ok]
+        pk = [max(r["err_peak_steps"], r["err_peak_interp"]) for r in ok]
+        out.append({"step": h, "runs": n, "failed": n - len(ok),
+                    "meets_1pc": sum(r["meets_1pc"] for r in ok),
+                    "count_exact": sum(r["err_count"] == 0 for r in ok),
+                    "err_exit_velocity_median": float(np.median(ev)) if ev else math.nan,
+                    "err_exit_velocity_max": max(ev, default=math.nan),
+                    "err_peak_max": max(pk, default=math.nan),
+                    "solve_cpu_s_median": float(np.median([r["solve_cpu_s"] for r in ok]))
+                    if ok else math.nan,
+                    "steps_median": float(np.median([r["steps"] for r in ok])) if ok
+                    else math.nan})
+    return out
+
+
 def _fmt(v, pct=False) -> str:
     if isinstance(v, bool):
         return "yes" if v else "no"
@@ -248,7 +291,7 @@ def _fmt(v, pct=False) -> str:
     return "" if v is None else str(v)
 
 
-def markdown(rows: list[dict], mach: dict, ref: dict, t_end: float) -> str:
+def markdown(rows: list[dict], mach: dict, ref: dict, t_end: float, spreads=()) -> str:
     """The table as markdown, with the machine and the reference."""
     head = (f"three_mass {VARIANT}, {t_end:g} s; machine: {mach['cpu']}, {mach['cores']} cores, "
             f"Python {mach['python']}, " + ", ".join(f"{k} {v}" for k, v in
@@ -267,6 +310,19 @@ def markdown(rows: list[dict], mach: dict, ref: dict, t_end: float) -> str:
                      f"{_fmt(r['err_exit_velocity'], True)} | {_fmt(r['meets_1pc'])} |")
     lines.append("")
     lines.append(f"CPU: best of {rows[0]['repeat'] if rows else 0} runs each.")
+    if spreads:
+        lines += ["", f"Exudyn's step sequence: {spreads[0]['runs']} runs per largest step h, "
+                  f"the robot lifted by k x {LIFT:g} m (k = 0, 1, ...):", "",
+                  "| h [s] | runs within 1 % | C's count exact | exit velocity error "
+                  "(median / max) | peak error (max) | solve CPU (median) [s] | steps "
+                  "(median) |", "|---|---|---|---|---|---|---|"]
+        for r in spreads:
+            lines.append(f"| {r['step']:g} | {r['meets_1pc']} of {r['runs']} | "
+                         f"{r['count_exact']} of {r['runs']} | "
+                         f"{_fmt(r['err_exit_velocity_median'], True)} / "
+                         f"{_fmt(r['err_exit_velocity_max'], True)} | "
+                         f"{_fmt(r['err_peak_max'], True)} | {_fmt(r['solve_cpu_s_median'])} | "
+                         f"{r['steps_median']:.0f} |")
     return "\n".join(lines) + "\n"
 
 
@@ -278,6 +334,11 @@ def main(argv=None) -> int:
     ap.add_argument("--peers", default=",".join(PEERS), help="comma-separated subset of "
                     + ", ".join(PEERS))
     ap.add_argument("--out", default=str(ROOT / "runs" / "peers"))
+    ap.add_argument("--spread", type=int, default=0, metavar="N",
+                    help=f"also run the Exudyn model N times per step of --exudyn-steps, the "
+                    f"robot lifted by k x {LIFT:g} m: how much its errors owe to its steps")
+    ap.add_argument("--exudyn-steps", default="5e-4",
+                    help="largest steps h [s] of --spread, comma-separated (default 5e-4)")
     ap.add_argument("--cache-dir", default=str(ROOT / "runs" / ".bench-cache"),
                     help="where the reference is cached")
     a = ap.parse_args(argv)
@@ -287,7 +348,9 @@ def main(argv=None) -> int:
         ap.error(f"unknown peers {sorted(unknown)}; known: {', '.join(PEERS)}")
     if a.repeat < 1:
         ap.error(f"`--repeat` must be >= 1, got {a.repeat}")
-    if "exudyn" in peers and importlib.util.find_spec("exudyn") is None:
+    mach = machine()
+    print("machine: " + json.dumps(mach))
+    if "exudyn" in peers and "exudyn" not in mach["versions"]:
         print("exudyn is not installed (pip install \".[peers]\"): its row is left out")
         peers.remove("exudyn")
     t_end = QUICK_T_END if a.quick else None
@@ -295,11 +358,9 @@ def main(argv=None) -> int:
 
     from cosim.bench import reference
 
-    mach = machine()
-    print("machine: " + json.dumps(mach))
     ref = reference(SCENE, VARIANT, CONTACT, JOINT,
                     overrides=[f"t_end={t_end!r}"] if t_end else (), cache_dir=a.cache_dir)
-    t_show = t_end or 0.25
+    t_show = t_end or float(tomllib.loads(SCENE.read_text())["t_end"])
     print(f"reference: C closes {ref['count']} times, peak {ref['peak']:.6g} m, "
           f"exit velocity {ref['exit_velocity']:.6g} rad/s")
     rows = []
@@ -308,6 +369,12 @@ def main(argv=None) -> int:
             row = measure(peer, Path(tmp), repeat, t_end, ref)
             rows.append(row)
             print(json.dumps(row))
+        spreads = []
+        if a.spread and "exudyn" in peers:
+            steps = [float(v) for v in a.exudyn_steps.split(",") if v.strip()]
+            spreads = spread(Path(tmp), steps, a.spread, t_end, ref)
+            for r in spreads:
+                print(json.dumps(r))
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     with (out / "peers.csv").open("w", newline="") as fh:
@@ -315,10 +382,11 @@ def main(argv=None) -> int:
         w.writeheader()
         for r in rows:
             w.writerow({k: r.get(k) for k in COLUMNS})
-    md = markdown(rows, mach, ref, t_show)
+    md = markdown(rows, mach, ref, t_show, spreads)
     (out / "peers.md").write_text(md)
     (out / "peers.json").write_text(json.dumps({"machine": mach, "reference": ref,
-                                                "t_end": t_show, "rows": rows}, indent=1))
+                                                "t_end": t_show, "rows": rows,
+                                                "exudyn_spread": spreads}, indent=1))
     print()
     print(md, end="")
     print(f"wrote {out / 'peers.csv'}, {out / 'peers.md'} and {out / 'peers.json'}")
