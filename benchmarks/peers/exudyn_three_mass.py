@@ -1,0 +1,319 @@
+"""Scene 5 (three_mass) as an Exudyn model: the peer the README compares with.
+
+The numbers come from the scene file itself (``cases/three_mass.toml`` with a
+variant applied), so the two models cannot drift apart; the structure is the
+one CASES.md sections 4-5 describe, written in Exudyn's own terms:
+
+- the main body (#3) and the arm (#4) are two free planar rigid bodies
+  (``NodeRigidBody2D`` + ``ObjectRigidBody2D``, three absolute coordinates
+  each, mass centre at the node) joined by a revolute joint
+  (``ObjectJointRevolute2D``, one Lagrange multiplier pair): redundant
+  coordinates, where cosim uses the four joint coordinates x, y, body, arm;
+- the chain is three 1-D masses (``Node1D`` + ``Mass1D``) on coordinate
+  springs (``CoordinateSpringDamper``), the last one to the ground, started
+  in static equilibrium under gravity;
+- each contact is Exudyn's own unilateral penalty element on a coordinate
+  gap (``ObjectContactCoordinate``, linear, undamped, its open/closed state
+  in a ``NodeGenericData``): A and B between the foot's height and the
+  ground, C between the arm tip's height and the top mass's.  A point's
+  height is a coordinate marker (``MarkerBodiesRelativeTranslationCoordinate``
+  from the ground body along y), so the gap is ``y_C - y_top`` wherever the
+  body drifts sideways, as the scene says;
+- gravity as constant loads on the mass centres and the chain's coordinates.
+
+It is solved by the implicit trapezoidal rule with index-2 constraints
+(``TrapezoidalIndex2``), h = 5e-4 s, adaptive steps, discontinuous
+(active-set) iterations with tolerance 1, and the contact elements'
+recommended step size, which cuts a step at a contact switch.  Exudyn's
+default smallest step (1e-8 s) stops the run at a grazing switch of C near
+t = 0.105 s (the recommended step shrinks below it), so the smallest step is
+lowered to 1e-12 s; nothing else is tuned.
+
+Run: ``python benchmarks/peers/exudyn_three_mass.py [--variant f100]
+[--t-end T] [--step H] [--lift DY] [--out DIR]``.  It prints one JSON line: the CPU time of the
+solve alone (``time.process_time`` around ``SolveDynamic``), the number of
+steps, and where the series went.  ``DIR/series.npz`` holds, at every
+accepted step, ``t``, ``gap/C`` [m] (negative in contact) and its rate
+``gap_rate/C`` [m/s], and the robot's joint coordinates in cosim's names
+(``q/robot/x``, ``y``, ``body``, ``arm`` and their ``dq/...``), so that
+cosim's metrics read it as they read a cosim run.  Needs ``pip install
+".[peers]"`` (exudyn 1.13.6).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+import tomllib
+from pathlib import Path
+
+import numpy as np
+
+#: the step and settings of the comparison (issue 12)
+STEP = 5e-4                 # [s] largest step
+MIN_STEP = 1e-12            # [s] smallest step the adaptive control may take
+DISCONTINUOUS_TOLERANCE = 1.0
+
+
+def _merge(base: dict, over: dict) -> dict:
+    out = dict(base)
+    for k, v in over.items():
+        out[k] = _merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
+    return out
+
+
+def scene_numbers(path, variant: str | None = None) -> dict:
+    """The numbers of scene 5 that the Exudyn model needs, read from its file.
+
+    Parameters
+    ----------
+    path : str or Path
+        ``cases/three_mass.toml``.
+    variant : str, optional
+        A variant's overrides are applied first (default: the file's own).
+
+    Returns
+    -------
+    dict
+        ``gravity`` [m/s^2], ``t_end`` [s], ``y0`` (the body's height) [m],
+        ``body`` and ``arm`` (``mass`` [kg], ``inertia`` [kg m^2]),
+        ``A``, ``B`` (body frame) and ``joint`` (body frame), ``com`` and
+        ``C`` (arm frame, from the joint) [m], ``q_arm``, ``dq_arm``
+        [rad, rad/s], ``chain_masses`` [kg], ``chain_stiffnesses`` [N/m],
+        ``chain_origin_y`` [m], ``k`` {contact: stiffness [N/m]}.
+    """
+    data = tomllib.loads(Path(path).read_text())
+    variant = variant or data.get("default_variant")
+    if variant:
+        data = _merge(data, data["variants"][variant])
+    b = data["subsystems"]["robot"]["bodies"]
+    main, arm = b["main"], b["arm"]
+    chain = data["subsystems"]["chain"]
+    for name, body in (("x", b["slider_x"]), ("body", main)):
+        j = body["joint"]
+        if j.get("q0", 0.0) or j.get("dq0", 0.0):
+            raise ValueError(f"the Exudyn model starts joint `{name}` at rest at 0, the scene "
+                             f"gives q0 = {j.get('q0', 0.0)}, dq0 = {j.get('dq0', 0.0)}")
+    return {
+        "gravity": float(data["effects"]["gravity"]),
+        "t_end": float(data["t_end"]),
+        "y0": float(b["slider_y"]["joint"]["q0"]),
+        "body": {"mass": float(main["mass"]), "inertia": float(main["inertia"])},
+        "arm": {"mass": float(arm["mass"]), "inertia": float(arm["inertia"])},
+        "A": [float(v) for v in main["points"]["A"]],
+        "B": [float(v) for v in main["points"]["B"]],
+        "joint": [float(v) for v in arm["joint"]["offset"]],
+        "com": [float(v) for v in arm["com"]],
+        "C": [float(v) for v in arm["points"]["C"]],
+        "q_arm": float(arm["joint"].get("q0", 0.0)),
+        "dq_arm": float(arm["joint"].get("dq0", 0.0)),
+        "chain_masses": [float(v) for v in chain["masses"]],
+        "chain_stiffnesses": [float(v) for v in chain["stiffnesses"]],
+        "chain_origin_y": float(chain["origin"][1]),
+        "k": {c: float(data["contacts"][c]["law"]["contact_stiffness"]) for c in "ABC"},
+    }
+
+
+def _rot(phi: float, v) -> np.ndarray:
+    c, s = math.cos(phi), math.sin(phi)
+    return np.array([c * v[0] - s * v[1], s * v[0] + c * v[1]])
+
+
+def chain_equilibrium(masses, stiffnesses, gravity: float) -> list[float]:
+    """Static displacements [m] (top first) of a hanging chain of masses on
+    springs, the last spring to the ground, under gravity along -y: spring i
+    carries the weight of masses 0..i."""
+    u, below = [], 0.0
+    for i in reversed(range(len(masses))):
+        below -= gravity * sum(masses[:i + 1]) / stiffnesses[i]
+        u.append(below)
+    return u[::-1]
+
+
+def build(exu, n: dict, t_end: float, step: float = STEP, lift: float = 0.0):
+    """The Exudyn system of scene 5 and its simulation settings.
+
+    Parameters
+    ----------
+    exu : module
+        ``exudyn``.
+    n : dict
+        :func:`scene_numbers`.
+    t_end : float
+        [s]
+    step : float
+        Largest step h [s].
+    lift : float
+        Raise the robot's initial height by this much [m] (a round-off-sized
+        lift, 1e-15 m, shows how much the run depends on its step sequence).
+
+    Returns
+    -------
+    tuple
+        ``(mbs, settings, sensors, geometry)``; ``sensors`` maps names to
+        sensor numbers that store coordinates and their rates at every step.
+    """
+    from exudyn.itemInterface import (CoordinateSpringDamper, LoadCoordinate, LoadForceVector,
+                                      MarkerBodiesRelativeTranslationCoordinate,
+                                      MarkerBodyPosition, MarkerNodeCoordinate, Mass1D,
+                                      Node1D, NodeGenericData, NodePointGround,
+                                      NodeRigidBody2D, ObjectContactCoordinate, ObjectGround,
+                                      ObjectJointRevolute2D, ObjectRigidBody2D, SensorNode)
+
+    g = n["gravity"]
+    n = {**n, "y0": n["y0"] + lift}
+    sc = exu.SystemContainer()
+    mbs = sc.AddSystem()
+    # main body: mass centre on R3, at rest, horizontal
+    body_node = mbs.AddNode(NodeRigidBody2D(referenceCoordinates=[0.0, n["y0"], 0.0]))
+    body = mbs.AddObject(ObjectRigidBody2D(nodeNumber=body_node, **n["body"]))
+    # arm: its node at its mass centre, rotated by q_arm, turning at dq_arm
+    joint_point = np.array([0.0, n["y0"]]) + np.array(n["joint"])
+    r_com = _rot(n["q_arm"], n["com"])
+    com = joint_point + r_com
+    w = n["dq_arm"]
+    arm_node = mbs.AddNode(NodeRigidBody2D(
+        referenceCoordinates=[com[0], com[1], n["q_arm"]],
+        initialVelocities=[-w * r_com[1], w * r_com[0], w]))
+    arm = mbs.AddObject(ObjectRigidBody2D(nodeNumber=arm_node, **n["arm"]))
+    c_local = [n["C"][0] - n["com"][0], n["C"][1] - n["com"][1], 0.0]
+    mbs.AddObject(ObjectJointRevolute2D(markerNumbers=[
+        mbs.AddMarker(MarkerBodyPosition(bodyNumber=body, localPosition=n["joint"] + [0.0])),
+        mbs.AddMarker(MarkerBodyPosition(bodyNumber=arm,
+                                         localPosition=[-n["com"][0], -n["com"][1], 0.0]))]))
+    for obj, mass in ((body, n["body"]["mass"]), (arm, n["arm"]["mass"])):
+        mk = mbs.AddMarker(MarkerBodyPosition(bodyNumber=obj, localPosition=[0.0, 0.0, 0.0]))
+        mbs.AddLoad(LoadForceVector(markerNumber=mk, loadVector=[0.0, -mass * g, 0.0]))
+
+    ground = mbs.AddObject(ObjectGround())
+    ground_coord = mbs.AddMarker(MarkerNodeCoordinate(nodeNumber=mbs.AddNode(NodePointGround()),
+                                                      coordinate=0))
+
+    def height(obj, local):
+        """A coordinate marker: the height of a body point above y = 0."""
+        return mbs.AddMarker(MarkerBodiesRelativeTranslationCoordinate(
+            bodyNumbers=[ground, obj], localPosition0=[0.0, 0.0, 0.0],
+            localPosition1=list(local), axis0=[0.0, 1.0, 0.0]))
+
+    def contact(lower, upper, k, offset, gap0):
+        # gap = upper - lower - offset; force k * (-gap) while gap < 0
+        state = mbs.AddNode(NodeGenericData(initialCoordinates=[gap0],
+                                            numberOfDataCoordinates=1))
+        mbs.AddObject(ObjectContactCoordinate(markerNumbers=[lower, upper], nodeNumber=state,
+                                              contactStiffness=k, contactDamping=0.0,
+                                              offset=offset))
+
+    for name in ("A", "B"):
+        contact(ground_coord, height(body, n[name] + [0.0]), n["k"][name], 0.0,
+                n["y0"] + n[name][1])
+
+    u0 = chain_equilibrium(n["chain_masses"], n["chain_stiffnesses"], g)
+    chain_nodes, chain_coords = [], []
+    for m, u in zip(n["chain_masses"], u0):
+        nd = mbs.AddNode(Node1D(referenceCoordinates=[0.0], initialCoordinates=[u]))
+        mbs.AddObject(Mass1D(nodeNumber=nd, mass=m))
+        mk = mbs.AddMarker(MarkerNodeCoordinate(nodeNumber=nd, coordinate=0))
+        mbs.AddLoad(LoadCoordinate(markerNumber=mk, load=-m * g))
+        chain_nodes.append(nd)
+        chain_coords.append(mk)
+    for i, k in enumerate(n["chain_stiffnesses"]):
+        below = chain_coords[i + 1] if i + 1 < len(chain_coords) else ground_coord
+        mbs.AddObject(CoordinateSpringDamper(markerNumbers=[below, chain_coords[i]],
+                                             stiffness=k, damping=0.0))
+    # the top mass's height is origin_y + its displacement
+    y_c0 = com[1] + _rot(n["q_arm"], c_local)[1]
+    contact(chain_coords[0], height(arm, c_local), n["k"]["C"], n["chain_origin_y"],
+            y_c0 - n["chain_origin_y"] - u0[0])
+
+    ovt = exu.OutputVariableType
+    sensors = {}
+    for name, nd in (("body", body_node), ("arm", arm_node), ("top", chain_nodes[0])):
+        for kind, ov in (("q", ovt.Coordinates), ("dq", ovt.Coordinates_t)):
+            sensors[f"{kind}/{name}"] = mbs.AddSensor(SensorNode(
+                nodeNumber=nd, outputVariableType=ov, storeInternal=True, writeToFile=False))
+    mbs.Assemble()
+
+    s = exu.SimulationSettings()
+    ti = s.timeIntegration
+    ti.endTime = t_end
+    ti.numberOfSteps = max(1, round(t_end / step))
+    ti.adaptiveStep = True
+    ti.minimumStepSize = MIN_STEP
+    ti.discontinuous.iterationTolerance = DISCONTINUOUS_TOLERANCE
+    ti.discontinuous.useRecommendedStepSize = True
+    ti.verboseMode = 0
+    s.solution.file.write = False           # the series goes to series.npz
+    s.solution.sensors.writePeriod = 0.0     # every step
+    s.show.statistics = False
+    s.show.computationTime = False
+    geometry = {"system_container": sc,      # keeps the system alive with the caller
+                "body_ref": [0.0, n["y0"], 0.0], "arm_ref": [com[0], com[1], n["q_arm"]],
+                "c_local": c_local[:2], "top_origin_y": n["chain_origin_y"]}
+    return mbs, s, sensors, geometry
+
+
+def series(mbs, sensors, geometry) -> dict:
+    """The stored sensor data as cosim-named arrays at every accepted step."""
+    d = {k: mbs.GetSensorStoredData(v) for k, v in sensors.items()}
+    t = d["q/body"][:, 0]
+    body = d["q/body"][:, 1:4] + geometry["body_ref"]
+    arm = d["q/arm"][:, 1:4] + geometry["arm_ref"]
+    dbody, darm = d["dq/body"][:, 1:4], d["dq/arm"][:, 1:4]
+    cx, cy = geometry["c_local"]
+    phi = arm[:, 2]
+    rx = np.cos(phi) * cx - np.sin(phi) * cy
+    ry = np.sin(phi) * cx + np.cos(phi) * cy
+    y_c = arm[:, 1] + ry
+    v_c = darm[:, 1] + darm[:, 2] * rx
+    y_top = geometry["top_origin_y"] + d["q/top"][:, 1]
+    v_top = d["dq/top"][:, 1]
+    return {
+        "t": t, "gap/C": y_c - y_top, "gap_rate/C": v_c - v_top,
+        "q/robot/x": body[:, 0], "q/robot/y": body[:, 1], "q/robot/body": body[:, 2],
+        "q/robot/arm": arm[:, 2] - body[:, 2],
+        "dq/robot/x": dbody[:, 0], "dq/robot/y": dbody[:, 1], "dq/robot/body": dbody[:, 2],
+        "dq/robot/arm": darm[:, 2] - dbody[:, 2],
+    }
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scene", default=str(Path(__file__).resolve().parents[2] / "cases"
+                                           / "three_mass.toml"))
+    ap.add_argument("--variant", default="f100")
+    ap.add_argument("--t-end", type=float, default=None, help="[s] (default: the scene's)")
+    ap.add_argument("--out", default=None, help="directory for series.npz")
+    ap.add_argument("--step", type=float, default=STEP, help=f"largest step [s] (default {STEP})")
+    ap.add_argument("--lift", type=float, default=0.0,
+                    help="raise the robot's initial height by this much [m] (default 0)")
+    a = ap.parse_args(argv)
+    import exudyn as exu
+
+    n = scene_numbers(a.scene, a.variant)
+    t_end = a.t_end or n["t_end"]
+    mbs, settings, sensors, geometry = build(exu, n, t_end, a.step, a.lift)
+    cpu0 = time.process_time()
+    try:
+        ok = exu.SolveDynamic(mbs, settings,
+                              solverType=exu.DynamicSolverType.TrapezoidalIndex2)
+    except exu.SolverError:
+        ok = False
+    cpu = time.process_time() - cpu0
+    s = series(mbs, sensors, geometry)
+    path = None
+    if a.out:
+        out = Path(a.out)
+        out.mkdir(parents=True, exist_ok=True)
+        path = out / "series.npz"
+        np.savez(path, **s)
+    print(json.dumps({"peer": "exudyn", "version": exu.__version__, "success": bool(ok),
+                      "solve_cpu_s": cpu, "steps": int(len(s["t"]) - 1), "t_end": t_end,
+                      "step": a.step, "lift": a.lift,
+                      "series": None if path is None else str(path)}))
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
