@@ -13,5 +13,5 @@ from cosim.cli import main
 if __name__ == "__main__":
     out = sys.argv[sys.argv.index("--out") + 1] if "--out" in sys.argv else "runs/work-precision"
     sys.exit(main(["bench", "cases/three_mass.toml", "--variant", "f100", "--schemes",
-                   "gauss_seidel,jacobi,implicit", "--steps", "1e-4,5e-5,2e-5,1e-5",
+                   "gauss_seidel,jacobi,implicit", "--steps", "8e-5,4e-5,3e-5,2e-5,1e-5",
                    "--out", out]))

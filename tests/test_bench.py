@@ -8,7 +8,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from cosim.bench import COLUMNS, reference, run_bench, write_csv
+from cosim.bench import COLUMNS, BenchRow, cheapest_within, reference, run_bench, write_csv
 from cosim.cli import main
 from cosim.metrics import exit_velocity, impact_metrics, relative_errors
 from conftest import CASES
@@ -87,3 +87,24 @@ def test_bench_command_writes_table_csv_and_plot(tmp_path, capsys, monkeypatch):
     assert "paper_rk45" in text and "gauss_seidel" in text and "cores" in text
     assert (out / "bench.csv").stat().st_size > 0
     assert (out / "bench.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_cheapest_within_picks_the_cheapest_accurate_row_of_each_kind():
+    nan = math.nan
+
+    def row(scheme, label, cpu, peak, count, exit_v, status="finished"):
+        return BenchRow(scheme, label, nan, nan, cpu, peak, count, exit_v, 0.0, status)
+    rows = [row("monolithic", "paper_rk45", 3.0, 0.002, 0, 0.005),
+            row("monolithic", "monolithic", 0.8, 0.001, 0, 0.002),
+            row("monolithic", "monolithic", 0.5, 0.02, 0, 0.002),      # peak off by 2 %
+            row("gauss_seidel", "gauss_seidel", 0.2, 0.009, 1, 0.001),  # a contact too many
+            row("gauss_seidel", "gauss_seidel", 0.3, 0.001, 0, 0.002),
+            row("jacobi", "jacobi", 0.1, nan, nan, nan, "refused")]
+    best = cheapest_within(rows, 0.01)
+    assert best["cosim"].cpu_time_s == 0.3
+    assert best["monolithic"].cpu_time_s == 0.8
+    assert best["paper_rk45"].cpu_time_s == 3.0
+    assert best["ratio_monolithic"] == pytest.approx(0.375)
+    assert best["ratio_paper_rk45"] == pytest.approx(0.1)
+    none = cheapest_within(rows, 1e-4)
+    assert none["cosim"] is None and math.isnan(none["ratio_monolithic"])

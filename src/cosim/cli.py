@@ -203,7 +203,7 @@ def _machine() -> str:
 def _cmd_bench(args) -> int:
     import math
 
-    from .bench import plot, run_bench, write_csv
+    from .bench import cheapest_within, plot, run_bench, write_csv
 
     out = Path(args.out) if args.out else Path("runs") / (
         Path(args.scene).stem + (f"-{args.variant}" if args.variant else "") + "-bench")
@@ -229,6 +229,16 @@ def _cmd_bench(args) -> int:
     print(f"reference (monolithic DOP853, rtol 1e-11): {ref['count']} contacts of "
           f"{args.contact}, peak {ref['peak']:.6g} m, exit velocity {ref['exit_velocity']:.6g}, "
           f"CPU {ref['cpu_time_s']:.2f} s")
+    best = cheapest_within(rows, 0.01)
+    print("cheapest within 1 % (exact count; peak and exit velocity within 1 %):")
+    for kind in ("cosim", "monolithic", "paper_rk45"):
+        r = best[kind]
+        print(f"  {kind:<11}" + ("none" if r is None else
+                                 f"{r.label} {fmt(r.macro_step, '1.1e').strip()} "
+                                 f"{fmt(r.tolerance, '1.0e').strip()}: {r.cpu_time_s:.2f} s"))
+    if best["cosim"] is not None:
+        print(f"  co-simulation / monolithic CPU {best['ratio_monolithic']:.2f}, "
+              f"/ paper_rk45 CPU {best['ratio_paper_rk45']:.2f}")
     write_csv(rows, out / "bench.csv")
     print(f"wrote {out / 'bench.csv'}")
     try:

@@ -675,7 +675,9 @@ def _finish(point, spec, out, res, scene, status, message, rows, contact, joint)
     if out is not None:
         d = out / point.name
         if res is not None:
-            write_outputs(res, d, scene)
+            # the sweep itself chose to (re)run this point: a stale or failed
+            # run of it is what gets replaced
+            write_outputs(res, d, scene, overwrite=True)
         else:
             for stale in ("summary.json", "series.npz"):
                 (d / stale).unlink(missing_ok=True)
