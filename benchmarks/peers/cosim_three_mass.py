@@ -32,13 +32,13 @@ def main(argv=None) -> int:
 
     from cosim.cli import main as cosim_main
 
-    args = ["run", a.scene, "--variant", a.variant, "--out", a.out, "--quiet"]
+    args = ["run", a.scene, "--variant", a.variant, "--out", a.out, "--quiet", "--overwrite"]
     if a.t_end:
         args += ["--set", f"t_end={a.t_end!r}"]
     code = cosim_main(args + extra)
     summary = Path(a.out) / "summary.json"
     s = json.loads(summary.read_text()) if summary.exists() else {}
-    print(json.dumps({"peer": "cosim", "success": s.get("status") == "finished",
+    print(json.dumps({"peer": "cosim", "success": code == 0 and s.get("status") == "finished",
                       "solve_cpu_s": s.get("cpu_time_s"), "steps": s.get("macro_steps"),
                       "t_end": s.get("t_end"), "scheme": s.get("scheme"), "run_dir": a.out}))
     return code
