@@ -495,32 +495,27 @@ class _Runner:
 
     def run(self, jobs):
         """Run ``{key: scene}``; yield ``(key, outcome)`` as each completes."""
-        if self._client is not None:
-            from distributed import as_completed
-            futures = {self._client.submit(_simulate, scene, pure=False): key
-                       for key, scene in jobs.items()}
+        if self._client is not None or self._pool is not None:
+            if self._client is not None:
+                from distributed import as_completed
+                client = self._client
+                futures = {client.submit(_simulate, scene, pure=False): key
+                           for key, scene in jobs.items()}
+                cancel = lambda: client.cancel(list(futures))      # noqa: E731
+            else:
+                from concurrent.futures import as_completed
+                futures = {self._pool.submit(_simulate, scene): key
+                           for key, scene in jobs.items()}
+                cancel = lambda: [fut.cancel() for fut in futures]  # noqa: E731
             try:
                 for fut in as_completed(futures):
                     try:
                         outcome = fut.result()
-                    except Exception as exc:           # noqa: BLE001 - a lost worker
+                    except Exception as exc:   # noqa: BLE001 - a lost worker or process
                         outcome = ("error", f"{type(exc).__name__}: {exc}")
                     yield futures[fut], outcome
             finally:
-                self._client.cancel(list(futures))
-        elif self._pool is not None:
-            from concurrent.futures import as_completed
-            futures = {self._pool.submit(_simulate, scene): key for key, scene in jobs.items()}
-            try:
-                for fut in as_completed(futures):
-                    try:
-                        outcome = fut.result()
-                    except Exception as exc:           # noqa: BLE001 - a dead process
-                        outcome = ("error", f"{type(exc).__name__}: {exc}")
-                    yield futures[fut], outcome
-            finally:
-                for fut in futures:
-                    fut.cancel()
+                cancel()
         else:
             for key, scene in jobs.items():
                 yield key, _simulate(scene)
