@@ -4,14 +4,37 @@ from __future__ import annotations
 import numpy as np
 
 from couplers import PointContact
+from couplers.laws import (FloresLaw, HertzLaw, HuntCrossleyLaw, KelvinVoigtLaw,
+                           LankaraniNikraveshLaw, LinearLaw, RigidLaw)
 from multibody import JointEffects, TreeModel
 from multibody.impact import frictional_impact, frictionless_impact
 
 from .errors import SimulationError
-from .integrators import RK4, TimeStepper
+from .integrators import INTEGRATORS, RK4, TimeStepper
+from .kernel import compiled_module
 from .subsystem import EmbeddedContact, StepInput, Subsystem
 
-__all__ = ["MultibodySubsystem"]
+__all__ = ["MultibodySubsystem", "kernel_law"]
+
+
+def kernel_law(law):
+    """``(kind, k, c_or_chi, exponent)`` of a penalty law for the compiled
+    kernel (``cosim._multibody_step``), or None for a law it does not know
+    (a user's own law is stepped by the reference)."""
+    kind = type(law)
+    if kind is LinearLaw:
+        return (0, law.contact_stiffness, 0.0, 1.0)
+    if kind is KelvinVoigtLaw:
+        return (1, law.contact_stiffness, law.contact_damping, 1.0)
+    if kind in (HertzLaw, HuntCrossleyLaw, LankaraniNikraveshLaw, FloresLaw):
+        return (2, law.contact_stiffness, law._chi(), law.exponent)
+    if kind is RigidLaw:
+        return (3, 0.0, 0.0, 1.0)
+    return None
+
+
+#: integrators whose steps the compiled kernel takes (RK4) or feeds (adaptive)
+KERNEL_INTEGRATORS = tuple(INTEGRATORS.values())
 
 
 class MultibodySubsystem(Subsystem):
@@ -86,6 +109,7 @@ class MultibodySubsystem(Subsystem):
         e = EmbeddedContact(contact, port, own_side, partner_position, partner_velocity)
         self._embedded.append(e)
         self.aux = np.zeros(4 * len(self._embedded) + 2)
+        self._kernel = None
         return e
 
     #: embedded slot -> cosim.connections.EmbeddedConnection (grasp, friction)
@@ -96,6 +120,7 @@ class MultibodySubsystem(Subsystem):
         :class:`cosim.connections.EmbeddedConnection`: its mode's normal and
         tangential forces, friction, and a grasp on the located touch)."""
         self._connections = {**self._connections, int(slot): connection}
+        self._kernel = None
 
     def _connection_switch(self, t, j, on, y):
         """A located switch of connection ``j``: grasp on touch.  Returns the
@@ -202,6 +227,44 @@ class MultibodySubsystem(Subsystem):
                          if k in self._connections else float(e.law.switch(d, dd))
                          for k, (e, d, dd) in enumerate(self._embedded_state(t, x, v))])
 
+    #: the compiled step (cosim._multibody_step.MultibodyStep), built on the
+    #: first step that it covers; False where it does not cover this side
+    _kernel = None
+
+    def _compiled_step(self, inputs):
+        """The compiled kernel for this step, or None where the reference must
+        step: the kernel not built or not chosen (:mod:`cosim.kernel`), joint
+        effects, grasp or friction connections, a custom law or integrator, or
+        an input that is not a :class:`StepInput`."""
+        if self._kernel is False or (inputs is not None and type(inputs) is not StepInput):
+            return None
+        if self._kernel is None:
+            self._kernel = self._build_kernel() or False
+        return self._kernel or None
+
+    def _build_kernel(self):
+        if (self.effects is not None or self._connections
+                or type(self.integrator) not in KERNEL_INTEGRATORS):
+            return None
+        laws = [kernel_law(e.law) for e in self._embedded]
+        if any(law is None for law in laws):
+            return None
+        module = compiled_module("_multibody_step")
+        if module is None:
+            return None
+        m = self.model
+        contacts = [(e.port, e.side, e.normal, e.offset, *law)
+                    for e, law in zip(self._embedded, laws)]
+        return module.MultibodyStep(m.parent, m.revolute, m._offset, m._axis, m._angle0,
+                                    m.ancestors, m.mass, m.inertia, m._com, m._rot_mass, self._g,
+                                    self._port_body, self._port_local_c, contacts)
+
+    @property
+    def kernel(self) -> str:
+        """``"compiled"`` when the last step ran in the compiled kernel,
+        ``"numpy"`` otherwise."""
+        return "compiled" if self._kernel else "numpy"
+
     def _step_impl(self, t, h, inputs: StepInput | None):
         self._t0, self._h = t, h
         self.aux[2:-2:4] = 0.0          # first moments are per step
@@ -209,10 +272,22 @@ class MultibodySubsystem(Subsystem):
         switch = self._switch if self._embedded else None
         self.switch_log = []
         self.impact_log = []
-        # laws' switch functions are positive where closed; a connection's
-        # are not, so a side with connections never takes coarse steps
-        y1 = self.integrator.integrate(lambda tt, yy: self._rhs(tt, yy, inputs), t, y0, t + h,
-                                       switch, self._on_switch, coarse=not self._connections)
+        kernel = self._compiled_step(inputs)
+        integ = self.integrator
+        if kernel is not None:
+            kernel.set_step(t, h, inputs, [(e.t0, e.h, e.motion) for e in self._embedded])
+            if type(integ) is RK4:
+                y1 = kernel.integrate(t, y0, t + h, integ.max_step, integ.free_step or 0.0,
+                                      True, self._on_switch)
+            else:                        # an adaptive method: compiled right-hand side
+                y1 = integ.integrate(kernel.rhs, t, y0, t + h,
+                                     kernel.switch if self._embedded else None,
+                                     self._on_switch, coarse=True)
+        else:
+            # laws' switch functions are positive where closed; a connection's
+            # are not, so a side with connections never takes coarse steps
+            y1 = integ.integrate(lambda tt, yy: self._rhs(tt, yy, inputs), t, y0, t + h,
+                                 switch, self._on_switch, coarse=not self._connections)
         n2, na = 2 * self.n_dof, self.aux.size
         self.x[:] = y1[:n2]
         self.aux[:] = y1[n2:n2 + na]
