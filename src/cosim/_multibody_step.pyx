@@ -655,3 +655,42 @@ cdef class MultibodyStep:
             for k in range(self.nc):
                 out[k] = self.sws[2, k]
         return out
+
+    def outputs(self, y):
+        """Port positions and velocities, each ``(n_p, 2)`` [m], [m/s], at
+        state ``y = [q, dq, ...]``."""
+        yin = np.ascontiguousarray(y, dtype=float)
+        cdef double[::1] yv = yin
+        cdef int p, n = self.n
+        pos = np.empty((self.np_, 2))
+        vel = np.empty((self.np_, 2))
+        cdef double[:, ::1] pv = pos
+        cdef double[:, ::1] vv = vel
+        self._frames(&yv[0], &yv[n])
+        for p in range(self.np_):
+            self._point(n + p, self.port_body[p], self.pl_re[p], self.pl_im[p], &yv[n], False)
+            pv[p, 0], pv[p, 1] = self.px_re[n + p], self.px_im[n + p]
+            vv[p, 0], vv[p, 1] = self.pv_re[n + p], self.pv_im[n + p]
+        return pos, vel
+
+    def energy(self, y):
+        """Kinetic energy plus gravity's potential energy relative to the
+        world origin [J] at state ``y = [q, dq, ...]``
+        (:meth:`multibody.TreeModel.kinetic_energy` and ``potential_energy``)."""
+        yin = np.ascontiguousarray(y, dtype=float)
+        cdef double[::1] yv = yin
+        cdef int i, j, n = self.n
+        cdef double kin = 0.0, pot = 0.0, row
+        self._frames(&yv[0], &yv[n])
+        for i in range(n):
+            self._point(i, i, self.com_re[i], self.com_im[i], &yv[n], True)
+        self._mass_and_forces()
+        for i in range(n):
+            row = 0.0
+            for j in range(n):
+                row += self.M[i, j] * yv[n + j]
+            kin += yv[n + i] * row
+        if self.has_g:
+            for i in range(n):
+                pot -= self.mass[i] * (self.px_re[i] * self.g_re + self.px_im[i] * self.g_im)
+        return 0.5 * kin + pot

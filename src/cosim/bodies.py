@@ -227,43 +227,50 @@ class MultibodySubsystem(Subsystem):
                          if k in self._connections else float(e.law.switch(d, dd))
                          for k, (e, d, dd) in enumerate(self._embedded_state(t, x, v))])
 
-    #: the compiled step (cosim._multibody_step.MultibodyStep), built on the
-    #: first step that it covers; False where it does not cover this side
+    #: the compiled kernel (cosim._multibody_step.MultibodyStep): None until
+    #: first asked for, False where it is not built or not chosen
     _kernel = None
+    #: whether the kernel steps this side (see :meth:`_compiled_step`)
+    _kernel_steps = False
 
-    def _compiled_step(self, inputs):
-        """The compiled kernel for this step, or None where the reference must
-        step: the kernel not built or not chosen (:mod:`cosim.kernel`), joint
-        effects, grasp or friction connections, a custom law or integrator, or
-        an input that is not a :class:`StepInput`."""
-        if self._kernel is False or (inputs is not None and type(inputs) is not StepInput):
-            return None
+    def _compiled(self):
+        """The compiled kernel of this tree, or None (:mod:`cosim.kernel`)."""
         if self._kernel is None:
             self._kernel = self._build_kernel() or False
         return self._kernel or None
 
+    def _compiled_step(self, inputs):
+        """The compiled kernel where it takes this step, or None where the
+        reference must: the kernel not built or not chosen, joint effects,
+        grasp or friction connections, a user's own law or integrator, or an
+        input that is not a :class:`StepInput`."""
+        kernel = self._compiled()
+        if kernel is None or not self._kernel_steps:
+            return None
+        if inputs is not None and type(inputs) is not StepInput:
+            return None
+        return kernel
+
     def _build_kernel(self):
-        if (self.effects is not None or self._connections
-                or type(self.integrator) not in KERNEL_INTEGRATORS):
-            return None
-        laws = [kernel_law(e.law) for e in self._embedded]
-        if any(law is None for law in laws):
-            return None
         module = compiled_module("_multibody_step")
         if module is None:
             return None
+        laws = [kernel_law(e.law) for e in self._embedded]
+        self._kernel_steps = (self.effects is None and not self._connections
+                              and type(self.integrator) in KERNEL_INTEGRATORS
+                              and all(law is not None for law in laws))
+        contacts = ([(e.port, e.side, e.normal, e.offset, *law)
+                     for e, law in zip(self._embedded, laws)] if self._kernel_steps else [])
         m = self.model
-        contacts = [(e.port, e.side, e.normal, e.offset, *law)
-                    for e, law in zip(self._embedded, laws)]
         return module.MultibodyStep(m.parent, m.revolute, m._offset, m._axis, m._angle0,
                                     m.ancestors, m.mass, m.inertia, m._com, m._rot_mass, self._g,
                                     self._port_body, self._port_local_c, contacts)
 
     @property
     def kernel(self) -> str:
-        """``"compiled"`` when the last step ran in the compiled kernel,
-        ``"numpy"`` otherwise."""
-        return "compiled" if self._kernel else "numpy"
+        """``"compiled"`` when the compiled kernel takes this side's steps,
+        ``"numpy"`` when the reference does."""
+        return "compiled" if self._compiled() is not None and self._kernel_steps else "numpy"
 
     def _step_impl(self, t, h, inputs: StepInput | None):
         self._t0, self._h = t, h
@@ -390,6 +397,9 @@ class MultibodySubsystem(Subsystem):
         return out
 
     def outputs(self, t, x):
+        kernel = self._compiled()
+        if kernel is not None:
+            return kernel.outputs(x)
         n = self.n_dof
         q, dq = x[:n], x[n:2 * n]
         xp, vp, _, _ = self.model.points_c(self.model.frames(q, dq), dq, self._port_body,
@@ -400,7 +410,11 @@ class MultibodySubsystem(Subsystem):
         x = self.x if x is None else x
         n = self.n_dof
         q, dq = x[:n], x[n:2 * n]
-        e = self.model.kinetic_energy(q, dq) + self.model.potential_energy(q, self.gravity)
+        kernel = self._compiled()
+        if kernel is not None:
+            e = kernel.energy(x)
+        else:
+            e = self.model.kinetic_energy(q, dq) + self.model.potential_energy(q, self.gravity)
         return e if self.effects is None else e + self.effects.potential(q)
 
     def port_mobility(self, port, direction):
