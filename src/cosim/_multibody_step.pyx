@@ -175,40 +175,79 @@ cdef class MultibodyStep:
         self.n_rhs = 0
 
     # ------------------------------------------------------------ the step
-    def set_step(self, double t0, double h, inputs, motions):
+    def set_step(self, double t0, double h, inputs, embedded):
         """Load the step: its start ``t0`` and length ``h`` [s], the input
-        (a :class:`cosim.subsystem.StepInput` or None) and, per contact,
-        the partner's motion ``(t0, h, coeffs)`` (complex coefficients in
-        the partner's normalised time, lowest first)."""
-        cdef int j, k, p, i
+        (a :class:`cosim.subsystem.StepInput` or None) and the partners'
+        motion from the host's embedded contacts
+        (:class:`cosim.subsystem.EmbeddedContact`: ``t0``, ``h`` and complex
+        ``motion`` coefficients in the partner's normalised time, lowest
+        first)."""
+        cdef int j, k, p, i, m
+        cdef double[:, :, :] c
+        cdef double complex[:] mc
+        cdef double mh
         self.t0, self.h = t0, h
         if inputs is None:
             self.u_len = 0
         else:
-            c = np.asarray(inputs.coeffs, float)
-            if c.shape[0] > MAX_COEF:
-                raise ValueError(f"input polynomial of order {c.shape[0] - 1} is above the "
-                                 f"kernel's {MAX_COEF - 1}")
+            c = inputs.coeffs
+            if c.shape[0] > MAX_COEF or c.shape[1] != self.np_ or c.shape[2] != 2:
+                raise ValueError(f"input coefficients must have shape (<= {MAX_COEF}, "
+                                 f"{self.np_}, 2), got {np.shape(inputs.coeffs)}")
             self.u_len = c.shape[0]
-            self.u_t0, self.u_h = float(inputs.t0), float(inputs.h)
-            for j in range(c.shape[0]):
+            self.u_t0, self.u_h = inputs.t0, inputs.h
+            for j in range(self.u_len):
                 for p in range(self.np_):
                     self.u_coef[j, p, 0] = c[j, p, 0]
                     self.u_coef[j, p, 1] = c[j, p, 1]
-        for k, (mt0, mh, coeffs) in enumerate(motions):
-            c = np.asarray(coeffs, complex)
-            if c.size > MAX_COEF:
-                raise ValueError(f"partner motion of order {c.size - 1} is above the "
+        for k in range(self.nc):
+            e = embedded[k]
+            mc = e.motion
+            m = mc.shape[0]
+            if m > MAX_COEF:
+                raise ValueError(f"partner motion of order {m - 1} is above the "
                                  f"kernel's {MAX_COEF - 1}")
-            self.m_len[k] = c.size
-            self.m_still[k] = not np.any(c[1:])
-            self.m_t0[k], self.m_h[k] = mt0, mh
-            for i in range(c.size):
-                self.m_re[k, i] = c[i].real
-                self.m_im[k, i] = c[i].imag
+            self.m_len[k] = m
+            self.m_t0[k] = e.t0
+            self.m_h[k] = mh = e.h
+            self.m_still[k] = 1
+            for i in range(m):
+                self.m_re[k, i] = mc[i].real
+                self.m_im[k, i] = mc[i].imag
                 if i > 0:
-                    self.dm_re[k, i - 1] = c[i].real * i / mh
-                    self.dm_im[k, i - 1] = c[i].imag * i / mh
+                    if mc[i] != 0:
+                        self.m_still[k] = 0
+                    self.dm_re[k, i - 1] = mc[i].real * i / mh
+                    self.dm_im[k, i - 1] = mc[i].imag * i / mh
+
+    def step(self, double t, double h, x, aux, inputs, embedded, double max_step,
+             double free_step, on_switch):
+        """One macro step of the host: ``x = [q, dq]`` and ``aux`` (the
+        embedded contacts' quadratures, whose first moments restart at zero)
+        are advanced in place by RK4 (:meth:`integrate`); returns the port
+        velocity moments ``int v s^j dt``, ``(3, n_p)`` complex."""
+        cdef double[::1] xv = x
+        cdef double[::1] av = aux
+        cdef int i, nx = xv.shape[0], na = av.shape[0]
+        if nx + na + 6 * self.np_ != self.ny:
+            raise ValueError(f"`x` and `aux` must hold {self.ny - 6 * self.np_} entries, "
+                             f"got {nx + na}")
+        self.set_step(t, h, inputs, embedded)
+        for i in range(self.nc):
+            av[4 * i + 2] = 0.0                 # first moments are per step
+        y0 = np.zeros(self.ny)
+        cdef double[::1] yv = y0
+        for i in range(nx):
+            yv[i] = xv[i]
+        for i in range(na):
+            yv[nx + i] = av[i]
+        y1 = self.integrate(t, y0, t + h, max_step, free_step, True, on_switch)
+        yv = y1
+        for i in range(nx):
+            xv[i] = yv[i]
+        for i in range(na):
+            av[i] = yv[nx + i]
+        return y1[nx + na:].view(complex).reshape(3, self.np_)
 
     # ------------------------------------------------------------ kinematics
     cdef void _frames(self, const double* q, const double* dq) noexcept nogil:

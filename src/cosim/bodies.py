@@ -274,22 +274,23 @@ class MultibodySubsystem(Subsystem):
 
     def _step_impl(self, t, h, inputs: StepInput | None):
         self._t0, self._h = t, h
-        self.aux[2:-2:4] = 0.0          # first moments are per step
-        y0 = np.concatenate([self.x, self.aux, np.zeros(6 * self.n_ports)])
         switch = self._switch if self._embedded else None
         self.switch_log = []
         self.impact_log = []
         kernel = self._compiled_step(inputs)
         integ = self.integrator
-        if kernel is not None:
-            kernel.set_step(t, h, inputs, [(e.t0, e.h, e.motion) for e in self._embedded])
-            if type(integ) is RK4:
-                y1 = kernel.integrate(t, y0, t + h, integ.max_step, integ.free_step or 0.0,
-                                      True, self._on_switch)
-            else:                        # an adaptive method: compiled right-hand side
-                y1 = integ.integrate(kernel.rhs, t, y0, t + h,
-                                     kernel.switch if self._embedded else None,
-                                     self._on_switch, coarse=True)
+        if kernel is not None and type(integ) is RK4:
+            self.port_moments = kernel.step(t, h, self.x, self.aux, inputs, self._embedded,
+                                            integ.max_step, integ.free_step or 0.0,
+                                            self._on_switch)
+            return
+        self.aux[2:-2:4] = 0.0          # first moments are per step
+        y0 = np.concatenate([self.x, self.aux, np.zeros(6 * self.n_ports)])
+        if kernel is not None:           # an adaptive method: compiled right-hand side
+            kernel.set_step(t, h, inputs, self._embedded)
+            y1 = integ.integrate(kernel.rhs, t, y0, t + h,
+                                 kernel.switch if self._embedded else None,
+                                 self._on_switch, coarse=True)
         else:
             # laws' switch functions are positive where closed; a connection's
             # are not, so a side with connections never takes coarse steps

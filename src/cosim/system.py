@@ -116,6 +116,11 @@ class CoupledSystem:
                                  f"side b")
         self._normals = np.array([ln.contact.normal for ln in self.links]).reshape(-1, 2)
         self._offsets = np.array([ln.contact.offset for ln in self.links])
+        self._laws = [ln.contact.law for ln in self.links]
+        # each contact's two ports as rows of all subsystems' stacked outputs
+        first = np.cumsum([0] + [sub.n_ports for sub in self.subsystems])
+        self._row_a = np.array([first[ln.sub_a] + ln.port_a for ln in self.links], dtype=int)
+        self._row_b = np.array([first[ln.sub_b] + ln.port_b for ln in self.links], dtype=int)
         # Port-force maps: flat port forces of subsystem s = G[s] @ row forces.
         self._G = []
         for s, sub in enumerate(self.subsystems):
@@ -235,10 +240,9 @@ class CoupledSystem:
 
     def penetrations(self, outs):
         """Penetration and rate of every contact, from subsystem outputs."""
-        xa = np.array([outs[ln.sub_a][0][ln.port_a] for ln in self.links]).reshape(-1, 2)
-        va = np.array([outs[ln.sub_a][1][ln.port_a] for ln in self.links]).reshape(-1, 2)
-        xb = np.array([outs[ln.sub_b][0][ln.port_b] for ln in self.links]).reshape(-1, 2)
-        vb = np.array([outs[ln.sub_b][1][ln.port_b] for ln in self.links]).reshape(-1, 2)
+        pos = np.concatenate([o[0] for o in outs])
+        vel = np.concatenate([o[1] for o in outs])
+        xa, xb, va, vb = pos[self._row_a], pos[self._row_b], vel[self._row_a], vel[self._row_b]
         n = self._normals
         d = self._offsets - np.einsum("cx,cx->c", xa - xb, n)
         dd = -np.einsum("cx,cx->c", va - vb, n)
@@ -254,7 +258,8 @@ class CoupledSystem:
         """Forces of the rows ``which`` (all by default), in the current modes."""
         if self.connections is None:
             idx = range(self.n_contacts) if which is None else which
-            return np.array([float(self.links[c].contact.law.force(d[c], dd[c])) for c in idx])
+            laws = self._laws
+            return np.array([laws[c].evaluate(d[c], dd[c])[0] for c in idx], dtype=float)
         f = np.zeros(self.n_rows)
         cs = self.connections
         for c, ln in enumerate(self.links):
@@ -274,7 +279,7 @@ class CoupledSystem:
         cs = self.connections
         for c, ln in enumerate(self.links):
             if ln.connection is None:
-                out[c] = float(ln.contact.law.dissipation_rate(f[c], d[c], dd[c]))
+                out[c] = ln.contact.law.dissipation_rate(f[c], d[c], dd[c])
                 continue
             r = self.tangent_row[c]
             ft, e, de = (f[r], d[r], dd[r]) if r >= 0 else (0.0, 0.0, 0.0)
@@ -295,12 +300,13 @@ class CoupledSystem:
 
     def contact_potential(self, d) -> float:
         if self.connections is None:
-            return float(sum(ln.contact.law.potential(d[c]) for c, ln in enumerate(self.links)))
+            laws = self._laws
+            return float(sum([laws[c].potential(d[c]) for c in range(self.n_contacts)]))
         return float(np.sum(self.contact_potentials(d)))
 
     def energy(self, d) -> float:
         """Energy of the subsystems plus the elastic energy of the contacts [J]."""
-        return float(sum(s.energy() for s in self.subsystems)) + self.contact_potential(d)
+        return float(sum([s.energy() for s in self.subsystems])) + self.contact_potential(d)
 
     def step_input(self, s: int, t0: float, h: float, coeffs: np.ndarray) -> StepInput:
         """Port forces of subsystem ``s`` from contact-force polynomial
