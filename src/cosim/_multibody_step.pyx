@@ -695,6 +695,32 @@ cdef class MultibodyStep:
                 out[k] = self.sws[2, k]
         return out
 
+    def evaluate(self, y):
+        """``M``, ``F`` and the ports' complex positions, velocities and
+        Jacobian rows at state ``y = [q, dq, ...]``: what
+        :meth:`multibody.TreeModel.evaluate` returns (less the
+        velocity-product terms), for a right-hand side written in Python."""
+        yin = np.ascontiguousarray(y, dtype=float)
+        cdef double[::1] yv = yin
+        cdef int i, j, n = self.n, npt = self.np_
+        self._frames(&yv[0], &yv[n])
+        for i in range(n):
+            self._point(i, i, self.com_re[i], self.com_im[i], &yv[n], True)
+        for i in range(npt):
+            self._point(n + i, self.port_body[i], self.pl_re[i], self.pl_im[i], &yv[n], True)
+        self._mass_and_forces()
+        M = np.array(self.M)
+        F = np.array(self.F)
+        x = np.empty(npt, complex)
+        v = np.empty(npt, complex)
+        J = np.empty((npt, n), complex)
+        for i in range(npt):
+            x[i] = complex(self.px_re[n + i], self.px_im[n + i])
+            v[i] = complex(self.pv_re[n + i], self.pv_im[n + i])
+            for j in range(n):
+                J[i, j] = complex(self.J_re[n + i, j], self.J_im[n + i, j])
+        return M, F, x, v, J
+
     def outputs(self, y):
         """Port positions and velocities, each ``(n_p, 2)`` [m], [m/s], at
         state ``y = [q, dq, ...]``."""

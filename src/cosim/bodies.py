@@ -173,6 +173,9 @@ class MultibodySubsystem(Subsystem):
     def _evaluate(self, y):
         n = self.n_dof
         q, dq = y[:n], y[n:2 * n]
+        kernel = self._compiled()
+        if kernel is not None:       # the tree's part of a right-hand side in Python
+            return (dq, *kernel.evaluate(y))
         M, F, x, v, J, _ = self.model.evaluate(q, dq, self._g, self._port_body,
                                                self._port_local_c)
         return dq, M, F, x, v, J
