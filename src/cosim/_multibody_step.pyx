@@ -34,12 +34,59 @@ cdef enum:
     KELVIN_VOIGT = 1    # f = max(k d + c dd, 0), switch min(d, d + c/k dd)
     POWER = 2           # f = k d^n (1 + chi dd), switch d or min(d, d (1 + chi dd))
     RIGID = 3           # no force; switch d marks touch-down
+    # joint drives (multibody.effects) and the references a PD drive tracks
+    DRIVE_CONSTANT = 0
+    DRIVE_TABLE = 1
+    DRIVE_PD = 2
+    REF_TABLE = 0
+    REF_MINIMUM_JERK = 1
+    REF_SINUSOID = 2
     # largest number of polynomial coefficients of a partner's motion or an input
     MAX_COEF = 8
     # most contacts one subsystem hosts in the kernel
     MAX_CONTACTS = 64
 
 LAW_KINDS = {"linear": LINEAR, "kelvin_voigt": KELVIN_VOIGT, "power": POWER, "rigid": RIGID}
+DRIVE_KINDS = {"constant": DRIVE_CONSTANT, "table": DRIVE_TABLE, "pd": DRIVE_PD}
+REFERENCE_KINDS = {"table": REF_TABLE, "minimum_jerk": REF_MINIMUM_JERK,
+                   "sinusoid": REF_SINUSOID}
+
+
+cdef double _interp(double t, const double* ts, const double* vs, int m) noexcept nogil:
+    """``numpy.interp`` on one value: held outside the table."""
+    cdef int lo = 0, hi = m - 1, mid
+    cdef double slope, r
+    if t < ts[0] or m == 1:
+        return vs[0]
+    if t >= ts[m - 1]:
+        return vs[m - 1]
+    while hi - lo > 1:                  # ts[lo] <= t < ts[hi]
+        mid = (lo + hi) // 2
+        if ts[mid] <= t:
+            lo = mid
+        else:
+            hi = mid
+    if t == ts[lo]:
+        return vs[lo]
+    slope = (vs[lo + 1] - vs[lo]) / (ts[lo + 1] - ts[lo])
+    r = slope * (t - ts[lo]) + vs[lo]
+    if r != r:
+        r = slope * (t - ts[lo + 1]) + vs[lo + 1]
+    return r
+
+
+cdef double _table_rate(double t, const double* ts, const double* vs, int m) noexcept nogil:
+    """The slope of the table's segment at ``t`` (zero outside and at its ends)."""
+    cdef int lo = 0, hi = m - 1, mid
+    if m < 2 or t <= ts[0] or t >= ts[m - 1]:
+        return 0.0
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if ts[mid] <= t:
+            lo = mid
+        else:
+            hi = mid
+    return (vs[lo + 1] - vs[lo]) / (ts[lo + 1] - ts[lo])
 
 
 cdef inline double _hermite(double y0, double f0, double y1, double f1, double h,
@@ -102,11 +149,19 @@ cdef class MultibodyStep:
     cdef double[::1] F, b, u_re, u_im, sw_tmp
     cdef double[:, ::1] stage          # rows: k1, k2, k3, k4, tmp, y1, k1n, yi, ya, ka
     cdef double[:, ::1] sws            # rows: s0, s1, s, snew
+    # joint effects
+    cdef bint has_springs, has_dampers
+    cdef int nd
+    cdef double[::1] e_k, e_rest, e_c, tau
+    cdef long[::1] d_joint, d_kind, d_ref, d_off, d_len
+    cdef double[:, ::1] d_pd                   # (n_d, 3): kp, kd, max torque (or the torque)
+    cdef double[:, ::1] d_par                  # (n_d, 4): the reference's parameters
+    cdef double[::1] d_tab                     # tables: times then values, per drive
     #: number of right-hand-side evaluations so far
     cdef public long n_rhs
 
     def __init__(self, parent, revolute, offset, axis, angle0, ancestors, mass, inertia, com,
-                 rot_mass, gravity, port_body, port_local, contacts):
+                 rot_mass, gravity, port_body, port_local, contacts, effects=None):
         cdef int n = len(parent)
         self.n = n
         self.np_ = len(port_body)
@@ -173,6 +228,37 @@ cdef class MultibodyStep:
         self.stage = np.zeros((10, self.ny))
         self.sws = np.zeros((4, max(self.nc, 1)))
         self.n_rhs = 0
+        self._set_effects(n, effects)
+
+    def _set_effects(self, int n, effects):
+        """Joint springs, dampers and drives from ``effects``: None, or
+        ``(stiffness, rest, damping, drives)`` with per-joint arrays and
+        drives ``(joint, kind, gains (3,), reference kind, reference
+        params (4,), table times, table values)`` (see
+        :func:`cosim.bodies.kernel_effects`)."""
+        self.tau = np.zeros(n)
+        if effects is None:
+            self.has_springs = self.has_dampers = False
+            self.e_k = self.e_rest = self.e_c = np.zeros(n)
+            drives = []
+        else:
+            k, rest, c, drives = effects
+            self.e_k = np.ascontiguousarray(k, dtype=float)
+            self.e_rest = np.ascontiguousarray(rest, dtype=float)
+            self.e_c = np.ascontiguousarray(c, dtype=float)
+            self.has_springs = bool(np.any(self.e_k))
+            self.has_dampers = bool(np.any(self.e_c))
+        self.nd = len(drives)
+        m = max(self.nd, 1)
+        self.d_joint = np.array([d[0] for d in drives] or [0], dtype=np.int_)
+        self.d_kind = np.array([d[1] for d in drives] or [0], dtype=np.int_)
+        self.d_pd = np.array([list(d[2]) for d in drives] or [[0.0] * 3], dtype=float)
+        self.d_ref = np.array([d[3] for d in drives] or [0], dtype=np.int_)
+        self.d_par = np.array([list(d[4]) for d in drives] or [[0.0] * 4], dtype=float)
+        tabs = [(np.asarray(d[5], float), np.asarray(d[6], float)) for d in drives]
+        self.d_len = np.array([t.size for t, _ in tabs] or [0], dtype=np.int_)
+        self.d_off = np.array(np.cumsum([0] + [2 * t.size for t, _ in tabs])[:m], dtype=np.int_)
+        self.d_tab = np.concatenate([np.concatenate([t, v]) for t, v in tabs] + [np.zeros(1)])
 
     # ------------------------------------------------------------ the step
     def set_step(self, double t0, double h, inputs, embedded):
@@ -483,7 +569,11 @@ cdef class MultibodyStep:
             out[base + 4 * k + 2] = f * tau
             out[base + 4 * k + 3] = fr * self.pv_re[n + p] + fi * self.pv_im[n + p]
             sw[k] = swk
-        # generalised forces Re(J^H u) - F, then ddq
+        # generalised forces Re(J^H u) - (F - effects), then ddq
+        if self.nd or self.has_springs or self.has_dampers:
+            self._effects(t, q, dq, &out[2 * n + 4 * self.nc])
+            for i in range(n):
+                self.F[i] = self.F[i] - self.tau[i]
         for i in range(n):
             s = 0.0
             for p in range(npt):
@@ -494,8 +584,9 @@ cdef class MultibodyStep:
         if self._solve(out + n) != 0:
             return -1
         base = 2 * n + 4 * self.nc
-        out[base] = 0.0
-        out[base + 1] = 0.0
+        if not (self.nd or self.has_springs or self.has_dampers):
+            out[base] = 0.0
+            out[base + 1] = 0.0
         base += 2
         s = tau / self.h
         for p in range(npt):
@@ -506,6 +597,76 @@ cdef class MultibodyStep:
             out[base + 4 * npt + 2 * p] = (s * s) * self.pv_re[n + p]
             out[base + 4 * npt + 2 * p + 1] = (s * s) * self.pv_im[n + p]
         return 0
+
+    cdef double _reference(self, int k, double t, bint rate) noexcept nogil:
+        """The value (or rate) of drive ``k``'s reference at ``t``
+        (:mod:`multibody.effects` trajectories)."""
+        cdef int kind = self.d_ref[k]
+        cdef double x, a, w
+        cdef const double* ts
+        if kind == REF_TABLE:
+            ts = &self.d_tab[self.d_off[k]]
+            if rate:
+                return _table_rate(t, ts, ts + self.d_len[k], self.d_len[k])
+            return _interp(t, ts, ts + self.d_len[k], self.d_len[k])
+        if kind == REF_MINIMUM_JERK:    # params: start, end, t_start, t_end
+            x = (t - self.d_par[k, 2]) / (self.d_par[k, 3] - self.d_par[k, 2])
+            x = 0.0 if x < 0.0 else x
+            x = 1.0 if x > 1.0 else x
+            if rate:
+                a = (self.d_par[k, 1] - self.d_par[k, 0]) / (self.d_par[k, 3] - self.d_par[k, 2])
+                return a * 30 * x * x * pow(1 - x, 2.0)
+            return (self.d_par[k, 0] + (self.d_par[k, 1] - self.d_par[k, 0]) * pow(x, 3.0)
+                    * (10 - 15 * x + 6 * x * x))
+        # sinusoid: amplitude, frequency, phase, offset
+        w = 2 * 3.141592653589793 * self.d_par[k, 1]
+        if rate:
+            return self.d_par[k, 0] * w * cos(w * t + self.d_par[k, 2])
+        return self.d_par[k, 3] + self.d_par[k, 0] * sin(2 * 3.141592653589793
+                                                         * self.d_par[k, 1] * t
+                                                         + self.d_par[k, 2])
+
+    cdef void _effects(self, double t, const double* q, const double* dq,
+                       double* rates) noexcept nogil:
+        """Joint effects' generalised forces into ``tau`` and the power the
+        dampers dissipate and the drives supply into ``rates[0:2]``
+        (:class:`multibody.JointEffects`)."""
+        cdef int i, k, j, kind
+        cdef double tq, diss = 0.0, sup = 0.0, r, rd
+        cdef const double* ts
+        for i in range(self.n):
+            self.tau[i] = 0.0
+        for k in range(self.nd):
+            j = self.d_joint[k]
+            kind = self.d_kind[k]
+            if kind == DRIVE_CONSTANT:
+                tq = self.d_pd[k, 0]
+            elif kind == DRIVE_TABLE:
+                ts = &self.d_tab[self.d_off[k]]
+                tq = _interp(t, ts, ts + self.d_len[k], self.d_len[k])
+            else:                       # PD
+                r = self._reference(k, t, False)
+                rd = self._reference(k, t, True)
+                tq = self.d_pd[k, 0] * (r - q[j]) + self.d_pd[k, 1] * (rd - dq[j])
+                if tq < -self.d_pd[k, 2]:
+                    tq = -self.d_pd[k, 2]
+                if tq > self.d_pd[k, 2]:
+                    tq = self.d_pd[k, 2]
+            self.tau[j] += tq
+        if self.nd:
+            for i in range(self.n):
+                sup += self.tau[i] * dq[i]
+        if self.has_dampers:
+            for i in range(self.n):
+                diss += self.e_c[i] * dq[i] * dq[i]
+        if self.has_springs:
+            for i in range(self.n):
+                self.tau[i] -= self.e_k[i] * (q[i] - self.e_rest[i])
+        if self.has_dampers:
+            for i in range(self.n):
+                self.tau[i] -= self.e_c[i] * dq[i]
+        rates[0] = diss
+        rates[1] = sup
 
     cdef void _switch(self, double t, const double* y, double* sw) noexcept nogil:
         """The contacts' switch values at ``(t, y)``: port kinematics only."""

@@ -7,6 +7,8 @@ from couplers import PointContact
 from couplers.laws import (FloresLaw, HertzLaw, HuntCrossleyLaw, KelvinVoigtLaw,
                            LankaraniNikraveshLaw, LinearLaw, RigidLaw)
 from multibody import JointEffects, TreeModel
+from multibody.effects import (ConstantTorque, MinimumJerk, PDTracking, Sinusoid, Table,
+                               TorqueTable)
 from multibody.impact import frictional_impact, frictionless_impact
 
 from .errors import SimulationError
@@ -31,6 +33,35 @@ def kernel_law(law):
     if kind is RigidLaw:
         return (3, 0.0, 0.0, 1.0)
     return None
+
+
+def kernel_effects(effects: JointEffects | None):
+    """Joint effects as the compiled kernel takes them:
+    ``(stiffness, rest, damping, drives)``, or None for no effects; raises
+    ``TypeError`` for a drive or reference the kernel does not know."""
+    if effects is None:
+        return None
+    drives = []
+    for d in effects.drives:
+        ref_kind, ref_par, ts, vs = 0, (0.0,) * 4, (), ()
+        if type(d) is ConstantTorque:
+            kind, gains = 0, (d.torque, 0.0, 0.0)
+        elif type(d) is TorqueTable:
+            kind, gains, ts, vs = 1, (0.0,) * 3, d.torque.times, d.torque.values
+        elif type(d) is PDTracking:
+            kind, gains, r = 2, (d.kp, d.kd, d.max_torque), d.reference
+            if type(r) is Table:
+                ts, vs = r.times, r.values
+            elif type(r) is MinimumJerk:
+                ref_kind, ref_par = 1, (r.start, r.end, r.t_start, r.t_end)
+            elif type(r) is Sinusoid:
+                ref_kind, ref_par = 2, (r.amplitude, r.frequency, r.phase, r.offset)
+            else:
+                raise TypeError(f"reference {type(r).__name__}")
+        else:
+            raise TypeError(f"drive {type(d).__name__}")
+        drives.append((d.joint, kind, gains, ref_kind, ref_par, ts, vs))
+    return effects.stiffness, effects.rest, effects.damping, drives
 
 
 #: integrators whose steps the compiled kernel takes (RK4) or feeds (adaptive)
@@ -244,9 +275,9 @@ class MultibodySubsystem(Subsystem):
 
     def _compiled_step(self, inputs):
         """The compiled kernel where it takes this step, or None where the
-        reference must: the kernel not built or not chosen, joint effects,
-        grasp or friction connections, a user's own law or integrator, or an
-        input that is not a :class:`StepInput`."""
+        reference must: the kernel not built or not chosen, grasp or friction
+        connections embedded here, a user's own law, drive or integrator, or
+        an input that is not a :class:`StepInput`."""
         kernel = self._compiled()
         if kernel is None or not self._kernel_steps:
             return None
@@ -259,7 +290,13 @@ class MultibodySubsystem(Subsystem):
         if module is None:
             return None
         laws = [kernel_law(e.law) for e in self._embedded]
-        self._kernel_steps = (self.effects is None and not self._connections
+        try:
+            effects = kernel_effects(self.effects)
+        except TypeError:               # a user's own drive: the reference steps
+            effects, known = None, False
+        else:
+            known = True
+        self._kernel_steps = (known and not self._connections
                               and type(self.integrator) in KERNEL_INTEGRATORS
                               and all(law is not None for law in laws))
         contacts = ([(e.port, e.side, e.normal, e.offset, *law)
@@ -267,7 +304,8 @@ class MultibodySubsystem(Subsystem):
         m = self.model
         return module.MultibodyStep(m.parent, m.revolute, m._offset, m._axis, m._angle0,
                                     m.ancestors, m.mass, m.inertia, m._com, m._rot_mass, self._g,
-                                    self._port_body, self._port_local_c, contacts)
+                                    self._port_body, self._port_local_c, contacts,
+                                    effects if self._kernel_steps else None)
 
     @property
     def kernel(self) -> str:

@@ -109,6 +109,12 @@ class CoupledSystem:
                 self.subsystems[own].attach_connection(
                     slots[own], EmbeddedConnection(self.connections, i, ln.contact.normal, side))
             slots[own] += 1
+        # embedded contacts grouped by host: (host, contact indices, slots)
+        hosts = sorted({s for s, _ in self.embedded.values()})
+        self._embedded_groups = [
+            (s, np.array([c for c, (h, _) in self.embedded.items() if h == s], dtype=int),
+             np.array([k for h, k in self.embedded.values() if h == s], dtype=int))
+            for s in hosts]
         self._followers = [ln for ln in self.links if ln.follow]
         for ln in self._followers:
             if not hasattr(self.subsystems[ln.sub_b], "move_port"):
@@ -345,15 +351,15 @@ class CoupledSystem:
     def embedded_work(self) -> np.ndarray:
         """(n_contacts,) work [J] embedded contacts did on their hosts so far."""
         out = np.zeros(self.n_contacts)
-        for c, (s, slot) in self.embedded.items():
-            out[c] = self.subsystems[s].embedded_quadratures()[slot, 3]
+        for s, contacts, slots in self._embedded_groups:
+            out[contacts] = self.subsystems[s].embedded_quadratures()[slots, 3]
         return out
 
     def embedded_quadratures(self):
         """(n_contacts, 2) impulse and dissipated energy of embedded contacts."""
         out = np.zeros((self.n_contacts, 2))
-        for c, (s, slot) in self.embedded.items():
-            out[c] = self.subsystems[s].embedded_quadratures()[slot, :2]
+        for s, contacts, slots in self._embedded_groups:
+            out[contacts] = self.subsystems[s].embedded_quadratures()[slots, :2]
         return out
 
     def hosted_view_forces(self, outs) -> dict:
