@@ -15,6 +15,8 @@ from abc import ABC, abstractmethod
 
 import numpy as np
 
+from couplers.contact import penetration_c
+
 __all__ = ["StepInput", "Subsystem", "RigidReference", "SubsystemState", "EmbeddedContact",
            "reparametrised", "hermite_coefficients"]
 
@@ -126,18 +128,15 @@ class EmbeddedContact:
         s = (np.asarray(t, float) - self.t0) / self.h
         xp = np.polyval(self.motion[::-1], s)
         vp = np.polyval(self._dmotion[::-1], s)
-        nc = self.normal.conjugate()
-        return (self.offset - self.side * (nc * (x - xp)).real,
-                -self.side * (nc * (v - vp)).real)
+        return penetration_c(self.normal, self.offset, self.side * (x - xp),
+                             self.side * (v - vp))
 
     def penetration(self, t: float, x: complex, v: complex) -> tuple[float, float]:
         """Penetration [m] and its rate [m/s] for host port position ``x``
         and velocity ``v`` (complex) at ``t``."""
         xp, vp = self.partner(t)
-        nc = self.normal.conjugate()
-        d = self.offset - self.side * (nc * (x - xp)).real
-        dd = -self.side * (nc * (v - vp)).real
-        return d, dd
+        return penetration_c(self.normal, self.offset, self.side * (x - xp),
+                             self.side * (v - vp))
 
 
 class SubsystemState:

@@ -2,19 +2,35 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
 from couplers import Connection, PointContact
 from couplers.connection import GRASPED
+from couplers.contact import penetrations
 
 from .connections import ConnectionSet, EmbeddedConnection
-from .subsystem import StepInput, Subsystem
+from .subsystem import EmbeddedContact, StepInput, Subsystem
 
-__all__ = ["ContactLink", "CoupledSystem", "PLACEMENTS"]
+__all__ = ["ContactLink", "CoupledSystem", "HostedContact", "PLACEMENTS"]
 
 #: Where a contact's penalty law is evaluated in a co-simulation.
 PLACEMENTS = ("embedded", "coupler")
+
+
+class HostedContact(NamedTuple):
+    """A contact evaluated inside one side's integrator against a moving partner."""
+
+    #: index of the subsystem whose integrator evaluates the contact
+    host: int
+    #: the contact's slot among the host's embedded contacts (its ``aux`` block)
+    slot: int
+    #: index of the partner subsystem, and its port
+    partner: int
+    partner_port: int
+    #: the host's view of the contact (the partner's motion over the step)
+    embedded: EmbeddedContact
 
 
 @dataclass(frozen=True)
@@ -68,9 +84,8 @@ class CoupledSystem:
         self._init_rows()
         # embedded: contact index -> (subsystem index, slot in its aux)
         self.embedded: dict[int, tuple[int, int]] = {}
-        # hosted (embedded against a moving partner): contact index ->
-        # (host, slot, partner, partner port, EmbeddedContact)
-        self.hosted: dict[int, tuple] = {}
+        # hosted (embedded against a moving partner): contact index -> HostedContact
+        self.hosted: dict[int, HostedContact] = {}
         slots = [0] * len(self.subsystems)
         for i, ln in enumerate(self.links):
             if ln.placement != "embedded":
@@ -100,7 +115,7 @@ class CoupledSystem:
                     raise ValueError(f"contact `{ln.contact.name}`: a grasp or friction "
                                      f"between two moving sides is exchanged by the scheme; "
                                      f"use placement `coupler`")
-                self.hosted[i] = (own, slots[own], partner, partner_port, emb)
+                self.hosted[i] = HostedContact(own, slots[own], partner, partner_port, emb)
             if ln.connection is not None:
                 if not hasattr(self.subsystems[own], "attach_connection"):
                     raise ValueError(f"contact `{ln.contact.name}`: subsystem "
@@ -145,7 +160,7 @@ class CoupledSystem:
         for s, G in enumerate(self._G):
             mask = np.zeros(self.n_rows)
             mask[self.coupler_rows] = 1.0
-            for c, (_, _, partner, _, _) in self.hosted.items():
+            for c, partner in ((c, h.partner) for c, h in self.hosted.items()):
                 if partner == s:
                     mask[c] = 1.0
             self._Gc.append(G * mask)
@@ -248,15 +263,14 @@ class CoupledSystem:
         """Penetration and rate of every contact, from subsystem outputs."""
         pos = np.concatenate([o[0] for o in outs])
         vel = np.concatenate([o[1] for o in outs])
-        xa, xb, va, vb = pos[self._row_a], pos[self._row_b], vel[self._row_a], vel[self._row_b]
-        n = self._normals
-        d = self._offsets - np.einsum("cx,cx->c", xa - xb, n)
-        dd = -np.einsum("cx,cx->c", va - vb, n)
+        dx = pos[self._row_a] - pos[self._row_b]
+        dv = vel[self._row_a] - vel[self._row_b]
+        d, dd = penetrations(self._normals, self._offsets, dx, dv)
         if self.n_rows > self.n_contacts:
             nc, ct = self.n_contacts, self.row_contact[self.n_contacts:]
             t = self._row_dir[nc:]
-            e = np.einsum("cx,cx->c", (xa - xb)[ct], t) - self.connections.anchor[ct]
-            de = np.einsum("cx,cx->c", (va - vb)[ct], t)
+            e = np.einsum("cx,cx->c", dx[ct], t) - self.connections.anchor[ct]
+            de = np.einsum("cx,cx->c", dv[ct], t)
             d, dd = np.concatenate([d, e]), np.concatenate([dd, de])
         return d, dd
 
@@ -366,7 +380,7 @@ class CoupledSystem:
         """Force of each hosted contact as its host sees it now, against the
         partner motion it was given, from outputs ``outs``."""
         out = {}
-        for c, (host, _, _, _, emb) in self.hosted.items():
+        for c, (host, _, _, _, emb) in self.hosted.items():   # HostedContact
             sub = self.subsystems[host]
             pos, vel = outs[host]
             d, dd = emb.penetration(sub.t, complex(*pos[emb.port]), complex(*vel[emb.port]))
