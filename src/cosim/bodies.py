@@ -14,7 +14,8 @@ from multibody.impact import frictional_impact, frictionless_impact
 from .errors import SimulationError
 from .integrators import INTEGRATORS, RK4, TimeStepper
 from .kernel import compiled_module
-from .subsystem import EmbeddedContact, StepInput, Subsystem
+from .subsystem import (DISSIPATED, IMPULSE, MOMENT, QUADRATURES, WORK, EmbeddedContact,
+                        StepInput, Subsystem)
 
 __all__ = ["MultibodySubsystem", "kernel_law"]
 
@@ -88,8 +89,11 @@ class MultibodySubsystem(Subsystem):
 
     Notes
     -----
-    ``aux`` holds, per embedded contact, its impulse and dissipated energy,
-    then the energy dissipated by joint dampers and supplied by drives.
+    ``aux`` holds, per embedded contact, its :data:`~cosim.subsystem.QUADRATURES`
+    (impulse, dissipated energy, the step's first moment of the force, work),
+    then the energy dissipated by joint dampers and supplied by drives.  The
+    integrated state is ``[q, dq, aux, port velocity moments]``, the layout the
+    compiled kernel shares (:mod:`cosim._multibody_step`).
     """
 
     def __init__(self, name: str, model: TreeModel, q0, dq0, ports: dict,
@@ -172,7 +176,7 @@ class MultibodySubsystem(Subsystem):
         this subsystem [J] so far, and the current step's first moment of the
         force ``int f (t - t0) dt`` [N s^2], in the order impulse, dissipated,
         moment, work."""
-        return self.aux[:-2].reshape(-1, 4)
+        return self.aux[:-2].reshape(-1, len(QUADRATURES))
 
     def ledger(self):
         return float(self.aux[-2]), float(self.aux[-1])
@@ -325,7 +329,7 @@ class MultibodySubsystem(Subsystem):
                                             integ.max_step, integ.free_step or 0.0,
                                             self._on_switch)
             return
-        self.aux[2:-2:4] = 0.0          # first moments are per step
+        self.aux[MOMENT:-2:len(QUADRATURES)] = 0.0      # first moments are per step
         y0 = np.concatenate([self.x, self.aux, np.zeros(6 * self.n_ports)])
         if kernel is not None:           # an adaptive method: compiled right-hand side
             kernel.set_step(t, h, inputs, self._embedded)
@@ -410,10 +414,11 @@ class MultibodySubsystem(Subsystem):
             p_i = float(res.normal_impulse[i])
             if y.size > 2 * n:           # the stepping state carries the quadratures
                 share = res.energy_loss * (p_i / total if total else 0.0)
-                out[2 * n + 4 * k] += p_i
-                out[2 * n + 4 * k + 1] += share
-                out[2 * n + 4 * k + 2] += p_i * (t - self._t0)
-                out[2 * n + 4 * k + 3] -= share       # the kinetic energy the impact took
+                q = out[2 * n + len(QUADRATURES) * k:]   # contact k's quadratures
+                q[IMPULSE] += p_i
+                q[DISSIPATED] += share
+                q[MOMENT] += p_i * (t - self._t0)
+                q[WORK] -= share       # the kinetic energy the impact took
             if k != slot:
                 self.switch_log.append((t, k, True))
             self.impact_log.append({

@@ -17,8 +17,17 @@ import numpy as np
 
 from couplers.contact import penetration_c
 
-__all__ = ["StepInput", "Subsystem", "RigidReference", "SubsystemState", "EmbeddedContact",
+__all__ = ["QUADRATURES", "IMPULSE", "DISSIPATED", "MOMENT", "WORK", "StepInput", "Subsystem", "RigidReference", "SubsystemState", "EmbeddedContact",
            "reparametrised", "hermite_coefficients"]
+
+
+#: What each contact embedded in a subsystem integrates along the
+#: subsystem's state, in this order (its block of ``aux``): the impulse [N s],
+#: the energy dissipated [J], the step's first moment of the force
+#: ``int f (t - t0) dt`` [N s^2] (restarted every step) and the work the
+#: contact did on the subsystem [J].
+QUADRATURES = ("impulse", "dissipated", "moment", "work")
+IMPULSE, DISSIPATED, MOMENT, WORK = range(len(QUADRATURES))
 
 
 def hermite_coefficients(x0, v0, x1, v1, h: float) -> tuple:
