@@ -414,11 +414,11 @@ class MultibodySubsystem(Subsystem):
             p_i = float(res.normal_impulse[i])
             if y.size > 2 * n:           # the stepping state carries the quadratures
                 share = res.energy_loss * (p_i / total if total else 0.0)
-                q = out[2 * n + len(QUADRATURES) * k:]   # contact k's quadratures
-                q[IMPULSE] += p_i
-                q[DISSIPATED] += share
-                q[MOMENT] += p_i * (t - self._t0)
-                q[WORK] -= share       # the kinetic energy the impact took
+                quad = out[2 * n + len(QUADRATURES) * k:]   # contact k's quadratures
+                quad[IMPULSE] += p_i
+                quad[DISSIPATED] += share
+                quad[MOMENT] += p_i * (t - self._t0)
+                quad[WORK] -= share    # the kinetic energy the impact took
             if k != slot:
                 self.switch_log.append((t, k, True))
             self.impact_log.append({
