@@ -135,6 +135,17 @@ class CoupledSystem:
             if not hasattr(self.subsystems[ln.sub_b], "move_port"):
                 raise ValueError(f"contact `{ln.contact.name}`: `follow` needs a structure as "
                                  f"side b")
+            if ln.placement == "embedded" and ln.host == ln.sub_a:
+                raise ValueError(f"contact `{ln.contact.name}`: a following contact hosted by "
+                                 f"its point's side (`{self.subsystems[ln.sub_a].name}`) "
+                                 f"would miss the surface's slope force; host it in "
+                                 f"`{self.subsystems[ln.sub_b].name}` or use placement "
+                                 f"`coupler`")
+        #: following contacts: index, and n . dx_b/ds at the surface point now
+        self._follow_index = np.array([c for c, ln in enumerate(self.links) if ln.follow],
+                                      dtype=int)
+        self._follow_slope = np.zeros(self._follow_index.size)
+        self._follow_axis = np.zeros((self._follow_index.size, 2))
         self._normals = np.array([ln.contact.normal for ln in self.links]).reshape(-1, 2)
         self._offsets = np.array([ln.contact.offset for ln in self.links])
         self._laws = [ln.contact.law for ln in self.links]
@@ -164,7 +175,7 @@ class CoupledSystem:
                 if partner == s:
                     mask[c] = 1.0
             self._Gc.append(G * mask)
-        self._applied: dict[int, np.ndarray] = {}      # force polynomials of the step
+        self._applied: dict[int, tuple] = {}   # force polynomials of the step, and their maps
         self._work = np.zeros(self.n_rows)
         #: the rows whose force a scheme hands over (coupler rows, hosted contacts)
         self.exchanged = np.array(sorted(set(self.coupler_rows.tolist()) | set(self.hosted)),
@@ -246,12 +257,67 @@ class CoupledSystem:
         return on
 
     # ---------------------------------------------------- moving surface points
-    def update_followers(self, outs) -> None:
-        """Move each following contact's surface port under its point: the
-        material coordinate of side ``b`` below side ``a``'s port."""
-        for ln in self._followers:
+    def update_followers(self, outs, states=None) -> None:
+        """Move each following contact's surface port under its point, and
+        turn the force on the point to the deformed surface's normal.
+
+        Side ``b``'s port moves to the material coordinate ``s`` below side
+        ``a``'s point ``x_a``: ``s = (x_a - o) . e`` with the structure's
+        origin ``o`` and axis ``e``.  The surface point is then
+        ``x_b(s, t) = o + s e + w(s, t) r`` (``r`` the deflection direction),
+        and the penetration ``d = offset - n . (x_a - x_b(s, t))`` depends on
+        ``x_a`` through ``s`` as well.  Its rate is
+
+            dd = -n . (v_a - w_t r) + sigma (e . v_a),   sigma = n . (e + w' r),
+
+        where ``w_t r`` is the port's material velocity (what
+        :meth:`penetrations` takes for ``v_b``) and ``w' = dw/ds``.  A spring of
+        potential ``V(d)`` and force ``f = V'(d)`` therefore acts with
+        ``-dV/dx_a = f (n - sigma e)`` on the point and with ``-f n`` on the
+        material point ``s`` (its consistent nodal load), and the power balance
+        is exact:
+
+            f (n - sigma e) . v_a - f n . (w_t r) = -f dd = -dV/dt.
+
+        A force along ``n`` alone, as before, leaves ``-f sigma (e . v_a)``
+        (the slope term ``w' ds/dt`` of the spring's stretch) unpaid: the
+        spring's energy changed without work on either side.  So the column
+        of side ``a``'s port-force maps for the contact's row becomes
+        ``n - sigma e`` (``sigma = 0`` where ``s`` is clipped to the
+        structure's ends, for there ``s`` no longer moves with ``x_a``), and
+        :meth:`penetrations` adds the slope term to ``dd``.
+
+        Parameters
+        ----------
+        outs : list
+            Every subsystem's port positions and velocities.
+        states : list of arrays, optional
+            The subsystems' states that gave ``outs`` (default: their own
+            ``x``); side ``b``'s gives ``w'``.
+        """
+        for i, c in enumerate(self._follow_index):
+            ln = self.links[c]
             sub = self.subsystems[ln.sub_b]
-            sub.move_port(ln.port_b, sub.material_coordinate(outs[ln.sub_a][0][ln.port_a]))
+            s_raw = sub.material_coordinate(outs[ln.sub_a][0][ln.port_a])
+            s = sub.move_port(ln.port_b, s_raw)
+            x = sub.x if states is None else states[ln.sub_b]
+            axis = np.asarray(sub.structure.axis, float)
+            n = ln.contact.normal
+            sigma = float(n @ sub.surface_tangent(ln.port_b, x)) if s == s_raw else 0.0
+            if s != s_raw:
+                axis = np.zeros(2)
+            self._follow_slope[i] = sigma
+            self._follow_axis[i] = axis
+            col = np.asarray(n, float) - sigma * axis
+            rows = slice(2 * ln.port_a, 2 * ln.port_a + 2)
+            # new arrays, not in place: a step's work is taken with the maps
+            # its forces were applied through
+            for maps in (self._G, self._Gc):
+                G = maps[ln.sub_a]
+                if G[rows, c].any() and not np.array_equal(G[rows, c], col):
+                    G = G.copy()
+                    G[rows, c] = col
+                    maps[ln.sub_a] = G
 
     # ------------------------------------------------------------- states
     def outputs(self, states=None):
@@ -266,6 +332,10 @@ class CoupledSystem:
         dx = pos[self._row_a] - pos[self._row_b]
         dv = vel[self._row_a] - vel[self._row_b]
         d, dd = penetrations(self._normals, self._offsets, dx, dv)
+        if self._follow_index.size:     # the surface point moves with x_a (update_followers)
+            fi = self._follow_index
+            dd[fi] += self._follow_slope * np.einsum("cx,cx->c", vel[self._row_a[fi]],
+                                                     self._follow_axis)
         if self.n_rows > self.n_contacts:
             nc, ct = self.n_contacts, self.row_contact[self.n_contacts:]
             t = self._row_dir[nc:]
@@ -332,7 +402,7 @@ class CoupledSystem:
         """Port forces of subsystem ``s`` from contact-force polynomial
         coefficients ``coeffs`` (order + 1, n_rows)."""
         sub = self.subsystems[s]
-        self._applied[s] = coeffs
+        self._applied[s] = (coeffs, self._Gc[s])
         c = coeffs @ self._Gc[s].T
         return StepInput(t0, h, c.reshape(len(coeffs), sub.n_ports, 2))
 
@@ -340,12 +410,12 @@ class CoupledSystem:
         """Add the work the exchanged forces did on subsystem ``s`` over its
         last step (the force polynomial it was handed against its ports'
         velocity moments: exact for the polynomial)."""
-        coeffs = self._applied.pop(s, None)
+        coeffs, G = self._applied.pop(s, (None, None))
         if coeffs is None:
             return
         mom = self.subsystems[s].port_moments.view(float).reshape(3, -1)
         p = coeffs.shape[0]
-        self._work += np.einsum("jc,jc->c", coeffs, mom[:p] @ self._Gc[s])
+        self._work += np.einsum("jc,jc->c", coeffs, mom[:p] @ G)
 
     def exchange_work(self) -> np.ndarray:
         """(n_contacts,) work [J] the exchanged contact forces (all rows of a

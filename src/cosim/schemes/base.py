@@ -80,6 +80,15 @@ class CouplingScheme(ABC):
     #: option name -> Option; the scene loader validates them.
     options: ClassVar[dict] = {}
     explicit: ClassVar[bool] = False
+    #: counters so far, kept as a run goes (a run that stops early reports them)
+    n_windows: int = 0
+    n_iterations: int = 0
+    n_rejected: int = 0
+
+    def counters(self) -> dict:
+        """The counters so far: ``n_windows``, ``n_iterations``, ``n_rejected``."""
+        return {"n_windows": self.n_windows, "n_iterations": self.n_iterations,
+                "n_rejected": self.n_rejected}
 
     def __init__(self, **opts):
         unknown = set(opts) - set(self.options)
@@ -170,7 +179,7 @@ class CoSimulationScheme(CouplingScheme):
             raise ValueError(f"scheme `{self.name}` needs `macro_step` [s]")
         self.preflight(system)
         self._system = system
-        self.n_iterations = 0
+        self.n_iterations = self.n_windows = self.n_rejected = 0
         nc = system.n_contacts
         coupler = system.coupler
         outs = system.outputs()
@@ -215,6 +224,7 @@ class CoSimulationScheme(CouplingScheme):
                     system.set_state(saved)
                     system.discard_work()
                     n_rejected += 1
+                    self.n_rejected = n_rejected
                     self._h_next = h_new
                     self._outs = system.outputs()
                     continue
@@ -231,6 +241,7 @@ class CoSimulationScheme(CouplingScheme):
                     system.set_state(saved)
                     system.discard_work()
                     n_rejected += 1
+                    self.n_rejected = n_rejected
                     self._h_next, self._aimed = onset
                     self._outs = system.outputs()
                     continue
@@ -243,6 +254,7 @@ class CoSimulationScheme(CouplingScheme):
                 f = system.forces(d, dd)
             h_prev = h
             k += 1
+            self.n_windows = k          # kept as they go: a run that fails reports them
             self._outs, self._f = outs, f
             self._hist = (self._hist + [f])[-3:]
             work += system.exchange_work()
