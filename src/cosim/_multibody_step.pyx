@@ -97,6 +97,37 @@ cdef inline double _hermite(double y0, double f0, double y1, double f1, double h
             + (-2 * t3 + 3 * t2) * y1 + (t3 - t2) * h * f1)
 
 
+cdef void _substep_peaks(double* peak, const double* d0, const double* v0, const double* d1,
+                         const double* v1, double h, int n) noexcept nogil:
+    """Raise each ``peak[j]`` to the largest value of the cubic Hermite
+    through ``d0[j]``, ``d1[j]`` with rates ``v0[j]``, ``v1[j]`` over one
+    accepted sub-step of ``h`` (:func:`cosim.integrators.substep_peaks`, the
+    same arithmetic)."""
+    cdef int j
+    cdef double p, dd, c1, c2, c3, qa, qb, disc, r, q, s, x
+    for j in range(n):
+        p = d1[j]
+        if v0[j] > 0.0 and 0.0 > v1[j]:
+            dd = d1[j] - d0[j]
+            c1 = h * v0[j]
+            c2 = 3.0 * dd - h * (2.0 * v0[j] + v1[j])
+            c3 = -2.0 * dd + h * (v0[j] + v1[j])
+            qa = 3.0 * c3
+            qb = 2.0 * c2
+            disc = qb * qb - 4.0 * qa * c1
+            r = sqrt(disc) if disc > 0.0 else 0.0
+            q = -0.5 * (qb + (r if qb >= 0.0 else -r))
+            s = c1 / q if q != 0.0 else 1.0
+            if not (0.0 < s < 1.0) and qa != 0.0:
+                s = q / qa
+            if 0.0 < s < 1.0:
+                x = d0[j] + s * (c1 + s * (c2 + s * c3))
+                if x > p:
+                    p = x
+        if p > peak[j]:
+            peak[j] = p
+
+
 cdef class MultibodyStep:
     """Compiled RK4 step of one :class:`cosim.bodies.MultibodySubsystem`.
 
@@ -149,6 +180,7 @@ cdef class MultibodyStep:
     cdef double[::1] F, b, u_re, u_im, sw_tmp
     cdef double[:, ::1] stage          # rows: k1, k2, k3, k4, tmp, y1, k1n, yi, ya, ka
     cdef double[:, ::1] sws            # rows: s0, s1, s, snew
+    cdef double[:, ::1] pen            # rows: d, dd at the last rhs; d, dd at the last sub-step end
     # joint effects
     cdef bint has_springs, has_dampers
     cdef int nd
@@ -227,6 +259,7 @@ cdef class MultibodyStep:
         self.sw_tmp = np.zeros(max(self.nc, 1))
         self.stage = np.zeros((10, self.ny))
         self.sws = np.zeros((4, max(self.nc, 1)))
+        self.pen = np.zeros((4, max(self.nc, 1)))
         self.n_rhs = 0
         self._set_effects(n, effects)
 
@@ -307,11 +340,12 @@ cdef class MultibodyStep:
                     self.dm_im[k, i - 1] = mc[i].imag * i / mh
 
     def step(self, double t, double h, x, aux, inputs, embedded, double max_step,
-             double free_step, on_switch):
+             double free_step, on_switch, peak=None):
         """One macro step of the host: ``x = [q, dq]`` and ``aux`` (the
         embedded contacts' quadratures, whose first moments restart at zero)
-        are advanced in place by RK4 (:meth:`integrate`); returns the port
-        velocity moments ``int v s^j dt``, ``(3, n_p)`` complex."""
+        are advanced in place by RK4 (:meth:`integrate`, which raises
+        ``peak`` to the contacts' peaks); returns the port velocity moments
+        ``int v s^j dt``, ``(3, n_p)`` complex."""
         cdef double[::1] xv = x
         cdef double[::1] av = aux
         cdef int i, nx = xv.shape[0], na = av.shape[0]
@@ -327,7 +361,7 @@ cdef class MultibodyStep:
             yv[i] = xv[i]
         for i in range(na):
             yv[nx + i] = av[i]
-        y1 = self.integrate(t, y0, t + h, max_step, free_step, True, on_switch)
+        y1 = self.integrate(t, y0, t + h, max_step, free_step, True, on_switch, peak)
         yv = y1
         for i in range(nx):
             xv[i] = yv[i]
@@ -559,6 +593,8 @@ cdef class MultibodyStep:
         for k in range(self.nc):
             p = self.c_port[k]
             self._penetration(k, t, &d, &dd)
+            self.pen[0, k] = d
+            self.pen[1, k] = dd
             self._law(k, d, dd, &f, &pw, &swk)
             fr = self.c_side[k] * f * self.c_nre[k]
             fi = self.c_side[k] * f * self.c_nim[k]
@@ -753,11 +789,28 @@ cdef class MultibodyStep:
     cdef _fail(self, double t):
         raise FloatingPointError(f"the mass matrix is not positive definite at t = {t:.6g} s")
 
+    cdef void _watch(self, double* peak, double h) noexcept nogil:
+        """One accepted sub-step of ``h`` whose end the last right-hand side
+        evaluated: raise ``peak`` over it; its end becomes the next start."""
+        _substep_peaks(peak, &self.pen[2, 0], &self.pen[3, 0], &self.pen[0, 0], &self.pen[1, 0],
+                       h, self.nc)
+        self._watched()
+
+    cdef void _watched(self) noexcept nogil:
+        """The last right-hand side's penetrations start the next sub-step."""
+        cdef int k
+        for k in range(self.nc):
+            self.pen[2, k] = self.pen[0, k]
+            self.pen[3, k] = self.pen[1, k]
+
     def integrate(self, double t0, y0, double t1, double max_step, double free_step,
-                  bint coarse, on_switch=None):
+                  bint coarse, on_switch=None, peak=None):
         """Advance ``y0`` from ``t0`` to ``t1`` (see
         :meth:`cosim.integrators.TimeStepper.integrate`, whose algorithm this
-        is); ``free_step <= 0`` means none.  Returns the new state."""
+        is); ``free_step <= 0`` means none.  With ``peak`` (one entry per
+        contact), each contact's largest penetration over the step is located
+        on the accepted sub-steps' cubic Hermite and raised into it, as the
+        reference's ``probe``/``peak`` do.  Returns the new state."""
         cdef int ny = self.ny, nc = self.nc, i, n, it, k
         cdef double t = t0, te, h, dt, step, ts
         cdef bint any_closed, any_flip, has_sw = nc > 0
@@ -773,8 +826,17 @@ cdef class MultibodyStep:
         cdef double* s1 = &self.sws[1, 0]
         cdef double* snew = &self.sws[3, 0]
         cdef char flipped[MAX_CONTACTS]
+        cdef double[::1] pkv
+        cdef double* pk = NULL
+        if peak is not None and nc > 0:
+            pkv = peak
+            if pkv.shape[0] != nc:
+                raise ValueError(f"`peak` must have {nc} entries, got {pkv.shape[0]}")
+            pk = &pkv[0]
         if self._rhs(t, y, k1, s0):
             self._fail(t)
+        if pk != NULL:
+            self._watched()
         step = max_step
         if coarse and free_step > 0.0:
             any_closed = False
@@ -816,15 +878,25 @@ cdef class MultibodyStep:
                         if self._single(t, y, ts - t, k1, &self.stage[8, 0]):
                             self._fail(t)
                         memcpy(y, &self.stage[8, 0], ny * sizeof(double))
+                        if self._rhs(ts, y, k1, snew):
+                            self._fail(ts)
+                        if pk != NULL:
+                            self._watch(pk, ts - t)
                         t = ts
-                        if self._rhs(t, y, k1, snew):
-                            self._fail(t)
                         if on_switch is not None:
                             self._notify(on_switch, t, y, k1, s0, snew)
+                            if pk != NULL:
+                                self._watched()     # after a jump of the rates
                         memcpy(s0, snew, nc * sizeof(double))
                         continue
+                    if pk != NULL:
+                        self._watch(pk, h)
                     if on_switch is not None:
                         self._notify(on_switch, te, y1, k1n, s0, s1)
+                        if pk != NULL:
+                            self._watched()
+                elif pk != NULL:
+                    self._watch(pk, h)
                 memcpy(s0, s1, nc * sizeof(double))
             t = te
             memcpy(y, y1, ny * sizeof(double))
