@@ -25,7 +25,8 @@ in place between steps, as a contact that follows a moving point does): the
 ports' shape rows ``R`` (n_p, m) and reference positions ``ref`` (n_p, 2).
 After changing ``R`` the host calls :meth:`StructureStep.forget_bases`.
 """
-from libc.math cimport sin, cos, pow, ceil, fabs, sqrt
+from libc.math cimport sin, cos, pow, ceil, fabs, sqrt, copysign, isfinite
+from libc.float cimport DBL_EPSILON
 
 import numpy as np
 
@@ -53,6 +54,224 @@ cdef double _comb(int n, int k) noexcept nogil:
     for i in range(k):
         c = c * (n - i) / (i + 1)
     return c
+
+
+cdef int _secular(int n, const double* d, const double* z, double* lam, double* V,
+                  int max_iterations, double* work) noexcept nogil:
+    """Roots and eigenvectors of ``diag(d) + z z^T`` for sorted, distinct ``d``
+    and non-zero ``z`` (:func:`fem.rank_one._secular`, each root iterated on
+    its own as the reference iterates its rows): ``lam`` (n), ``V`` (n, n)
+    row-major, columns the eigenvectors.  ``work`` holds 2 n^2 + 8 n doubles.
+    Returns -1 where the reference returns None."""
+    cdef double* G = work                   # (n, n): d_j - d_origin(i)
+    cdef double* delta = work + n * n       # (n, n)
+    cdef double* z2 = work + 2 * n * n
+    cdef double* tau = z2 + n
+    cdef double* lo = tau + n
+    cdef double* hi = lo + n
+    cdef double* kd = hi + n                # d at each root's origin
+    cdef double* zhat = kd + n
+    cdef double* fm = zhat + n
+    cdef double* nrm = fm + n
+    cdef int i, j, it, r, kk, ac, bc, left_done
+    cdef double mid, f, t, T, T2, psi, dpsi, tot, dtot, phi, dphi, lo_r, hi_r, a, b
+    cdef double s_, p_, S_, q_, C, B2, C2, root, qq, r1, r2, eta, new, prod, x, den
+    cdef bint go, narrow, bad
+    for j in range(n):
+        z2[j] = z[j] * z[j]
+    if n == 1:
+        lam[0] = d[0] + z2[0]
+        V[0] = 1.0
+        return 0
+    for i in range(n):
+        if i < n - 1:
+            mid = 0.5 * (d[i] + d[i + 1])
+            f = 1.0
+            for j in range(n):
+                f += z2[j] / (d[j] - mid)
+            if f < 0.0:                     # root in (mid, d_{i+1})
+                kd[i] = d[i + 1]
+                lo[i] = mid - d[i + 1]
+                hi[i] = 0.0
+                fm[i] = i + 1
+            else:
+                kd[i] = d[i]
+                lo[i] = 0.0
+                hi[i] = mid - d[i]
+                fm[i] = i
+        else:
+            kd[i] = d[i]
+            fm[i] = i
+            lo[i] = 0.0
+            hi[i] = 0.0
+            for j in range(n):
+                hi[i] += z2[j]
+        for j in range(n):
+            G[i * n + j] = d[j] - kd[i]
+        tau[i] = 0.5 * (lo[i] + hi[i])
+    for r in range(n):
+        ac = r
+        bc = r + 1 if r + 1 < n else n - 1
+        for it in range(max_iterations + 1):
+            if it == max_iterations:
+                return -1
+            t = tau[r]
+            psi = 0.0
+            dpsi = 0.0
+            tot = 0.0
+            dtot = 0.0
+            for j in range(n):
+                x = G[r * n + j] - t
+                delta[r * n + j] = x
+                T = z2[j] / x
+                T2 = T / x
+                tot += T
+                dtot += T2
+                if j <= r:
+                    psi += T
+                    dpsi += T2
+            phi = tot - psi
+            dphi = dtot - dpsi
+            f = 1.0 + psi + phi
+            go = fabs(f) > 8.0 * DBL_EPSILON * (1.0 + fabs(psi) + fabs(phi))
+            lo_r = t if f < 0.0 else lo[r]
+            hi_r = t if f > 0.0 else hi[r]
+            a = delta[r * n + ac]
+            b = delta[r * n + bc]
+            s_ = dpsi * a * a
+            p_ = psi - dpsi * a
+            S_ = dphi * b * b
+            q_ = phi - dphi * b
+            C = 1.0 + p_ + q_
+            B2 = -(C * (a + b) + s_ + S_)
+            C2 = C * a * b + s_ * b + S_ * a
+            x = B2 * B2 - 4.0 * C * C2
+            root = sqrt(x if x > 0.0 else 0.0)
+            qq = -0.5 * (B2 + copysign(root, B2))
+            r1 = qq / C
+            r2 = C2 / qq
+            eta = r1 if (r1 > a and r1 < b) else r2
+            if r == n - 1:
+                eta = a + s_ / (1.0 + p_)
+            new = t + eta
+            bad = not isfinite(new) or new <= lo_r or new >= hi_r
+            if bad:
+                new = 0.5 * (lo_r + hi_r)
+            narrow = fabs(hi_r - lo_r) <= 4.0 * DBL_EPSILON * (
+                fabs(lo_r) if fabs(lo_r) > fabs(hi_r) else fabs(hi_r))
+            tau[r] = new if go else t
+            lo[r] = lo_r
+            hi[r] = hi_r
+            if not go or narrow:
+                break
+    for i in range(n):
+        for j in range(n):
+            delta[i * n + j] = G[i * n + j] - tau[i]
+        lam[i] = kd[i] + tau[i]
+    # Loewner: the z for which the computed roots are exact
+    for j in range(n):
+        prod = 1.0
+        for kk in range(n - 1):
+            if kk < j:
+                den = d[kk] - d[j]
+            else:
+                den = d[kk + 1 if kk + 1 < n else n - 1] - d[j]
+            prod *= -delta[kk * n + j] / den
+        x = -delta[(n - 1) * n + j] * prod
+        if not isfinite(x) or x < 0.0:
+            return -1
+        zhat[j] = copysign(sqrt(x), z[j])
+    for i in range(n):
+        nrm[i] = 0.0
+        for j in range(n):
+            x = zhat[j] / delta[i * n + j]
+            V[j * n + i] = x
+            nrm[i] += x * x
+        nrm[i] = sqrt(nrm[i])
+    for j in range(n):
+        for i in range(n):
+            V[j * n + i] /= nrm[i]
+    return 0
+
+
+def rank_one_eigh(d, z, int max_iterations=50):
+    """:func:`fem.rank_one.rank_one_eigh` compiled: ``(lam, V)`` of
+    ``diag(d) + z z^T``, or None where the reference declines."""
+    cdef int m = len(d)
+    ws = np.empty(3 * m * m + 16 * m)
+    lam = np.empty(m)
+    V = np.empty((m, m))
+    cdef double[::1] dv = np.ascontiguousarray(d, dtype=float)
+    cdef double[::1] zv = np.ascontiguousarray(z, dtype=float)
+    if zv.shape[0] != m:
+        raise ValueError(f"`z` must have shape ({m},), got {np.shape(z)}")
+    cdef double[::1] w = ws, lv = lam
+    cdef double[:, ::1] Vv = V
+    if _rank_one(m, &dv[0], &zv[0], &lv[0], &Vv[0, 0], max_iterations, &w[0]):
+        return None
+    return lam, V
+
+
+cdef int _rank_one(int m, const double* d, const double* z, double* lam, double* out,
+                   int max_iterations, double* work) noexcept nogil:
+    """:func:`fem.rank_one.rank_one_eigh` into ``lam`` (m) and ``out`` (m, m)
+    row-major; -1 where the reference returns None.  ``work``: 3 m^2 + 16 m."""
+    cdef double* ds = work
+    cdef double* zs = work + m
+    cdef double* order = work + 2 * m        # the sorting permutation (as doubles)
+    cdef double* dk = work + 3 * m
+    cdef double* zk = work + 4 * m
+    cdef double* lk = work + 5 * m
+    cdef double* Vk = work + 6 * m           # (n, n)
+    cdef double* sec = Vk + m * m            # _secular's 2 n^2 + 8 n
+    cdef int i, j, n, a, b
+    cdef double z2sum = 0.0, dmax = 0.0, tol, x
+    cdef int* idx = <int*> (sec + 2 * m * m + 8 * m)    # m ints in 2 m doubles' room
+    # stable argsort of d (insertion sort: once per new set of closed springs)
+    for i in range(m):
+        j = i
+        while j > 0 and d[<int> order[j - 1]] > d[i]:
+            order[j] = order[j - 1]
+            j -= 1
+        order[j] = i
+    for i in range(m):
+        ds[i] = d[<int> order[i]]
+        zs[i] = z[<int> order[i]]
+        z2sum += zs[i] * zs[i]
+        if fabs(ds[i]) > dmax:
+            dmax = fabs(ds[i])
+    for i in range(m):
+        lam[i] = ds[i]
+        for j in range(m):
+            out[i * m + j] = 0.0
+    if z2sum == 0.0:
+        for i in range(m):
+            out[(<int> order[i]) * m + i] = 1.0
+        return 0
+    tol = 8.0 * DBL_EPSILON * (dmax if dmax > z2sum else z2sum)
+    n = 0
+    x = sqrt(z2sum)
+    for i in range(m):
+        if fabs(zs[i]) * x > tol:
+            idx[n] = i
+            dk[n] = ds[i]
+            zk[n] = zs[i]
+            n += 1
+    for i in range(1, n):
+        if dk[i] - dk[i - 1] <= tol:
+            return -1
+    if _secular(n, dk, zk, lk, Vk, max_iterations, sec):
+        return -1
+    # V = I with the kept block replaced; rows back in the original order
+    for i in range(m):
+        out[(<int> order[i]) * m + i] = 1.0
+    for a in range(n):
+        lam[idx[a]] = lk[a]
+        out[(<int> order[idx[a]]) * m + idx[a]] = 0.0
+    for a in range(n):
+        for b in range(n):
+            out[(<int> order[idx[a]]) * m + idx[b]] = Vk[a * n + b]
+    return 0
 
 
 cdef class StructureStep:
@@ -83,6 +302,7 @@ cdef class StructureStep:
     cdef double[:, ::1] R, ref
     cdef double dre, dim
     cdef double[::1] lam0, g_modal
+    cdef double wmax0
     cdef long[::1] c_port
     cdef double[::1] c_side, c_nre, c_nim, c_off, c_k
     cdef object host_basis
@@ -110,9 +330,14 @@ cdef class StructureStep:
     cdef double[:, ::1] C, S                # trig moments (DEG1, m)
     cdef double[:, ::1] Wm                  # (DEG1, n_p)
     cdef double[::1] W, DW, W0, WL, d0, dprev, dcur, ddcur
+    # the rank-one update of one closed spring: workspace, z, lam, V
+    cdef double[::1] r1_work, r1_z, r1_lam, r1_V
     cdef long[::1] active
     #: segments stepped so far (closed-form phases)
     cdef public long n_segments
+    #: bases asked of the host (several springs closed, or the rank-one
+    #: update declined)
+    cdef public long n_host_bases
 
     def __init__(self, omega, R, ref, direction, g_modal, contacts, basis):
         cdef int m = len(omega)
@@ -129,6 +354,7 @@ cdef class StructureStep:
                              f"structure, got {self.nc}")
         self.dre, self.dim = float(direction[0]), float(direction[1])
         self.lam0 = np.ascontiguousarray(np.asarray(omega, float) ** 2)
+        self.wmax0 = float(np.max(omega, initial=0.0))
         self.g_modal = np.ascontiguousarray(g_modal, dtype=float)
         nc = max(self.nc, 1)
         self.c_port = np.array([c[0] for c in contacts] or [0], dtype=np.int_)
@@ -170,7 +396,12 @@ cdef class StructureStep:
         self.d0 = np.zeros(nc); self.dprev = np.zeros(nc)
         self.dcur = np.zeros(nc); self.ddcur = np.zeros(nc)
         self.active = np.zeros(nc, dtype=np.int_)
+        self.r1_work = np.zeros(3 * m * m + 16 * m)
+        self.r1_z = np.zeros(m)
+        self.r1_lam = np.zeros(m)
+        self.r1_V = np.zeros(m * m)
         self.n_segments = 0
+        self.n_host_bases = 0
 
     # --------------------------------------------------------------- loading
     def forget_bases(self):
@@ -422,30 +653,78 @@ cdef class StructureStep:
         for s in range(self.n_bases):
             if self.b_mask[s] == mask:
                 return s
-        lam, Psi, wmax = self.host_basis(tuple(bool(self.active[k]) for k in range(self.nc)))
         s = self.next_base
+        if self._rank_one_basis(mask, s):
+            self.n_host_bases += 1
+            lam, Psi, wmax = self.host_basis(tuple(bool(self.active[k])
+                                                   for k in range(self.nc)))
+            self.b_wmax[s] = wmax
+            lam = np.asarray(lam, float)
+            for i in range(m):
+                self.b_lam[s, i] = lam[i]
+            if Psi is None:
+                self.b_ident[s] = 1
+                for i in range(m):
+                    for p in range(npt):
+                        self.b_P[s, i, p] = self.R[p, i]
+            else:
+                self.b_ident[s] = 0
+                Psi = np.ascontiguousarray(Psi, dtype=float)
+                np.asarray(self.b_psi)[s] = Psi
+                PR = Psi.T @ np.asarray(self.R).T
+                for i in range(m):
+                    for p in range(npt):
+                        self.b_P[s, i, p] = PR[i, p]
         self.next_base = (s + 1) % MAX_BASES
         if self.n_bases < MAX_BASES:
             self.n_bases += 1
         self.b_mask[s] = mask
-        self.b_wmax[s] = wmax
-        lam = np.asarray(lam, float)
-        for i in range(m):
-            self.b_lam[s, i] = lam[i]
-        if Psi is None:
+        return s
+
+    cdef int _rank_one_basis(self, long long mask, int s) noexcept nogil:
+        """Slot ``s`` filled with the modes of ``mask`` where no spring or one
+        spring is closed, as the host's ``_active_basis`` makes them; -1 where
+        the host must (several springs, or the rank-one update declined)."""
+        cdef int i, j, k, p, m = self.m, npt = self.np_, one = -1, count = 0
+        cdef double c, lmax, acc
+        for k in range(self.nc):
+            if self.active[k]:
+                one = k
+                count += 1
+        if count == 0:                      # the structure's own modes
             self.b_ident[s] = 1
+            for i in range(m):
+                self.b_lam[s, i] = self.lam0[i]
+            self.b_wmax[s] = self.wmax0
             for i in range(m):
                 for p in range(npt):
                     self.b_P[s, i, p] = self.R[p, i]
-        else:
-            self.b_ident[s] = 0
-            Psi = np.ascontiguousarray(Psi, dtype=float)
-            np.asarray(self.b_psi)[s] = Psi
-            PR = Psi.T @ np.asarray(self.R).T
-            for i in range(m):
-                for p in range(npt):
-                    self.b_P[s, i, p] = PR[i, p]
-        return s
+            return 0
+        if count > 1:
+            return -1
+        p = self.c_port[one]
+        c = self.c_nre[one] * self.dre + self.c_nim[one] * self.dim
+        for i in range(m):
+            self.r1_z[i] = sqrt(self.c_k[one]) * fabs(c) * self.R[p, i]
+        if _rank_one(m, &self.lam0[0], &self.r1_z[0], &self.r1_lam[0], &self.r1_V[0], 50,
+                     &self.r1_work[0]):
+            return -1
+        self.b_ident[s] = 0
+        lmax = self.r1_lam[0]
+        for i in range(m):
+            if self.r1_lam[i] > lmax:
+                lmax = self.r1_lam[i]
+            self.b_lam[s, i] = self.r1_lam[i] if self.r1_lam[i] > 0.0 else 0.0
+            for j in range(m):
+                self.b_psi[s, i, j] = self.r1_V[i * m + j]
+        self.b_wmax[s] = sqrt(lmax if lmax > 0.0 else 0.0)
+        for i in range(m):
+            for p in range(npt):
+                acc = 0.0
+                for k in range(m):
+                    acc += self.b_psi[s, k, i] * self.R[p, k]
+                self.b_P[s, i, p] = acc
+        return 0
 
     # ------------------------------------------------------------ stepping
     cdef void _segment_load(self, double tc) noexcept nogil:
