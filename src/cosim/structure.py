@@ -130,8 +130,9 @@ class StructureSubsystem(Subsystem):
         self.port_coordinates[port] = s
         if any(e.port == port for e in self._embedded):
             self._bases = {}            # the springs' modes hang on the port's shape row
-            if self._kernel:
-                self._kernel.forget_bases()
+        if self._kernel:
+            # the kernel keeps every port's row in each set's modes
+            self._kernel.forget_bases()
 
     def material_coordinate(self, point) -> float:
         """Material coordinate ``s`` of the structure below a world point."""
