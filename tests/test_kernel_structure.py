@@ -244,3 +244,28 @@ def test_a_moved_port_is_seen_by_the_kernel(monkeypatch):
     assert com.kernel == "compiled"
     assert ref.embedded_quadratures()[0, 0] > 0           # the spring closed
     np.testing.assert_allclose(b, a, rtol=0, atol=1e-10 * np.abs(a).max())
+
+
+@pytest.mark.parametrize("kernel", ["numpy", "compiled"])
+def test_a_touch_on_the_step_boundary_is_logged_at_the_step_start(monkeypatch, kernel):
+    """Open at the end of a step, closed at the start of the next (the
+    partner's motion is extrapolated anew each step): a touch at the start
+    when the contact is closing; none when it is opening (the jump of the
+    new extrapolation just after a release)."""
+    monkeypatch.setenv("COSIM_KERNEL", kernel)
+    logs = []
+    for rate in (+0.5, -0.5):                    # the partner's velocity [m/s]
+        sub = _chain_with_spring()               # top rising at 1 m/s, partner 0.1 mm up
+        sub.step(0.0, 5e-5)                      # still open: 0.05 mm apart
+        assert sub.switch_log == []
+        gap = 1e-4 - (sub.outputs(sub.t, sub.x)[0][0, 1])
+        e = sub._embedded[0]
+        # the partner now 1 um below the top, moving at `rate` relative to it
+        v_top = sub.outputs(sub.t, sub.x)[1][0, 1]
+        e.set_motion(sub.t, 1e-4, np.array([complex(0.0, 1e-4 - gap - 1e-6),
+                                            complex(0.0, 1e-4 * (v_top - rate))]))
+        sub.step(sub.t, 1e-4)
+        logs.append(sub.switch_log)
+    closing, opening = logs
+    assert closing[0][1:] == (0, True) and closing[0][0] == pytest.approx(5e-5, abs=1e-15)
+    assert all(not (on and t == pytest.approx(5e-5, abs=1e-15)) for t, _, on in opening)

@@ -329,7 +329,7 @@ cdef class StructureStep:
     cdef double[::1] om, b0, b1, b2, b3, A, B
     cdef double[:, ::1] C, S                # trig moments (DEG1, m)
     cdef double[:, ::1] Wm                  # (DEG1, n_p)
-    cdef double[::1] W, DW, W0, WL, d0, dprev, dcur, ddcur
+    cdef double[::1] W, DW, W0, WL, d0, dd0, dprev, dcur, ddcur
     # the rank-one update of one closed spring: workspace, z, lam, V
     cdef double[::1] r1_work, r1_z, r1_lam, r1_V
     cdef long[::1] active
@@ -393,7 +393,7 @@ cdef class StructureStep:
         self.Wm = np.zeros((DEG1, npp))
         self.W = np.zeros(npp); self.DW = np.zeros(npp)
         self.W0 = np.zeros(npp); self.WL = np.zeros(npp)
-        self.d0 = np.zeros(nc); self.dprev = np.zeros(nc)
+        self.d0 = np.zeros(nc); self.dd0 = np.zeros(nc); self.dprev = np.zeros(nc)
         self.dcur = np.zeros(nc); self.ddcur = np.zeros(nc)
         self.active = np.zeros(nc, dtype=np.int_)
         self.r1_work = np.zeros(3 * m * m + 16 * m)
@@ -948,6 +948,7 @@ cdef class StructureStep:
                 p = self.c_port[k]
                 self._gap(k, tc, self.W[p], self.DW[p], &d, &dd)
                 self.d0[k] = d
+                self.dd0[k] = dd
                 self.active[k] = d > 0 or (d == 0 and dd > 0)
                 if d == 0 and dd > 0:
                     log.append((tc, k, True))
@@ -957,7 +958,8 @@ cdef class StructureStep:
             if tc == self.t:
                 # a touch on the step boundary (see the reference)
                 for k in range(nc):
-                    if self.active[k] and closed[k] == 0 and not self.d0[k] == 0:
+                    if self.active[k] and closed[k] == 0 and self.d0[k] != 0 \
+                            and self.dd0[k] > 0:
                         log.append((tc, k, True))
             for k in range(nc):
                 closed[k] = self.active[k]

@@ -509,12 +509,14 @@ class StructureSubsystem(Subsystem):
             for j in np.flatnonzero((d0[0] == 0) & (dd0[0] > 0)):
                 self.switch_log.append((tc, int(j), True))     # touching and closing now
             if tc == t:
-                # closed at the start, open at the end of the last step: the
-                # touch fell on the step boundary (a step aimed at a located
-                # onset ends there to round-off, and the partner's motion is
-                # extrapolated anew), so it is this step's start
+                # closed and closing at the start, open at the end of the last
+                # step: the touch fell on the step boundary (a step aimed at a
+                # located onset ends there to round-off, and the partner's
+                # motion is extrapolated anew), so it is this step's start.
+                # (Closed but opening is the new extrapolation's jump just
+                # after a release: no touch.)
                 for j, on in enumerate(active):
-                    if on and self._closed_end[j] == 0 and not d0[0, j] == 0:
+                    if on and self._closed_end[j] == 0 and d0[0, j] != 0 and dd0[0, j] > 0:
                         self.switch_log.append((tc, j, True))
             closed = list(active)
             lam, Psi, wmax = self._active_basis(active)
