@@ -9,6 +9,7 @@ from setuptools import Extension, setup
 
 KERNELS = [
     Extension("cosim._multibody_step", ["src/cosim/_multibody_step.pyx"]),
+    Extension("cosim._structure_step", ["src/cosim/_structure_step.pyx"]),
 ]
 
 setup(ext_modules=cythonize(KERNELS, language_level=3,

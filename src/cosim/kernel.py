@@ -1,9 +1,10 @@
 """Which implementation steps each side: the compiled kernel or the numpy reference.
 
 Each side's step runs in compiled code (Cython, built by ``pip install .``):
-:mod:`cosim._multibody_step` for the multibody side.  The numpy modules stay the
-readable reference and are what the kernels are tested against
-(``tests/test_kernel.py``).
+:mod:`cosim._multibody_step` for the multibody side, :mod:`cosim._structure_step`
+for the structure side.  The numpy modules stay the readable reference and are
+what the kernels are tested against (``tests/test_kernel.py``,
+``tests/test_kernel_structure.py``).
 
 The environment variable ``COSIM_KERNEL`` chooses: ``compiled`` (the default)
 uses the kernel wherever it covers the scene and the reference elsewhere;

@@ -29,6 +29,7 @@ from fem.rank_one import rank_one_eigh
 from fem.response import undamped_moments, undamped_response
 
 from .integrators import RK4
+from .kernel import compiled_module
 from .subsystem import EmbeddedContact, StepInput, Subsystem, reparametrised
 
 __all__ = ["StructureSubsystem"]
@@ -101,6 +102,9 @@ class StructureSubsystem(Subsystem):
         self._acc = self._modal_acceleration(self.x, None, 0.0)
         self.aux = np.zeros(2)
         self._embedded = []
+        #: per hosted contact, closed (1) or open (0) at the end of the last
+        #: step as the closed-form stepping left it; -1 before the first step
+        self._closed_end = np.zeros(0, np.int8)
         self._bases: dict = {}
         self._t0, self._h = 0.0, 1.0
         #: ``int v_p(t) s^j dt`` over the last step, (3, n_ports) complex [m]
@@ -131,6 +135,9 @@ class StructureSubsystem(Subsystem):
         self.port_coordinates[port] = s
         if any(e.port == port for e in self._embedded):
             self._bases = {}            # the springs' modes hang on the port's shape row
+        if self._kernel:
+            # the kernel keeps every port's row in each set's modes
+            self._kernel.forget_bases()
         return s
 
     def surface_tangent(self, port: int, x) -> np.ndarray:
@@ -207,6 +214,9 @@ class StructureSubsystem(Subsystem):
         e = EmbeddedContact(contact, port, own_side, partner_position, partner_velocity)
         self._embedded.append(e)
         self.aux = np.zeros(4 * len(self._embedded) + 2)
+        self._closed_end = np.full(len(self._embedded), -1, np.int8)
+        self._kernel = None
+        self._closed_ok = None
         return e
 
     def embedded_quadratures(self):
@@ -259,10 +269,56 @@ class StructureSubsystem(Subsystem):
         g = self._modal_force(u) + self._g_modal
         return g - self.modal_damping * x[m:2 * m] - self.omega ** 2 * x[:m]
 
+    #: the compiled step (cosim._structure_step.StructureStep), built on the
+    #: first step that it covers; False where it does not cover this side
+    _kernel = None
+
+    def _compiled_step(self, inputs):
+        """The compiled kernel for this step, or None where the reference must
+        step: the kernel not built or not chosen (:mod:`cosim.kernel`), a
+        structure that is not stepped in closed form (damped, a scheme of
+        ``fem.STRUCTURAL_INTEGRATORS``, a hosted contact whose law is not
+        linear), or an input that is not a :class:`StepInput`."""
+        if self._kernel is False or (inputs is not None and type(inputs) is not StepInput):
+            return None
+        if self._kernel is None:
+            self._kernel = self._build_kernel() or False
+        return self._kernel or None
+
+    def _build_kernel(self):
+        free = not self._embedded and self._ts is None and not np.any(self.modal_damping)
+        if not (self._closed_form or free):
+            return None
+        module = compiled_module("_structure_step")
+        if module is None:
+            return None
+        contacts = []
+        for e in self._embedded:
+            contacts.append((e.port, e.side, e.normal, e.offset, e.law.contact_stiffness))
+        return module.StructureStep(self.omega, self._R, self._ref, self._dir, self._g_modal,
+                                    contacts, self._active_basis)
+
+    @property
+    def kernel(self) -> str:
+        """``"compiled"`` when the steps run in the compiled kernel, ``"numpy"``
+        otherwise."""
+        return "compiled" if self._kernel else "numpy"
+
     def _step_impl(self, t, h, inputs: StepInput | None):
         m = self.n_modes
         self.switch_log = []
         self._t0, self._h = t, h
+        kernel = self._compiled_step(inputs)
+        if kernel is not None and kernel.set_step(
+                t, h, None if inputs is None else inputs.coeffs,
+                [(e.t0, e.h, e.motion, e._dmotion) for e in self._embedded]):
+            self.port_moments = pm = np.zeros((3, self.n_ports), complex)
+            if self._embedded:
+                self.switch_log = kernel.step(self.x, self.aux, pm.view(float),
+                                              self._closed_end)
+            else:
+                kernel.step_free(self.x, pm.view(float))
+            return
         self.aux[2:-2:4] = 0.0          # first moments are per step
         if self._closed_form:
             self._step_closed_form(t, h, inputs)
@@ -470,6 +526,17 @@ class StructureSubsystem(Subsystem):
             active = tuple(bool(x > 0 or (x == 0 and v > 0)) for x, v in zip(d0[0], dd0[0]))
             for j in np.flatnonzero((d0[0] == 0) & (dd0[0] > 0)):
                 self.switch_log.append((tc, int(j), True))     # touching and closing now
+            if tc == t:
+                # closed and closing at the start, open at the end of the last
+                # step: the touch fell on the step boundary (a step aimed at a
+                # located onset ends there to round-off, and the partner's
+                # motion is extrapolated anew), so it is this step's start.
+                # (Closed but opening is the new extrapolation's jump just
+                # after a release: no touch.)
+                for j, on in enumerate(active):
+                    if on and self._closed_end[j] == 0 and d0[0, j] != 0 and dd0[0, j] > 0:
+                        self.switch_log.append((tc, j, True))
+            closed = list(active)
             lam, Psi, wmax = self._active_basis(active)
             seg = self._segment(lam, Psi, q, dq, self._segment_load(t, h, tc, Gin, active))
             n = int(min(max(math.ceil(2.0 * L * wmax), 2), 512))
@@ -499,7 +566,9 @@ class StructureSubsystem(Subsystem):
             tc += best
             for j in who:
                 self.switch_log.append((tc, int(j), not active[j]))
+                closed[j] = not active[j]
         self.x[:m], self.x[m:] = q, dq
+        self._closed_end[:] = closed
 
     @staticmethod
     def _switch_time(j, was_closed, lo, hi, d_lo, d_hi, tol, gaps):
@@ -560,14 +629,15 @@ class StructureSubsystem(Subsystem):
 
     def get_state(self):
         st = super().get_state()
-        st.x = np.concatenate([st.x, self._acc])
+        st.x = np.concatenate([st.x, self._acc, self._closed_end])
         return st
 
     def set_state(self, state):
-        n = self.x.size
+        n, m = self.x.size, self.n_modes
         self.t, self.n_steps, self.status = state.t, state.n_steps, state.status
         self.x[...] = state.x[:n]
-        self._acc = state.x[n:].copy()
+        self._acc = state.x[n:n + m].copy()
+        self._closed_end[:] = state.x[n + m:]
         self.aux[...] = state.aux
 
     def _on_switch(self, t, j, on, y):

@@ -1,0 +1,271 @@
+"""The compiled structure step (``cosim._structure_step``) against the numpy reference.
+
+Every shipped scene and variant with a structure runs both ways in-process
+(``COSIM_KERNEL``, the scene built anew each way): the same contact intervals,
+every series to 1e-10 relative to its largest value.  One step of a chain whose
+spring touches and releases inside it is compared value by value.  The
+extension must have been built: no test here skips without it.
+"""
+import json
+import os
+import subprocess
+import sys
+import tomllib
+
+import numpy as np
+import pytest
+
+import cosim
+import fem
+from conftest import CASES, ROOT
+from cosim.structure import StructureSubsystem
+from cosim.subsystem import StepInput
+from couplers import LinearLaw, PointContact
+
+STRUCTURES = {"chain", "beam", "cable", "rod"}
+RTOL = 1e-10
+
+#: settings that keep CI short: three_mass to 0.13 s holds every contact of C
+#: (the first touch is at 0.1027 s); brachiation to 0.3 s (the cable loaded by
+#: the swinging robot, free exact steps)
+SHORT = {"three_mass": ["t_end=0.13"], "brachiation": ["t_end=0.3"]}
+
+
+def _structure_cases():
+    out = []
+    for path in sorted(CASES.glob("*.toml")):
+        data = tomllib.loads(path.read_text())
+        for variant in [None] + sorted(data.get("variants", {})):
+            scene = cosim.load_scene(path, variant)
+            if any(s["type"] in STRUCTURES for s in scene.subsystems):
+                out.append((path, variant))
+    return out
+
+
+CASES_WITH_STRUCTURE = _structure_cases()
+
+
+def test_every_structure_scene_is_covered():
+    names = {(p.stem, v) for p, v in CASES_WITH_STRUCTURE}
+    for need in [("three_mass", None), ("three_mass", "f1000"), ("three_mass", "ms0.01"),
+                 ("beam_impact", None), ("brachiation", None), ("rod_impact", None)]:
+        assert need in names, sorted(names)
+    assert ("brachiation", "rigid_cable") not in names      # no structure there
+
+
+def test_the_extension_is_built():
+    """CI must fail, not fall back, when the kernel did not build."""
+    import cosim._structure_step as k
+    assert hasattr(k, "StructureStep")
+
+
+def _run(monkeypatch, kernel, path, variant, overrides):
+    """One run with ``COSIM_KERNEL=kernel``; the structures' kernels that were built."""
+    monkeypatch.setenv("COSIM_KERNEL", kernel)
+    built = []
+    original = StructureSubsystem._build_kernel
+
+    def spy(self):
+        k = original(self)
+        built.append(k)
+        return k
+
+    monkeypatch.setattr(StructureSubsystem, "_build_kernel", spy)
+    res = cosim.simulate(cosim.load_scene(path, variant, overrides=overrides))
+    monkeypatch.setattr(StructureSubsystem, "_build_kernel", original)
+    assert res.success, res.message
+    return res, built
+
+
+@pytest.mark.parametrize("path,variant", CASES_WITH_STRUCTURE,
+                         ids=lambda x: getattr(x, "stem", x))
+def test_compiled_structure_step_matches_the_reference(monkeypatch, path, variant):
+    overrides = SHORT.get(path.stem, [])
+    ref, built_ref = _run(monkeypatch, "numpy", path, variant, overrides)
+    com, built_com = _run(monkeypatch, "compiled", path, variant, overrides)
+    assert built_ref == [] or all(k is None for k in built_ref)
+    assert built_com and all(k is not None for k in built_com), \
+        f"the structure of {path.stem} was not stepped by the kernel"
+    # each shipped structure hosts one spring at most: its modes come from
+    # the compiled rank-one update, never from the host's numpy
+    assert all(k.n_host_bases == 0 for k in built_com)
+    cr, cc = ref.summary["contacts"], com.summary["contacts"]
+    assert sum(c["count"] for c in cr.values()) > 0
+    for name in cr:
+        assert cc[name]["count"] == cr[name]["count"], (name, cr[name]["intervals"],
+                                                       cc[name]["intervals"])
+        np.testing.assert_allclose(np.ravel(cc[name]["intervals"]),
+                                   np.ravel(cr[name]["intervals"]), rtol=0, atol=1e-9)
+    assert sorted(com.series) == sorted(ref.series)
+    for key in ref.series:
+        a, b = np.asarray(ref.series[key]), np.asarray(com.series[key])
+        assert a.shape == b.shape, key
+        scale = max(float(np.abs(a).max(initial=0.0)), 1e-300)
+        err = float(np.abs(a - b).max(initial=0.0)) / scale
+        assert err <= RTOL, f"{key}: relative difference {err:.2e} > {RTOL:g}"
+
+
+def test_compiled_rank_one_update_matches_the_reference():
+    """Eigenpairs of diag(d) + z z^T: sorted and unsorted d, a zero entry of
+    z (deflation), scales over six decades; declined where the reference
+    declines (two equal entries of d that z couples)."""
+    from cosim._structure_step import rank_one_eigh as compiled
+    from fem.rank_one import rank_one_eigh as reference
+    rng = np.random.default_rng(7)
+    solved = 0
+    for trial in range(200):
+        m = int(rng.integers(1, 40))
+        d = rng.uniform(0.0, 1e6, m)
+        if trial % 3:
+            d = np.sort(d)
+        z = rng.normal(size=m) * 10.0 ** rng.uniform(-3, 3)
+        if trial % 5 == 0:
+            z[rng.integers(0, m)] = 0.0
+        a, b = reference(d, z), compiled(d, z)
+        assert (a is None) == (b is None), trial
+        if a is not None:
+            solved += 1
+            np.testing.assert_allclose(b[0], a[0], rtol=0, atol=1e-13 * np.abs(a[0]).max())
+            np.testing.assert_allclose(b[1], a[1], rtol=0, atol=1e-12)
+    assert solved > 150
+    d = np.array([1.0, 2.0, 2.0, 5.0])
+    assert reference(d, np.ones(4)) is None and compiled(d, np.ones(4)) is None
+
+
+# ------------------------------------------------------------------ one step
+def _chain_with_spring():
+    """Two 0.1 kg masses on 1e5 N/m springs, the top one rising at 1 m/s
+    towards a fixed point 0.1 mm above it, with a 1e6 N/m linear spring:
+    it touches after 0.1 ms and leaves about 1 ms later."""
+    s = fem.Chain((0.1, 0.1), (1e5, 1e5), spacing=0.05).assemble()
+    sub = StructureSubsystem("chain", s, fem.modes(s), {"top": 0}, v0=np.ones(2))
+    contact = PointContact("c", LinearLaw(1e6), (0.0, 1.0))
+    sub.embed_contact(contact, 0, -1.0, (0.0, 1e-4))
+    return sub
+
+
+def _one_step(monkeypatch, kernel):
+    monkeypatch.setenv("COSIM_KERNEL", kernel)
+    sub = _chain_with_spring()
+    coeffs = np.zeros((2, 1, 2))
+    coeffs[:, 0, 1] = (-20.0, 35.0)          # a port force, linear over the step [N]
+    h = 3e-3
+    sub.step(0.0, h, StepInput(0.0, h, coeffs))
+    return sub
+
+
+def test_one_step_with_a_touch_and_a_release_matches_the_reference(monkeypatch):
+    ref = _one_step(monkeypatch, "numpy")
+    com = _one_step(monkeypatch, "compiled")
+    assert ref.kernel == "numpy" and com.kernel == "compiled"
+    # the step holds a touch and a release of the spring
+    assert [(j, on) for _, j, on in ref.switch_log] == [(0, True), (0, False)]
+    assert [(j, on) for _, j, on in com.switch_log] == [(0, True), (0, False)]
+    t_ref = [t for t, _, _ in ref.switch_log]
+    t_com = [t for t, _, _ in com.switch_log]
+    assert 0 < t_ref[0] < t_ref[1] < 3e-3
+    np.testing.assert_allclose(t_com, t_ref, rtol=0, atol=1e-15)
+    for a, b in [(ref.x, com.x), (ref.aux, com.aux), (ref.port_moments, com.port_moments)]:
+        assert np.abs(a).max() > 0
+        np.testing.assert_allclose(b, a, rtol=0, atol=1e-12 * np.abs(a).max())
+    # the impulse is the spring's, and the first moment lies inside the contact
+    impulse, _, moment, work = ref.embedded_quadratures()[0]
+    assert impulse > 0 and t_ref[0] < moment / impulse < t_ref[1]
+
+
+def test_a_rolled_back_step_is_taken_again_the_same_way(monkeypatch):
+    """get_state / set_state carry the kernel's view of the closed springs."""
+    monkeypatch.setenv("COSIM_KERNEL", "compiled")
+    sub = _chain_with_spring()
+    saved = sub.get_state()
+    sub.step(0.0, 3e-3)
+    first = (sub.x.copy(), sub.aux.copy(), list(sub.switch_log))
+    sub.set_state(saved)
+    sub.step(0.0, 1e-3)
+    sub.set_state(saved)
+    sub.step(0.0, 3e-3)
+    np.testing.assert_array_equal(sub.x, first[0])
+    np.testing.assert_array_equal(sub.aux, first[1])
+    assert sub.switch_log == first[2]
+
+
+def test_the_reference_is_chosen_by_cosim_kernel_numpy(monkeypatch):
+    monkeypatch.setenv("COSIM_KERNEL", "numpy")
+    sub = _chain_with_spring()
+    sub.step(0.0, 1e-3)
+    assert sub.kernel == "numpy"
+
+
+# --------------------------------------------------------- as a user runs it
+def test_cli_runs_a_structure_scene_the_same_with_either_kernel(tmp_path):
+    """`COSIM_KERNEL=numpy cosim run ...` and the default give the same run."""
+    runs = {}
+    for kernel in ("numpy", "compiled"):
+        out = tmp_path / kernel
+        env = {**os.environ, "COSIM_KERNEL": kernel}
+        proc = subprocess.run([sys.executable, "-m", "cosim.cli", "run",
+                               str(CASES / "rod_impact.toml"), "--out", str(out), "--quiet"],
+                              capture_output=True, text=True, env=env, cwd=ROOT)
+        assert proc.returncode == 0, proc.stderr
+        assert "not built" not in proc.stderr
+        assert (out / "summary.json").is_file() and (out / "series.npz").is_file()
+        runs[kernel] = (json.loads((out / "summary.json").read_text()),
+                        dict(np.load(out / "series.npz")))
+    (s_ref, x_ref), (s_com, x_com) = runs["numpy"], runs["compiled"]
+    assert s_com["contacts"]["wall"]["count"] == s_ref["contacts"]["wall"]["count"] >= 1
+    for key, a in x_ref.items():
+        scale = max(float(np.abs(a).max(initial=0.0)), 1e-300)
+        assert float(np.abs(x_com[key] - a).max(initial=0.0)) <= RTOL * scale, key
+
+
+def _beam_with_moving_probe(monkeypatch, kernel):
+    """A pinned beam pushed up at a probe that moves along it each step, into
+    a spring hosted at another point: the kernel must see the moved row."""
+    monkeypatch.setenv("COSIM_KERNEL", kernel)
+    sec = fem.rectangular_section(0.04, 0.01)
+    s = fem.Beam(1.0, 210e9, sec.second_moment, 7850.0, sec.area, 16, "pinned",
+                 "pinned").assemble()
+    sub = StructureSubsystem("beam", s, fem.modes(s), {"hit": 0.45, "probe": 0.3})
+    sub.embed_contact(PointContact("c", LinearLaw(1e6), (0.0, 1.0)), 0, -1.0, (0.45, 2e-6))
+    h = 2e-4
+    out = []
+    for k in range(12):
+        sub.move_port(1, 0.3 + 0.02 * k)
+        coeffs = np.zeros((1, 2, 2))
+        coeffs[0, 1, 1] = 400.0                  # [N] up, at the probe
+        sub.step(k * h, h, StepInput(k * h, h, coeffs))
+        out.append(np.concatenate([sub.x, sub.aux, sub.port_moments.view(float).ravel()]))
+    return sub, np.array(out)
+
+
+def test_a_moved_port_is_seen_by_the_kernel(monkeypatch):
+    ref, a = _beam_with_moving_probe(monkeypatch, "numpy")
+    com, b = _beam_with_moving_probe(monkeypatch, "compiled")
+    assert com.kernel == "compiled"
+    assert ref.embedded_quadratures()[0, 0] > 0           # the spring closed
+    np.testing.assert_allclose(b, a, rtol=0, atol=1e-10 * np.abs(a).max())
+
+
+@pytest.mark.parametrize("kernel", ["numpy", "compiled"])
+def test_a_touch_on_the_step_boundary_is_logged_at_the_step_start(monkeypatch, kernel):
+    """Open at the end of a step, closed at the start of the next (the
+    partner's motion is extrapolated anew each step): a touch at the start
+    when the contact is closing; none when it is opening (the jump of the
+    new extrapolation just after a release)."""
+    monkeypatch.setenv("COSIM_KERNEL", kernel)
+    logs = []
+    for rate in (+0.5, -0.5):                    # the partner's velocity [m/s]
+        sub = _chain_with_spring()               # top rising at 1 m/s, partner 0.1 mm up
+        sub.step(0.0, 5e-5)                      # still open: 0.05 mm apart
+        assert sub.switch_log == []
+        gap = 1e-4 - (sub.outputs(sub.t, sub.x)[0][0, 1])
+        e = sub._embedded[0]
+        # the partner now 1 um below the top, moving at `rate` relative to it
+        v_top = sub.outputs(sub.t, sub.x)[1][0, 1]
+        e.set_motion(sub.t, 1e-4, np.array([complex(0.0, 1e-4 - gap - 1e-6),
+                                            complex(0.0, 1e-4 * (v_top - rate))]))
+        sub.step(sub.t, 1e-4)
+        logs.append(sub.switch_log)
+    closing, opening = logs
+    assert closing[0][1:] == (0, True) and closing[0][0] == pytest.approx(5e-5, abs=1e-15)
+    assert all(not (on and t == pytest.approx(5e-5, abs=1e-15)) for t, _, on in opening)
