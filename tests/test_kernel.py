@@ -1,7 +1,7 @@
-"""The compiled multibody step against the numpy reference.
+"""The compiled steps against the numpy reference.
 
-Each side's step runs in compiled code (``cosim._multibody_step``); the numpy
-modules stay the reference.  Here both run every shipped scene and variant: the
+Each side's step runs in compiled code (``cosim._multibody_step`` and
+``cosim._structure_step``); the numpy modules stay the reference.  Here both run every shipped scene and variant: the
 contact interval counts and impacts agree exactly, every series to 1e-10 of its
 largest magnitude (gaps and forces: of the scene's largest gap or force, since a
 gap is the difference of two positions and a contact may barely touch).  The compiled kernel must be built: this file fails (never
@@ -14,6 +14,7 @@ import pytest
 
 import cosim
 from cosim.bodies import MultibodySubsystem
+from cosim.structure import StructureSubsystem
 from conftest import CASES
 
 SERIES_RTOL = 1e-10
@@ -30,11 +31,26 @@ def _cases():
             yield pytest.param(path, v, id=f"{path.stem}-{v or 'default'}")
 
 
-def _run(monkeypatch, kernel, path, variant):
+def _run(monkeypatch, kernel, path, variant, structure_kernels=None):
+    """One run with ``COSIM_KERNEL=kernel``; the structures' compiled steps
+    that were built are appended to ``structure_kernels``."""
     monkeypatch.setenv("COSIM_KERNEL", kernel)
     over = [f"t_end={T_END[path.stem]}"] if path.stem in T_END else []
     scene = cosim.load_scene(path, variant, overrides=over)
-    return cosim.simulate(scene)
+    if structure_kernels is None:
+        return cosim.simulate(scene)
+    original = StructureSubsystem._build_kernel
+
+    def spy(self):
+        k = original(self)
+        structure_kernels.append(k)
+        return k
+
+    monkeypatch.setattr(StructureSubsystem, "_build_kernel", spy)
+    try:
+        return cosim.simulate(scene)
+    finally:
+        monkeypatch.setattr(StructureSubsystem, "_build_kernel", original)
 
 
 def test_compiled_kernel_is_built():
@@ -87,7 +103,11 @@ def _run_cholesky(monkeypatch, path, variant):
 @pytest.mark.parametrize("path,variant", list(_cases()))
 def test_compiled_matches_reference(monkeypatch, path, variant):
     ref = _run(monkeypatch, "numpy", path, variant)
-    fast = _run(monkeypatch, "compiled", path, variant)
+    built = []
+    fast = _run(monkeypatch, "compiled", path, variant, built)
+    # every structure steps compiled; each shipped one hosts one spring at
+    # most, whose modes come from the compiled rank-one update, never numpy
+    assert all(k is not None and k.n_host_bases == 0 for k in built), path.stem
     assert fast.status == ref.status and fast.message == ref.message
     assert fast.n_windows == ref.n_windows and fast.n_rejected == ref.n_rejected
     assert fast.n_iterations == ref.n_iterations
@@ -103,6 +123,9 @@ def test_compiled_matches_reference(monkeypatch, path, variant):
                 f"contact {name}: {_counts(fast)[name]} intervals compiled, {n} in the "
                 f"reference, whose own round-off spread is {spread}")
         return
+    for name, c in ref.summary["contacts"].items():
+        np.testing.assert_allclose(np.ravel(fast.summary["contacts"][name]["intervals"]),
+                                   np.ravel(c["intervals"]), rtol=0, atol=1e-9, err_msg=name)
     assert len(fast.summary["impacts"]) == len(ref.summary["impacts"])
     # communication points aimed at a predicted touch-down carry its round-off
     np.testing.assert_allclose(fast.t, ref.t, rtol=1e-12, atol=1e-15)
@@ -228,3 +251,14 @@ def test_kernel_joint_effects_against_reference(monkeypatch, kind):
     np.testing.assert_allclose(e1, e0, rtol=1e-12)
     np.testing.assert_allclose(l1, l0, rtol=1e-10, atol=1e-14)
     assert l0[1] != 0.0 and l0[0] > 0.0       # the drive supplied, the damper dissipated
+
+
+def test_a_bad_kernel_choice_is_refused_before_the_run(tmp_path, monkeypatch):
+    import subprocess
+    import sys
+    monkeypatch.setenv("COSIM_KERNEL", "fortran")
+    p = subprocess.run([sys.executable, "-m", "cosim.cli", "run", str(CASES / "spring_drop.toml"),
+                        "--out", str(tmp_path / "run")], capture_output=True, text=True)
+    assert p.returncode == 2
+    assert "`COSIM_KERNEL` must be one of ['compiled', 'numpy'], got 'fortran'" in p.stderr
+    assert "Traceback" not in p.stderr and not (tmp_path / "run").exists()

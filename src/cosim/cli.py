@@ -474,6 +474,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
+    from .kernel import kernel_choice
+    try:                                 # a bad COSIM_KERNEL is said before anything runs
+        kernel_choice()
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     from .errors import OutputExistsError
     from .scene import SceneError
     from .schemes import UnsafeStepError
