@@ -133,6 +133,10 @@ class Recorder:
         self._count = 0
         self._prev = None            # (t, d, dd, active)
         self.peak = np.zeros(nc)
+        #: contacts whose peaks between samples their host's integrator (or
+        #: the monolithic solver's peak events) locates: a cubic through the
+        #: samples would only guess at them, and may overshoot
+        self._located = np.array([c in system.embedded for c in range(nc)], dtype=bool)
         self.intervals = [[] for _ in range(nc)]
         self._open = [None] * nc
         self.e0 = None
@@ -191,7 +195,8 @@ class Recorder:
             tp, dp, ddp, ap = prev
             h = t - tp
             for c in range(nc):
-                if h > 0 and (ap[c] or active[c]) and ddp[c] > 0 >= dd[c]:
+                if h > 0 and (ap[c] or active[c]) and ddp[c] > 0 >= dd[c] \
+                        and not self._located[c]:
                     self.peak[c] = max(self.peak[c], hermite_cubic_max(dp[c], ddp[c], d[c],
                                                                        dd[c], h)[0])
                 if self.auto_edges[c] and ap[c] != active[c] and c not in released:
@@ -202,6 +207,9 @@ class Recorder:
             self.edge(c, e["time"], e["to"] == "grasped" or e["closed"])
         if nc:
             self.peak = np.maximum(self.peak, np.where(active, d[:nc], 0.0))
+            # embedded contacts: the peaks their hosts' integrators located
+            # inside the steps since the last sample
+            self.peak = np.maximum(self.peak, self.system.take_peaks())
         if prev is None:
             for c in np.flatnonzero(active):
                 self.edge(int(c), t, True)
