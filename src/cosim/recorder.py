@@ -133,6 +133,10 @@ class Recorder:
         self._count = 0
         self._prev = None            # (t, d, dd, active)
         self.peak = np.zeros(nc)
+        #: per contact, the largest penetration since the last stored sample
+        #: (the series ``peak/CONTACT``: a contact shorter than the sampling
+        #: interval still shows there)
+        self._since = np.zeros(nc)
         #: contacts whose peaks between samples their host's integrator (or
         #: the monolithic solver's peak events) locates: a cubic through the
         #: samples would only guess at them, and may overshoot
@@ -191,14 +195,15 @@ class Recorder:
             released = {self.system.contact_names.index(e["contact"]) for e in switched
                         if e["to"] == "released"}
         prev = self._prev
+        since = self._since
         if prev is not None:
             tp, dp, ddp, ap = prev
             h = t - tp
             for c in range(nc):
                 if h > 0 and (ap[c] or active[c]) and ddp[c] > 0 >= dd[c] \
                         and not self._located[c]:
-                    self.peak[c] = max(self.peak[c], hermite_cubic_max(dp[c], ddp[c], d[c],
-                                                                       dd[c], h)[0])
+                    since[c] = max(since[c], hermite_cubic_max(dp[c], ddp[c], d[c], dd[c],
+                                                               h)[0])
                 if self.auto_edges[c] and ap[c] != active[c] and c not in released:
                     self.edge(c, self._crossing(c, tp, dp[c], ddp[c], t, d[c], dd[c], ap[c]),
                               bool(active[c]))
@@ -206,10 +211,11 @@ class Recorder:
             c = self.system.contact_names.index(e["contact"])
             self.edge(c, e["time"], e["to"] == "grasped" or e["closed"])
         if nc:
-            self.peak = np.maximum(self.peak, np.where(active, d[:nc], 0.0))
+            np.maximum(since, np.where(active, d[:nc], 0.0), out=since)
             # embedded contacts: the peaks their hosts' integrators located
             # inside the steps since the last sample
-            self.peak = np.maximum(self.peak, self.system.take_peaks())
+            np.maximum(since, self.system.take_peaks(), out=since)
+            np.maximum(self.peak, since, out=self.peak)
         if prev is None:
             for c in np.flatnonzero(active):
                 self.edge(int(c), t, True)
@@ -247,6 +253,8 @@ class Recorder:
         row[L["diss"]] = diss_total
         if sysm.connections is not None:
             row[L["mode"]] = sysm.connections.mode
+        row[L["pk"]] = self._since
+        self._since[:] = 0.0
         self._last_t = t
         self._n_buf += 1            # the row counts only once it is whole
         if self._n_buf == len(self._buf):
@@ -257,11 +265,11 @@ class Recorder:
         first sample."""
         sysm = self.system
         nm = len(sysm.connections.mode) if sysm.connections is not None else 0
-        edges = np.cumsum([1, nx, nd, nd, 1, 1, nm])
+        edges = np.cumsum([1, nx, nd, nd, 1, 1, nm, sysm.n_contacts])
         self._slices = {"x": slice(edges[0], edges[1]), "d": slice(edges[1], edges[2]),
                         "f": slice(edges[2], edges[3]), "e": edges[3], "diss": edges[4],
-                        "mode": slice(edges[5], edges[6])}
-        width = int(edges[6])
+                        "mode": slice(edges[5], edges[6]), "pk": slice(edges[6], edges[7])}
+        width = int(edges[7])
         names, dtypes = ["t"], [np.float64]
         for name in sysm.contact_names:
             names += [f"gap/{name}", f"force/{name}"]
@@ -283,6 +291,8 @@ class Recorder:
                 dtypes += [np.float64, np.float64]
         names += ["energy/total", "energy/dissipated"]
         dtypes += [np.float64, np.float64]
+        names += [f"peak/{name}" for name in sysm.contact_names]
+        dtypes += [np.float64] * sysm.n_contacts
         spool = None
         if self._series_path is not None:
             spool = self._series_path.with_name(f".{self._series_path.name}.spool")
@@ -315,6 +325,8 @@ class Recorder:
             for iq, idq in sub.coordinates().values():
                 cols += [X[:, offsets[s] + iq], X[:, offsets[s] + idq]]
         cols += [B[:, L["e"]], B[:, L["diss"]]]
+        P = B[:, L["pk"]]
+        cols += [P[:, c] for c in range(sysm.n_contacts)]
         return np.array(cols).reshape(len(cols), len(B))
 
     def _flush(self) -> None:
