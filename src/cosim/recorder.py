@@ -158,12 +158,21 @@ class Recorder:
         self._next_progress = -math.inf
 
     def edge(self, c: int, t: float, on: bool) -> None:
-        """Report an exactly located contact onset (``on``) or release."""
+        """Report an exactly located contact onset (``on``) or release.
+
+        Raises
+        ------
+        GuardError
+            From the guard, when the contact chatters."""
         if on and self._open[c] is None:
             self._open[c] = t
         elif not on and self._open[c] is not None:
             self.intervals[c].append([self._open[c], t])
             self._open[c] = None
+        else:
+            return
+        if self.guard is not None:
+            self.guard.switched(c, t)
 
     def record(self, t: float, d: np.ndarray, dd: np.ndarray, f: np.ndarray,
                impulse: np.ndarray, dissipated: np.ndarray, internal=(0.0, 0.0),

@@ -17,7 +17,8 @@ import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .guard import DEFAULT_ENERGY_FLOOR, DEFAULT_ENERGY_GROWTH, GuardOptions
+from .guard import (DEFAULT_CHATTER_SWITCHES, DEFAULT_CHATTER_WINDOW, DEFAULT_ENERGY_FLOOR,
+                    DEFAULT_ENERGY_GROWTH, GuardOptions)
 
 
 __all__ = ["SceneError", "Scene", "load_scene", "parse_override", "SUBSYSTEM_TYPES"]
@@ -225,7 +226,8 @@ class Scene:
         The merged scene table (after variant and overrides).
     guard : GuardOptions
         The run guard's settings (``[guard]``: ``energy_growth``,
-        ``energy_check``, ``energy_floor``), see :mod:`cosim.guard`.
+        ``energy_check``, ``energy_floor``, ``chatter_switches``,
+        ``chatter_window``), see :mod:`cosim.guard`.
     """
 
     name: str
@@ -376,7 +378,12 @@ def _validate(data: dict, file, variant) -> Scene:
                                                  rule=">0"),
                          energy_check=gd.boolean("energy_check", True),
                          energy_floor=gd.number("energy_floor", DEFAULT_ENERGY_FLOOR,
-                                                rule=">=0", unit="J"))
+                                                rule=">=0", unit="J"),
+                         chatter_switches=gd.integer("chatter_switches",
+                                                     DEFAULT_CHATTER_SWITCHES, low=2,
+                                                     high=10 ** 9),
+                         chatter_window=gd.number("chatter_window", DEFAULT_CHATTER_WINDOW,
+                                                  rule=">=0", unit="s"))
     gd.finish()
 
     subs = []
