@@ -36,6 +36,8 @@ class MultibodySubsystem(Subsystem):
     -----
     ``aux`` holds, per embedded contact, its impulse and dissipated energy,
     then the energy dissipated by joint dampers and supplied by drives.
+    ``peak`` holds each embedded contact's largest penetration, located on
+    the integrator's sub-steps (:func:`cosim.integrators.substep_peaks`).
     """
 
     def __init__(self, name: str, model: TreeModel, q0, dq0, ports: dict,

@@ -2,9 +2,13 @@
 
 Contact statistics are kept online at every sample, so the series may be
 decimated without losing them.  Between two samples the penetration is the
-cubic Hermite interpolant of its values and rates; contact onset and release
-(where the law's switch function changes sign) and the peak penetration are
-located on it.
+cubic Hermite interpolant of its values and rates; the onset and release of
+a contact the scheme exchanges (where the law's switch function changes
+sign) and its peak penetration are located on it.  A contact evaluated
+inside a subsystem's integrator has its switches and its peaks located
+there (:meth:`cosim.system.CoupledSystem.take_peaks`); the series
+``peak/CONTACT`` holds each contact's largest penetration since the
+previous stored sample.
 """
 from __future__ import annotations
 
