@@ -108,8 +108,11 @@ def test_hosted_coupling_converges_at_third_order(tmp_path):
 
 def test_interface_error_control_refines_the_contact_steps():
     """three_mass f100 with contact steps of 100 us: alone they miss C's peak
-    by 1 %; with an interface tolerance of 1e-3 the controller rejects and
-    shortens steps inside the contact train and lands within 0.2 %."""
+    by 0.2 % and the arm's exit velocity by 0.7 %; with an interface
+    tolerance of 1e-3 the controller rejects and shortens steps inside the
+    contact train and lands within 0.1 % and 0.2 %.  (Before peaks were
+    located inside the chain's steps, the coarse run's peak read 1 % low:
+    most of that was its 100 us samples missing the top of C's spring.)"""
     from cosim.metrics import impact_metrics, relative_errors
 
     def run(*ov, scheme=None):
@@ -127,7 +130,8 @@ def test_interface_error_control_refines_the_contact_steps():
     assert res.n_rejected > 0
     assert e_ctrl["count"] == 0
     assert e_ctrl["peak"] < 2e-3 and e_ctrl["exit_velocity"] < 3e-3, e_ctrl
-    assert e_ctrl["peak"] < e_coarse["peak"] / 4, (e_ctrl, e_coarse)
+    assert e_ctrl["peak"] < e_coarse["peak"] / 1.5, (e_ctrl, e_coarse)
+    assert e_ctrl["exit_velocity"] < e_coarse["exit_velocity"] / 3, (e_ctrl, e_coarse)
 
 
 def test_implicit_iterates_the_partner_motion_to_agreement(tmp_path):

@@ -1,6 +1,7 @@
 """`cosim info`: what a run will meet, as numbers a script can read."""
 import json
 import math
+import warnings
 
 import pytest
 
@@ -69,3 +70,52 @@ def test_info_and_the_preflight_check_give_the_same_limit_between_moving_sides()
                     sch.preflight(system)
             else:
                 sch.preflight(system)
+
+
+def test_info_says_when_sampling_is_too_coarse_to_draw_a_contact():
+    """spring_drop's contact lasts pi sqrt(m/k) = 3.14 ms: sampled every
+    0.1 ms (the default) it is drawn by 31 samples; every 5 ms, by none."""
+    c = scene_info(load_scene(CASES / "spring_drop.toml"))["contacts"]["wall"]
+    assert c["sampling_interval_s"] == pytest.approx(1e-4)
+    assert c["samples_per_contact"] == pytest.approx(math.pi / 1000 / 1e-4)
+    assert "sampling_note" not in c
+    coarse = scene_info(load_scene(CASES / "spring_drop.toml",
+                                   overrides=["scheme.macro_step=5e-3"]))["contacts"]["wall"]
+    assert coarse["samples_per_contact"] == pytest.approx(math.pi / 1000 / 5e-3)
+    assert coarse["sampling_note"].startswith(
+        "the series sample contact `wall` every 0.005 s, 0.628 times in its contact time of "
+        "0.00314 s: too coarse to draw it.")
+    assert "at most every 0.000785 s (`scheme.macro_step`)" in coarse["sampling_note"]
+
+
+def test_info_sampling_follows_contact_step_every_and_the_monolithic_interval():
+    # three_mass: C is hosted, so step control samples it every contact_step
+    c = scene_info(load_scene(CASES / "three_mass.toml"))["contacts"]["C"]
+    assert c["sampling_interval_s"] == pytest.approx(3e-5)
+    # keeping one sample in 50 makes it too coarse, and the note names both keys
+    c = scene_info(load_scene(CASES / "three_mass.toml",
+                              overrides=["output.every=50"]))["contacts"]["C"]
+    assert c["sampling_interval_s"] == pytest.approx(1.5e-3)
+    assert "(`scheme.contact_step` or `output.every`)" in c["sampling_note"]
+    # the monolithic scheme samples every output_interval (t_end / 1000 by default)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")     # monolithic ignores macro_step
+        scene = load_scene(CASES / "spring_drop.toml", scheme="monolithic",
+                           overrides=["t_end=10"])
+    c = scene_info(scene)["contacts"]["wall"]
+    assert c["sampling_interval_s"] == pytest.approx(0.01)
+    assert "(its switch and peak events are sampled too)" in c["sampling_note"]
+    assert "`scheme.monolithic.output_interval`" in c["sampling_note"]
+
+
+def test_cli_info_prints_the_sampling_note(tmp_path):
+    import subprocess
+    import sys
+
+    from conftest import ROOT
+    proc = subprocess.run([sys.executable, "-m", "cosim.cli", "info",
+                           str(CASES / "spring_drop.toml"), "--set", "scheme.macro_step=5e-3"],
+                          capture_output=True, text=True, cwd=ROOT, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert "output sampling every 0.005 s: 0.628 samples per contact" in proc.stdout
+    assert "note: the series sample contact `wall` every 0.005 s" in proc.stdout

@@ -94,6 +94,8 @@ class MultibodySubsystem(Subsystem):
     then the energy dissipated by joint dampers and supplied by drives.  The
     integrated state is ``[q, dq, aux, port velocity moments]``, the layout the
     compiled kernel shares (:mod:`cosim._multibody_step`).
+    ``peak`` holds each embedded contact's largest penetration, located on
+    the integrator's sub-steps (:func:`cosim.integrators.substep_peaks`).
     """
 
     def __init__(self, name: str, model: TreeModel, q0, dq0, ports: dict,
@@ -114,7 +116,7 @@ class MultibodySubsystem(Subsystem):
         self._port_body = np.array([b for b, _ in ports.values()], dtype=int)
         self._port_local = np.array([p for _, p in ports.values()], dtype=float).reshape(-1, 2)
         self._port_local_c = self._port_local[:, 0] + 1j * self._port_local[:, 1]
-        self._last_switch = (None, None)
+        self._last_switch = (None, None, None, None)
         self.effects = None if effects is None or effects.empty else effects
         self.aux = np.zeros(2)
         self._embedded: list = []
@@ -144,6 +146,7 @@ class MultibodySubsystem(Subsystem):
         e = EmbeddedContact(contact, port, own_side, partner_position, partner_velocity)
         self._embedded.append(e)
         self.aux = np.zeros(4 * len(self._embedded) + 2)
+        self.peak = np.zeros(len(self._embedded))
         self._kernel = None
         return e
 
@@ -233,9 +236,11 @@ class MultibodySubsystem(Subsystem):
         else:
             ur = inputs(t)
             u = ur[:, 0] + 1j * ur[:, 1]
-        rates, switch = [], []
+        rates, switch, pd, pv = [], [], [], []
         tau = t - self._t0
         for k, (e, d, dd) in enumerate(self._embedded_state(t, x, v)):
+            pd.append(d)
+            pv.append(dd)
             if k in self._connections:          # a grasp or friction: cosim.connections
                 xp, vp = e.partner(t)
                 uk, f, p, sw = self._connections[k].evaluate(x[e.port] - xp, v[e.port] - vp,
@@ -249,7 +254,7 @@ class MultibodySubsystem(Subsystem):
             u[e.port] += fn
             rates += [f, p, f * tau, (fn.conjugate() * v[e.port]).real]
             switch.append(sw)
-        self._last_switch = (y, np.array(switch))
+        self._last_switch = (y, np.array(switch), pd, pv)
         s = tau / self._h
         return np.concatenate([dq, self._accelerations(M, F, J, u), rates, (diss, sup),
                                np.concatenate([v, s * v, (s * s) * v]).view(float)])
@@ -317,6 +322,22 @@ class MultibodySubsystem(Subsystem):
         ``"numpy"`` when the reference does."""
         return "compiled" if self._compiled() is not None and self._kernel_steps else "numpy"
 
+    def _probe(self, t, y):
+        """Penetrations and rates of the embedded contacts at ``(t, y)``: those
+        the right-hand side just found there, else evaluated."""
+        last = self._last_switch
+        if last[0] is y:
+            return last[2], last[3]
+        kernel = self._compiled()
+        if kernel is not None and self._kernel_steps:
+            return kernel.penetrations(t, y)
+        n = self.n_dof
+        q, dq = y[:n], y[n:2 * n]
+        x, v, _, _ = self.model.points_c(self.model.frames(q, dq), dq, self._port_body,
+                                        self._port_local_c)
+        states = list(self._embedded_state(t, x, v))
+        return [d for _, d, _ in states], [dd for _, _, dd in states]
+
     def _step_impl(self, t, h, inputs: StepInput | None):
         self._t0, self._h = t, h
         switch = self._switch if self._embedded else None
@@ -327,25 +348,27 @@ class MultibodySubsystem(Subsystem):
         if kernel is not None and type(integ) is RK4:
             self.port_moments = kernel.step(t, h, self.x, self.aux, inputs, self._embedded,
                                             integ.max_step, integ.free_step or 0.0,
-                                            self._on_switch)
+                                            self._on_switch, self.peak)
             return
         self.aux[MOMENT:-2:len(QUADRATURES)] = 0.0      # first moments are per step
         y0 = np.concatenate([self.x, self.aux, np.zeros(6 * self.n_ports)])
+        probe = self._probe if self._embedded else None
         if kernel is not None:           # an adaptive method: compiled right-hand side
             kernel.set_step(t, h, inputs, self._embedded)
             y1 = integ.integrate(kernel.rhs, t, y0, t + h,
                                  kernel.switch if self._embedded else None,
-                                 self._on_switch, coarse=True)
+                                 self._on_switch, coarse=True, probe=probe, peak=self.peak)
         else:
             # laws' switch functions are positive where closed; a connection's
             # are not, so a side with connections never takes coarse steps
             y1 = integ.integrate(lambda tt, yy: self._rhs(tt, yy, inputs), t, y0, t + h,
-                                 switch, self._on_switch, coarse=not self._connections)
+                                 switch, self._on_switch, coarse=not self._connections,
+                                 probe=probe, peak=self.peak)
         n2, na = 2 * self.n_dof, self.aux.size
         self.x[:] = y1[:n2]
         self.aux[:] = y1[n2:n2 + na]
         self.port_moments = y1[n2 + na:].view(complex).reshape(3, self.n_ports)
-        self._last_switch = (None, None)
+        self._last_switch = (None, None, None, None)
 
     def _on_switch(self, t, j, on, y):
         self.switch_log.append((t, j, on))

@@ -184,6 +184,11 @@ def _cmd_info(args) -> int:
             if "max_integrator_step_s" in c:
                 print("    largest stable integrator step [s]: " + ", ".join(
                     f"{k} {_fmt(v)}" for k, v in c["max_integrator_step_s"].items()))
+            if "sampling_interval_s" in c:
+                print(f"    output sampling every {c['sampling_interval_s']:.4g} s: "
+                      f"{c['samples_per_contact']:.3g} samples per contact")
+            if "sampling_note" in c:
+                print(f"    note: {c['sampling_note']}")
     return 0
 
 

@@ -12,6 +12,45 @@ __all__ = ["scene_info"]
 #: RK4's stability limit on an undamped oscillator, omega * dt.
 RK4_LIMIT = 2.0 * math.sqrt(2.0)
 
+#: fewest samples in a contact's duration that draw it as a shape
+SAMPLES_TO_DRAW = 4
+
+
+def _sampling(system, c, scene, contact_time: float, name: str) -> dict:
+    """How often the series will sample contact ``c`` while it is closed,
+    against its duration ``contact_time`` [s].
+
+    A co-simulation samples at each communication point: every
+    ``contact_step`` while a contact the scheme exchanges (coupler or
+    hosted) is closed, when step control is on, else every ``macro_step``;
+    the monolithic scheme every ``output_interval`` (``t_end / 1000`` by
+    default) plus the instants of its switch and peak events.  ``output.every``
+    keeps one sample in that many."""
+    opts, every = scene.scheme_options, scene.output_every
+    monolithic = scene.scheme == "monolithic"
+    if monolithic:
+        dt, key = opts.get("output_interval") or scene.t_end / 1000.0, \
+            "scheme.monolithic.output_interval"
+    else:
+        dt, key = opts.get("macro_step"), "scheme.macro_step"
+        if dt is None:
+            return {}
+        step = opts.get("contact_step")
+        if step is not None and c in set(int(r) for r in system.exchanged):
+            dt, key = min(dt, step), "scheme.contact_step"
+    dt *= every
+    n = contact_time / dt
+    out = {"sampling_interval_s": dt, "samples_per_contact": n}
+    if n < SAMPLES_TO_DRAW:
+        keys = f"`{key}`" + (" or `output.every`" if every > 1 else "")
+        extra = (" (its switch and peak events are sampled too)" if monolithic else "")
+        out["sampling_note"] = (
+            f"the series sample contact `{name}` every {dt:.3g} s{extra}, {n:.3g} times in its "
+            f"contact time of {contact_time:.3g} s: too coarse to draw it. `peak/{name}` in "
+            f"the series and `peak_penetration` in the summary still hold its peak. To draw "
+            f"it, sample at most every {contact_time / SAMPLES_TO_DRAW:.3g} s ({keys}).")
+    return out
+
 
 def _contact_info(system, c, scene) -> dict:
     ln = system.links[c]
@@ -37,6 +76,7 @@ def _contact_info(system, c, scene) -> dict:
     omega = math.sqrt(k / m)
     out.update(stiffness=k, damping=cd, reduced_mass=m, frequency_hz=omega / (2 * math.pi),
                contact_time_s=math.pi / omega)
+    out.update(_sampling(system, c, scene, math.pi / omega, ln.contact.name))
     opts = scene.scheme_options
     order, gain = opts.get("extrapolation_order", 0), opts.get("max_energy_gain", 0.01)
     steps = {}
@@ -62,7 +102,10 @@ def _contact_info(system, c, scene) -> dict:
 
 def scene_info(scene) -> dict:
     """DOFs and natural frequencies of each subsystem, and each contact's
-    frequency, contact time and largest stable macro step per scheme.
+    frequency, contact time, largest stable macro step per scheme, and how
+    often the series will sample it (``sampling_interval_s``,
+    ``samples_per_contact``, and a ``sampling_note`` when that is fewer than
+    :data:`SAMPLES_TO_DRAW`).
 
     Frequencies are in Hz, times in s.  The reduced mass of a contact is
     that of its two ports at the initial state, ``1 / (n^T J M^-1 J^T n)``

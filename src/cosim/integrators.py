@@ -14,7 +14,8 @@ from typing import Callable, ClassVar
 
 import numpy as np
 
-__all__ = ["TimeStepper", "RK4", "ScipyStepper", "INTEGRATORS", "get_integrator"]
+__all__ = ["TimeStepper", "RK4", "ScipyStepper", "INTEGRATORS", "get_integrator",
+           "substep_peaks"]
 
 
 def _hermite(y0, f0, y1, f1, h, theta):
@@ -22,6 +23,49 @@ def _hermite(y0, f0, y1, f1, h, theta):
     t3 = t2 * theta
     return ((2 * t3 - 3 * t2 + 1) * y0 + (t3 - 2 * t2 + theta) * h * f0
             + (-2 * t3 + 3 * t2) * y1 + (t3 - t2) * h * f1)
+
+
+def substep_peaks(peak, d0, v0, d1, v1, h: float) -> None:
+    """Raise each ``peak[j]`` to the largest value on one accepted sub-step
+    of the cubic Hermite through ``d0[j]``, ``d1[j]`` with rates ``v0[j]``,
+    ``v1[j]`` at its two ends, ``h`` [s] apart.
+
+    This is all the per-sub-step work of locating peak penetrations: the
+    end value, and where the rate goes from positive to negative (a maximum
+    inside the sub-step) the one root of the interpolant's derivative there.
+    With ``p(s) = d0 + c1 s + c2 s^2 + c3 s^3`` on ``s`` in [0, 1]
+    (``c1 = h v0``, ``c2 = 3 (d1 - d0) - h (2 v0 + v1)``,
+    ``c3 = -2 (d1 - d0) + h (v0 + v1)``), ``p'(s) = c1 + 2 c2 s + 3 c3 s^2``
+    has ``p'(0) > 0 > p'(1)``, so exactly one root in (0, 1).
+
+    Parameters
+    ----------
+    peak : (n,) float array, updated in place
+    d0, v0, d1, v1 : sequences of n floats
+        Values [m] and rates [m/s] at the sub-step's start and end.
+    h : float
+        The sub-step's length [s].
+    """
+    for j in range(len(peak)):
+        p = d1[j]
+        if v0[j] > 0.0 > v1[j]:
+            dd = d1[j] - d0[j]
+            c1 = h * v0[j]
+            c2 = 3.0 * dd - h * (2.0 * v0[j] + v1[j])
+            c3 = -2.0 * dd + h * (v0[j] + v1[j])
+            # root of 3 c3 s^2 + 2 c2 s + c1 in (0, 1), in the form that does
+            # not cancel (c1 > 0 and the root's sign is fixed)
+            qa, qb = 3.0 * c3, 2.0 * c2
+            disc = qb * qb - 4.0 * qa * c1
+            r = math.sqrt(disc) if disc > 0.0 else 0.0
+            q = -0.5 * (qb + (r if qb >= 0.0 else -r))
+            s = c1 / q if q != 0.0 else 1.0
+            if not 0.0 < s < 1.0 and qa != 0.0:
+                s = q / qa
+            if 0.0 < s < 1.0:
+                p = max(p, d0[j] + s * (c1 + s * (c2 + s * c3)))
+        if p > peak[j]:
+            peak[j] = p
 
 
 @dataclass(frozen=True)
@@ -62,7 +106,8 @@ class TimeStepper(ABC):
 
     def integrate(self, f: Callable, t0: float, y0: np.ndarray, t1: float,
                   switch: Callable | None = None,
-                  on_switch: Callable | None = None, coarse: bool = False) -> np.ndarray:
+                  on_switch: Callable | None = None, coarse: bool = False,
+                  probe: Callable | None = None, peak: np.ndarray | None = None) -> np.ndarray:
         """Advance ``y0`` from ``t0`` to ``t1``.
 
         Parameters
@@ -82,9 +127,19 @@ class TimeStepper(ABC):
             The switch functions are positive where a contact is closed: if
             none is at ``t0``, sub-steps of ``free_step`` until one changes
             sign (see the class).
+        probe : callable ``probe(t, y) -> (d, v)`` or None
+            Quantities to watch (contacts' penetrations) and their rates at
+            ``(t, y)``.  It is called only right after ``f(t, y)``, so it may
+            return what that evaluation found.
+        peak : (n,) float array or None
+            With ``probe``: raised in place to the largest value of each
+            watched quantity over the step, located on each accepted
+            sub-step's cubic Hermite by :func:`substep_peaks`.
         """
         t, y = t0, y0
         k1 = f(t, y)
+        watch = probe is not None and peak is not None
+        pv = probe(t, y) if watch else None
         s0 = None if switch is None else switch(t, y)
         step = self.max_step
         if coarse and self.free_step is not None and (s0 is None or not (s0 > 0).any()):
@@ -112,20 +167,40 @@ class TimeStepper(ABC):
                     ts = self._locate(switch, t, y, k1, y1, k1n, h, s0, flipped)
                     if ts is not None:
                         y = self._single(f, t, y, ts - t, k1)
+                        k1 = f(ts, y)
+                        if watch:
+                            pv = self._watch(probe, peak, pv, ts, y, ts - t)
                         t = ts
-                        k1 = f(t, y)
                         s_new = switch(t, y)
                         if on_switch is not None:
                             y, k1, s_new = self._notify(f, switch, on_switch, t, y, k1,
                                                         s0, s_new)
+                            if watch:
+                                pv = probe(t, y)      # after a jump of the rates
                         s0 = s_new
                         continue  # the rest of this sub-step, from the switch
+                    if watch:
+                        pv = self._watch(probe, peak, pv, te, y1, h)
                     if on_switch is not None:
                         y1, k1n, s1 = self._notify(f, switch, on_switch, te, y1, k1n, s0, s1)
+                        if watch:
+                            pv = probe(te, y1)
+                elif watch:
+                    pv = self._watch(probe, peak, pv, te, y1, h)
                 s0 = s1
+            elif watch:
+                pv = self._watch(probe, peak, pv, te, y1, h)
             t, y, k1 = te, y1, k1n
             i += 1
         return y
+
+    @staticmethod
+    def _watch(probe, peak, pv, t, y, h):
+        """One accepted sub-step ending at ``(t, y)``, just evaluated: raise
+        ``peak`` over it (:func:`substep_peaks`); the end's values."""
+        d1, v1 = probe(t, y)
+        substep_peaks(peak, pv[0], pv[1], d1, v1, h)
+        return d1, v1
 
     @staticmethod
     def _notify(f, switch, on_switch, t, y, k, s_old, s_new):
@@ -205,26 +280,42 @@ class ScipyStepper(TimeStepper):
     def _single(self, f, t, y, h, k1):  # pragma: no cover - integrate() is overridden
         return self.integrate(f, t, y, t + h)
 
-    def integrate(self, f, t0, y0, t1, switch=None, on_switch=None, coarse=False):
+    def integrate(self, f, t0, y0, t1, switch=None, on_switch=None, coarse=False,
+                  probe=None, peak=None):
         """See :meth:`TimeStepper.integrate`; ``coarse`` is ignored (the
-        error control chooses the steps)."""
+        error control chooses the steps).  A watched quantity's maxima are
+        non-terminal events (its rate falling through zero), located on the
+        dense output; the values there are probed at the located states."""
         from scipy.integrate import solve_ivp
 
         t, y = t0, y0
         sign = None if switch is None else switch(t, y) > 0
+        n_sw = 0 if sign is None else len(sign)
+        watch = []
+        if probe is not None and peak is not None:
+            watch = [self._rate_event(probe, j) for j in range(len(peak))]
         while t < t1:
             events = None
             if switch is not None:
                 events = [self._event(switch, j, bool(sign[j])) for j in range(len(sign))]
+            if watch:
+                events = (events or []) + watch
             sol = solve_ivp(f, (t, t1), y, method=self.method, rtol=self.rtol, atol=self.atol,
                             max_step=self.max_step, events=events)
             if sol.status == -1:
                 raise RuntimeError(f"integrator {self.name} failed at t = {sol.t[-1]:.6g} s: "
                                    f"{sol.message}")
             t, y = float(sol.t[-1]), sol.y[:, -1]
+            for j in range(len(watch)):
+                for te, ye in zip(sol.t_events[n_sw + j], sol.y_events[n_sw + j]):
+                    peak[j] = max(peak[j], float(probe(float(te), ye)[0][j]))
+            if watch:
+                d_end = probe(t, y)[0]
+                for j in range(len(watch)):
+                    peak[j] = max(peak[j], float(d_end[j]))
             if sol.status != 1:
                 break
-            j = min((i for i in range(len(sign)) if len(sol.t_events[i])),
+            j = min((i for i in range(n_sw) if len(sol.t_events[i])),
                     key=lambda i: sol.t_events[i][0])
             sign = sign.copy()
             sign[j] = not sign[j]
@@ -234,6 +325,14 @@ class ScipyStepper(TimeStepper):
                     y = jumped
                     sign = switch(t, y) > 0
         return y
+
+    @staticmethod
+    def _rate_event(probe, j):
+        def ev(t, y):
+            return float(probe(t, y)[1][j])
+        ev.terminal = False
+        ev.direction = -1.0
+        return ev
 
     @staticmethod
     def _event(switch, j, positive):

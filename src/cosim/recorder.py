@@ -2,9 +2,13 @@
 
 Contact statistics are kept online at every sample, so the series may be
 decimated without losing them.  Between two samples the penetration is the
-cubic Hermite interpolant of its values and rates; contact onset and release
-(where the law's switch function changes sign) and the peak penetration are
-located on it.
+cubic Hermite interpolant of its values and rates; the onset and release of
+a contact the scheme exchanges (where the law's switch function changes
+sign) and its peak penetration are located on it.  A contact evaluated
+inside a subsystem's integrator has its switches and its peaks located
+there (:meth:`cosim.system.CoupledSystem.take_peaks`); the series
+``peak/CONTACT`` holds each contact's largest penetration since the
+previous stored sample.
 """
 from __future__ import annotations
 
@@ -133,6 +137,14 @@ class Recorder:
         self._count = 0
         self._prev = None            # (t, d, dd, active)
         self.peak = np.zeros(nc)
+        #: per contact, the largest penetration since the last stored sample
+        #: (the series ``peak/CONTACT``: a contact shorter than the sampling
+        #: interval still shows there)
+        self._since = np.zeros(nc)
+        #: contacts whose peaks between samples their host's integrator (or
+        #: the monolithic solver's peak events) locates: a cubic through the
+        #: samples would only guess at them, and may overshoot
+        self._located = np.array([c in system.embedded for c in range(nc)], dtype=bool)
         self.intervals = [[] for _ in range(nc)]
         self._open = [None] * nc
         self.e0 = None
@@ -151,12 +163,21 @@ class Recorder:
         self._next_progress = -math.inf
 
     def edge(self, c: int, t: float, on: bool) -> None:
-        """Report an exactly located contact onset (``on``) or release."""
+        """Report an exactly located contact onset (``on``) or release.
+
+        Raises
+        ------
+        GuardError
+            From the guard, when the contact chatters."""
         if on and self._open[c] is None:
             self._open[c] = t
         elif not on and self._open[c] is not None:
             self.intervals[c].append([self._open[c], t])
             self._open[c] = None
+        else:
+            return
+        if self.guard is not None:
+            self.guard.switched(c, t)
 
     def record(self, t: float, d: np.ndarray, dd: np.ndarray, f: np.ndarray,
                impulse: np.ndarray, dissipated: np.ndarray, internal=(0.0, 0.0),
@@ -190,13 +211,15 @@ class Recorder:
             released = {self.system.contact_names.index(e["contact"]) for e in switched
                         if e["to"] == "released"}
         prev = self._prev
+        since = self._since
         if prev is not None:
             tp, dp, ddp, ap = prev
             h = t - tp
             for c in range(nc):
-                if h > 0 and (ap[c] or active[c]) and ddp[c] > 0 >= dd[c]:
-                    self.peak[c] = max(self.peak[c], hermite_cubic_max(dp[c], ddp[c], d[c],
-                                                                       dd[c], h)[0])
+                if h > 0 and (ap[c] or active[c]) and ddp[c] > 0 >= dd[c] \
+                        and not self._located[c]:
+                    since[c] = max(since[c], hermite_cubic_max(dp[c], ddp[c], d[c], dd[c],
+                                                               h)[0])
                 if self.auto_edges[c] and ap[c] != active[c] and c not in released:
                     self.edge(c, self._crossing(c, tp, dp[c], ddp[c], t, d[c], dd[c], ap[c]),
                               bool(active[c]))
@@ -204,7 +227,11 @@ class Recorder:
             c = self.system.contact_names.index(e["contact"])
             self.edge(c, e["time"], e["to"] == "grasped" or e["closed"])
         if nc:
-            self.peak = np.maximum(self.peak, np.where(active, d[:nc], 0.0))
+            np.maximum(since, np.where(active, d[:nc], 0.0), out=since)
+            # embedded contacts: the peaks their hosts' integrators located
+            # inside the steps since the last sample
+            np.maximum(since, self.system.take_peaks(), out=since)
+            np.maximum(self.peak, since, out=self.peak)
         if prev is None:
             for c in np.flatnonzero(active):
                 self.edge(int(c), t, True)
@@ -242,6 +269,8 @@ class Recorder:
         row[L["diss"]] = diss_total
         if sysm.connections is not None:
             row[L["mode"]] = sysm.connections.mode
+        row[L["pk"]] = self._since
+        self._since[:] = 0.0
         self._last_t = t
         self._n_buf += 1            # the row counts only once it is whole
         if self._n_buf == len(self._buf):
@@ -252,11 +281,11 @@ class Recorder:
         first sample."""
         sysm = self.system
         nm = len(sysm.connections.mode) if sysm.connections is not None else 0
-        edges = np.cumsum([1, nx, nd, nd, 1, 1, nm])
+        edges = np.cumsum([1, nx, nd, nd, 1, 1, nm, sysm.n_contacts])
         self._slices = {"x": slice(edges[0], edges[1]), "d": slice(edges[1], edges[2]),
                         "f": slice(edges[2], edges[3]), "e": edges[3], "diss": edges[4],
-                        "mode": slice(edges[5], edges[6])}
-        width = int(edges[6])
+                        "mode": slice(edges[5], edges[6]), "pk": slice(edges[6], edges[7])}
+        width = int(edges[7])
         names, dtypes = ["t"], [np.float64]
         for name in sysm.contact_names:
             names += [f"gap/{name}", f"force/{name}"]
@@ -278,6 +307,8 @@ class Recorder:
                 dtypes += [np.float64, np.float64]
         names += ["energy/total", "energy/dissipated"]
         dtypes += [np.float64, np.float64]
+        names += [f"peak/{name}" for name in sysm.contact_names]
+        dtypes += [np.float64] * sysm.n_contacts
         spool = None
         if self._series_path is not None:
             spool = self._series_path.with_name(f".{self._series_path.name}.spool")
@@ -310,6 +341,8 @@ class Recorder:
             for iq, idq in sub.coordinates().values():
                 cols += [X[:, offsets[s] + iq], X[:, offsets[s] + idq]]
         cols += [B[:, L["e"]], B[:, L["diss"]]]
+        P = B[:, L["pk"]]
+        cols += [P[:, c] for c in range(sysm.n_contacts)]
         return np.array(cols).reshape(len(cols), len(B))
 
     def _flush(self) -> None:

@@ -17,8 +17,9 @@ import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .guard import (DEFAULT_COUPLING_WARNING, DEFAULT_ENERGY_FLOOR, DEFAULT_ENERGY_GROWTH,
-                    DEFAULT_ENERGY_WARNING, GuardOptions)
+from .guard import (DEFAULT_CHATTER_SWITCHES, DEFAULT_CHATTER_WINDOW, DEFAULT_COUPLING_WARNING,
+                    DEFAULT_ENERGY_FLOOR, DEFAULT_ENERGY_GROWTH, DEFAULT_ENERGY_WARNING,
+                    GuardOptions)
 
 
 __all__ = ["SceneError", "Scene", "load_scene", "parse_override", "SUBSYSTEM_TYPES"]
@@ -226,7 +227,8 @@ class Scene:
         The merged scene table (after variant and overrides).
     guard : GuardOptions
         The run guard's settings (``[guard]``: ``energy_growth``,
-        ``energy_check``, ``energy_floor``), see :mod:`cosim.guard`.
+        ``energy_check``, ``energy_floor``, ``chatter_switches``,
+        ``chatter_window``), see :mod:`cosim.guard`.
     """
 
     name: str
@@ -381,7 +383,12 @@ def _validate(data: dict, file, variant) -> Scene:
                          energy_warning=gd.number("energy_warning", DEFAULT_ENERGY_WARNING,
                                                   rule=">0"),
                          coupling_warning=gd.number("coupling_warning",
-                                                    DEFAULT_COUPLING_WARNING, rule=">0"))
+                                                    DEFAULT_COUPLING_WARNING, rule=">0"),
+                         chatter_switches=gd.integer("chatter_switches",
+                                                     DEFAULT_CHATTER_SWITCHES, low=2,
+                                                     high=10 ** 9),
+                         chatter_window=gd.number("chatter_window", DEFAULT_CHATTER_WINDOW,
+                                                  rule=">=0", unit="s"))
     gd.finish()
 
     subs = []

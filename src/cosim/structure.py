@@ -217,6 +217,7 @@ class StructureSubsystem(Subsystem):
         self._closed_end = np.full(len(self._embedded), -1, np.int8)
         self._kernel = None
         self._closed_ok = None
+        self.peak = np.zeros(len(self._embedded))
         return e
 
     def embedded_quadratures(self):
@@ -241,22 +242,37 @@ class StructureSubsystem(Subsystem):
         m = self.n_modes
         q, dq = y[:m], y[m:2 * m]
         u = np.zeros((self.n_ports, 2)) if inputs is None else inputs(t)
-        rates = []
+        rates, pd, pv = [], [], []
         tau = t - self._t0
         dirc = complex(self._dir[0], self._dir[1])
         dw = self._R @ dq
         for e, d, dd in self._contacts(t, q, dq):
+            pd.append(d)
+            pv.append(dd)
             f = float(e.law.force(d, dd))
             fn = e.side * f * e.normal
             u[e.port] += (fn.real, fn.imag)
             rates += [f, float(e.law.dissipation_rate(f, d, dd)), f * tau,
                       (fn.conjugate() * dirc).real * dw[e.port]]
+        self._last_eval = (y, pd, pv)
         g = self._modal_force(u) + self._g_modal
         ddq = g - self.modal_damping * dq - self.omega ** 2 * q
         v = dw * dirc
         s = tau / self._h
         return np.concatenate([dq, ddq, rates, [float(self.modal_damping @ (dq * dq)), 0.0],
                                np.concatenate([v, s * v, (s * s) * v]).view(float)])
+
+    _last_eval = (None, None, None)
+
+    def _probe(self, t, y):
+        """Penetrations and rates of the embedded contacts at ``(t, y)``: those
+        the right-hand side just found there, else evaluated."""
+        last = self._last_eval
+        if last[0] is y:
+            return last[1], last[2]
+        m = self.n_modes
+        states = list(self._contacts(t, y[:m], y[m:2 * m]))
+        return [d for _, d, _ in states], [dd for _, _, dd in states]
 
     # ---------------------------------------------------------- stepping
     def max_stable_step(self) -> float:
@@ -345,7 +361,9 @@ class StructureSubsystem(Subsystem):
         # a contact is or becomes closed: RK4 on the modal equations
         y0 = np.concatenate([self.x, self.aux, np.zeros(6 * self.n_ports)])
         y1 = self._rk4.integrate(lambda tt, yy: self._rhs(tt, yy, inputs), t, y0, t + h,
-                                 self._switch, self._on_switch)
+                                 self._switch, self._on_switch, probe=self._probe,
+                                 peak=self.peak)
+        self._last_eval = (None, None, None)
         na = self.aux.size
         self.x[:] = y1[:2 * m]
         self.aux[:] = y1[2 * m:2 * m + na]
@@ -539,14 +557,16 @@ class StructureSubsystem(Subsystem):
             closed = list(active)
             lam, Psi, wmax = self._active_basis(active)
             seg = self._segment(lam, Psi, q, dq, self._segment_load(t, h, tc, Gin, active))
-            n = int(min(max(math.ceil(2.0 * L * wmax), 2), 512))
+            n = int(max(math.ceil(2.0 * L * wmax), 2))
             taus = L * np.arange(1, n + 1) / n
             W, DW = self._port_states(seg, taus)
-            d, _ = self._gaps(tc, taus, W, DW)
+            d, dd = self._gaps(tc, taus, W, DW)
             flips = (d > 0) != np.array(active)
             rows = np.flatnonzero(flips.any(axis=1))
             if not len(rows):
                 self._segment_quadratures(t, h, tc, L, seg, active, inputs)
+                self._segment_peaks(tc, seg, active, np.concatenate([[0.0], taus]),
+                                    np.vstack([d0, d]), np.vstack([dd0, dd]))
                 q, dq = self._end_state(seg, Psi, taus[-1])
                 break
             i = int(rows[0])
@@ -562,6 +582,10 @@ class StructureSubsystem(Subsystem):
                 elif abs(hi - best) <= 1e-15:
                     who.append(j)
             self._segment_quadratures(t, h, tc, best, seg, active, inputs)
+            if any(active):
+                d_b, dd_b = self._gaps(tc, [best], *self._port_states(seg, [best]))
+                self._segment_peaks(tc, seg, active, np.concatenate([[0.0], taus[:i], [best]]),
+                                    np.vstack([d0, d[:i], d_b]), np.vstack([dd0, dd[:i], dd_b]))
             q, dq = self._end_state(seg, Psi, best)
             tc += best
             for j in who:
@@ -569,6 +593,55 @@ class StructureSubsystem(Subsystem):
                 closed[j] = not active[j]
         self.x[:m], self.x[m:] = q, dq
         self._closed_end[:] = closed
+
+    def _segment_peaks(self, tc, seg, active, taus, D, V) -> None:
+        """Raise :attr:`peak` of each closed contact to its largest
+        penetration over a segment, on the exact solution.
+
+        ``taus`` (k,) are instants after the segment's start, from 0 to its
+        end, dense enough that the switch search trusts them (half a radian
+        of the fastest mode apart); ``D``, ``V`` (k, n_embedded) the
+        penetrations and rates there.  A maximum is an end value or lies
+        where a rate falls through zero between two instants; it is located
+        there by regula falsi (Illinois) on the rate of the exact solution,
+        and the penetration taken at the root."""
+        for j in np.flatnonzero(active):
+            best = float(np.max(D[:, j]))
+            for i in np.flatnonzero((V[:-1, j] > 0.0) & (V[1:, j] <= 0.0)):
+                best = max(best, self._rate_root_value(tc, seg, j, taus[i], taus[i + 1],
+                                                       V[i, j], V[i + 1, j]))
+            if best > self.peak[j]:
+                self.peak[j] = best
+
+    def _rate_root_value(self, tc, seg, j, lo, hi, v_lo, v_hi) -> float:
+        """Penetration of contact ``j`` where its rate, ``v_lo > 0 >= v_hi``
+        at ``lo`` and ``hi`` after ``tc``, falls through zero."""
+        def at(tau):
+            dj, vj = self._gaps(tc, [tau], *self._port_states(seg, [tau]))
+            return float(dj[0, j]), float(vj[0, j])
+
+        d_best = -math.inf
+        side = 0
+        tol = 1e-14 * max(1.0, abs(tc) + hi)
+        for _ in range(60):
+            x = hi if v_hi == v_lo else (lo * v_hi - hi * v_lo) / (v_hi - v_lo)
+            if not lo <= x <= hi:
+                x = 0.5 * (lo + hi)
+            dx, vx = at(x)
+            d_best = max(d_best, dx)
+            if vx > 0.0:
+                lo, v_lo = x, vx
+                if side == 1:
+                    v_hi *= 0.5
+                side = 1
+            else:
+                hi, v_hi = x, vx
+                if side == -1:
+                    v_lo *= 0.5
+                side = -1
+            if hi - lo <= tol or vx == 0.0:
+                break
+        return d_best
 
     @staticmethod
     def _switch_time(j, was_closed, lo, hi, d_lo, d_hi, tol, gaps):
@@ -639,6 +712,8 @@ class StructureSubsystem(Subsystem):
         self._acc = state.x[n:n + m].copy()
         self._closed_end[:] = state.x[n + m:]
         self.aux[...] = state.aux
+        if state.peak is not None:
+            self.peak[...] = state.peak
 
     def _on_switch(self, t, j, on, y):
         self.switch_log.append((t, j, on))

@@ -149,12 +149,14 @@ class EmbeddedContact:
 
 
 class SubsystemState:
-    """Opaque snapshot for rollback (time, state vector, quadratures, counters)."""
+    """Opaque snapshot for rollback (time, state vector, quadratures, peak
+    penetrations since they were last taken, counters)."""
 
-    __slots__ = ("t", "x", "aux", "n_steps", "status")
+    __slots__ = ("t", "x", "aux", "n_steps", "status", "peak")
 
-    def __init__(self, t, x, aux, n_steps, status):
+    def __init__(self, t, x, aux, n_steps, status, peak=None):
         self.t, self.x, self.aux, self.n_steps, self.status = t, x, aux, n_steps, status
+        self.peak = peak
 
 
 class Subsystem(ABC):
@@ -164,6 +166,9 @@ class Subsystem(ABC):
     :meth:`_step_impl`, :meth:`derivatives`, :meth:`outputs` and
     :meth:`energy`.  ``aux`` holds quadratures a subsystem integrates along
     its state (the impulse and dissipated energy of contacts embedded in it).
+    ``peak`` holds, per embedded contact, its largest penetration [m] (0 if
+    none) since :meth:`take_peaks` last read it, located inside the steps by
+    the subsystem's integrator.
     """
 
     #: True for a subsystem without dynamics (wall, ground).
@@ -177,6 +182,7 @@ class Subsystem(ABC):
         self.n_steps = 0
         self.x = np.zeros(0)
         self.aux = np.zeros(0)
+        self.peak = np.zeros(0)
 
     # -------------------------------------------------------------- protocol
     @property
@@ -252,8 +258,16 @@ class Subsystem(ABC):
         """Named coordinates: name -> (index of q in x, index of dq in x)."""
         return {}
 
+    def take_peaks(self) -> np.ndarray:
+        """Each embedded contact's largest penetration [m] since the last
+        call (0 if it never penetrated), and start again from 0."""
+        out = self.peak.copy()
+        self.peak[:] = 0.0
+        return out
+
     def get_state(self) -> SubsystemState:
-        return SubsystemState(self.t, self.x.copy(), self.aux.copy(), self.n_steps, self.status)
+        return SubsystemState(self.t, self.x.copy(), self.aux.copy(), self.n_steps, self.status,
+                              self.peak.copy())
 
     def set_state(self, state: SubsystemState) -> None:
         self.t = state.t
@@ -261,6 +275,8 @@ class Subsystem(ABC):
         self.aux[...] = state.aux
         self.n_steps = state.n_steps
         self.status = state.status
+        if state.peak is not None:
+            self.peak[...] = state.peak
 
 
 class RigidReference(Subsystem):

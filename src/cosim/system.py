@@ -439,6 +439,22 @@ class CoupledSystem:
             out[contacts] = self.subsystems[s].embedded_quadratures()[slots, 3]
         return out
 
+    def take_peaks(self) -> np.ndarray:
+        """(n_contacts,) each embedded contact's largest penetration [m] since
+        the last call, as its host's integrator located it inside the steps
+        (0 for the other contacts, and for rigid laws, whose impact is an
+        instant); the hosts start again from 0."""
+        out = np.zeros(self.n_contacts)
+        if not self.embedded:
+            return out
+        taken = {}
+        for c, (s, slot) in self.embedded.items():
+            if s not in taken:
+                taken[s] = self.subsystems[s].take_peaks()
+            if not self.links[c].contact.law.rigid:
+                out[c] = taken[s][slot]
+        return out
+
     def embedded_quadratures(self):
         """(n_contacts, 2) impulse and dissipated energy of embedded contacts."""
         out = np.zeros((self.n_contacts, 2))
