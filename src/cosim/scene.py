@@ -17,10 +17,12 @@ import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from . import tomlread
 from .guard import DEFAULT_ENERGY_FLOOR, DEFAULT_ENERGY_GROWTH, GuardOptions
 
 
-__all__ = ["SceneError", "Scene", "load_scene", "parse_override", "SUBSYSTEM_TYPES"]
+__all__ = ["SceneError", "Scene", "load_scene", "parse_override", "read_toml_file",
+           "SUBSYSTEM_TYPES"]
 
 log = logging.getLogger(__name__)
 
@@ -179,11 +181,17 @@ def parse_override(text: str, file="--set") -> tuple[list[str], object]:
     if "=" not in text:
         raise SceneError(file, "", f"override {text!r} must read key.path=value")
     key, value = text.split("=", 1)
+    if key.count(".") >= tomlread.MAX_DEPTH:
+        raise SceneError(file, "", f"override key must have at most {tomlread.MAX_DEPTH} "
+                                   f"parts (`cosim.tomlread.MAX_DEPTH`), got "
+                                   f"{key.count('.') + 1}")
     path = [p.strip() for p in key.strip().split(".")]
     if not all(path):
         raise SceneError(file, key, f"override {text!r} has an empty key")
     try:
-        parsed = tomllib.loads(f"v = {value.strip()}")["v"]
+        parsed = tomlread.loads(f"v = {value.strip()}")["v"]
+    except tomlread.TomlLimitError as exc:
+        raise SceneError(file, key.strip(), f"value {exc}") from None
     except tomllib.TOMLDecodeError:
         parsed = value.strip()
     return path, parsed
@@ -271,14 +279,7 @@ def load_scene(path, variant: str | None = None, overrides=(), scheme: str | Non
     SceneError
     """
     file = Path(path)
-    try:
-        text = file.read_text()
-    except OSError as exc:
-        raise SceneError(file, "", f"cannot be read: {exc.strerror or exc}") from None
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise SceneError(file, "", f"is not valid TOML: {exc}") from None
+    data = read_toml_file(file)
     variants = data.pop("variants", {})
     if not isinstance(variants, dict) or not all(isinstance(v, dict) for v in variants.values()):
         raise SceneError(file, "variants", "must be a table of tables")
@@ -302,7 +303,31 @@ def load_scene(path, variant: str | None = None, overrides=(), scheme: str | Non
         if not isinstance(sch, dict):
             raise SceneError(file, "scheme", f"must be a table, got {_type_name(sch)} {sch!r}")
         sch["name"] = scheme
+    try:
+        tomlread.check_depth(data)          # an override may reach deeper than the file
+    except tomlread.TomlLimitError as exc:
+        raise SceneError(file, exc.key, str(exc)) from None
     return _validate(data, file, chosen)
+
+
+def read_toml_file(file) -> dict:
+    """Read a scene or a study file within the limits of :mod:`cosim.tomlread`
+    (a regular file of at most 64 MiB, UTF-8, nested at most 32 levels, at
+    most 10 000 keys).
+
+    Raises
+    ------
+    SceneError
+        Naming the file, if it cannot be read, passes a limit, or is not TOML.
+    """
+    try:
+        return tomlread.read_toml(file)
+    except OSError as exc:
+        raise SceneError(file, "", f"cannot be read: {exc.strerror or exc}") from None
+    except tomlread.TomlLimitError as exc:
+        raise SceneError(file, exc.key, str(exc)) from None
+    except tomllib.TOMLDecodeError as exc:
+        raise SceneError(file, "", f"is not valid TOML: {exc}") from None
 
 
 def _validate(data: dict, file, variant) -> Scene:

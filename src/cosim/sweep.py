@@ -31,7 +31,6 @@ import logging
 import math
 import os
 import re
-import tomllib
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -40,7 +39,8 @@ import numpy as np
 
 from .errors import UnsafeStepError
 from .result import _atomic_write, resolved_scene_text, write_outputs
-from .scene import SceneError, load_scene, parse_override
+from .scene import SceneError, load_scene, parse_override, read_toml_file
+from .tomlread import TomlLimitError, read_bytes
 
 __all__ = ["Point", "SweepEvent", "Study", "sweep", "grid_points", "split_values",
            "parse_grid_option", "impact_regime", "flatten", "write_table", "read_table",
@@ -422,7 +422,7 @@ def _simulate(scene):
 
 
 def _file_hash(path: Path) -> str:
-    return hashlib.sha256(path.read_bytes()).hexdigest()
+    return hashlib.sha256(read_bytes(path)).hexdigest()
 
 
 def _spec(point: Point, scene_path: Path, scheme, scene_hash: str) -> dict:
@@ -597,15 +597,14 @@ def sweep(scene, *, variants=None, grid=None, scheme: str | None = None, workers
     [('f1', 1), ('f100', 9)]
     """
     scene_path = Path(scene)
+    table = read_toml_file(scene_path)      # a regular file within the limits, or refused
     try:
         scene_hash = _file_hash(scene_path)
-    except OSError as exc:
-        raise SceneError(scene_path, "", f"cannot be read: {exc.strerror or exc}") from None
+    except (OSError, TomlLimitError) as exc:
+        raise SceneError(scene_path, "", f"cannot be read: {getattr(exc, 'strerror', None) or exc}"
+                         ) from None
     if not variants:                    # name the default variant, so the point says it
-        try:
-            default = tomllib.loads(scene_path.read_text()).get("default_variant")
-        except tomllib.TOMLDecodeError as exc:
-            raise SceneError(scene_path, "", f"is not valid TOML: {exc}") from None
+        default = table.get("default_variant")
         variants = [default] if isinstance(default, str) else None
     points = grid_points(variants, grid)
     out = Path(out) if out is not None else None
@@ -847,6 +846,9 @@ class Study:
         key = "contacts.C.law.contact_stiffness"
         scale = 6.25e-6
         label = "f"
+
+    and optionally ``timeout``, the most wall-clock seconds a point may run
+    (see :func:`sweep`).
     """
 
     name: str
@@ -859,6 +861,7 @@ class Study:
     x: str | None = None
     x_scale: float = 1.0
     x_label: str | None = None
+    timeout: float | None = None
 
 
 def load_study(path) -> Study:
@@ -870,33 +873,30 @@ def load_study(path) -> Study:
         Naming the file and the key, if a value is missing or of the wrong
         kind.
     """
+    from .scene import _Table
+
     path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text())
-    except OSError as exc:
-        raise SceneError(path, "", f"cannot be read: {exc.strerror or exc}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise SceneError(path, "", f"is not valid TOML: {exc}") from None
-    known = {"title", "scene", "variants", "set", "x", "contact", "joint"}
-    for k in data:
-        if k not in known:
-            raise SceneError(path, k, f"is not a key of a study; keys are {sorted(known)}")
-    if not isinstance(data.get("scene"), str):
-        raise SceneError(path, "scene", "must be the scene file's path (a string)")
-    variants = data.get("variants", [])
+    top = _Table(read_toml_file(path), (), path)
+    title = top.string("title", path.stem)
+    scene = top.string("scene")
+    variants = top.raw("variants", [])
     if not isinstance(variants, list) or not all(isinstance(v, str) for v in variants):
-        raise SceneError(path, "variants", f"must be a list of names, got {variants!r}")
-    grid = data.get("set", {})
+        top.error("variants", f"must be a list of names, got {variants!r}")
+    grid = top.raw("set", {})
     if not isinstance(grid, dict) or not all(isinstance(v, list) and v for v in grid.values()):
-        raise SceneError(path, "set", "must be a table of key = [values]")
-    x = data.get("x", {})
-    if not isinstance(x, dict) or set(x) - {"key", "scale", "label"}:
-        raise SceneError(path, "x", "must be a table of `key`, `scale` and `label`")
-    return Study(name=path.stem, title=str(data.get("title", path.stem)),
-                 scene=(path.parent / data["scene"]), variants=tuple(variants),
-                 grid=dict(grid), contact=str(data.get("contact", "C")),
-                 joint=str(data.get("joint", "robot/arm")), x=x.get("key"),
-                 x_scale=float(x.get("scale", 1.0)), x_label=x.get("label"))
+        top.error("set", f"must be a table of key = [values], got {grid!r}")
+    contact = top.string("contact", "C")
+    joint = top.string("joint", "robot/arm")
+    timeout = top.number("timeout", None, rule=">0", unit="s")
+    x = top.table("x", {})
+    key = x.string("key", None)
+    scale = x.number("scale", 1.0)
+    label = x.string("label", None)
+    x.finish()
+    top.finish()
+    return Study(name=path.stem, title=title, scene=path.parent / scene,
+                 variants=tuple(variants), grid=dict(grid), contact=contact, joint=joint,
+                 x=key, x_scale=scale, x_label=label, timeout=timeout)
 
 
 def run_study(study: Study, *, out, workers: int = 1, scheduler=None, scheme=None,
