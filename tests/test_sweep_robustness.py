@@ -30,9 +30,24 @@ def cosim(*args, cwd=ROOT):
 
 
 def start(*args):
+    """``cosim`` in a session of its own, so that any process it leaves
+    behind is found by :func:`leftovers` (orphans keep their session)."""
     return subprocess.Popen([sys.executable, "-m", "cosim.cli", *map(str, args)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            cwd=ROOT)
+                            cwd=ROOT, start_new_session=True)
+
+
+def leftovers(session: int) -> list:
+    """Processes still alive in the session of a finished ``cosim``."""
+    time.sleep(0.5)
+    out = []
+    for p in psutil.process_iter(["pid", "status"]):
+        try:
+            if os.getsid(p.pid) == session and p.info["status"] != psutil.STATUS_ZOMBIE:
+                out.append(p)
+        except (ProcessLookupError, PermissionError, psutil.NoSuchProcess):
+            pass
+    return out
 
 
 def table(out):
@@ -83,17 +98,19 @@ def gone(p: psutil.Process) -> bool:
 def test_a_hanging_point_ends_at_the_time_limit_and_the_others_finish(tmp_path):
     out = tmp_path / "sw"
     t0 = time.monotonic()
-    proc = cosim("sweep", SPRING_DROP, "--set", "t_end=0.001,1000", "--workers", "2",
+    proc = start("sweep", SPRING_DROP, "--set", "t_end=0.001,1000", "--workers", "2",
                  "--timeout", "10", "--no-plot", "--quiet", "--out", out)
+    stdout, stderr = proc.communicate(timeout=LIMIT)
     assert time.monotonic() - t0 < LIMIT
-    assert proc.returncode == 1, proc.stderr
+    assert proc.returncode == 1, stderr
+    assert leftovers(proc.pid) == []
     rows = table(out)
     short, long = rows["undamped,t_end=0.001"], rows["undamped,t_end=1000"]
     assert short["status"] == "finished"
     assert long["status"] == "timeout"
     assert long["message"] == ("ran past the time limit of 10 s (wall clock); its process "
                                "was stopped")
-    assert "undamped,t_end=1000                      timeout" in proc.stdout
+    assert "undamped,t_end=1000                      timeout" in stdout
     # the timed-out point has its record, no outputs
     assert (out / "undamped,t_end=1000" / "point.json").exists()
     assert not (out / "undamped,t_end=1000" / "summary.json").exists()
@@ -115,7 +132,7 @@ def test_a_worker_that_dies_costs_its_point_alone(tmp_path):
                                "the other points ran on")
     assert rows["undamped,t_end=0.001"]["status"] == "finished"
     assert "1 of 2 point(s) finished" in stdout
-    assert pool_workers(proc.pid) == []
+    assert leftovers(proc.pid) == []
 
 
 @pytest.mark.parametrize("sig,code", [(signal.SIGTERM, 143), (signal.SIGHUP, 129),
@@ -139,6 +156,7 @@ def test_a_stopped_sweep_ends_its_workers_and_writes_what_finished(tmp_path, sig
     assert rows["undamped,t_end=1000"]["message"] == (f"the sweep was stopped ({sig.name}) "
                                                       f"before this point ended")
     assert gone(worker), "the worker process outlived the sweep"
+    assert leftovers(proc.pid) == []
     assert not (out / "undamped,t_end=0.002").exists()       # never started
     # sweeping again runs what was interrupted, and skips what finished
     again = cosim("sweep", SPRING_DROP, "--set", "t_end=0.001,0.002", "--no-plot", "--quiet",
@@ -218,3 +236,58 @@ def test_a_bad_timeout_option_is_refused(tmp_path, value):
     assert proc.returncode == 2
     assert f"error: `--timeout` must be > 0 s, got" in proc.stderr
     assert not (tmp_path / "sw").exists()
+
+
+# ------------------------------------------------------------------- Dask
+def test_the_local_dask_cluster_is_private():
+    """`--scheduler local` listens on 127.0.0.1 with TLS and a certificate made
+    for this cluster alone: a client without it, or with another, is turned
+    away; the sweep's own client runs tasks."""
+    pytest.importorskip("cryptography")
+    distributed = pytest.importorskip("distributed")
+    from distributed.security import Security
+
+    from cosim.sweep import _private_cluster
+
+    with _private_cluster(1) as cluster:
+        address = cluster.scheduler_address
+        assert address.startswith("tls://127.0.0.1:")
+        with distributed.Client(cluster) as own:
+            assert own.submit(abs, -2).result(timeout=60) == 2
+        for kw in ({}, {"security": Security.temporary()}):
+            with pytest.raises(Exception) as exc:
+                distributed.Client(address, timeout=5, **kw)
+            assert not isinstance(exc.value, AssertionError)
+        with pytest.raises(Exception):
+            distributed.Client(address.replace("tls://", "tcp://"), timeout=5)
+
+
+def test_without_cryptography_the_local_cluster_has_no_socket(monkeypatch):
+    distributed = pytest.importorskip("distributed")
+    from distributed.security import Security
+
+    from cosim.sweep import _private_cluster
+
+    def missing(*a, **k):
+        raise ImportError("no cryptography")
+    monkeypatch.setattr(Security, "temporary", classmethod(missing))
+    with _private_cluster(1) as cluster:
+        assert cluster.scheduler_address.startswith("inproc://")
+        with distributed.Client(cluster) as client:
+            assert client.submit(abs, -3).result(timeout=60) == 3
+
+
+def test_a_hanging_point_on_dask_ends_at_the_time_limit(tmp_path):
+    pytest.importorskip("distributed")
+    out = tmp_path / "sw"
+    proc = start("sweep", SPRING_DROP, "--set", "t_end=0.001,1000", "--scheduler", "local",
+                 "--workers", "2", "--timeout", "15", "--no-plot", "--quiet", "--out", out)
+    stdout, stderr = proc.communicate(timeout=LIMIT + 60)
+    assert proc.returncode == 1, stderr
+    rows = table(out)
+    assert rows["undamped,t_end=0.001"]["status"] == "finished"
+    long = rows["undamped,t_end=1000"]
+    assert long["status"] == "timeout"
+    assert long["message"].startswith("ran past the time limit of 15 s (wall clock); its "
+                                      "task was cancelled")
+    assert leftovers(proc.pid) == []

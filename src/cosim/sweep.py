@@ -755,29 +755,35 @@ class _Runner:
                 for fut, (key, deadline) in list(live.items()):
                     if deadline is not None and now >= deadline:
                         del live[fut]
-                        _stop_dask_task(client, fut)
+                        restarted = _stop_dask_task(client, fut)
                         yield key, ("timeout", f"ran past the time limit of "
                                                f"{self.timeout:g} s (wall clock); its task "
-                                               f"was cancelled")
+                                               f"was cancelled"
+                                               + (" and its worker restarted" if restarted
+                                                  else ""))
                 submit()
         finally:
             client.cancel(list(live))
 
 
-def _stop_dask_task(client, fut) -> None:
+def _stop_dask_task(client, fut) -> bool:
     """Cancel a task past its time limit and restart the worker running it
-    (Dask cannot stop a running task; a worker under a nanny restarts)."""
+    (Dask cannot stop a running task; a worker under a nanny restarts).
+    Returns whether a worker was restarted."""
     try:
         holders = [w for w, keys in client.processing().items() if fut.key in keys]
     except Exception:                              # noqa: BLE001 - best effort
         holders = []
     client.cancel([fut], force=True)
-    if holders:
-        try:
-            client.restart_workers(holders, timeout=30)
-        except Exception as exc:                   # noqa: BLE001 - say it, go on
-            log.warning("could not restart the Dask worker(s) %s running a point past its "
-                        "time limit: %s", holders, exc)
+    if not holders:
+        return False
+    try:
+        client.restart_workers(holders, timeout=30)
+    except Exception as exc:                       # noqa: BLE001 - say it, go on
+        log.warning("could not restart the Dask worker(s) %s running a point past its "
+                    "time limit: %s", holders, exc)
+        return False
+    return True
 
 
 def sweep(scene, *, variants=None, grid=None, scheme: str | None = None, workers: int = 1,
