@@ -193,6 +193,9 @@ def check_text(text: str, max_depth: int = MAX_DEPTH, max_keys: int = MAX_KEYS) 
             too_deep(f"more than {max_depth} nested arrays or inline tables")
 
 
+_NESTED = frozenset((dict, list))
+
+
 def check_depth(data, max_depth: int = MAX_DEPTH) -> None:
     """Walk parsed tables and arrays iteratively; refuse ones nested deeper than
     ``max_depth`` levels below the top (dotted keys inside nested inline tables
@@ -207,7 +210,12 @@ def check_depth(data, max_depth: int = MAX_DEPTH) -> None:
     todo = [(data, 0, ())]
     while todo:
         node, depth, path = todo.pop()
-        items = node.items() if isinstance(node, dict) else enumerate(node)
+        if isinstance(node, dict):
+            items = node.items()
+        elif _NESTED.isdisjoint(map(type, node)):   # an array of numbers: C speed
+            continue
+        else:
+            items = enumerate(node)
         for k, v in items:
             if isinstance(v, (dict, list)):
                 sub = path + (f"{k}" if isinstance(node, dict) else f"[{k}]",)
