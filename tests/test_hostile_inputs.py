@@ -176,8 +176,12 @@ def test_strings_comments_and_numbers_are_not_structure(text):
 
 
 def test_every_shipped_scene_and_study_is_within_the_limits():
+    """Well within: 7 levels and 300 keys (the README says so)."""
     for path in sorted(CASES.glob("*.toml")) + sorted((ROOT / "studies").glob("*.toml")):
         tomlread.read_toml(path)
+        text = path.read_text()
+        tomlread.check_text(text, max_depth=7, max_keys=300)
+        tomlread.check_depth(tomlread.loads(text), max_depth=7)
 
 
 # ------------------------------------------------------------- what it needs
