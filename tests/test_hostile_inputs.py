@@ -260,3 +260,18 @@ def test_a_long_drive_table_is_converted_once(tmp_path):
     assert proc.returncode == 0, proc.stderr
     assert "status finished" in proc.stdout
     assert (out / "summary.json").exists() and (out / "series.npz").exists()
+
+
+def test_plot_reads_a_run_whose_scene_file_is_hostile(tmp_path):
+    """`cosim plot` reads the run's scene.toml for its end time only: one that
+    is not UTF-8 or nests thousands deep is passed over, not a traceback."""
+    pytest.importorskip("matplotlib")
+    out = tmp_path / "run"
+    proc = cosim("run", SPRING_DROP, "--set", "t_end=0.012", "--out", out)
+    assert proc.returncode == 0, proc.stderr
+    for bad in (b"t_end = \xe9\n", b"t_end = " + b"[" * 5000 + b"\n"):
+        (out / "scene.toml").write_bytes(bad)
+        proc = cosim("plot", out, "--out", tmp_path / "pictures")
+        assert proc.returncode == 0, proc.stderr
+        assert "Traceback" not in proc.stderr
+        assert any((tmp_path / "pictures").iterdir())
