@@ -317,10 +317,10 @@ def _cmd_sweep(args) -> int:
     where = (f"Dask scheduler {args.scheduler}" if args.scheduler
              else f"{workers} process(es)" if workers > 1 else "this process")
     n = len(sw.grid_points(variants or None, grid))
-    print(f"sweep {scene}: {n} point(s) on {where}, into {out}")
     if args.timeout is not None and not (args.timeout > 0 and math.isfinite(args.timeout)):
         print(f"error: `--timeout` must be > 0 s, got {args.timeout!r}", file=sys.stderr)
         return 2
+    print(f"sweep {scene}: {n} point(s) on {where}, into {out}")
     bar = _SweepProgress(args.quiet, n)
     stopped = None
     try:
@@ -333,7 +333,7 @@ def _cmd_sweep(args) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     except sw.SweepInterrupted as exc:
-        rows, stopped = exc.rows, got[-1] if got else exc.signal_name
+        rows, stopped = exc.rows, got[0] if got else exc.signal_name
     finally:
         bar.close()
     for r in rows:
@@ -381,13 +381,15 @@ class _StopSignal(KeyboardInterrupt):
 def _stop_signals_interrupt():
     """Within: SIGTERM and SIGHUP (a scheduler's stop, `timeout`, a closed
     terminal) interrupt as Ctrl-C does, so that what ran is kept and the
-    workers are ended; the handlers before are restored after.  Yields the
+    workers are ended (a second signal is noted, not raised, so the clean-up
+    runs to its end); the handlers before are restored after.  Yields the
     list of the names of the signals received."""
     got: list[str] = []
 
     def handler(signum, frame):
         got.append(signal.Signals(signum).name)
-        raise _StopSignal(got[-1])
+        if len(got) == 1:           # a second one must not cut the clean-up short
+            raise _StopSignal(got[-1])
 
     saved = {}
     for name in ("SIGTERM", "SIGHUP"):

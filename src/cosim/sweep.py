@@ -556,10 +556,10 @@ class _ProcessPool:
 
         todo = deque(jobs.items())
         while todo or any(w.key is not None for w in self.workers):
-            if not todo and all(w.key is None for w in self.workers):
-                break
-            while todo and len(self.workers) < min(self.n, len(jobs)):
-                self.workers.append(_Worker(self.ctx))
+            idle = sum(w.key is None for w in self.workers)
+            while todo and len(self.workers) < self.n and idle < len(todo):
+                self.workers.append(_Worker(self.ctx))      # started only for work left
+                idle += 1
             for w in self.workers:
                 if w.ready and w.key is None and todo:
                     key, scene = todo.popleft()
@@ -617,9 +617,10 @@ class _ProcessPool:
                     self._replace(w)
 
     def _replace(self, w: _Worker) -> None:
+        """End ``w``; :meth:`run` starts another if points are left."""
         w.key = None
         w.stop()
-        self.workers[self.workers.index(w)] = _Worker(self.ctx)
+        self.workers.remove(w)
 
     def close(self, wait: float = 5.0) -> None:
         workers, self.workers = self.workers, []
