@@ -114,8 +114,8 @@ def test_effects_torque_and_energy():
                                       r"must be >= 0"),
     ('drive = { type = "pid" }', r"`subsystems\.arm\.bodies\.link\.joint\.drive\.type` must be one of"),
     ('drive = { type = "table", times = [0.0, 0.0], torques = [1.0, 2.0] }',
-     r"`subsystems\.arm\.bodies\.link\.joint\.drive\.times` must increase strictly, "
-     r"got \[0\.0, 0\.0\]"),
+     r"`subsystems\.arm\.bodies\.link\.joint\.drive\.times\[1\]` must be greater than the "
+     r"time before it, 0\.0 \(times increase strictly\), got 0\.0$"),
     ('drive = { type = "pd", kp = 1.0, kd = 1.0, reference = { type = "minimum_jerk", start = 0.0,'
      ' end = 1.0, t_start = 1.0, t_end = 0.5 } }',
      r"`subsystems\.arm\.bodies\.link\.joint\.drive\.reference\.t_end` must be > "

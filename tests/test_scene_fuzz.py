@@ -17,11 +17,11 @@ import tomllib
 import warnings
 
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 from conftest import CASES, ROOT
-from cosim import cli
+from cosim import cli, tomlread
 from cosim.scene import MAX_ELEMENTS, MAX_STEPS, SceneError, load_scene
 from cosim.schemes import UnsafeStepError
 from cosim.tomlwrite import dumps
@@ -244,3 +244,125 @@ def test_command_line_in_a_fresh_process(tmp_path):
     assert proc.stderr.strip() == (f"error: {file}: `subsystems.beam.elements` must be <= "
                                    f"{MAX_ELEMENTS}, got 1000000000")
     assert not (tmp_path / "o").exists()
+
+
+# ------------------------------------------------------- bytes, nesting, sizes
+SMALL = settings(max_examples=100, deadline=None,
+                 suppress_health_check=[HealthCheck.function_scoped_fixture,
+                                        HealthCheck.too_slow])
+
+
+@SMALL
+@given(data=st.data())
+def test_mutated_bytes_are_refused_with_the_file(data, tmp_path):
+    """Bytes that are not UTF-8 (Latin-1 letters, cut multi-byte characters,
+    noise, NUL) end in a scene error naming the file, never in a
+    UnicodeDecodeError."""
+    name = data.draw(st.sampled_from(sorted(TEXTS)), label="scene")
+    raw = bytearray(TEXTS[name].encode())
+    op = data.draw(st.sampled_from(["insert", "replace", "latin1", "cut_utf8", "bom"]),
+                   label="op")
+    at = data.draw(st.integers(0, len(raw) - 1), label="at")
+    if op == "insert":
+        raw[at:at] = data.draw(st.binary(min_size=1, max_size=8), label="bytes")
+    elif op == "replace":
+        raw[at] = data.draw(st.integers(0, 255), label="byte")
+    elif op == "latin1":
+        raw[at:at] = "é ü ß".encode("latin-1")
+    elif op == "cut_utf8":
+        raw[at:at] = "é".encode()[:1]
+    else:
+        raw[0:0] = b"\xef\xbb\xbf"
+    file = tmp_path / "fuzzed.toml"
+    file.write_bytes(bytes(raw))
+    outcome(file)
+    if op in ("latin1", "cut_utf8"):
+        with pytest.raises(SceneError, match=re.escape(f"{file}: must be UTF-8 text")):
+            load_scene(file)
+
+
+def _nest(kind: str, depth: int, leaf: str = "1.0") -> str:
+    if kind == "array":
+        return "[" * depth + leaf + "]" * depth
+    return "{ a = " * depth + leaf + " }" * depth
+
+
+@SMALL
+@given(data=st.data())
+def test_nesting_near_the_limit(data, tmp_path):
+    """A value nested ``depth`` levels below its key (arrays, inline tables, a
+    dotted key or a table header): past :data:`cosim.tomlread.MAX_DEPTH` a
+    scene error naming the file, at or below it whatever the scene makes of
+    it -- never a RecursionError."""
+    name = data.draw(st.sampled_from(sorted(TEXTS)), label="scene")
+    kind = data.draw(st.sampled_from(["array", "table", "dotted", "header"]), label="kind")
+    depth = data.draw(st.integers(1, 2 * tomlread.MAX_DEPTH), label="depth")
+    if kind == "dotted":
+        line = ".".join(["zz"] * depth) + " = 1.0"
+    elif kind == "header":
+        line = "[" + ".".join(["zz"] * depth) + "]\nq = 1.0"
+    else:
+        line = f"zz = {_nest(kind, depth)}"
+    text = TEXTS[name]
+    if kind == "header":
+        text = text + "\n" + line + "\n"
+    else:
+        text = line + "\n" + text
+    file = tmp_path / "fuzzed.toml"
+    file.write_text(text)
+    levels = depth - (0 if kind in ("array", "table") else 1)    # below the top table
+    if kind == "header":
+        levels = depth                        # the table `zz...` holds `q`
+    if levels > tomlread.MAX_DEPTH:
+        with pytest.raises(SceneError, match=re.escape(f"{file}: ")) as exc:
+            load_scene(file)
+        assert "must nest at most 32 levels" in str(exc.value)
+    else:
+        outcome(file)
+
+
+@settings(max_examples=60, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(kind=st.sampled_from(["chain", "beam", "rod"]),
+       size=st.integers(1, MAX_ELEMENTS),
+       modes=st.sampled_from([{}, {"count": 6}, {"cutoff_hz": 5000.0}, {"count": 10**6}]))
+def test_sizes_are_refused_by_their_estimate_before_anything_is_built(kind, size, modes,
+                                                                        monkeypatch):
+    """Any size up to the element limit: refused, naming the key and the
+    estimate, exactly when the estimate passes :data:`cosim.scene.MAX_MEMORY`;
+    nothing is assembled either way (only loaded)."""
+    import fem
+    from cosim.scene import MAX_MEMORY, structure_memory
+
+    scene, key, overrides = {
+        "chain": ("three_mass.toml", "subsystems.chain.masses",
+                  [f"subsystems.chain.masses=[{', '.join(['0.15'] * size)}]",
+                   f"subsystems.chain.stiffnesses=[{', '.join(['1.6e5'] * size)}]"]),
+        "beam": ("beam_impact.toml", "subsystems.beam.elements",
+                 [f"subsystems.beam.elements={size}"]),
+        "rod": ("rod_impact.toml", "subsystems.rod.elements",
+                [f"subsystems.rod.elements={size}"]),
+    }[kind]
+    table = key.rsplit(".", 1)[0]
+    overrides.append(f"{table}.modes={{ {', '.join(f'{k} = {v!r}' for k, v in modes.items())} }}")
+
+    def no_assembly(*a, **k):
+        raise AssertionError("assembled a structure while loading")
+    for cls in (fem.Beam, fem.Rod, fem.Chain):
+        monkeypatch.setattr(cls, "assemble", no_assembly)
+    _, nbytes, _ = structure_memory(kind, size, modes.get("count"), modes.get("cutoff_hz"))
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            load_scene(CASES / scene, overrides=overrides)
+    except SceneError as exc:
+        if "cosim.scene.MAX_MEMORY" in str(exc):
+            assert nbytes > MAX_MEMORY and exc.key == key, str(exc)
+            event("refused for its memory")
+            return
+        # refused for another reason, which comes first (a point index past a
+        # short chain's end): the memory rule itself is checked on its own
+        assert exc.key != key or "must hold at most" not in str(exc), str(exc)
+        return
+    assert nbytes <= MAX_MEMORY
+    event("loaded")

@@ -992,3 +992,21 @@ cdef class MultibodyStep:
             for i in range(n):
                 pot -= self.mass[i] * (self.px_re[i] * self.g_re + self.px_im[i] * self.g_im)
         return 0.5 * kin + pot
+
+    def penetrations(self, double t, y):
+        """The contacts' penetrations [m] and rates [m/s] at ``(t, y)``, as
+        two lists (the reference's ``MultibodySubsystem._probe``)."""
+        yin = np.ascontiguousarray(y, dtype=float)
+        cdef double[::1] yv = yin
+        cdef int k, p
+        cdef double d, dd
+        ds, dds = [], []
+        self._frames(&yv[0], &yv[self.n])
+        for k in range(self.nc):
+            p = self.c_port[k]
+            self._point(self.n + p, self.port_body[p], self.pl_re[p], self.pl_im[p],
+                        &yv[self.n], False)
+            self._penetration(k, t, &d, &dd)
+            ds.append(d)
+            dds.append(dd)
+        return ds, dds

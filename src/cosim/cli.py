@@ -2,6 +2,9 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
+import math
+import signal
 import sys
 import warnings
 from pathlib import Path
@@ -286,7 +289,7 @@ def _cmd_sweep(args) -> int:
 
     if args.study:
         path = Path(args.study)
-        if not path.is_file():
+        if not path.exists():
             path = Path("studies") / f"{args.study}.toml"
         study = sw.load_study(path)
         if args.scene or args.variants or args.set:
@@ -295,6 +298,7 @@ def _cmd_sweep(args) -> int:
             return 2
         scene, variants, grid = study.scene, list(study.variants), study.grid
         contact, joint = study.contact, study.joint
+        timeout = args.timeout if args.timeout is not None else study.timeout
         default_out = Path("runs") / study.name
     elif args.scene:
         study = None
@@ -310,6 +314,7 @@ def _cmd_sweep(args) -> int:
             print(f"error: --set: {exc}", file=sys.stderr)
             return 2
         contact, joint = args.contact, args.joint
+        timeout = args.timeout
         default_out = Path("runs") / f"{Path(scene).stem}-sweep"
     else:
         print("error: give a SCENE or --study", file=sys.stderr)
@@ -319,16 +324,23 @@ def _cmd_sweep(args) -> int:
     where = (f"Dask scheduler {args.scheduler}" if args.scheduler
              else f"{workers} process(es)" if workers > 1 else "this process")
     n = len(sw.grid_points(variants or None, grid))
+    if args.timeout is not None and not (args.timeout > 0 and math.isfinite(args.timeout)):
+        print(f"error: `--timeout` must be > 0 s, got {args.timeout!r}", file=sys.stderr)
+        return 2
     print(f"sweep {scene}: {n} point(s) on {where}, into {out}")
     bar = _SweepProgress(args.quiet, n)
+    stopped = None
     try:
-        rows = sw.sweep(scene, variants=variants or None, grid=grid, scheme=args.scheme,
-                        workers=workers, scheduler=args.scheduler, out=out,
-                        retry_failed=args.retry_failed, contact=contact, joint=joint,
-                        progress=bar)
-    except ImportError as exc:
+        with _stop_signals_interrupt() as got:
+            rows = sw.sweep(scene, variants=variants or None, grid=grid, scheme=args.scheme,
+                            workers=workers, scheduler=args.scheduler, out=out,
+                            retry_failed=args.retry_failed, contact=contact, joint=joint,
+                            progress=bar, timeout=timeout)
+    except (ImportError, sw.SweepError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    except sw.SweepInterrupted as exc:
+        rows, stopped = exc.rows, got[0] if got else exc.signal_name
     finally:
         bar.close()
     for r in rows:
@@ -345,6 +357,11 @@ def _cmd_sweep(args) -> int:
     print(f"{sum(r['status'] == 'finished' for r in rows)} of {len(rows)} point(s) finished"
           + (f", {skipped} done before (not run again)" if skipped else ""))
     print(f"wrote {out / sw.TABLE}")
+    if stopped is not None:
+        print(f"error: the sweep was stopped ({stopped}); the points that had not ended are "
+              f"`interrupted` in {out / sw.TABLE}; sweep again to run them",
+              file=sys.stderr)
+        return 128 + int(getattr(signal, stopped))
     if not args.no_plot:
         try:
             png = sw.plot_sweep(rows, out / sw.PLOT, contact=contact,
@@ -357,6 +374,40 @@ def _cmd_sweep(args) -> int:
             print('no plot: matplotlib is not installed (pip install "cosim[plot]")',
                   file=sys.stderr)
     return 0 if all(r["status"] == "finished" for r in rows) else 1
+
+
+class _StopSignal(KeyboardInterrupt):
+    """SIGTERM or SIGHUP, raised where the main thread is, as Ctrl-C is."""
+
+    def __init__(self, name: str):
+        super().__init__(name)
+        self.signal_name = name
+
+
+@contextlib.contextmanager
+def _stop_signals_interrupt():
+    """Within: SIGTERM and SIGHUP (a scheduler's stop, `timeout`, a closed
+    terminal) interrupt as Ctrl-C does, so that what ran is kept and the
+    workers are ended (a second signal is noted, not raised, so the clean-up
+    runs to its end); the handlers before are restored after.  Yields the
+    list of the names of the signals received."""
+    got: list[str] = []
+
+    def handler(signum, frame):
+        got.append(signal.Signals(signum).name)
+        if len(got) == 1:           # a second one must not cut the clean-up short
+            raise _StopSignal(got[-1])
+
+    saved = {}
+    for name in ("SIGTERM", "SIGHUP"):
+        sig = getattr(signal, name, None)
+        if sig is not None:
+            saved[sig] = signal.signal(sig, handler)
+    try:
+        yield got
+    finally:
+        for sig, old in saved.items():
+            signal.signal(sig, old)
 
 
 class _SweepProgress:
@@ -445,6 +496,10 @@ def build_parser() -> argparse.ArgumentParser:
                     help="run on a Dask distributed cluster (tcp://host:8786), or `local` to "
                          "start one here; needs the dask extra")
     sw.add_argument("--out", help="sweep directory (default runs/SCENE-sweep or runs/STUDY)")
+    sw.add_argument("--timeout", type=float, metavar="SECONDS",
+                    help="most wall-clock seconds a point may run; a point past it is "
+                         "stopped and recorded with status `timeout` (a study's `timeout` "
+                         "key otherwise)")
     sw.add_argument("--retry-failed", action="store_true",
                     help="run the points that failed or were refused before again")
     sw.add_argument("--contact", default="C", help="contact whose regime is classified and "

@@ -83,7 +83,7 @@ def load_run(run_dir) -> RunData:
     PlotError
         If there is no readable ``series.npz``.
     """
-    import tomllib
+    from .tomlread import read_toml
 
     path = Path(run_dir)
     fseries = path / "series.npz"
@@ -110,8 +110,8 @@ def load_run(run_dir) -> RunData:
     fscene = path / "scene.toml"
     if fscene.is_file():
         try:
-            scene = tomllib.loads(fscene.read_text())
-        except (OSError, tomllib.TOMLDecodeError):
+            scene = read_toml(fscene)           # within the limits of a scene file
+        except (OSError, ValueError):           # TOMLDecodeError, TomlLimitError
             scene = None
     t_end = None
     if scene is not None and isinstance(scene.get("t_end"), (int, float)):

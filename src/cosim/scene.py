@@ -17,12 +17,14 @@ import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from . import tomlread
 from .guard import (DEFAULT_CHATTER_SWITCHES, DEFAULT_CHATTER_WINDOW, DEFAULT_COUPLING_WARNING,
                     DEFAULT_ENERGY_FLOOR, DEFAULT_ENERGY_GROWTH, DEFAULT_ENERGY_WARNING,
                     GuardOptions)
 
 
-__all__ = ["SceneError", "Scene", "load_scene", "parse_override", "SUBSYSTEM_TYPES"]
+__all__ = ["SceneError", "Scene", "load_scene", "parse_override", "read_toml_file",
+           "SUBSYSTEM_TYPES"]
 
 log = logging.getLogger(__name__)
 
@@ -34,6 +36,9 @@ _MISSING = object()
 MAX_ELEMENTS = 20_000
 #: most steps a run may ask for (end time over a macro or integrator step)
 MAX_STEPS = 10**9
+#: most memory the structures of a scene may need, as estimated before they
+#: are built (:func:`structure_memory`) [bytes]
+MAX_MEMORY = 4 * 2**30
 #: rule name -> (text, check)
 _RULES = {">0": ("> 0", lambda v: v > 0), ">=0": (">= 0", lambda v: v >= 0)}
 
@@ -181,11 +186,17 @@ def parse_override(text: str, file="--set") -> tuple[list[str], object]:
     if "=" not in text:
         raise SceneError(file, "", f"override {text!r} must read key.path=value")
     key, value = text.split("=", 1)
+    if key.count(".") >= tomlread.MAX_DEPTH:
+        raise SceneError(file, "", f"a --set key must have at most {tomlread.MAX_DEPTH} "
+                                   f"parts (`cosim.tomlread.MAX_DEPTH`), got "
+                                   f"{key.count('.') + 1}")
     path = [p.strip() for p in key.strip().split(".")]
     if not all(path):
         raise SceneError(file, key, f"override {text!r} has an empty key")
     try:
-        parsed = tomllib.loads(f"v = {value.strip()}")["v"]
+        parsed = tomlread.loads(f"v = {value.strip()}")["v"]
+    except tomlread.TomlLimitError as exc:
+        raise SceneError(file, key.strip(), f"given with --set {exc}") from None
     except tomllib.TOMLDecodeError:
         parsed = value.strip()
     return path, parsed
@@ -274,14 +285,7 @@ def load_scene(path, variant: str | None = None, overrides=(), scheme: str | Non
     SceneError
     """
     file = Path(path)
-    try:
-        text = file.read_text()
-    except OSError as exc:
-        raise SceneError(file, "", f"cannot be read: {exc.strerror or exc}") from None
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise SceneError(file, "", f"is not valid TOML: {exc}") from None
+    data = read_toml_file(file)
     variants = data.pop("variants", {})
     if not isinstance(variants, dict) or not all(isinstance(v, dict) for v in variants.values()):
         raise SceneError(file, "variants", "must be a table of tables")
@@ -305,7 +309,31 @@ def load_scene(path, variant: str | None = None, overrides=(), scheme: str | Non
         if not isinstance(sch, dict):
             raise SceneError(file, "scheme", f"must be a table, got {_type_name(sch)} {sch!r}")
         sch["name"] = scheme
+    try:
+        tomlread.check_depth(data)          # an override may reach deeper than the file
+    except tomlread.TomlLimitError as exc:
+        raise SceneError(file, exc.key, str(exc)) from None
     return _validate(data, file, chosen)
+
+
+def read_toml_file(file) -> dict:
+    """Read a scene or a study file within the limits of :mod:`cosim.tomlread`
+    (a regular file of at most 64 MiB, UTF-8, nested at most 32 levels, at
+    most 10 000 keys).
+
+    Raises
+    ------
+    SceneError
+        Naming the file, if it cannot be read, passes a limit, or is not TOML.
+    """
+    try:
+        return tomlread.read_toml(file)
+    except OSError as exc:
+        raise SceneError(file, "", f"cannot be read: {exc.strerror or exc}") from None
+    except tomlread.TomlLimitError as exc:
+        raise SceneError(file, exc.key, str(exc)) from None
+    except tomllib.TOMLDecodeError as exc:
+        raise SceneError(file, "", f"is not valid TOML: {exc}") from None
 
 
 def _validate(data: dict, file, variant) -> Scene:
@@ -401,6 +429,7 @@ def _validate(data: dict, file, variant) -> Scene:
                              f"steps, more than {MAX_STEPS:.0e}")
     if not subs:
         top.error("subsystems", "must declare at least one subsystem")
+    _check_memory(subs, file)
     structures = [s["name"] for s in subs if s["type"] in STRUCTURE_TYPES]
     for name in export:
         if name not in structures:
@@ -433,6 +462,83 @@ def _scheme_option(sch: _Table, k, opt):
     if not opt.check(v):
         sch.error(k, f"must be {opt.rule}, got {v!r}")
     return v
+
+
+def structure_memory(kind: str, size: int, n_modes: int | None, cutoff_hz: float | None
+                     ) -> tuple[int, int, str]:
+    """Estimate the memory that building a structure takes, before it is built.
+
+    Parameters
+    ----------
+    kind : str
+        ``chain``, ``beam``, ``cable``, ``string`` or ``rod``.
+    size : int
+        Masses of a chain, elements of the others.
+    n_modes, cutoff_hz
+        The structure's ``modes`` table (``count`` and ``cutoff_hz``).
+
+    Returns
+    -------
+    n_dof : int
+        Its degrees of freedom before constraints (an upper bound).
+    bytes : int
+        About the peak memory of its assembly and modal analysis [bytes]: a
+        dense eigenproblem (every mode kept, or a structure of at most
+        ``fem.modal.DENSE_LIMIT`` DOFs) holds about ten ``n x n`` arrays of
+        doubles (9.4 measured for a chain of 2000 masses), and so does a
+        chain, whose matrices are dense; a sparse one, a few ``n``-vectors per
+        Lanczos vector (a lower bound with a cutoff alone, whose number of
+        modes is found while solving).
+    why : str
+        What dominates, for the message.
+    """
+    from fem.modal import DENSE_LIMIT
+
+    n = {"chain": size, "beam": 2 * (size + 1), "cable": 2 * (size + 1)}.get(kind, size + 1)
+    dense = (n <= DENSE_LIMIT or (n_modes is None and cutoff_hz is None)
+             or (n_modes is not None and n_modes >= n - 3))
+    if dense or kind == "chain":
+        nbytes = 10 * 8 * n * n
+        why = f"dense {n} x {n} matrices"
+        if not dense:
+            why += " (a chain's matrices are dense whatever modes it keeps)"
+        else:
+            why += (" (every mode is kept: give `modes.count` or `modes.cutoff_hz`)"
+                    if kind != "chain" else "")
+        return n, nbytes, why
+    k = n_modes if n_modes is not None else 16
+    nbytes = 8 * n * (3 * max(2 * k + 1, 20) + 60)
+    return n, nbytes, f"{k} Lanczos vectors of {n} DOFs"
+
+
+def _check_memory(subs: list[dict], file) -> None:
+    """Refuse a scene whose structures would need more than :data:`MAX_MEMORY`."""
+    found = []
+    for spec in subs:
+        if spec["type"] not in STRUCTURE_TYPES:
+            continue
+        model, modes = spec["model"], spec["modes"]
+        size = (len(model.masses) if spec["type"] == "chain" else model.n_elements)
+        n, nbytes, why = structure_memory(spec["type"], size, modes["n_modes"],
+                                          modes["cutoff_hz"])
+        key = spec["key"] + (".masses" if spec["type"] == "chain" else ".elements")
+        found.append((nbytes, key, n, why))
+    total = sum(f[0] for f in found)
+    if total > MAX_MEMORY:
+        nbytes, key, n, why = max(found)
+        others = (f"; with the other structures, {_size_text(total)}"
+                  if total > nbytes else "")
+        raise SceneError(file, key, f"makes a structure of {n} DOFs whose model and modes "
+                                    f"need about {_size_text(nbytes)} ({why}){others}, more "
+                                    f"than the {_size_text(MAX_MEMORY)} a scene may use "
+                                    f"(`cosim.scene.MAX_MEMORY`)")
+
+
+def _size_text(nbytes: float) -> str:
+    for unit in ("bytes", "KiB", "MiB", "GiB"):
+        if nbytes < 1024 or unit == "GiB":
+            return f"{nbytes:.3g} {unit}"
+        nbytes /= 1024
 
 
 def _subsystem_spec(name: str, t: _Table) -> dict:

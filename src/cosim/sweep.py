@@ -31,7 +31,7 @@ import logging
 import math
 import os
 import re
-import tomllib
+import signal
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -40,9 +40,10 @@ import numpy as np
 
 from .errors import UnsafeStepError
 from .result import _atomic_write, resolved_scene_text, write_outputs
-from .scene import SceneError, load_scene, parse_override
+from .scene import SceneError, load_scene, parse_override, read_toml_file
+from .tomlread import TomlLimitError, read_bytes
 
-__all__ = ["Point", "SweepEvent", "Study", "sweep", "grid_points", "split_values",
+__all__ = ["Point", "SweepEvent", "Study", "SweepError", "SweepInterrupted", "sweep", "grid_points", "split_values",
            "parse_grid_option", "impact_regime", "flatten", "write_table", "read_table",
            "plot_sweep", "load_study", "run_study", "TIMING_COLUMNS", "TABLE", "PLOT"]
 
@@ -388,8 +389,9 @@ class SweepEvent:
     point : Point
     status : str
         ``finished``, ``failed`` (the run stopped; ``message`` says why),
-        ``refused`` (the scene or its step was refused before the run) or
-        ``error`` (the worker raised).
+        ``refused`` (the scene or its step was refused before the run),
+        ``error`` (the worker raised, or its process died while running this
+        point) or ``timeout`` (the point ran past the sweep's time limit).
     message : str
     skipped : bool
         The point was done before (resume) and was not run again.
@@ -422,7 +424,7 @@ def _simulate(scene):
 
 
 def _file_hash(path: Path) -> str:
-    return hashlib.sha256(path.read_bytes()).hexdigest()
+    return hashlib.sha256(read_bytes(path)).hexdigest()
 
 
 def _spec(point: Point, scene_path: Path, scheme, scene_hash: str) -> dict:
@@ -457,37 +459,238 @@ def _load_done(run_dir: Path, spec: dict, retry_failed: bool):
     return done, summary, series
 
 
-class _Runner:
-    """Where the points run: this process, a process pool, or Dask."""
+class SweepError(ValueError):
+    """A sweep that cannot start: a scheduler address that is malformed or
+    cannot be reached.  Nothing has run, nothing is written."""
 
-    def __init__(self, workers: int, scheduler):
-        self.workers, self.scheduler = workers, scheduler
+
+class SweepInterrupted(KeyboardInterrupt):
+    """A sweep stopped by Ctrl-C (or by SIGTERM/SIGHUP, which ``cosim sweep``
+    turns into this).  ``rows`` holds every point's record in grid order: the
+    points that ended before the stop with their status, the others with
+    status ``interrupted``; the table was written."""
+
+    def __init__(self, rows: list, signal_name: str = "SIGINT"):
+        super().__init__(signal_name)
+        self.rows, self.signal_name = rows, signal_name
+
+
+def _signal_text(code) -> str:
+    """How a process ended, from its exit code."""
+    if code is None:
+        return "it stopped answering"
+    if code < 0:
+        try:
+            return f"killed by {signal.Signals(-code).name}"
+        except ValueError:
+            return f"killed by signal {-code}"
+    return f"exit code {code}"
+
+
+def _worker_main(conn) -> None:
+    """A pool process: run the scenes it is sent, one at a time, until it is
+    sent None or its parent is gone.  Ctrl-C is the parent's to handle."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    from . import run  # noqa: F401 - import the models before the clock of a point starts
+    try:
+        conn.send("ready")
+    except OSError:
+        return
+    while True:
+        try:
+            scene = conn.recv()
+        except (EOFError, OSError):
+            return
+        if scene is None:
+            return
+        try:
+            conn.send(_simulate(scene))
+        except (BrokenPipeError, OSError):
+            return
+
+
+class _Worker:
+    """One process of :class:`_ProcessPool` and the point it holds."""
+
+    def __init__(self, ctx):
+        self.conn, child = ctx.Pipe()
+        self.proc = ctx.Process(target=_worker_main, args=(child,), daemon=True)
+        self.proc.start()
+        child.close()
+        self.key = self.deadline = None
+        self.ready = False
+
+    def stop(self, wait: float = 0.0) -> None:
+        """End the process: politely when idle (``wait`` > 0), else killed."""
+        if self.proc.is_alive() and wait > 0 and self.key is None:
+            try:
+                self.conn.send(None)
+            except OSError:
+                pass
+            self.proc.join(wait)
+        if self.proc.is_alive():
+            self.proc.kill()
+        self.proc.join()
+        self.conn.close()
+
+
+class _ProcessPool:
+    """Local worker processes, each holding one point at a time, so that the
+    sweep knows which point a process held when it died or ran past the time
+    limit: that point alone is recorded (``error`` with how the process
+    ended, or ``timeout``), the process is replaced, and the other points run
+    on.  Processes are started with ``spawn`` (no state of this process is
+    inherited) and ignore Ctrl-C; :meth:`close` kills any still running."""
+
+    def __init__(self, n: int, timeout: float | None):
+        import multiprocessing
+        self.ctx = multiprocessing.get_context("spawn")
+        self.n, self.timeout = max(n, 1), timeout
+        self.workers: list[_Worker] = []
+        self.failed_starts = 0
+
+    def run(self, jobs: dict):
+        import time
+        from collections import deque
+        from multiprocessing.connection import wait
+
+        todo = deque(jobs.items())
+        while todo or any(w.key is not None for w in self.workers):
+            idle = sum(w.key is None for w in self.workers)
+            while todo and len(self.workers) < self.n and idle < len(todo):
+                self.workers.append(_Worker(self.ctx))      # started only for work left
+                idle += 1
+            for w in self.workers:
+                if w.ready and w.key is None and todo:
+                    key, scene = todo.popleft()
+                    try:
+                        w.conn.send(scene)
+                    except OSError:             # died idle: the point goes to a new one
+                        todo.appendleft((key, scene))
+                        self._replace(w)
+                        continue
+                    w.key = key
+                    w.deadline = (time.monotonic() + self.timeout
+                                  if self.timeout is not None else None)
+            starting = [w for w in self.workers if not w.ready]
+            busy = [w for w in self.workers if w.key is not None]
+            deadlines = [w.deadline for w in busy if w.deadline is not None]
+            left = max(min(deadlines) - time.monotonic(), 0.0) if deadlines else None
+            ready = wait([w.conn for w in busy + starting]
+                         + [w.proc.sentinel for w in busy + starting], left)
+            now = time.monotonic()
+            for w in starting:
+                if w.conn in ready:
+                    try:
+                        w.ready = w.conn.recv() == "ready"
+                    except (EOFError, OSError):
+                        ready.append(w.proc.sentinel)
+                if w.proc.sentinel in ready and not w.ready:
+                    w.proc.join()
+                    self.failed_starts += 1
+                    if self.failed_starts > 3:
+                        raise RuntimeError(f"sweep worker processes die before they can "
+                                           f"start ({_signal_text(w.proc.exitcode)})")
+                    self._replace(w)
+            for w in busy:
+                key = w.key
+                if w.conn in ready:
+                    try:
+                        outcome = w.conn.recv()
+                    except (EOFError, OSError):     # died while answering
+                        w.proc.join(1.0)
+                        outcome = ("error", f"its worker process died while sending the "
+                                            f"result ({_signal_text(w.proc.exitcode)})")
+                        self._replace(w)
+                    else:
+                        w.key = w.deadline = None
+                    yield key, outcome
+                elif w.proc.sentinel in ready:
+                    w.proc.join()
+                    yield key, ("error", f"its worker process died while running it "
+                                         f"({_signal_text(w.proc.exitcode)}); the other "
+                                         f"points ran on")
+                    self._replace(w)
+                elif w.deadline is not None and now >= w.deadline:
+                    yield key, ("timeout", f"ran past the time limit of {self.timeout:g} s "
+                                           f"(wall clock); its process was stopped")
+                    self._replace(w)
+
+    def _replace(self, w: _Worker) -> None:
+        """End ``w``; :meth:`run` starts another if points are left."""
+        w.key = None
+        w.stop()
+        self.workers.remove(w)
+
+    def close(self, wait: float = 5.0) -> None:
+        workers, self.workers = self.workers, []
+        for w in workers:
+            w.stop(wait if w.key is None else 0.0)
+
+
+#: seconds ``--scheduler ADDRESS`` waits for the scheduler to answer
+CONNECT_TIMEOUT_S = 10.0
+
+
+def _private_cluster(n_workers: int):
+    """A Dask ``LocalCluster`` that other users of this machine cannot use:
+    TLS with a certificate made for this cluster alone (mutual: a client or
+    a worker must present it), listening on 127.0.0.1; without the
+    ``cryptography`` package, the workers are threads of this process
+    reached by the in-process transport (no socket at all)."""
+    from distributed import LocalCluster
+    try:
+        from distributed.security import Security
+        security = Security.temporary()
+    except ImportError:
+        log.warning("no `cryptography` package: the local Dask cluster runs its workers "
+                    "as threads of this process (no network listener)")
+        return LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=False,
+                            protocol="inproc://", dashboard_address=None)
+    return LocalCluster(n_workers=n_workers, threads_per_worker=1, host="127.0.0.1",
+                        protocol="tls://", security=security, dashboard_address=None)
+
+
+class _Runner:
+    """Where the points run: this process, a process pool, or Dask.
+
+    A Dask scheduler given by address is reached when the runner is entered
+    (a :class:`SweepError` if it cannot be); a ``local`` cluster is started
+    only when there are points to run."""
+
+    def __init__(self, workers: int, scheduler, timeout: float | None = None):
+        self.workers, self.scheduler, self.timeout = workers, scheduler, timeout
         self._pool = self._client = self._cluster = None
 
     def __enter__(self):
         if self.scheduler is not None:
             try:
-                from distributed import Client, LocalCluster
+                from distributed import Client
             except ImportError as exc:
                 raise ImportError('a Dask scheduler needs dask.distributed: '
                                   'pip install "cosim[dask]"') from exc
             if self.scheduler == "local":
-                self._cluster = LocalCluster(n_workers=max(self.workers, 1),
-                                             threads_per_worker=1, dashboard_address=None)
-                self._client = Client(self._cluster)
+                pass                                    # started by run()
             elif isinstance(self.scheduler, str):
-                self._client = Client(self.scheduler)
+                try:
+                    self._client = Client(self.scheduler, timeout=CONNECT_TIMEOUT_S)
+                except (ValueError, TypeError) as exc:
+                    raise SweepError(f"`--scheduler` must be `local` or a Dask scheduler's "
+                                     f"address (tcp://HOST:PORT or tls://HOST:PORT), got "
+                                     f"{self.scheduler!r}: {exc}") from None
+                except OSError as exc:
+                    raise SweepError(f"`--scheduler` {self.scheduler!r} cannot be reached: "
+                                     f"{exc}") from None
             else:                                       # a Client or a cluster object
                 self._client = (self.scheduler if hasattr(self.scheduler, "submit")
                                 else Client(self.scheduler))
-        elif self.workers > 1:
-            from concurrent.futures import ProcessPoolExecutor
-            self._pool = ProcessPoolExecutor(max_workers=self.workers)
+        elif self.workers > 1 or self.timeout is not None:
+            self._pool = _ProcessPool(self.workers, self.timeout)
         return self
 
     def __exit__(self, *exc):
         if self._pool is not None:
-            self._pool.shutdown(wait=True, cancel_futures=True)
+            self._pool.close(wait=0.0 if exc[0] is not None else 5.0)
         if self._client is not None and self._client is not self.scheduler:
             self._client.close()
         if self._cluster is not None:
@@ -495,35 +698,99 @@ class _Runner:
 
     def run(self, jobs):
         """Run ``{key: scene}``; yield ``(key, outcome)`` as each completes."""
-        if self._client is not None or self._pool is not None:
-            if self._client is not None:
-                from distributed import as_completed
-                client = self._client
-                futures = {client.submit(_simulate, scene, pure=False): key
-                           for key, scene in jobs.items()}
-                cancel = lambda: client.cancel(list(futures))      # noqa: E731
-            else:
-                from concurrent.futures import as_completed
-                futures = {self._pool.submit(_simulate, scene): key
-                           for key, scene in jobs.items()}
-                cancel = lambda: [fut.cancel() for fut in futures]  # noqa: E731
-            try:
-                for fut in as_completed(futures):
-                    try:
-                        outcome = fut.result()
-                    except Exception as exc:   # noqa: BLE001 - a lost worker or process
-                        outcome = ("error", f"{type(exc).__name__}: {exc}")
-                    yield futures[fut], outcome
-            finally:
-                cancel()
+        if self.scheduler == "local" and self._client is None:
+            from distributed import Client
+            self._cluster = _private_cluster(max(self.workers, 1))
+            self._client = Client(self._cluster)
+        if self._client is not None:
+            yield from self._run_dask(jobs)
+        elif self._pool is not None:
+            yield from self._pool.run(jobs)
         else:
             for key, scene in jobs.items():
                 yield key, _simulate(scene)
 
+    def _run_dask(self, jobs):
+        """On Dask: as many points in flight as the cluster has threads, so
+        a point's time limit runs from its submission.  A worker that dies is
+        Dask's to handle: it runs the points that worker held elsewhere, and
+        a point that kills workers again and again ends in ``KilledWorker``
+        for that point alone."""
+        import time
+        from collections import deque
+
+        from distributed import wait
+
+        client = self._client
+        try:
+            slots = max(sum(client.nthreads().values()), 1)
+        except Exception:                          # noqa: BLE001 - not told: one by one
+            slots = 1
+        todo = deque(jobs.items())
+        live: dict = {}
+
+        def submit():
+            while todo and len(live) < slots:
+                key, scene = todo.popleft()
+                fut = client.submit(_simulate, scene, pure=False)
+                live[fut] = (key, None if self.timeout is None
+                             else time.monotonic() + self.timeout)
+
+        try:
+            submit()
+            while live:
+                deadlines = [d for _, d in live.values() if d is not None]
+                left = max(min(deadlines) - time.monotonic(), 0.0) if deadlines else None
+                try:
+                    finished, _ = wait(list(live), timeout=left, return_when="FIRST_COMPLETED")
+                except TimeoutError:
+                    finished = ()
+                for fut in finished:
+                    key, _ = live.pop(fut)
+                    try:
+                        outcome = fut.result()
+                    except Exception as exc:   # noqa: BLE001 - a lost worker
+                        outcome = ("error", f"{type(exc).__name__}: {exc}")
+                    yield key, outcome
+                now = time.monotonic()
+                for fut, (key, deadline) in list(live.items()):
+                    if deadline is not None and now >= deadline:
+                        del live[fut]
+                        restarted = _stop_dask_task(client, fut)
+                        yield key, ("timeout", f"ran past the time limit of "
+                                               f"{self.timeout:g} s (wall clock); its task "
+                                               f"was cancelled"
+                                               + (" and its worker restarted" if restarted
+                                                  else ""))
+                submit()
+        finally:
+            client.cancel(list(live))
+
+
+def _stop_dask_task(client, fut) -> bool:
+    """Cancel a task past its time limit and restart the worker running it
+    (Dask cannot stop a running task; a worker under a nanny restarts).
+    Returns whether a worker was restarted."""
+    try:
+        holders = [w for w, keys in client.processing().items() if fut.key in keys]
+    except Exception:                              # noqa: BLE001 - best effort
+        holders = []
+    client.cancel([fut], force=True)
+    if not holders:
+        return False
+    try:
+        client.restart_workers(holders, timeout=30)
+    except Exception as exc:                       # noqa: BLE001 - say it, go on
+        log.warning("could not restart the Dask worker(s) %s running a point past its "
+                    "time limit: %s", holders, exc)
+        return False
+    return True
+
 
 def sweep(scene, *, variants=None, grid=None, scheme: str | None = None, workers: int = 1,
           scheduler=None, out=None, retry_failed: bool = False, contact: str = "C",
-          joint: str = "robot/arm", progress=None) -> list[dict]:
+          joint: str = "robot/arm", progress=None, timeout: float | None = None
+          ) -> list[dict]:
     """Run a scene over a grid of variants and overrides; one record per point.
 
     Parameters
@@ -560,6 +827,11 @@ def sweep(scene, *, variants=None, grid=None, scheme: str | None = None, workers
         scene has them.
     progress : callable, optional
         Called with a :class:`SweepEvent` after each point.
+    timeout : float, optional
+        Most wall-clock seconds a point may run [s]; a point past it is
+        recorded with status ``timeout`` and its process stopped (on Dask its
+        task is cancelled and the worker running it restarted).  With a
+        timeout, even ``workers = 1`` runs the points in a child process.
 
     Returns
     -------
@@ -580,6 +852,12 @@ def sweep(scene, *, variants=None, grid=None, scheme: str | None = None, workers
         If the scene file cannot be read.
     ValueError
         If the grid is malformed.
+    SweepError
+        If ``scheduler`` is malformed or cannot be reached (nothing written).
+    SweepInterrupted
+        On Ctrl-C (a ``KeyboardInterrupt``): the workers are ended, the table
+        is written with the points not ended as ``interrupted``, and the
+        exception carries the records.
 
     Notes
     -----
@@ -597,15 +875,14 @@ def sweep(scene, *, variants=None, grid=None, scheme: str | None = None, workers
     [('f1', 1), ('f100', 9)]
     """
     scene_path = Path(scene)
+    table = read_toml_file(scene_path)      # a regular file within the limits, or refused
     try:
         scene_hash = _file_hash(scene_path)
-    except OSError as exc:
-        raise SceneError(scene_path, "", f"cannot be read: {exc.strerror or exc}") from None
+    except (OSError, TomlLimitError) as exc:
+        raise SceneError(scene_path, "", f"cannot be read: {getattr(exc, 'strerror', None) or exc}"
+                         ) from None
     if not variants:                    # name the default variant, so the point says it
-        try:
-            default = tomllib.loads(scene_path.read_text()).get("default_variant")
-        except tomllib.TOMLDecodeError as exc:
-            raise SceneError(scene_path, "", f"is not valid TOML: {exc}") from None
+        default = table.get("default_variant")
         variants = [default] if isinstance(default, str) else None
     points = grid_points(variants, grid)
     out = Path(out) if out is not None else None
@@ -613,52 +890,67 @@ def sweep(scene, *, variants=None, grid=None, scheme: str | None = None, workers
     rows: dict[int, dict] = {}
     scenes, specs = {}, {}
     seen_warnings: set[str] = set()
+    stopped = None
 
     def report(point, status, message, skipped):
         if progress is not None:
             progress(SweepEvent(point, status, message, skipped, len(rows), total))
 
-    for p in points:
-        spec = _spec(p, scene_path, scheme, scene_hash)
-        specs[p.index] = spec
-        if out is not None:
-            done = _load_done(out / p.name, spec, retry_failed)
-            if done is not None:
-                meta, summary, series = done
-                rows[p.index] = _record(p, meta, summary, series, contact, joint)
-                report(p, meta["status"], meta["message"], True)
-                continue
+    with _Runner(workers, scheduler, timeout) as runner:
         try:
-            with warnings.catch_warnings(record=True) as caught:
-                warnings.simplefilter("always")
-                sc = load_scene(scene_path, p.variant, p.overrides, scheme)
-        except SceneError as exc:
-            _finish(p, spec, out, None, None, "refused", str(exc), rows, contact, joint)
-            report(p, "refused", str(exc), False)
-            continue
-        for w in caught:                    # each warning once per sweep, not per point
-            if str(w.message) not in seen_warnings:
-                seen_warnings.add(str(w.message))
-                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-        scenes[p.index] = sc
+            for p in points:
+                spec = _spec(p, scene_path, scheme, scene_hash)
+                specs[p.index] = spec
+                if out is not None:
+                    done = _load_done(out / p.name, spec, retry_failed)
+                    if done is not None:
+                        meta, summary, series = done
+                        rows[p.index] = _record(p, meta, summary, series, contact, joint)
+                        report(p, meta["status"], meta["message"], True)
+                        continue
+                try:
+                    with warnings.catch_warnings(record=True) as caught:
+                        warnings.simplefilter("always")
+                        sc = load_scene(scene_path, p.variant, p.overrides, scheme)
+                except SceneError as exc:
+                    _finish(p, spec, out, None, None, "refused", str(exc), rows, contact, joint)
+                    report(p, "refused", str(exc), False)
+                    continue
+                for w in caught:                # each warning once per sweep, not per point
+                    if str(w.message) not in seen_warnings:
+                        seen_warnings.add(str(w.message))
+                        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+                scenes[p.index] = sc
 
-    if scenes:
-        with _Runner(workers, scheduler) as runner:
-            for index, (kind, payload) in runner.run(scenes):
-                p, spec = points[index], specs[index]
-                if kind == "ran":
-                    res = payload
-                    _finish(p, spec, out, res, scenes[index], res.status, res.message, rows,
-                            contact, joint)
-                    report(p, res.status, res.message, False)
-                else:
-                    _finish(p, spec, out, None, scenes[index], kind, payload, rows,
-                            contact, joint)
-                    report(p, kind, payload, False)
-
+            if scenes:
+                for index, (kind, payload) in runner.run(scenes):
+                    p, spec = points[index], specs[index]
+                    if kind == "ran":
+                        res = payload
+                        _finish(p, spec, out, res, scenes[index], res.status, res.message,
+                                rows, contact, joint)
+                        report(p, res.status, res.message, False)
+                    else:
+                        _finish(p, spec, out, None, scenes[index], kind, payload, rows,
+                                contact, joint)
+                        report(p, kind, payload, False)
+        except KeyboardInterrupt as exc:
+            # the runner's exit ends the workers; the table keeps what ended
+            stopped = exc
+    if stopped is not None:
+        name = getattr(stopped, "signal_name", None) or "SIGINT"
+        for p in points:
+            if p.index not in rows:
+                rows[p.index] = _record(p, {**specs.get(p.index, {}), "variant": p.variant,
+                                            "status": "interrupted",
+                                            "message": f"the sweep was stopped ({name}) "
+                                                       f"before this point ended"},
+                                        None, None, contact, joint)
     records = [rows[p.index] for p in points]
     if out is not None:
         write_table(records, out / TABLE)
+    if stopped is not None:
+        raise SweepInterrupted(records, name) from None
     return records
 
 
@@ -847,6 +1139,9 @@ class Study:
         key = "contacts.C.law.contact_stiffness"
         scale = 6.25e-6
         label = "f"
+
+    and optionally ``timeout``, the most wall-clock seconds a point may run
+    (see :func:`sweep`).
     """
 
     name: str
@@ -859,6 +1154,7 @@ class Study:
     x: str | None = None
     x_scale: float = 1.0
     x_label: str | None = None
+    timeout: float | None = None
 
 
 def load_study(path) -> Study:
@@ -870,33 +1166,30 @@ def load_study(path) -> Study:
         Naming the file and the key, if a value is missing or of the wrong
         kind.
     """
+    from .scene import _Table
+
     path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text())
-    except OSError as exc:
-        raise SceneError(path, "", f"cannot be read: {exc.strerror or exc}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise SceneError(path, "", f"is not valid TOML: {exc}") from None
-    known = {"title", "scene", "variants", "set", "x", "contact", "joint"}
-    for k in data:
-        if k not in known:
-            raise SceneError(path, k, f"is not a key of a study; keys are {sorted(known)}")
-    if not isinstance(data.get("scene"), str):
-        raise SceneError(path, "scene", "must be the scene file's path (a string)")
-    variants = data.get("variants", [])
+    top = _Table(read_toml_file(path), (), path)
+    title = top.string("title", path.stem)
+    scene = top.string("scene")
+    variants = top.raw("variants", [])
     if not isinstance(variants, list) or not all(isinstance(v, str) for v in variants):
-        raise SceneError(path, "variants", f"must be a list of names, got {variants!r}")
-    grid = data.get("set", {})
+        top.error("variants", f"must be a list of names, got {variants!r}")
+    grid = top.raw("set", {})
     if not isinstance(grid, dict) or not all(isinstance(v, list) and v for v in grid.values()):
-        raise SceneError(path, "set", "must be a table of key = [values]")
-    x = data.get("x", {})
-    if not isinstance(x, dict) or set(x) - {"key", "scale", "label"}:
-        raise SceneError(path, "x", "must be a table of `key`, `scale` and `label`")
-    return Study(name=path.stem, title=str(data.get("title", path.stem)),
-                 scene=(path.parent / data["scene"]), variants=tuple(variants),
-                 grid=dict(grid), contact=str(data.get("contact", "C")),
-                 joint=str(data.get("joint", "robot/arm")), x=x.get("key"),
-                 x_scale=float(x.get("scale", 1.0)), x_label=x.get("label"))
+        top.error("set", f"must be a table of key = [values], got {grid!r}")
+    contact = top.string("contact", "C")
+    joint = top.string("joint", "robot/arm")
+    timeout = top.number("timeout", None, rule=">0", unit="s")
+    x = top.table("x", {})
+    key = x.string("key", None)
+    scale = x.number("scale", 1.0)
+    label = x.string("label", None)
+    x.finish()
+    top.finish()
+    return Study(name=path.stem, title=title, scene=path.parent / scene,
+                 variants=tuple(variants), grid=dict(grid), contact=contact, joint=joint,
+                 x=key, x_scale=scale, x_label=label, timeout=timeout)
 
 
 def run_study(study: Study, *, out, workers: int = 1, scheduler=None, scheme=None,
@@ -912,7 +1205,7 @@ def run_study(study: Study, *, out, workers: int = 1, scheduler=None, scheme=Non
     rows = sweep(study.scene, variants=study.variants or None, grid=study.grid,
                  scheme=scheme, workers=workers, scheduler=scheduler, out=out,
                  retry_failed=retry_failed, contact=study.contact, joint=study.joint,
-                 progress=progress)
+                 progress=progress, timeout=study.timeout)
     png = None
     if plot:
         png = plot_sweep(rows, Path(out) / PLOT, contact=study.contact, x=study.x,

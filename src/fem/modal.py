@@ -90,9 +90,10 @@ def _elastic_solver(structure: LinearStructure):
     part of ``b`` is solved for, and the rigid part of ``x`` is removed.
     """
     from scipy.linalg import qr
+    from scipy.sparse import csc_matrix
     from scipy.sparse.linalg import splu
 
-    k = structure.stiffness.tocsc()
+    k = csc_matrix(structure.stiffness)     # a chain's is dense
     mass = structure.mass
     rigid = structure.rigid_body_modes()
     if rigid.shape[1] == 0:
