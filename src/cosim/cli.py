@@ -91,7 +91,7 @@ def _progress_line(quiet: bool):
     """A progress renderer, or None when quiet or not talking to a terminal."""
     if quiet or not _on_terminal():
         return None
-    return _ProgressLine(sys.stderr)
+    return _ProgressLine(_raw(sys.stderr))
 
 
 def _cmd_run(args) -> int:
@@ -361,7 +361,7 @@ class _SweepProgress:
         if not quiet and _on_terminal():
             try:
                 from tqdm import tqdm
-                self._bar = tqdm(total=total, unit="point", file=sys.stderr)
+                self._bar = tqdm(total=total, unit="point", file=_raw(sys.stderr))
             except ImportError:
                 pass
 
@@ -470,7 +470,42 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+#: control characters (ANSI escapes, carriage returns, bidirectional overrides) and
+#: how the terminal is shown them: escaped, never raw
+_CONTROL = {c: f"\\x{c:02x}" for c in (*range(32), *range(127, 160)) if c not in (9, 10)}
+_CONTROL.update({c: f"\\u{c:04x}" for c in (0x200E, 0x200F, *range(0x202A, 0x202F),
+                                            *range(0x2066, 0x206A))})
+
+
+class _Printable:
+    """A text stream that shows control characters escaped (``\\x1b``), so no
+    name, path or message from a scene file can drive the terminal.  ``raw``
+    is the stream itself, for the progress line's own carriage returns."""
+
+    def __init__(self, stream):
+        self.raw = stream
+
+    def write(self, text: str) -> int:
+        return self.raw.write(text.translate(_CONTROL))
+
+    def __getattr__(self, name):
+        return getattr(self.raw, name)
+
+
+def _raw(stream):
+    return getattr(stream, "raw", stream) if isinstance(stream, _Printable) else stream
+
+
 def main(argv=None) -> int:
+    stdout, stderr = sys.stdout, sys.stderr
+    sys.stdout, sys.stderr = _Printable(stdout), _Printable(stderr)
+    try:
+        return _main(argv)
+    finally:
+        sys.stdout, sys.stderr = stdout, stderr
+
+
+def _main(argv) -> int:
     args = build_parser().parse_args(argv)
     from .errors import OutputExistsError
     from .scene import SceneError

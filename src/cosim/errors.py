@@ -1,6 +1,7 @@
 """Errors of a run (the scene loader's SceneError lives in cosim.scene)."""
 
-__all__ = ["SimulationError", "CouplingError", "UnsafeStepError", "OutputExistsError"]
+__all__ = ["SimulationError", "CouplingError", "UnsafeStepError", "OutputExistsError",
+           "OutputError", "OutputBusyError"]
 
 
 class SimulationError(RuntimeError):
@@ -17,3 +18,13 @@ class UnsafeStepError(ValueError):
 
 class OutputExistsError(FileExistsError):
     """The output directory already holds a run, and overwriting was not asked for."""
+
+
+class OutputError(OSError):
+    """A run's folder or one of its files cannot be written (a full disk, a
+    read-only place, a file where a folder should be); the message names the
+    path and the reason."""
+
+
+class OutputBusyError(OutputError):
+    """Another run holds the lock on the output folder."""
