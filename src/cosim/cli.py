@@ -94,7 +94,50 @@ def _progress_line(quiet: bool):
     return _ProgressLine(_raw(sys.stderr))
 
 
+#: signals that stop a run as Ctrl-C does (a scheduler's stop, `timeout`, a closed terminal)
+STOP_SIGNALS = ("SIGTERM", "SIGHUP")
+
+
+class _StopOnSignals:
+    """While in effect, SIGTERM and SIGHUP raise :class:`cosim.errors.SignalStop`
+    (a KeyboardInterrupt) once, as SIGINT raises KeyboardInterrupt: the run
+    writes its outputs up to then.  Repeats of them are ignored meanwhile, so
+    that the outputs are written whole; the previous handlers come back on
+    exit."""
+
+    def __enter__(self):
+        import signal
+        self._old = {}
+        for name in STOP_SIGNALS:
+            num = getattr(signal, name, None)
+            if num is not None:
+                self._old[num] = signal.signal(num, self._handler)
+        return self
+
+    def _handler(self, signum, frame):
+        import signal
+        from .errors import SignalStop
+        for num in self._old:
+            signal.signal(num, signal.SIG_IGN)       # once; the run is stopping
+        raise SignalStop(signum)
+
+    def __exit__(self, *exc):
+        import signal
+        for num, old in self._old.items():
+            signal.signal(num, old)
+
+
+def _stop_code(exc: BaseException) -> int:
+    """Exit status of a run stopped by ``exc``: 128 + the signal (130 for Ctrl-C)."""
+    return 128 + getattr(exc, "signum", 2)
+
+
 def _cmd_run(args) -> int:
+    with _StopOnSignals():
+        return _run(args)
+
+
+def _run(args) -> int:
     from .run import RunInterrupted, simulate
     from .scene import load_scene
 
@@ -106,7 +149,7 @@ def _cmd_run(args) -> int:
     try:
         res = simulate(scene, progress=progress, out=out, overwrite=args.overwrite)
     except RunInterrupted as exc:
-        res, code = exc.result, 130
+        res, code = exc.result, _stop_code(exc.__cause__)
     except Exception as exc:
         res = getattr(exc, "partial_result", None)
         if res is None:
@@ -116,10 +159,8 @@ def _cmd_run(args) -> int:
         if progress is not None:
             progress.close()
     _print_summary(res.summary, out)
-    if scene.export:
-        from .export import export_structures
-        for path in export_structures(scene, res, out):
-            print(f"  wrote {path} (open in ParaView)")
+    for name in scene.export:
+        print(f"  wrote {out / (name + '.xdmf')} (open in ParaView)")
     if res.status != "finished":
         print(f"error: the run did not finish ({res.status}): {res.message}. Its series and "
               f"summary up to t = {res.summary['t_end']:.6g} s are in {out}", file=sys.stderr)
@@ -505,9 +546,13 @@ def main(argv=None) -> int:
         sys.stdout, sys.stderr = stdout, stderr
 
 
+#: exit status when the reader of our output went away (`cosim run ... | head`): 128 + SIGPIPE
+EXIT_BROKEN_PIPE = 141
+
+
 def _main(argv) -> int:
     args = build_parser().parse_args(argv)
-    from .errors import OutputExistsError
+    from .errors import OutputError, OutputExistsError
     from .scene import SceneError
     from .schemes import UnsafeStepError
 
@@ -515,13 +560,34 @@ def _main(argv) -> int:
         warnings.simplefilter("always")
         warnings.showwarning = lambda msg, *a, **k: print(f"warning: {msg}", file=sys.stderr)
         try:
-            return args.func(args)
-        except (SceneError, UnsafeStepError, OutputExistsError) as exc:
-            print(f"error: {exc}", file=sys.stderr)
-            return 2
-        except KeyboardInterrupt:          # outside a run (a run's own is handled there)
-            print("error: interrupted", file=sys.stderr)
-            return 130
+            try:
+                code = args.func(args)
+                sys.stdout.flush()             # a closed pipe shows here, not at exit
+                return code
+            except (SceneError, UnsafeStepError, OutputExistsError, OutputError) as exc:
+                print(f"error: {exc}", file=sys.stderr)
+                return 2
+            except KeyboardInterrupt as exc:   # outside a run (a run's own is handled there)
+                name = getattr(exc, "signal_name", None)
+                print("error: interrupted" + (f" ({name})" if name else ""), file=sys.stderr)
+                return _stop_code(exc)
+        except BrokenPipeError:
+            _quiet_pipes()
+            return EXIT_BROKEN_PIPE
+
+
+def _quiet_pipes() -> None:
+    """After a reader closed our pipe: point stdout and stderr at the null
+    device, so that nothing else (not even the interpreter's flush at exit)
+    fails on it."""
+    import os
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    for stream in (sys.__stdout__, sys.__stderr__):
+        try:
+            os.dup2(devnull, stream.fileno())
+        except (OSError, ValueError, AttributeError):
+            pass
+    os.close(devnull)
 
 
 if __name__ == "__main__":  # pragma: no cover - `python -m cosim.cli`

@@ -78,7 +78,7 @@ def output_error(exc: OSError, path, what: str = "cannot write") -> OutputError:
         return exc
     reason = exc.strerror or str(exc) or type(exc).__name__
     err = OutputError(f"{what} {path}: {reason}")
-    err.errno, err.filename = exc.errno, str(path)
+    err.errno, err.path = exc.errno, str(path)     # not `filename`: it would reword str(err)
     return err
 
 
