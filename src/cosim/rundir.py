@@ -108,14 +108,14 @@ class RunLock:
         OutputBusyError
             If another process holds the lock.
         """
+        if os.path.lexists(self.folder) and not self.folder.is_dir():
+            raise OutputError(f"cannot make the run folder {self.folder}: it exists and is "
+                              f"not a folder")
         try:
             self.created = not self.folder.exists()
             self.folder.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
             raise output_error(exc, self.folder, "cannot make the run folder") from None
-        if not self.folder.is_dir():
-            raise OutputError(f"cannot make the run folder {self.folder}: "
-                              f"it exists and is not a folder")
         import fcntl                    # POSIX; the rest of this module is not
         for _ in range(5):              # the file may be removed between open and lock
             fd = self._open()
