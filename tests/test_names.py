@@ -181,3 +181,16 @@ def test_names_are_checked_from_python_too(tmp_path):
         load_scene(path)
     with pytest.raises(SceneError, match=r"`name` must be a plain name .*got 'a/b'"):
         load_scene(CASES / "spring_drop.toml", overrides=['name="a/b"'])
+
+
+def test_scene_toml_keeps_any_text_readable(tmp_path):
+    """Found by the names fuzz: JSON wrote characters beyond the BMP as
+    surrogate pairs, which TOML refuses, so such a scene's scene.toml could
+    not be read back."""
+    text = "drop \U0001F600 \x7f \x1b[31m \u2028 end"
+    path = scene_file(tmp_path, spring_drop(description=text))
+    proc = cosim("run", path, "--set", "t_end=0.001", "--out", tmp_path / "o", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    again = tomllib.loads((tmp_path / "o" / "scene.toml").read_text())
+    assert again["description"] == text
+    load_scene(tmp_path / "o" / "scene.toml")
