@@ -194,3 +194,13 @@ def test_scene_toml_keeps_any_text_readable(tmp_path):
     again = tomllib.loads((tmp_path / "o" / "scene.toml").read_text())
     assert again["description"] == text
     load_scene(tmp_path / "o" / "scene.toml")
+
+
+def test_a_subsystem_name_holds_no_dot(tmp_path):
+    table = spring_drop()
+    table["subsystems"]["wall.x"] = table["subsystems"].pop("wall")
+    path = scene_file(tmp_path, table)
+    with pytest.raises(SceneError, match=re.escape(
+            f"{path}: `subsystems` names a subsystem 'wall.x': a subsystem's name holds no "
+            f"`.`, which separates it from the point in SUBSYSTEM.POINT")):
+        load_scene(path)

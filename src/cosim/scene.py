@@ -396,6 +396,10 @@ def _validate(data: dict, file, variant) -> Scene:
     subs = []
     for sname, st in top.tables("subsystems"):
         _check_name(file, "subsystems", sname, "names a subsystem that")
+        if "." in sname:
+            raise SceneError(file, "subsystems", f"names a subsystem {sname!r}: a subsystem's "
+                                                 f"name holds no `.`, which separates it from "
+                                                 f"the point in SUBSYSTEM.POINT")
         subs.append(_subsystem_spec(sname, st))
         step = subs[-1].get("max_step")
         if step is not None and t_end / step > MAX_STEPS:
