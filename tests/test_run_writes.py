@@ -363,3 +363,16 @@ def test_cosim_run_piped_into_head(tmp_path):
     assert proc.stdout == "scene spring_drop  scheme gauss_seidel  status finished\n"
     assert proc.stderr in ("exit 0\n", "exit 141\n")            # 141 when head left first
     whole(out)
+
+
+def test_a_folder_made_for_a_lock_that_fails_is_removed(tmp_path, monkeypatch):
+    import errno
+    import fcntl
+
+    def broken(fd, op):
+        raise OSError(errno.EIO, "Input/output error")
+    monkeypatch.setattr(fcntl, "flock", broken)
+    with pytest.raises(OutputError, match=f"cannot lock {tmp_path}/new/{LOCK_NAME}: "
+                                          f"Input/output error"):
+        cosim.simulate(cosim.load_scene(SPRING_DROP), out=tmp_path / "new")
+    assert tree(tmp_path) == []

@@ -98,7 +98,7 @@ class RunLock:
         self._fd = None
 
     def acquire(self) -> "RunLock":
-        """Take the lock.
+        """Take the lock (a folder made for it is removed again when it fails).
 
         Raises
         ------
@@ -116,6 +116,18 @@ class RunLock:
             self.folder.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
             raise output_error(exc, self.folder, "cannot make the run folder") from None
+        try:
+            return self._lock()
+        except BaseException:
+            if self.created:            # a folder made just now holds nothing but the lock
+                try:
+                    self.path.unlink(missing_ok=True)
+                    self.folder.rmdir()
+                except OSError:
+                    pass
+            raise
+
+    def _lock(self) -> "RunLock":
         import fcntl                    # POSIX; the rest of this module is not
         for _ in range(5):              # the file may be removed between open and lock
             fd = self._open()
