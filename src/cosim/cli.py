@@ -111,7 +111,10 @@ class _StopOnSignals:
         for name in STOP_SIGNALS:
             num = getattr(signal, name, None)
             if num is not None:
-                self._old[num] = signal.signal(num, self._handler)
+                try:
+                    self._old[num] = signal.signal(num, self._handler)
+                except ValueError:                   # not the main thread: leave them be
+                    break
         return self
 
     def _handler(self, signum, frame):
