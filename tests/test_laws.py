@@ -83,3 +83,22 @@ def test_registry_lookup():
     assert get_contact_law(KelvinVoigtLaw) is KelvinVoigtLaw
     with pytest.raises(ValueError, match=r"unknown contact law 'hertzz'; valid laws are"):
         get_contact_law("hertzz")
+
+
+@pytest.mark.parametrize("name", sorted(CONTACT_LAWS))
+def test_scalar_evaluation_is_the_array_formula(name):
+    """``evaluate`` and the scalar ``potential``/``potential_slope`` (what
+    integrators and the schemes call per step, without array calls) give
+    bit for bit what the array formulas give."""
+    law = EXAMPLES[name]
+    rng = np.random.default_rng(7)
+    d = np.concatenate([rng.uniform(-1e-3, 1e-3, 300), [0.0, -0.0, 1e-300]])
+    dd = rng.uniform(-5.0, 5.0, d.size)
+    f_arr, sw_arr = law.force(d, dd), law.switch(d, dd)
+    p_arr = law.dissipation_rate(f_arr, d, dd)
+    for i in range(d.size):
+        for x, y in ((float(d[i]), float(dd[i])), (d[i], dd[i])):   # Python and numpy floats
+            f, p, sw = law.evaluate(x, y)
+            assert (f, p, sw) == (f_arr[i], p_arr[i], sw_arr[i]), (name, x, y)
+            assert law.potential(x) == law.potential(d[i:i + 1])[0]
+            assert law.potential_slope(x) == law.potential_slope(d[i:i + 1])[0]

@@ -4,14 +4,69 @@ from __future__ import annotations
 import numpy as np
 
 from couplers import PointContact
+from couplers.laws import (FloresLaw, HertzLaw, HuntCrossleyLaw, KelvinVoigtLaw,
+                           LankaraniNikraveshLaw, LinearLaw, RigidLaw)
 from multibody import JointEffects, TreeModel
+from multibody.effects import (ConstantTorque, MinimumJerk, PDTracking, Sinusoid, Table,
+                               TorqueTable)
 from multibody.impact import frictional_impact, frictionless_impact
 
 from .errors import SimulationError
-from .integrators import RK4, TimeStepper
-from .subsystem import EmbeddedContact, StepInput, Subsystem
+from .integrators import INTEGRATORS, RK4, TimeStepper
+from .kernel import compiled_module
+from .subsystem import (DISSIPATED, IMPULSE, MOMENT, QUADRATURES, WORK, EmbeddedContact,
+                        StepInput, Subsystem)
 
-__all__ = ["MultibodySubsystem"]
+__all__ = ["MultibodySubsystem", "kernel_law"]
+
+
+def kernel_law(law):
+    """``(kind, k, c_or_chi, exponent)`` of a penalty law for the compiled
+    kernel (``cosim._multibody_step``), or None for a law it does not know
+    (a user's own law is stepped by the reference)."""
+    kind = type(law)
+    if kind is LinearLaw:
+        return (0, law.contact_stiffness, 0.0, 1.0)
+    if kind is KelvinVoigtLaw:
+        return (1, law.contact_stiffness, law.contact_damping, 1.0)
+    if kind in (HertzLaw, HuntCrossleyLaw, LankaraniNikraveshLaw, FloresLaw):
+        return (2, law.contact_stiffness, law._chi(), law.exponent)
+    if kind is RigidLaw:
+        return (3, 0.0, 0.0, 1.0)
+    return None
+
+
+def kernel_effects(effects: JointEffects | None):
+    """Joint effects as the compiled kernel takes them:
+    ``(stiffness, rest, damping, drives)``, or None for no effects; raises
+    ``TypeError`` for a drive or reference the kernel does not know."""
+    if effects is None:
+        return None
+    drives = []
+    for d in effects.drives:
+        ref_kind, ref_par, ts, vs = 0, (0.0,) * 4, (), ()
+        if type(d) is ConstantTorque:
+            kind, gains = 0, (d.torque, 0.0, 0.0)
+        elif type(d) is TorqueTable:
+            kind, gains, ts, vs = 1, (0.0,) * 3, d.torque.times, d.torque.values
+        elif type(d) is PDTracking:
+            kind, gains, r = 2, (d.kp, d.kd, d.max_torque), d.reference
+            if type(r) is Table:
+                ts, vs = r.times, r.values
+            elif type(r) is MinimumJerk:
+                ref_kind, ref_par = 1, (r.start, r.end, r.t_start, r.t_end)
+            elif type(r) is Sinusoid:
+                ref_kind, ref_par = 2, (r.amplitude, r.frequency, r.phase, r.offset)
+            else:
+                raise TypeError(f"reference {type(r).__name__}")
+        else:
+            raise TypeError(f"drive {type(d).__name__}")
+        drives.append((d.joint, kind, gains, ref_kind, ref_par, ts, vs))
+    return effects.stiffness, effects.rest, effects.damping, drives
+
+
+#: integrators whose steps the compiled kernel takes (RK4) or feeds (adaptive)
+KERNEL_INTEGRATORS = tuple(INTEGRATORS.values())
 
 
 class MultibodySubsystem(Subsystem):
@@ -34,8 +89,11 @@ class MultibodySubsystem(Subsystem):
 
     Notes
     -----
-    ``aux`` holds, per embedded contact, its impulse and dissipated energy,
-    then the energy dissipated by joint dampers and supplied by drives.
+    ``aux`` holds, per embedded contact, its :data:`~cosim.subsystem.QUADRATURES`
+    (impulse, dissipated energy, the step's first moment of the force, work),
+    then the energy dissipated by joint dampers and supplied by drives.  The
+    integrated state is ``[q, dq, aux, port velocity moments]``, the layout the
+    compiled kernel shares (:mod:`cosim._multibody_step`).
     """
 
     def __init__(self, name: str, model: TreeModel, q0, dq0, ports: dict,
@@ -86,6 +144,7 @@ class MultibodySubsystem(Subsystem):
         e = EmbeddedContact(contact, port, own_side, partner_position, partner_velocity)
         self._embedded.append(e)
         self.aux = np.zeros(4 * len(self._embedded) + 2)
+        self._kernel = None
         return e
 
     #: embedded slot -> cosim.connections.EmbeddedConnection (grasp, friction)
@@ -96,6 +155,7 @@ class MultibodySubsystem(Subsystem):
         :class:`cosim.connections.EmbeddedConnection`: its mode's normal and
         tangential forces, friction, and a grasp on the located touch)."""
         self._connections = {**self._connections, int(slot): connection}
+        self._kernel = None
 
     def _connection_switch(self, t, j, on, y):
         """A located switch of connection ``j``: grasp on touch.  Returns the
@@ -116,7 +176,7 @@ class MultibodySubsystem(Subsystem):
         this subsystem [J] so far, and the current step's first moment of the
         force ``int f (t - t0) dt`` [N s^2], in the order impulse, dissipated,
         moment, work."""
-        return self.aux[:-2].reshape(-1, 4)
+        return self.aux[:-2].reshape(-1, len(QUADRATURES))
 
     def ledger(self):
         return float(self.aux[-2]), float(self.aux[-1])
@@ -148,6 +208,9 @@ class MultibodySubsystem(Subsystem):
     def _evaluate(self, y):
         n = self.n_dof
         q, dq = y[:n], y[n:2 * n]
+        kernel = self._compiled()
+        if kernel is not None:       # the tree's part of a right-hand side in Python
+            return (dq, *kernel.evaluate(y))
         M, F, x, v, J, _ = self.model.evaluate(q, dq, self._g, self._port_body,
                                                self._port_local_c)
         return dq, M, F, x, v, J
@@ -202,17 +265,82 @@ class MultibodySubsystem(Subsystem):
                          if k in self._connections else float(e.law.switch(d, dd))
                          for k, (e, d, dd) in enumerate(self._embedded_state(t, x, v))])
 
+    #: the compiled kernel (cosim._multibody_step.MultibodyStep): None until
+    #: first asked for, False where it is not built or not chosen
+    _kernel = None
+    #: whether the kernel steps this side (see :meth:`_compiled_step`)
+    _kernel_steps = False
+
+    def _compiled(self):
+        """The compiled kernel of this tree, or None (:mod:`cosim.kernel`)."""
+        if self._kernel is None:
+            self._kernel = self._build_kernel() or False
+        return self._kernel or None
+
+    def _compiled_step(self, inputs):
+        """The compiled kernel where it takes this step, or None where the
+        reference must: the kernel not built or not chosen, grasp or friction
+        connections embedded here, a user's own law, drive or integrator, or
+        an input that is not a :class:`StepInput`."""
+        kernel = self._compiled()
+        if kernel is None or not self._kernel_steps:
+            return None
+        if inputs is not None and type(inputs) is not StepInput:
+            return None
+        return kernel
+
+    def _build_kernel(self):
+        module = compiled_module("_multibody_step")
+        if module is None:
+            return None
+        laws = [kernel_law(e.law) for e in self._embedded]
+        try:
+            effects = kernel_effects(self.effects)
+        except TypeError:               # a user's own drive: the reference steps
+            effects, known = None, False
+        else:
+            known = True
+        self._kernel_steps = (known and not self._connections
+                              and type(self.integrator) in KERNEL_INTEGRATORS
+                              and all(law is not None for law in laws))
+        contacts = ([(e.port, e.side, e.normal, e.offset, *law)
+                     for e, law in zip(self._embedded, laws)] if self._kernel_steps else [])
+        m = self.model
+        return module.MultibodyStep(m.parent, m.revolute, m._offset, m._axis, m._angle0,
+                                    m.ancestors, m.mass, m.inertia, m._com, m._rot_mass, self._g,
+                                    self._port_body, self._port_local_c, contacts,
+                                    effects if self._kernel_steps else None)
+
+    @property
+    def kernel(self) -> str:
+        """``"compiled"`` when the compiled kernel takes this side's steps,
+        ``"numpy"`` when the reference does."""
+        return "compiled" if self._compiled() is not None and self._kernel_steps else "numpy"
+
     def _step_impl(self, t, h, inputs: StepInput | None):
         self._t0, self._h = t, h
-        self.aux[2:-2:4] = 0.0          # first moments are per step
-        y0 = np.concatenate([self.x, self.aux, np.zeros(6 * self.n_ports)])
         switch = self._switch if self._embedded else None
         self.switch_log = []
         self.impact_log = []
-        # laws' switch functions are positive where closed; a connection's
-        # are not, so a side with connections never takes coarse steps
-        y1 = self.integrator.integrate(lambda tt, yy: self._rhs(tt, yy, inputs), t, y0, t + h,
-                                       switch, self._on_switch, coarse=not self._connections)
+        kernel = self._compiled_step(inputs)
+        integ = self.integrator
+        if kernel is not None and type(integ) is RK4:
+            self.port_moments = kernel.step(t, h, self.x, self.aux, inputs, self._embedded,
+                                            integ.max_step, integ.free_step or 0.0,
+                                            self._on_switch)
+            return
+        self.aux[MOMENT:-2:len(QUADRATURES)] = 0.0      # first moments are per step
+        y0 = np.concatenate([self.x, self.aux, np.zeros(6 * self.n_ports)])
+        if kernel is not None:           # an adaptive method: compiled right-hand side
+            kernel.set_step(t, h, inputs, self._embedded)
+            y1 = integ.integrate(kernel.rhs, t, y0, t + h,
+                                 kernel.switch if self._embedded else None,
+                                 self._on_switch, coarse=True)
+        else:
+            # laws' switch functions are positive where closed; a connection's
+            # are not, so a side with connections never takes coarse steps
+            y1 = integ.integrate(lambda tt, yy: self._rhs(tt, yy, inputs), t, y0, t + h,
+                                 switch, self._on_switch, coarse=not self._connections)
         n2, na = 2 * self.n_dof, self.aux.size
         self.x[:] = y1[:n2]
         self.aux[:] = y1[n2:n2 + na]
@@ -286,10 +414,11 @@ class MultibodySubsystem(Subsystem):
             p_i = float(res.normal_impulse[i])
             if y.size > 2 * n:           # the stepping state carries the quadratures
                 share = res.energy_loss * (p_i / total if total else 0.0)
-                out[2 * n + 4 * k] += p_i
-                out[2 * n + 4 * k + 1] += share
-                out[2 * n + 4 * k + 2] += p_i * (t - self._t0)
-                out[2 * n + 4 * k + 3] -= share       # the kinetic energy the impact took
+                quad = out[2 * n + len(QUADRATURES) * k:]   # contact k's quadratures
+                quad[IMPULSE] += p_i
+                quad[DISSIPATED] += share
+                quad[MOMENT] += p_i * (t - self._t0)
+                quad[WORK] -= share    # the kinetic energy the impact took
             if k != slot:
                 self.switch_log.append((t, k, True))
             self.impact_log.append({
@@ -315,6 +444,9 @@ class MultibodySubsystem(Subsystem):
         return out
 
     def outputs(self, t, x):
+        kernel = self._compiled()
+        if kernel is not None:
+            return kernel.outputs(x)
         n = self.n_dof
         q, dq = x[:n], x[n:2 * n]
         xp, vp, _, _ = self.model.points_c(self.model.frames(q, dq), dq, self._port_body,
@@ -325,7 +457,11 @@ class MultibodySubsystem(Subsystem):
         x = self.x if x is None else x
         n = self.n_dof
         q, dq = x[:n], x[n:2 * n]
-        e = self.model.kinetic_energy(q, dq) + self.model.potential_energy(q, self.gravity)
+        kernel = self._compiled()
+        if kernel is not None:
+            e = kernel.energy(x)
+        else:
+            e = self.model.kinetic_energy(q, dq) + self.model.potential_energy(q, self.gravity)
         return e if self.effects is None else e + self.effects.potential(q)
 
     def port_mobility(self, port, direction):

@@ -146,9 +146,9 @@ def _simulate(scene, scheme, progress, progress_interval, out, overwrite):
         stop = exc
         status = "error"
         message = (f"stopped by {type(exc).__name__} at t = {_reached(rec):.6g} s: {exc}")
+    if status != "finished":            # the counters up to where the run stopped
+        counters = sch.counters()
     if stop is not None:
-        counters = {"n_windows": max(0, rec._count - 1),
-                    "n_iterations": getattr(sch, "n_iterations", 0)}
         log.error("%s", message)
     ended = f"the run ended ({status} at t = {_reached(rec):.6g} s)"
     try:

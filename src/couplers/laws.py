@@ -122,10 +122,15 @@ class LinearLaw(ContactLaw):
         return self.contact_stiffness * d
 
     def potential(self, d):
-        dp = np.maximum(d, 0.0)
+        if isinstance(d, float):        # one value (numpy's float64 too): no array calls
+            dp = d if d > 0.0 else 0.0
+        else:
+            dp = np.maximum(d, 0.0)
         return 0.5 * self.contact_stiffness * dp * dp
 
     def potential_slope(self, d):
+        if isinstance(d, float):
+            return self.contact_stiffness * (d if d > 0.0 else 0.0)
         return self.contact_stiffness * np.maximum(d, 0.0)
 
     def evaluate(self, d, dd):
@@ -162,7 +167,14 @@ class KelvinVoigtLaw(LinearLaw):
         object.__setattr__(self, "contact_damping",
                            _positive(self.contact_damping, "contact_damping", "N s/m", True))
 
-    evaluate = ContactLaw.evaluate      # not the undamped spring's shortcut
+    def evaluate(self, d, dd):
+        # ContactLaw.evaluate's formulas on one value, without array calls
+        k, c = self.contact_stiffness, self.contact_damping
+        a = d + (c / k) * dd
+        s = d if d < a else a
+        fa = k * d + c * dd
+        f = (fa if fa > 0.0 else 0.0) if s > 0.0 else 0.0
+        return f, (f - k * (d if d > 0.0 else 0.0)) * dd, s
 
     def force_active(self, d, dd):
         return self.contact_stiffness * d + self.contact_damping * dd
@@ -202,6 +214,9 @@ class RigidLaw(ContactLaw):
             raise ValueError(f"`restitution` must be in [0, 1], got {e!r}")
         object.__setattr__(self, "restitution", float(e))
         object.__setattr__(self, "friction", _positive(self.friction, "friction", "", True))
+
+    def evaluate(self, d, dd):
+        return 0.0, 0.0, d
 
     def force_active(self, d, dd):
         return 0.0 * d
@@ -267,9 +282,26 @@ class _PowerLaw(ContactLaw):
 
     def potential(self, d):
         n = self.exponent
+        if isinstance(d, float):        # one value (numpy's float64 too): no array calls
+            return self.contact_stiffness * (d if d > 0.0 else 0.0) ** (n + 1.0) / (n + 1.0)
         return self.contact_stiffness * np.maximum(d, 0.0) ** (n + 1.0) / (n + 1.0)
 
+    def evaluate(self, d, dd):
+        # ContactLaw.evaluate's formulas on one value, without array calls
+        chi = self._chi()
+        slope = self.contact_stiffness * (d if d > 0.0 else 0.0) ** self.exponent
+        if chi == 0.0:
+            s = d
+        else:
+            a = d * (1.0 + chi * dd)
+            s = d if d < a else a
+        fa = slope * (1.0 + chi * dd)
+        f = (fa if fa > 0.0 else 0.0) if s > 0.0 else 0.0
+        return f, (f - slope) * dd, s
+
     def potential_slope(self, d):
+        if isinstance(d, float):
+            return self.contact_stiffness * (d if d > 0.0 else 0.0) ** self.exponent
         return self.contact_stiffness * np.maximum(d, 0.0) ** self.exponent
 
     def switch(self, d, dd):
