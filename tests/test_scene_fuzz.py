@@ -22,6 +22,7 @@ from hypothesis import strategies as st
 
 from conftest import CASES, ROOT
 from cosim import cli, tomlread
+from cosim.rundir import NAME_MAX, inside, name_problem
 from cosim.scene import MAX_ELEMENTS, MAX_STEPS, SceneError, load_scene
 from cosim.schemes import UnsafeStepError
 from cosim.tomlwrite import dumps
@@ -159,6 +160,66 @@ def test_mutated_text_is_refused_with_file_and_key(data, tmp_path):
                        st.text(max_size=8)))
 def test_set_overrides_are_refused_with_file_and_key(key, value):
     outcome(CASES / "three_mass.toml", overrides=[f"{key}={value}"])
+
+
+# ------------------------------------------------------------------ names
+NAME_SLOTS = ["name", "subsystem", "contact", "joint", "variant"]
+odd_names = st.one_of(
+    st.text(max_size=70),
+    st.from_regex(r"[A-Za-z0-9_][A-Za-z0-9_.+-]{0,70}", fullmatch=True),
+    st.sampled_from(["..", ".", "../x", "/abs", "", "a/b", "a\\b", "\x1b[31m", "mu0.03", "a..b",
+                     "-x", "+x", ".x", "x" * NAME_MAX, "x" * (NAME_MAX + 1), "ok\n", "C:x",
+                     "\u202eevil", "x\x00"]))
+
+
+@FUZZ
+@given(slot=st.sampled_from(NAME_SLOTS), name=odd_names)
+def test_names_are_plain_words_or_refused_with_the_key(slot, name, tmp_path):
+    """A name in any slot that becomes a path or a key: the scene loads
+    exactly when the name fits the rule (and, for a subsystem, has no `.`,
+    which splits SUBSYSTEM.POINT), else the refusal names the slot's key."""
+    table = tomllib.loads(TEXTS["spring_drop.toml"])
+    expect_ok = name_problem(name) is None
+    key = {"name": "name", "subsystem": "subsystems", "contact": "contacts",
+           "joint": "subsystems.body.bodies.mass.joint.name", "variant": "variants"}[slot]
+    if slot == "name":
+        table["name"] = name
+    elif slot == "subsystem":
+        table["subsystems"] = {name if k == "wall" else k: v
+                               for k, v in table["subsystems"].items()}
+        table["contacts"]["wall"]["b"] = f"{name}.surface"
+        if name == "body":
+            expect_ok = False                         # a name declared twice
+        elif "." in name:
+            expect_ok = False                         # it would split SUBSYSTEM.POINT
+    elif slot == "contact":
+        table["contacts"] = {name: table["contacts"]["wall"]}
+        table["variants"]["kelvin_voigt"] = {"contacts": {name: {"law": {
+            "type": "kelvin_voigt", "contact_stiffness": 1e6, "contact_damping": 200.0}}}}
+    elif slot == "joint":
+        table["subsystems"]["body"]["bodies"]["mass"]["joint"]["name"] = name
+    else:
+        table["variants"] = {name: {}, "kelvin_voigt": table["variants"]["kelvin_voigt"]}
+        table["default_variant"] = name
+    file = tmp_path / "fuzzed.toml"
+    try:
+        file.write_text(dumps(table))
+    except UnicodeEncodeError:                        # a name no file can hold
+        return
+    if slot == "subsystem" and name == "body":
+        key = "subsystems"
+    try:
+        scene = load_scene(file)
+    except SceneError as exc:
+        assert not expect_ok, str(exc)
+        assert exc.key == key and str(exc).startswith(f"{file}: `{key}` "), str(exc)
+        return
+    assert expect_ok, f"{name!r} was accepted as a {slot} name"
+    names = {"name": [scene.name], "subsystem": [s["name"] for s in scene.subsystems],
+             "contact": [c["name"] for c in scene.contacts], "variant": [scene.variant],
+             "joint": [j["name"] for s in scene.subsystems for j in s.get("joints", [])]}
+    assert name in names[slot]
+    assert inside(tmp_path, name) == tmp_path / name     # a file name inside its folder
 
 
 # ------------------------------------------------------------ pinned cases

@@ -96,10 +96,56 @@ def _progress_line(quiet: bool):
     """A progress renderer, or None when quiet or not talking to a terminal."""
     if quiet or not _on_terminal():
         return None
-    return _ProgressLine(sys.stderr)
+    return _ProgressLine(_raw(sys.stderr))
+
+
+#: signals that stop a run as Ctrl-C does (a scheduler's stop, `timeout`, a closed terminal)
+STOP_SIGNALS = ("SIGTERM", "SIGHUP")
+
+
+class _StopOnSignals:
+    """While in effect, SIGTERM and SIGHUP raise :class:`cosim.errors.SignalStop`
+    (a KeyboardInterrupt) once, as SIGINT raises KeyboardInterrupt: the run
+    writes its outputs up to then.  Repeats of them are ignored meanwhile, so
+    that the outputs are written whole; the previous handlers come back on
+    exit."""
+
+    def __enter__(self):
+        import signal
+        self._old = {}
+        for name in STOP_SIGNALS:
+            num = getattr(signal, name, None)
+            if num is not None:
+                try:
+                    self._old[num] = signal.signal(num, self._handler)
+                except ValueError:                   # not the main thread: leave them be
+                    break
+        return self
+
+    def _handler(self, signum, frame):
+        import signal
+        from .errors import SignalStop
+        for num in self._old:
+            signal.signal(num, signal.SIG_IGN)       # once; the run is stopping
+        raise SignalStop(signum)
+
+    def __exit__(self, *exc):
+        import signal
+        for num, old in self._old.items():
+            signal.signal(num, old)
+
+
+def _stop_code(exc: BaseException) -> int:
+    """Exit status of a run stopped by ``exc``: 128 + the signal (130 for Ctrl-C)."""
+    return 128 + getattr(exc, "signum", 2)
 
 
 def _cmd_run(args) -> int:
+    with _StopOnSignals():
+        return _run(args)
+
+
+def _run(args) -> int:
     from .run import RunInterrupted, simulate
     from .scene import load_scene
 
@@ -111,7 +157,7 @@ def _cmd_run(args) -> int:
     try:
         res = simulate(scene, progress=progress, out=out, overwrite=args.overwrite)
     except RunInterrupted as exc:
-        res, code = exc.result, 130
+        res, code = exc.result, _stop_code(exc.__cause__)
     except Exception as exc:
         res = getattr(exc, "partial_result", None)
         if res is None:
@@ -121,10 +167,8 @@ def _cmd_run(args) -> int:
         if progress is not None:
             progress.close()
     _print_summary(res.summary, out)
-    if scene.export:
-        from .export import export_structures
-        for path in export_structures(scene, res, out):
-            print(f"  wrote {path} (open in ParaView)")
+    for name in scene.export:
+        print(f"  wrote {out / (name + '.xdmf')} (open in ParaView)")
     if res.status != "finished":
         print(f"error: the run did not finish ({res.status}): {res.message}. Its series and "
               f"summary up to t = {res.summary['t_end']:.6g} s are in {out}", file=sys.stderr)
@@ -419,7 +463,7 @@ class _SweepProgress:
         if not quiet and _on_terminal():
             try:
                 from tqdm import tqdm
-                self._bar = tqdm(total=total, unit="point", file=sys.stderr)
+                self._bar = tqdm(total=total, unit="point", file=_raw(sys.stderr))
             except ImportError:
                 pass
 
@@ -532,7 +576,46 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+#: control characters (ANSI escapes, carriage returns, bidirectional overrides) and
+#: how the terminal is shown them: escaped, never raw
+_CONTROL = {c: f"\\x{c:02x}" for c in (*range(32), *range(127, 160)) if c not in (9, 10)}
+_CONTROL.update({c: f"\\u{c:04x}" for c in (0x200E, 0x200F, *range(0x202A, 0x202F),
+                                            *range(0x2066, 0x206A))})
+
+
+class _Printable:
+    """A text stream that shows control characters escaped (``\\x1b``), so no
+    name, path or message from a scene file can drive the terminal.  ``raw``
+    is the stream itself, for the progress line's own carriage returns."""
+
+    def __init__(self, stream):
+        self.raw = stream
+
+    def write(self, text: str) -> int:
+        return self.raw.write(text.translate(_CONTROL))
+
+    def __getattr__(self, name):
+        return getattr(self.raw, name)
+
+
+def _raw(stream):
+    return getattr(stream, "raw", stream) if isinstance(stream, _Printable) else stream
+
+
 def main(argv=None) -> int:
+    stdout, stderr = sys.stdout, sys.stderr
+    sys.stdout, sys.stderr = _Printable(stdout), _Printable(stderr)
+    try:
+        return _main(argv)
+    finally:
+        sys.stdout, sys.stderr = stdout, stderr
+
+
+#: exit status when the reader of our output went away (`cosim run ... | head`): 128 + SIGPIPE
+EXIT_BROKEN_PIPE = 141
+
+
+def _main(argv) -> int:
     args = build_parser().parse_args(argv)
     from .kernel import kernel_choice
     try:                                 # a bad COSIM_KERNEL is said before anything runs
@@ -540,7 +623,7 @@ def main(argv=None) -> int:
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    from .errors import OutputExistsError
+    from .errors import OutputError, OutputExistsError
     from .scene import SceneError
     from .schemes import UnsafeStepError
 
@@ -548,13 +631,34 @@ def main(argv=None) -> int:
         warnings.simplefilter("always")
         warnings.showwarning = lambda msg, *a, **k: print(f"warning: {msg}", file=sys.stderr)
         try:
-            return args.func(args)
-        except (SceneError, UnsafeStepError, OutputExistsError) as exc:
-            print(f"error: {exc}", file=sys.stderr)
-            return 2
-        except KeyboardInterrupt:          # outside a run (a run's own is handled there)
-            print("error: interrupted", file=sys.stderr)
-            return 130
+            try:
+                code = args.func(args)
+                sys.stdout.flush()             # a closed pipe shows here, not at exit
+                return code
+            except (SceneError, UnsafeStepError, OutputExistsError, OutputError) as exc:
+                print(f"error: {exc}", file=sys.stderr)
+                return 2
+            except KeyboardInterrupt as exc:   # outside a run (a run's own is handled there)
+                name = getattr(exc, "signal_name", None)
+                print("error: interrupted" + (f" ({name})" if name else ""), file=sys.stderr)
+                return _stop_code(exc)
+        except BrokenPipeError:
+            _quiet_pipes()
+            return EXIT_BROKEN_PIPE
+
+
+def _quiet_pipes() -> None:
+    """After a reader closed our pipe: point stdout and stderr at the null
+    device, so that nothing else (not even the interpreter's flush at exit)
+    fails on it."""
+    import os
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    for stream in (sys.__stdout__, sys.__stderr__):
+        try:
+            os.dup2(devnull, stream.fileno())
+        except (OSError, ValueError, AttributeError):
+            pass
+    os.close(devnull)
 
 
 if __name__ == "__main__":  # pragma: no cover - `python -m cosim.cli`

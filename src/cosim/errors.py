@@ -1,6 +1,7 @@
 """Errors of a run (the scene loader's SceneError lives in cosim.scene)."""
 
-__all__ = ["SimulationError", "CouplingError", "UnsafeStepError", "OutputExistsError"]
+__all__ = ["SimulationError", "CouplingError", "UnsafeStepError", "OutputExistsError",
+           "OutputError", "OutputBusyError", "SignalStop"]
 
 
 class SimulationError(RuntimeError):
@@ -17,3 +18,33 @@ class UnsafeStepError(ValueError):
 
 class OutputExistsError(FileExistsError):
     """The output directory already holds a run, and overwriting was not asked for."""
+
+
+class OutputError(OSError):
+    """A run's folder or one of its files cannot be written (a full disk, a
+    read-only place, a file where a folder should be); the message names the
+    path and the reason."""
+
+
+class OutputBusyError(OutputError):
+    """Another run holds the lock on the output folder."""
+
+
+class SignalStop(KeyboardInterrupt):
+    """A signal other than SIGINT (SIGTERM, SIGHUP) stops a run as Ctrl-C does.
+
+    ``cosim run`` installs handlers that raise it; a run stopped by it ends
+    with status ``interrupted`` and a message naming the signal.
+
+    Attributes
+    ----------
+    signum : int
+    signal_name : str
+        ``SIGTERM``, ``SIGHUP``.
+    """
+
+    def __init__(self, signum: int):
+        import signal
+        self.signum = int(signum)
+        self.signal_name = signal.Signals(signum).name
+        super().__init__(self.signal_name)

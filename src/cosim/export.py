@@ -7,6 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .rundir import inside, output_error
+
 __all__ = ["export_structures"]
 
 
@@ -14,6 +16,11 @@ def export_structures(scene, result, out_dir) -> list[Path]:
     """Write ``OUT/NAME.xdmf`` for each structure the scene lists in
     ``output.export``: the nodes, line cells, and per recorded time the
     field ``w`` and the displacement vector (padded to 3 components).
+
+    Each file is written under a new temporary name in ``OUT`` and moved into
+    place whole; its path is checked to lie in ``OUT``
+    (:func:`cosim.rundir.inside`).  An :class:`OSError` becomes a
+    :class:`cosim.errors.OutputError` naming the file.
 
     meshio is imported here only, so runs that export nothing never load it.
     """
@@ -23,7 +30,10 @@ def export_structures(scene, result, out_dir) -> list[Path]:
     import meshio
 
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise output_error(exc, out, "cannot make the run folder") from exc
     written = []
     specs = {s["name"]: s for s in scene.subsystems}
     t = result.t
@@ -35,10 +45,11 @@ def export_structures(scene, result, out_dir) -> list[Path]:
         cells = [("line", np.column_stack([np.arange(len(nodes) - 1),
                                            np.arange(1, len(nodes))]))]
         direction = np.asarray(structure.direction, float)
-        path = out / f"{name}.xdmf"
-        fd, tmp = tempfile.mkstemp(dir=out, prefix=f".{name}.", suffix=".xdmf")
-        os.close(fd)
+        path = inside(out, f"{name}.xdmf")
+        tmp = None
         try:
+            fd, tmp = tempfile.mkstemp(dir=out, prefix=f".{name}.", suffix=".xdmf")
+            os.close(fd)
             with meshio.xdmf.TimeSeriesWriter(tmp, data_format="XML") as writer:
                 writer.write_points_cells(nodes, cells)
                 for k in range(0, len(t), scene.export_every):
@@ -47,9 +58,11 @@ def export_structures(scene, result, out_dir) -> list[Path]:
                     writer.write_data(float(t[k]), point_data={"w": W[k],
                                                                "displacement": disp})
             os.replace(tmp, path)
-        except BaseException:
-            if os.path.exists(tmp):
+        except BaseException as exc:
+            if tmp is not None and os.path.lexists(tmp):
                 os.unlink(tmp)
+            if isinstance(exc, OSError):
+                raise output_error(exc, path) from exc
             raise
         written.append(path)
     return written

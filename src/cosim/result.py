@@ -10,9 +10,11 @@ from pathlib import Path
 import numpy as np
 
 from .errors import OutputExistsError
+from .rundir import inside
 from .series import atomic_write, write_npz
 
-__all__ = ["SimulationResult", "write_outputs", "check_output_dir", "resolved_scene_text"]
+__all__ = ["SimulationResult", "write_outputs", "check_output_dir", "resolved_scene_text",
+           "written_by_a_run"]
 
 
 @dataclass(frozen=True)
@@ -69,10 +71,29 @@ def _atomic_write(path: Path, writer, mode: str) -> None:
 
 #: files whose presence makes a directory hold a run
 RUN_FILES = ("summary.json", "series.npz")
+#: how every ``scene.toml`` a run writes begins
+SCENE_HEADER = "# The scene as run: "
 
 
-def check_output_dir(out_dir, overwrite: bool = False) -> Path:
-    """Refuse an output directory that already holds a run.
+def written_by_a_run(path) -> bool:
+    """Whether ``path`` is a ``scene.toml`` that a run wrote (it begins with
+    :data:`SCENE_HEADER`), not a user's scene file."""
+    try:
+        with open(path, "rb") as fh:
+            return fh.read(len(SCENE_HEADER)) == SCENE_HEADER.encode()
+    except OSError:
+        return False
+
+
+def check_output_dir(out_dir, overwrite: bool = False, exports=()) -> Path:
+    """Refuse an output directory where a run would replace what it must not.
+
+    A run writes ``scene.toml``, ``summary.json``, ``series.npz`` and, for
+    each structure in ``exports``, ``NAME.xdmf``.  Without ``overwrite``,
+    none of them may exist, but for a ``scene.toml`` that a run wrote (the
+    leftover of a run killed outright).  Even with ``overwrite``, a
+    ``scene.toml`` that no run wrote (a user's scene, e.g. ``cosim run
+    scene.toml --out .``) is never replaced.
 
     Parameters
     ----------
@@ -80,19 +101,33 @@ def check_output_dir(out_dir, overwrite: bool = False) -> Path:
     overwrite : bool
         Allow replacing the run there (its files are replaced one by one,
         each atomically; other files are left alone).
+    exports : sequence of str
+        Structures whose fields the run exports.
 
     Raises
     ------
     OutputExistsError
-        If ``out_dir`` holds ``summary.json`` or ``series.npz`` and
-        ``overwrite`` is false.
+        If ``out_dir`` holds ``summary.json`` or ``series.npz`` (or an export
+        file) and ``overwrite`` is false, or a ``scene.toml`` that no run
+        wrote.
     """
     out = Path(out_dir)
-    found = [name for name in RUN_FILES if (out / name).exists()]
+    found = [name for name in RUN_FILES if os.path.lexists(out / name)]
     if found and not overwrite:
         raise OutputExistsError(
             f"{out} already holds a run ({', '.join(found)}); choose another --out, "
             f"or pass --overwrite (overwrite=True) to replace it")
+    scene = out / "scene.toml"
+    if os.path.lexists(scene) and not written_by_a_run(scene):
+        raise OutputExistsError(
+            f"{scene} was not written by a run (it may be your scene file), and a run "
+            f"writes its scene.toml there: choose another --out (--overwrite does not "
+            f"replace it)")
+    other = [f"{name}.xdmf" for name in exports if os.path.lexists(out / f"{name}.xdmf")]
+    if other and not overwrite:
+        raise OutputExistsError(
+            f"{out} already holds {', '.join(other)}, which this run would replace; choose "
+            f"another --out, or pass --overwrite (overwrite=True) to replace it")
     return out
 
 
@@ -103,7 +138,7 @@ def write_summary(summary: dict, path) -> None:
 
 def write_scene(scene, out_dir) -> Path:
     """Write ``scene.toml``, the scene as run, atomically."""
-    path = Path(out_dir) / "scene.toml"
+    path = inside(out_dir, "scene.toml")
     text = resolved_scene_text(scene)
     _atomic_write(path, lambda fh: fh.write(text), "w")
     return path
@@ -142,12 +177,14 @@ def write_outputs(result: SimulationResult, out_dir, scene=None, *,
     ``out_dir`` by :func:`cosim.simulate` (``out=``) is not written twice.
     """
     out = Path(out_dir)
-    summary = out / "summary.json"
-    series = out / "series.npz"
+    summary = inside(out, "summary.json")
+    series = inside(out, "series.npz")
     source = getattr(result.series, "path", None)
     same = source is not None and series.exists() and os.path.samefile(source, series)
     if not same:
         check_output_dir(out, overwrite)
+    elif scene is not None:
+        check_output_dir(out, True)         # never a user's scene.toml
     if scene is not None:
         write_scene(scene, out)
     if source is None:
@@ -166,7 +203,8 @@ def resolved_scene_text(scene) -> str:
     from .tomlwrite import dumps
 
     data = {"name": scene.name, **scene.data}
-    head = (f"# The scene as run: {Path(scene.path).name}"
+    origin = Path(scene.path).name.translate({c: "?" for c in (*range(32), 127)})
+    head = (f"{SCENE_HEADER}{origin}"
             + (f", variant {scene.variant!r}" if scene.variant else "")
             + ", overrides and scheme applied (written by `cosim run`).\n")
     return head + dumps(data)

@@ -8,7 +8,7 @@ from pathlib import Path
 from .guard import Guard
 from .recorder import Recorder
 from .scene import Scene, load_scene
-from .errors import SimulationError, UnsafeStepError
+from .errors import OutputError, SimulationError, UnsafeStepError
 from .schemes import Monolithic
 
 __all__ = ["simulate", "run_scene", "RunInterrupted"]
@@ -47,8 +47,11 @@ def simulate(scene: Scene, *, scheme: str | None = None, progress=None,
         series are streamed to disk as the run goes (memory does not grow
         with its length), and ``series.npz`` and ``summary.json`` are written
         when it ends, however it ends.  The result's ``series`` then read
-        ``out/series.npz``.  Without ``out`` nothing is written and the series
-        stay in memory (:func:`cosim.write_outputs` writes them).
+        ``out/series.npz``; the structures the scene lists in
+        ``output.export`` are written there as ``NAME.xdmf`` too.  The run
+        holds a lock on ``out`` meanwhile.  Without ``out`` nothing is
+        written and the series stay in memory (:func:`cosim.write_outputs`
+        writes them).
     overwrite : bool
         Allow ``out`` to hold a previous run, which is replaced.
 
@@ -65,26 +68,51 @@ def simulate(scene: Scene, *, scheme: str | None = None, progress=None,
         If an explicit scheme's macro step is too large for a contact (the
         pre-flight check); nothing has run then.
     OutputExistsError
-        If ``out`` holds a run and ``overwrite`` is false; checked first.
+        If ``out`` holds a run and ``overwrite`` is false, or a
+        ``scene.toml`` that no run wrote (see
+        :func:`~cosim.result.check_output_dir`); checked first.
+    OutputBusyError
+        If another run is writing into ``out`` (it holds the folder's lock,
+        see :class:`~cosim.rundir.RunLock`); nothing is touched then.
+    OutputError
+        If ``out`` cannot be made or written (a read-only place, a file in
+        the path, a full disk); the message names the path and what the run
+        could not keep.  No file is left half-written.
     RunInterrupted
-        On Ctrl-C (a :class:`KeyboardInterrupt`), after the result up to
-        that point, ``status`` ``interrupted``, is complete (and written to
-        ``out``); it is the exception's ``result``.
+        On Ctrl-C (a :class:`KeyboardInterrupt`; also SIGTERM and SIGHUP
+        under ``cosim run``, whose handlers raise one), after the result up
+        to that point, ``status`` ``interrupted``, is complete (and written
+        to ``out``); it is the exception's ``result``.
     Exception
         Any other exception during the run is re-raised after the result up
         to that point, ``status`` ``error``, is complete (and written to
         ``out``); it is the exception's ``partial_result``.
     """
+    from .rundir import RunLock
+
+    lock = None
+    if out is not None:
+        out = Path(out)
+        lock = RunLock(out).acquire()      # refuses a folder another run is writing
+    try:
+        return _simulate(scene, scheme, progress, progress_interval, out, overwrite)
+    finally:
+        if lock is not None:
+            lock.release()
+            if lock.created and out.is_dir() and not any(out.iterdir()):
+                out.rmdir()                # a refused run leaves no folder it made
+
+
+def _simulate(scene, scheme, progress, progress_interval, out, overwrite):
     from .result import check_output_dir, write_scene, write_summary
+    from .rundir import inside
 
     if out is not None:
-        out = check_output_dir(out, overwrite)
+        check_output_dir(out, overwrite, scene.export)
     system, sch = scene.build(scheme)
-    created = False
     if out is not None:
         if hasattr(sch, "preflight"):
             sch.preflight(system)          # a refusal writes nothing
-        created = not out.exists()
         write_scene(scene, out)
     if isinstance(sch, Monolithic):
         auto = False                       # it locates every switch itself
@@ -92,7 +120,7 @@ def simulate(scene: Scene, *, scheme: str | None = None, progress=None,
         auto = [c not in system.embedded for c in range(system.n_contacts)]
     rec = Recorder(system, scene.name, sch.name, scene.t_end, every=scene.output_every,
                    auto_edges=auto, progress=progress, progress_interval=progress_interval,
-                   series_path=None if out is None else Path(out) / "series.npz",
+                   series_path=None if out is None else inside(out, "series.npz"),
                    guard=Guard(system, scene.guard))
     cpu0 = time.process_time()
     status, message = "finished", ""
@@ -101,14 +129,19 @@ def simulate(scene: Scene, *, scheme: str | None = None, progress=None,
     try:
         counters = sch.run(system, scene.t_end, rec)
     except UnsafeStepError:                # refused before the first step
-        _discard(rec, out, created)
+        _discard(rec, out)
         raise
+    except OutputError as exc:             # the spool: a full disk during the run
+        _discard(rec, None)
+        raise _lost(exc, f"the run stopped at t = {_reached(rec):.6g} s and wrote no "
+                         f"series or summary", out) from None
     except SimulationError as exc:
         status, message = "failed", str(exc)
         log.error("%s", exc)
     except KeyboardInterrupt as exc:
         stop = exc
-        status, message = "interrupted", f"interrupted (Ctrl-C) at t = {_reached(rec):.6g} s"
+        cause = getattr(exc, "signal_name", None) or "Ctrl-C"
+        status, message = "interrupted", f"interrupted ({cause}) at t = {_reached(rec):.6g} s"
     except Exception as exc:       # a bug or a model's own error: keep what was done
         stop = exc
         status = "error"
@@ -117,9 +150,25 @@ def simulate(scene: Scene, *, scheme: str | None = None, progress=None,
         counters = sch.counters()
     if stop is not None:
         log.error("%s", message)
-    res = rec.finish(status, message, time.process_time() - cpu0, counters)
+    ended = f"the run ended ({status} at t = {_reached(rec):.6g} s)"
+    try:
+        res = rec.finish(status, message, time.process_time() - cpu0, counters)
+    except OutputError as exc:
+        raise _lost(exc, f"{ended} but wrote no series or summary", out) from None
     if out is not None:
-        write_summary(res.summary, Path(out) / "summary.json")
+        try:
+            write_summary(res.summary, inside(out, "summary.json"))
+        except OutputError as exc:
+            inside(out, "series.npz").unlink(missing_ok=True)   # never one without the other
+            raise _lost(exc, f"{ended} but wrote no summary, so its series.npz is removed "
+                             f"too", out) from None
+        if scene.export:
+            from .export import export_structures
+            try:
+                export_structures(scene, res, out)
+            except OutputError as exc:
+                raise _lost(exc, f"{ended}; its series and summary are written, not all of "
+                                 f"its exports", out) from None
     if isinstance(stop, KeyboardInterrupt):
         raise RunInterrupted(res) from stop
     if stop is not None:
@@ -128,16 +177,21 @@ def simulate(scene: Scene, *, scheme: str | None = None, progress=None,
     return res
 
 
-def _discard(rec: Recorder, out, created: bool) -> None:
-    """Remove what a refused run wrote: the spool, ``scene.toml``, and the
-    output directory if the run made it."""
+def _lost(exc: OutputError, what: str, out) -> OutputError:
+    """``exc`` with what the run could not keep."""
+    err = OutputError(f"{exc}; {what}" + (f" (in {out})" if out is not None else ""))
+    err.errno, err.path = exc.errno, getattr(exc, "path", None)
+    return err
+
+
+def _discard(rec: Recorder, out) -> None:
+    """Remove what a refused run wrote: the spool and ``scene.toml`` (the
+    folder, if the run made it, goes with the lock in :func:`simulate`)."""
     if rec._store_ is not None:
         rec._store_.close()
     if out is None:
         return
     (out / "scene.toml").unlink(missing_ok=True)
-    if created and not any(out.iterdir()):
-        out.rmdir()
 
 
 def _reached(rec: Recorder) -> float:

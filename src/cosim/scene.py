@@ -21,6 +21,7 @@ from . import tomlread
 from .guard import (DEFAULT_CHATTER_SWITCHES, DEFAULT_CHATTER_WINDOW, DEFAULT_COUPLING_WARNING,
                     DEFAULT_ENERGY_FLOOR, DEFAULT_ENERGY_GROWTH, DEFAULT_ENERGY_WARNING,
                     GuardOptions)
+from .rundir import name_problem
 
 
 __all__ = ["SceneError", "Scene", "load_scene", "parse_override", "read_toml_file",
@@ -50,6 +51,15 @@ class SceneError(ValueError):
         self.file, self.key = str(file), key
         where = f"`{key}` " if key else ""
         super().__init__(f"{self.file}: {where}{message}")
+
+
+def _check_name(file, key: str, name, what: str) -> None:
+    """Refuse a name that becomes a path or a key (a run folder, an export
+    file, a sweep point's folder, a ``series.npz`` member) unless it is a
+    plain word (:data:`cosim.rundir.NAME_RULE`)."""
+    problem = name_problem(name)
+    if problem is not None:
+        raise SceneError(file, key, " ".join(filter(None, (what, problem))))
 
 
 def _type_name(v) -> str:
@@ -289,6 +299,8 @@ def load_scene(path, variant: str | None = None, overrides=(), scheme: str | Non
     variants = data.pop("variants", {})
     if not isinstance(variants, dict) or not all(isinstance(v, dict) for v in variants.values()):
         raise SceneError(file, "variants", "must be a table of tables")
+    for vname in variants:
+        _check_name(file, "variants", vname, "names a variant that")
     default_variant = data.pop("default_variant", None)
     if default_variant is not None and not isinstance(default_variant, str):
         raise SceneError(file, "default_variant",
@@ -341,6 +353,8 @@ def _validate(data: dict, file, variant) -> Scene:
 
     top = _Table(data, (), file)
     name = top.string("name", file.stem)
+    _check_name(file, "name", name, "(a run folder's default name; the file's name when the "
+                                    "scene gives none)" if "name" not in data else "")
     top.string("description", "")
     t_end = top.number("t_end", rule=">0", unit="s")
 
@@ -421,6 +435,11 @@ def _validate(data: dict, file, variant) -> Scene:
 
     subs = []
     for sname, st in top.tables("subsystems"):
+        _check_name(file, "subsystems", sname, "names a subsystem that")
+        if "." in sname:
+            raise SceneError(file, "subsystems", f"names a subsystem {sname!r}: a subsystem's "
+                                                 f"name holds no `.`, which separates it from "
+                                                 f"the point in SUBSYSTEM.POINT")
         subs.append(_subsystem_spec(sname, st))
         step = subs[-1].get("max_step")
         if step is not None and t_end / step > MAX_STEPS:
@@ -437,6 +456,7 @@ def _validate(data: dict, file, variant) -> Scene:
                                                     f"of this scene; structures are {structures}")
     contacts = []
     for cname, ct in top.tables("contacts", {}):
+        _check_name(file, "contacts", cname, "names a contact that")
         contacts.append(_contact_spec(cname, ct, subs))
     _check_conditions(contacts, file)
     top.finish()
@@ -573,6 +593,7 @@ def _subsystem_spec(name: str, t: _Table) -> dict:
         for bname, bt in t.tables("bodies"):
             jt = bt.table("joint")
             jname = jt.string("name")
+            _check_name(t.file, jt.key("name"), jname, "")
             if jname in [j["name"] for j in joints]:
                 jt.error("name", f"repeats joint {jname!r}; joint names must be unique in "
                                  f"subsystem `{name}`")

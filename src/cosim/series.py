@@ -23,6 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .rundir import output_error
+
 __all__ = ["SeriesStore", "SeriesFile", "write_npz"]
 
 #: date stamped on every member of ``series.npz`` (zip cannot go earlier)
@@ -37,6 +39,10 @@ def chunk_rows(width: int) -> int:
 
 
 def _member(name: str) -> zipfile.ZipInfo:
+    parts = name.split("/")
+    if not all(parts) or any(p in (".", "..") or "\\" in p for p in parts):
+        raise ValueError(f"series name {name!r} must be words joined by `/` (no empty, "
+                         f"`.` or `..` part): it is a path inside series.npz")
     info = zipfile.ZipInfo(f"{name}.npy", date_time=_ZIP_DATE)
     info.compress_type = zipfile.ZIP_STORED
     info.create_system = 3                 # the same on every platform
@@ -73,19 +79,34 @@ def write_npz(path, arrays: Mapping) -> None:
 
 def atomic_write(path: Path, writer, mode: str) -> None:
     """Call ``writer(fh)`` on a temporary file beside ``path``, then move it
-    into place: ``path`` holds either its old content or the whole new one."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    into place: ``path`` holds either its old content or the whole new one.
+
+    The temporary file is made by :func:`tempfile.mkstemp` (a new name,
+    created exclusively: no link planted beside ``path`` is followed), and
+    the move replaces whatever entry ``path`` was (a link included) without
+    writing through it.
+
+    Raises
+    ------
+    cosim.errors.OutputError
+        An :class:`OSError` naming ``path`` and the reason (a full disk, a
+        read-only folder); nothing is left behind then.
+    """
+    fd = tmp = None
     try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
         with os.fdopen(fd, mode) as fh:
             writer(fh)
             fh.flush()
             os.fsync(fh.fileno())
-        os.chmod(tmp, 0o666 & ~_umask())      # as an ordinary new file, not mkstemp's 0600
+            os.fchmod(fh.fileno(), 0o666 & ~_umask())   # an ordinary file, not mkstemp's 0600
         os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
+    except BaseException as exc:
+        if tmp is not None and os.path.lexists(tmp):
             os.unlink(tmp)
+        if isinstance(exc, OSError):
+            raise output_error(exc, path) from exc
         raise
 
 
@@ -93,6 +114,22 @@ def _umask() -> int:
     mask = os.umask(0)
     os.umask(mask)
     return mask
+
+
+def _open_spool(path: Path):
+    """The spool, opened anew: a stale spool (a run killed outright) or
+    anything planted at its name is removed first, never followed, and the
+    file is created exclusively."""
+    flags = (os.O_RDWR | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0)
+             | getattr(os, "O_CLOEXEC", 0))
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        if os.path.lexists(path):
+            os.unlink(path)                   # a link goes, its target is untouched
+        fd = os.open(path, flags, 0o600)
+    except OSError as exc:
+        raise output_error(exc, path, "cannot create") from exc
+    return os.fdopen(fd, "w+b")
 
 
 class SeriesStore:
@@ -118,8 +155,7 @@ class SeriesStore:
         self.spool = None if spool is None else Path(spool)
         self._fh = None
         if self.spool is not None:
-            self.spool.parent.mkdir(parents=True, exist_ok=True)
-            self._fh = open(self.spool, "w+b")
+            self._fh = _open_spool(self.spool)
 
     def append(self, block: np.ndarray) -> None:
         """Add ``block`` (n_columns, rows)."""
@@ -130,9 +166,13 @@ class SeriesStore:
         if self._fh is None:
             self._blocks.append(block)
         else:
-            self._fh.seek(0, os.SEEK_END)
-            self._chunks.append((self._fh.tell(), rows))
-            self._fh.write(block.tobytes())
+            try:
+                self._fh.seek(0, os.SEEK_END)
+                offset = self._fh.tell()
+                self._fh.write(block.tobytes())
+            except OSError as exc:
+                raise output_error(exc, self.spool) from exc
+            self._chunks.append((offset, rows))
         self.length += rows
 
     def arrays(self) -> dict:

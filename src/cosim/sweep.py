@@ -40,6 +40,7 @@ import numpy as np
 
 from .errors import UnsafeStepError
 from .result import _atomic_write, resolved_scene_text, write_outputs
+from .rundir import inside
 from .scene import SceneError, load_scene, parse_override, read_toml_file
 from .tomlread import TomlLimitError, read_bytes
 
@@ -166,11 +167,13 @@ class Point:
 
 def point_name(variant: str | None, params) -> str:
     """The run directory's name of a point: ``VARIANT,KEY=VALUE,...`` with the
-    keys in grid order.  When a character outside ``[A-Za-z0-9._=+-]`` had to
-    be replaced, or the name is long, a hash of the exact parameters is
+    keys in grid order.  When a character outside ``[A-Za-z0-9._=+-]`` or a
+    leading ``.`` had to be replaced (no point is ``..``, ``.`` or hidden), or
+    the name is long, a hash of the exact parameters is
     appended, so that two points never share a name."""
     parts = ([variant] if variant is not None else []) + [f"{k}={_text(v)}" for k, v in params]
     clean = [_SAFE.sub("_", part) for part in parts]
+    clean = ["_" + c[1:] if c.startswith(".") or not c else c for c in clean]
     safe = ",".join(clean) if parts else "default"
     if clean != parts or len(safe) > _NAME_MAX:
         blob = json.dumps([variant, [[k, v] for k, v in params]], sort_keys=True)
@@ -960,7 +963,7 @@ def _finish(point, spec, out, res, scene, status, message, rows, contact, joint)
     summary = res.summary if res is not None else None
     series = res.series if res is not None else None
     if out is not None:
-        d = out / point.name
+        d = inside(out, point.name)
         if res is not None:
             # the sweep itself chose to (re)run this point: a stale or failed
             # run of it is what gets replaced

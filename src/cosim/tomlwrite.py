@@ -16,10 +16,17 @@ __all__ = ["dumps"]
 _BARE = re.compile(r"[A-Za-z0-9_-]+")
 
 
+def _string(text: str) -> str:
+    """A TOML basic string.  JSON's escapes are TOML's, but for characters
+    beyond the BMP, which JSON writes as a surrogate pair (invalid in TOML):
+    those stay as they are, and DEL, which TOML wants escaped."""
+    return json.dumps(text, ensure_ascii=False).replace("\x7f", "\\u007f")
+
+
 def _key(k: str) -> str:
     if not isinstance(k, str):
         raise TypeError(f"TOML keys must be strings, got {type(k).__name__} {k!r}")
-    return k if _BARE.fullmatch(k) else json.dumps(k)
+    return k if _BARE.fullmatch(k) else _string(k)
 
 
 def _value(v) -> str:
@@ -34,7 +41,7 @@ def _value(v) -> str:
             return "inf" if v > 0 else "-inf"
         return repr(v)                 # shortest round-tripping form, e.g. 1e-06, 0.5
     if isinstance(v, str):
-        return json.dumps(v)           # JSON's escapes are valid TOML basic-string escapes
+        return _string(v)
     if isinstance(v, (list, tuple)):
         return "[" + ", ".join(_value(x) for x in v) + "]"
     if isinstance(v, dict):
