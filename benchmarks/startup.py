@@ -4,7 +4,9 @@ building the scene cost, as ratios to numpy's own import in the same process.
 Run from the project root: ``python benchmarks/startup.py [--repeat 5]``.  A
 loaded, shared machine makes absolute times noisy; a ratio to numpy, measured in
 the same process, travels better between machines and loads.  Each figure is
-the best of ``--repeat`` fresh processes.
+the best of ``--repeat`` fresh processes, after one that is not counted:
+bytecode is cached as users have it (``PYTHONDONTWRITEBYTECODE`` is dropped from
+the environment of the runs, and the first run writes the caches).
 
 - *imports*: ``python -X importtime -m cosim.cli run SCENE ...`` as a user types
   it; the self times of every module are summed by top-level package: ours
@@ -47,6 +49,8 @@ t6 = time.perf_counter()
 print(t1 - t0, t2 - t1, t3 - t2, t4 - t3, t5 - t4, t6 - t5)
 """
 TIMING_KEYS = ("numpy", "import", "load", "build", "load_again", "build_again")
+#: the runs' environment: bytecode cached as users have it
+ENV = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
 
 
 def import_times(scene: str, variant: str | None, out: str) -> dict[str, float]:
@@ -55,7 +59,7 @@ def import_times(scene: str, variant: str | None, out: str) -> dict[str, float]:
             "--overwrite", "--quiet"]
     if variant:
         argv += ["--variant", variant]
-    proc = subprocess.run(argv, capture_output=True, text=True)
+    proc = subprocess.run(argv, capture_output=True, text=True, env=ENV)
     if proc.returncode != 0:
         raise RuntimeError(f"`cosim run` exited with {proc.returncode}:\n{proc.stderr[-2000:]}")
     sums = dict.fromkeys((*OURS, "ours", "numpy", "other", "all"), 0.0)
@@ -77,7 +81,7 @@ def scene_times(scene: str, variant: str | None) -> dict[str, float]:
     """``import numpy``, ``import cosim.run, cosim.scene``, load and build
     (first and second call) [s], from one fresh process."""
     proc = subprocess.run([sys.executable, "-c", TIMING, scene, variant or ""],
-                          capture_output=True, text=True)
+                          capture_output=True, text=True, env=ENV)
     if proc.returncode != 0:
         raise RuntimeError(f"the timing process exited with {proc.returncode}:\n"
                            f"{proc.stderr[-2000:]}")
@@ -98,8 +102,9 @@ def main(argv=None):
           f"{platform.python_version()}, {platform.system()} {platform.release()}, load average "
           f"{os.getloadavg()[0]:.1f}")
     with tempfile.TemporaryDirectory() as tmp:
-        imp = best([import_times(args.scene, args.variant, tmp) for _ in range(args.repeat)])
-    sc = best([scene_times(args.scene, args.variant) for _ in range(args.repeat)])
+        runs = [import_times(args.scene, args.variant, tmp) for _ in range(args.repeat + 1)]
+    imp = best(runs[1:])
+    sc = best([scene_times(args.scene, args.variant) for _ in range(args.repeat + 1)][1:])
     print(f"`cosim run {args.scene} --variant {args.variant}`, best of {args.repeat}")
     print(f"{'self import time of':<34}{'[ms]':>8}{'/ numpy':>9}")
     for group in (*OURS, "ours", "numpy", "other", "all"):
