@@ -1,18 +1,22 @@
 """The multibody side as a subsystem: a planar tree stepped by its own integrator."""
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from couplers import PointContact
 from couplers.laws import (FloresLaw, HertzLaw, HuntCrossleyLaw, KelvinVoigtLaw,
                            LankaraniNikraveshLaw, LinearLaw, RigidLaw)
-from multibody import JointEffects, TreeModel
-from multibody.impact import frictional_impact, frictionless_impact
+from multibody import TreeModel
 
 from .errors import SimulationError
 from .integrators import INTEGRATORS, RK4, TimeStepper
 from .kernel import compiled_module
 from .subsystem import EmbeddedContact, StepInput, Subsystem
+
+if TYPE_CHECKING:
+    from multibody import JointEffects
 
 __all__ = ["MultibodySubsystem", "kernel_law"]
 
@@ -332,6 +336,7 @@ class MultibodySubsystem(Subsystem):
             sustained rigid contact is not modelled; use a penalty law.  Or if
             several contacts with friction strike at once.
         """
+        from multibody.impact import frictional_impact, frictionless_impact  # where first needed
         n = self.n_dof
         q, dq = y[:n], y[n:2 * n]
         M, _, x, v, J, _ = self.model.evaluate(q, dq, None, self._port_body,
