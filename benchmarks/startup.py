@@ -12,14 +12,20 @@ the environment of the runs, and the first run writes the caches).
   it; the self times of every module are summed by top-level package: ours
   (``cosim``, ``multibody``, ``fem``, ``couplers``, each and together), numpy,
   and the rest (the standard library and other packages, whoever asked for them).
+  "best sum" is the best of the runs' sums; "sum of bests" sums each module's
+  best run, which filters out more of a loaded machine's noise.
 - *scene*: in another fresh process, ``time.perf_counter`` around ``import
-  numpy``, then around :func:`cosim.load_scene` and
-  :func:`cosim.build.build_system` as ``cosim run`` calls them (after ``import
-  cosim.run`` and ``cosim.scene``, as the command line does); the first call
-  pays for the modules it loads where first needed, and a second call shows the
-  rest.
+  numpy``, ``import cosim.run, cosim.scene`` (what the command line imports
+  before it reads the scene) and ``import cosim._multibody_step`` (the compiled
+  kernel, which `cosim run` imports through ``importlib``, out of
+  ``-X importtime``'s sight), then around :func:`cosim.load_scene` and
+  :func:`cosim.build.build_system`, which import the modules the scene needs
+  where first needed; then, in processes that import every module of the run
+  before the clock starts, load and build alone.
 """
 import argparse
+import json
+import math
 import os
 import platform
 import re
@@ -31,30 +37,65 @@ OURS = ("cosim", "multibody", "fem", "couplers")
 _LINE = re.compile(r"import time:\s+(\d+) \|\s+(\d+) \|\s*(\S+)")
 
 TIMING = """
-import sys, time
-t0 = time.perf_counter()
+import json, sys, time
+scene_path, variant, preload = sys.argv[1], sys.argv[2] or None, sys.argv[3:]
+out = {}
+t = time.perf_counter()
 import numpy
-t1 = time.perf_counter()
+out["numpy"] = time.perf_counter() - t
+t = time.perf_counter()
 import cosim.run, cosim.scene
-t2 = time.perf_counter()
-scene = cosim.load_scene(sys.argv[1], sys.argv[2] or None)
-t3 = time.perf_counter()
+for name in preload:                 # the rest of what a run imports, before the clock
+    __import__(name)
+out["import"] = time.perf_counter() - t
+if not preload:                      # the compiled kernel, timed on its own
+    t = time.perf_counter()
+    try:
+        import cosim._multibody_step
+    except ImportError:
+        pass
+    out["extension"] = time.perf_counter() - t
+t = time.perf_counter()
+scene = cosim.load_scene(scene_path, variant)
+out["load"] = time.perf_counter() - t
+t = time.perf_counter()
 from cosim.build import build_system
 build_system(scene)
-t4 = time.perf_counter()
-scene = cosim.load_scene(sys.argv[1], sys.argv[2] or None)
-t5 = time.perf_counter()
-build_system(scene)
-t6 = time.perf_counter()
-print(t1 - t0, t2 - t1, t3 - t2, t4 - t3, t5 - t4, t6 - t5)
+out["build"] = time.perf_counter() - t
+print(json.dumps(out))
 """
-TIMING_KEYS = ("numpy", "import", "load", "build", "load_again", "build_again")
+MODULES = """
+import sys
+import cosim
+cosim.load_scene(sys.argv[1], sys.argv[2] or None).build()
+print(*sorted(m for m in sys.modules if m.split(".")[0] in OURS))
+"""
 #: the runs' environment: bytecode cached as users have it
 ENV = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
 
 
+def group(module: str) -> str:
+    top = module.split(".")[0]
+    return top if top in OURS or top == "numpy" else "other"
+
+
+GROUPS = (*OURS, "ours", "numpy", "other", "all")
+
+
+def group_sums(self_times: dict[str, float]) -> dict[str, float]:
+    """Self times [s] summed per package group."""
+    sums = dict.fromkeys(GROUPS, 0.0)
+    for module, t in self_times.items():
+        g = group(module)
+        sums[g] += t
+        if g in OURS:
+            sums["ours"] += t
+        sums["all"] += t
+    return sums
+
+
 def import_times(scene: str, variant: str | None, out: str) -> dict[str, float]:
-    """Self import times [s] summed per group, from one ``-X importtime`` run."""
+    """Self import time [s] of each module, from one ``-X importtime`` run."""
     argv = [sys.executable, "-X", "importtime", "-m", "cosim.cli", "run", scene, "--out", out,
             "--overwrite", "--quiet"]
     if variant:
@@ -62,30 +103,29 @@ def import_times(scene: str, variant: str | None, out: str) -> dict[str, float]:
     proc = subprocess.run(argv, capture_output=True, text=True, env=ENV)
     if proc.returncode != 0:
         raise RuntimeError(f"`cosim run` exited with {proc.returncode}:\n{proc.stderr[-2000:]}")
-    sums = dict.fromkeys((*OURS, "ours", "numpy", "other", "all"), 0.0)
+    times = {}
     for line in proc.stderr.splitlines():
         m = _LINE.match(line)
-        if not m:
-            continue
-        self_s = int(m[1]) * 1e-6
-        top = m[3].split(".")[0]
-        group = top if top in OURS or top == "numpy" else "other"
-        sums[group] += self_s
-        if top in OURS:
-            sums["ours"] += self_s
-        sums["all"] += self_s
-    return sums
+        if m:
+            times[m[3]] = int(m[1]) * 1e-6
+    return times
 
 
-def scene_times(scene: str, variant: str | None) -> dict[str, float]:
-    """``import numpy``, ``import cosim.run, cosim.scene``, load and build
-    (first and second call) [s], from one fresh process."""
-    proc = subprocess.run([sys.executable, "-c", TIMING, scene, variant or ""],
-                          capture_output=True, text=True, env=ENV)
+def _run(script: str, *argv: str) -> str:
+    proc = subprocess.run([sys.executable, "-c", script, *argv], capture_output=True,
+                          text=True, env=ENV)
     if proc.returncode != 0:
         raise RuntimeError(f"the timing process exited with {proc.returncode}:\n"
                            f"{proc.stderr[-2000:]}")
-    return dict(zip(TIMING_KEYS, map(float, proc.stdout.split())))
+    return proc.stdout
+
+
+def scene_times(scene: str, variant: str | None, preload: list[str]) -> dict[str, float]:
+    """``import numpy``, the imports before the scene is read, ``load_scene``
+    and ``build_system`` [s], from one fresh process.  With ``preload`` every
+    module of the run is imported before the clock starts, so that load and
+    build are timed alone."""
+    return json.loads(_run(TIMING, scene, variant or "", *preload))
 
 
 def best(runs: list[dict]) -> dict[str, float]:
@@ -102,23 +142,30 @@ def main(argv=None):
           f"{platform.python_version()}, {platform.system()} {platform.release()}, load average "
           f"{os.getloadavg()[0]:.1f}")
     with tempfile.TemporaryDirectory() as tmp:
-        runs = [import_times(args.scene, args.variant, tmp) for _ in range(args.repeat + 1)]
-    imp = best(runs[1:])
-    sc = best([scene_times(args.scene, args.variant) for _ in range(args.repeat + 1)][1:])
+        runs = [import_times(args.scene, args.variant, tmp) for _ in range(args.repeat + 1)][1:]
+    imp = best([group_sums(r) for r in runs])
+    per_module = group_sums({m: min(r.get(m, math.inf) for r in runs) for m in runs[0]})
+    cold = best([scene_times(args.scene, args.variant, []) for _ in range(args.repeat + 1)][1:])
+    ours = _run(MODULES.replace("OURS", repr(OURS)), args.scene, args.variant or "").split()
+    warm = best([scene_times(args.scene, args.variant, ours) for _ in range(args.repeat)])
     print(f"`cosim run {args.scene} --variant {args.variant}`, best of {args.repeat}")
-    print(f"{'self import time of':<34}{'[ms]':>8}{'/ numpy':>9}")
-    for group in (*OURS, "ours", "numpy", "other", "all"):
-        label = {"ours": "  ours together", "other": "other (stdlib, ...)",
-                 "all": "everything"}.get(group, group)
-        print(f"{label:<34}{1e3 * imp[group]:>8.1f}{imp[group] / imp['numpy']:>9.2f}")
+    print(f"{'self import time of':<24}{'best sum [ms]':>14}{'/ numpy':>9}"
+          f"{'sum of bests [ms]':>19}{'/ numpy':>9}")
+    labels = {"ours": "  ours together", "other": "other (stdlib, ...)", "all": "everything"}
+    for g in GROUPS:
+        print(f"{labels.get(g, g):<24}{1e3 * imp[g]:>14.1f}{imp[g] / imp['numpy']:>9.2f}"
+              f"{1e3 * per_module[g]:>19.1f}{per_module[g] / per_module['numpy']:>9.2f}")
     print(f"{'in process (perf_counter)':<34}{'[ms]':>8}{'/ numpy':>9}")
-    labels = {"numpy": "import numpy", "import": "import cosim.run, cosim.scene",
-              "load": "load_scene", "build": "build_system (with its imports)",
-              "load_again": "load_scene, second call", "build_again": "build_system, second call"}
-    for key in TIMING_KEYS:
-        print(f"{labels[key]:<34}{1e3 * sc[key]:>8.1f}{sc[key] / sc['numpy']:>9.2f}")
-    first = sc["load"] + sc["build"]
-    print(f"{'scene read and build, first call':<34}{1e3 * first:>8.1f}{first / sc['numpy']:>9.2f}")
+    rows = [("import numpy", cold["numpy"]),
+            ("import cosim.run, cosim.scene", cold["import"]),
+            ("import cosim._multibody_step", cold["extension"]),
+            ("load_scene, with its imports", cold["load"]),
+            ("build_system, with its imports", cold["build"]),
+            ("load_scene alone", warm["load"]),
+            ("build_system alone", warm["build"]),
+            ("scene read and build alone", warm["load"] + warm["build"])]
+    for label, value in rows:
+        print(f"{label:<34}{1e3 * value:>8.1f}{value / cold['numpy']:>9.2f}")
 
 
 if __name__ == "__main__":
