@@ -213,3 +213,71 @@ def test_the_scheme_registry_is_a_registry_as_before():
                                          r"schemes are \['gauss_seidel', 'implicit', 'jacobi', "
                                          r"'monolithic'\]"):
         get_scheme("mine")
+
+
+# ----------------------------------------------------------------------------
+# Cheaper definitions, same models: a law or integrator class that adds no field
+# to its base is not decorated again (a frozen dataclass's methods are generated
+# with one `exec` each at import); what the decorator gave it must be unchanged.
+
+def _declared_fields(cls) -> list[str]:
+    """The non-ClassVar annotations along the MRO: what the fields must be."""
+    names = []
+    for klass in reversed(cls.__mro__):
+        for name, annotation in vars(klass).get("__annotations__", {}).items():
+            if "ClassVar" not in str(annotation) and name not in names:
+                names.append(name)
+    return names
+
+
+def _models():
+    from cosim.integrators import INTEGRATORS
+    from test_laws import EXAMPLES
+    changes = {"linear": ("contact_stiffness", 2e6), "kelvin_voigt": ("contact_damping", 1.0),
+               "rigid": ("restitution", 0.3), "hertz": ("exponent", 1.25),
+               "hunt_crossley": ("hysteresis_damping", 0.25),
+               "lankarani_nikravesh": ("restitution", 0.7), "flores": ("impact_speed", 3.0)}
+    out = [(law, *changes[name]) for name, law in EXAMPLES.items()]
+    out += [(INTEGRATORS["rk4"](max_step=1e-3), "max_step", 2e-3)]
+    out += [(cls(), "rtol", 1e-6) for name, cls in INTEGRATORS.items() if name != "rk4"]
+    return out
+
+
+@pytest.mark.parametrize("model,key,other", _models(), ids=lambda v: type(v).__name__
+                         if not isinstance(v, (str, float)) else "")
+def test_registered_models_are_the_frozen_dataclasses_they_were(model, key, other):
+    import dataclasses
+    cls = type(model)
+    assert dataclasses.is_dataclass(cls)
+    assert [f.name for f in dataclasses.fields(cls)] == _declared_fields(cls)
+    twin = dataclasses.replace(model)
+    assert twin is not model and twin == model and hash(twin) == hash(model)
+    changed = dataclasses.replace(model, **{key: other})
+    assert type(changed) is cls and changed != model and getattr(changed, key) == other
+    assert repr(model).startswith(f"{cls.__qualname__}({dataclasses.fields(cls)[0].name}=")
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        setattr(model, key, other)
+    with pytest.raises(ValueError, match=f"`{key}`"):   # __post_init__ still validates
+        dataclasses.replace(model, **{key: -1.0})
+
+
+def test_models_of_two_classes_with_the_same_fields_differ():
+    from couplers import FloresLaw, LankaraniNikraveshLaw
+    from cosim.integrators import INTEGRATORS
+    assert LankaraniNikraveshLaw(1e9, 1.5, 0.5, 2.0) != FloresLaw(1e9, 1.5, 0.5, 2.0)
+    assert INTEGRATORS["rk45"]() != INTEGRATORS["dop853"]() == INTEGRATORS["dop853"]()
+
+
+def test_a_simulation_result_compares_by_identity():
+    """It holds arrays: the generated == could only raise; now a result equals
+    itself alone and hashes (it is still frozen)."""
+    import dataclasses
+
+    import numpy as np
+
+    from cosim import SimulationResult
+    make = lambda: SimulationResult(np.arange(3.0), {}, {}, (), 1, 0, 0, "finished", "", True)  # noqa: E731
+    a, b = make(), make()
+    assert a == a and a != b and len({a, b}) == 2
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        a.status = "failed"
