@@ -11,6 +11,7 @@ first needed too; ``benchmarks/startup.py`` measures what that saves.
 """
 import importlib
 import json
+import re
 import subprocess
 import sys
 
@@ -281,3 +282,23 @@ def test_a_simulation_result_compares_by_identity():
     assert a == a and a != b and len({a, b}) == 2
     with pytest.raises(dataclasses.FrozenInstanceError):
         a.status = "failed"
+
+
+def test_the_startup_benchmark_runs_and_reports_every_group(tmp_path):
+    """``benchmarks/startup.py`` (a measurement, not a timed test): it runs,
+    finds our modules and numpy in ``-X importtime``'s output and prints a
+    row per group and per in-process step, each a time and a ratio."""
+    proc = subprocess.run([sys.executable, "benchmarks/startup.py", "--repeat", "1"], cwd=ROOT,
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    rows = {}
+    for line in proc.stdout.splitlines():
+        m = re.match(r"\s*(\S.*?)\s{2,}(\d+\.\d+)\s+(\d+\.\d+)", line)
+        if m:
+            rows[m[1]] = [float(m[2]), float(m[3])]
+    for label in ("cosim", "multibody", "fem", "couplers", "ours together", "numpy",
+                  "import numpy", "load_scene alone", "build_system alone",
+                  "scene read and build alone"):
+        assert label in rows, (label, proc.stdout)
+    assert rows["cosim"][0] > 0 and rows["numpy"][1] == 1.0
+    assert rows["import numpy"][1] == 1.0 and rows["load_scene alone"][0] > 0
