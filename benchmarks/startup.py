@@ -14,14 +14,16 @@ the environment of the runs, and the first run writes the caches).
   and the rest (the standard library and other packages, whoever asked for them).
   "best sum" is the best of the runs' sums; "sum of bests" sums each module's
   best run, which filters out more of a loaded machine's noise.
-- *scene*: in another fresh process, ``time.perf_counter`` around ``import
-  numpy``, ``import cosim.run, cosim.scene`` (what the command line imports
-  before it reads the scene) and ``import cosim._multibody_step`` (the compiled
-  kernel, which `cosim run` imports through ``importlib``, out of
-  ``-X importtime``'s sight), then around :func:`cosim.load_scene` and
-  :func:`cosim.build.build_system`, which import the modules the scene needs
-  where first needed; then, in processes that import every module of the run
-  before the clock starts, load and build alone.
+- *in process*: in other fresh processes, wall (``time.perf_counter``) and CPU
+  (``time.process_time``, which a loaded machine inflates far less) around
+  ``import numpy``, ``import cosim.run, cosim.scene`` (what the command line
+  imports before it reads the scene), ``import cosim._multibody_step`` (the
+  compiled kernel, which `cosim run` imports through ``importlib``, out of
+  ``-X importtime``'s sight), :func:`cosim.load_scene` and
+  :func:`cosim.build.build_system` (with the modules they import where first
+  needed); then, in processes that import everything else the run imports
+  (numpy, the standard library) before the clock starts, our modules alone, and
+  load and build alone.
 """
 import argparse
 import json
@@ -38,37 +40,54 @@ _LINE = re.compile(r"import time:\s+(\d+) \|\s+(\d+) \|\s*(\S+)")
 
 TIMING = """
 import json, sys, time
-scene_path, variant, preload = sys.argv[1], sys.argv[2] or None, sys.argv[3:]
+scene_path, variant, mode, preload = sys.argv[1], sys.argv[2] or None, sys.argv[3], sys.argv[4:]
 out = {}
-t = time.perf_counter()
-import numpy
-out["numpy"] = time.perf_counter() - t
-t = time.perf_counter()
-import cosim.run, cosim.scene
-for name in preload:                 # the rest of what a run imports, before the clock
-    __import__(name)
-out["import"] = time.perf_counter() - t
-if not preload:                      # the compiled kernel, timed on its own
-    t = time.perf_counter()
-    try:
+def clock():
+    return time.perf_counter(), time.process_time()
+def lap(key, start):
+    now = clock()
+    out[key] = [now[0] - start[0], now[1] - start[1]]
+if mode == "cold":                   # as `cosim run` goes
+    t = clock()
+    import numpy
+    lap("numpy", t)
+    t = clock()
+    import cosim.run, cosim.scene
+    lap("import", t)
+    t = clock()
+    try:                             # the compiled kernel, timed on its own
         import cosim._multibody_step
     except ImportError:
         pass
-    out["extension"] = time.perf_counter() - t
-t = time.perf_counter()
+    lap("extension", t)
+else:                                # the rest first: our modules, then load and build, alone
+    for name in preload:
+        try:
+            __import__(name)
+        except ImportError:
+            pass
+    t = clock()
+    import cosim.run, cosim.scene
+    for name in mode.split(","):
+        __import__(name)
+    lap("ours", t)
+t = clock()
 scene = cosim.load_scene(scene_path, variant)
-out["load"] = time.perf_counter() - t
-t = time.perf_counter()
+lap("load", t)
+t = clock()
 from cosim.build import build_system
 build_system(scene)
-out["build"] = time.perf_counter() - t
+lap("build", t)
 print(json.dumps(out))
 """
 MODULES = """
 import sys
+before = set(sys.modules)
 import cosim
 cosim.load_scene(sys.argv[1], sys.argv[2] or None).build()
-print(*sorted(m for m in sys.modules if m.split(".")[0] in OURS))
+new = sorted(set(sys.modules) - before)
+print(",".join(m for m in new if m.split(".")[0] in OURS))
+print(*(m for m in new if m.split(".")[0] not in OURS))
 """
 #: the runs' environment: bytecode cached as users have it
 ENV = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
@@ -127,16 +146,22 @@ def _run(script: str, *argv: str) -> str:
     return proc.stdout
 
 
-def scene_times(scene: str, variant: str | None, preload: list[str]) -> dict[str, float]:
-    """``import numpy``, the imports before the scene is read, ``load_scene``
-    and ``build_system`` [s], from one fresh process.  With ``preload`` every
-    module of the run is imported before the clock starts, so that load and
-    build are timed alone."""
-    return json.loads(_run(TIMING, scene, variant or "", *preload))
+def scene_times(scene: str, variant: str | None, ours: str = "", others=()) -> dict:
+    """Times ``[wall, CPU]`` [s] from one fresh process.  Without ``ours``:
+    ``import numpy``, ``import cosim.run, cosim.scene``, the kernel's import,
+    then ``load_scene`` and ``build_system`` with the imports they trigger.
+    With ``ours`` (comma-separated) and ``others``: ``others`` imported before
+    the clock starts, then our modules alone, then load and build alone."""
+    return json.loads(_run(TIMING, scene, variant or "", ours or "cold", *others))
 
 
-def best(runs: list[dict]) -> dict[str, float]:
-    return {k: min(r[k] for r in runs) for k in runs[0]}
+def best(runs: list[dict]) -> dict:
+    """Per key, the least value (per clock where a value is ``[wall, CPU]``)."""
+    def least(values):
+        if isinstance(values[0], list):
+            return [min(v[i] for v in values) for i in range(len(values[0]))]
+        return min(values)
+    return {k: least([r[k] for r in runs]) for k in runs[0]}
 
 
 def main(argv=None):
@@ -152,9 +177,11 @@ def main(argv=None):
         runs = [import_times(args.scene, args.variant, tmp) for _ in range(args.repeat + 1)][1:]
     imp = best([group_sums(r) for r in runs])
     per_module = group_sums({m: min(r.get(m, math.inf) for r in runs) for m in runs[0]})
-    cold = best([scene_times(args.scene, args.variant, []) for _ in range(args.repeat + 1)][1:])
-    ours = _run(MODULES.replace("OURS", repr(OURS)), args.scene, args.variant or "").split()
-    warm = best([scene_times(args.scene, args.variant, ours) for _ in range(args.repeat)])
+    cold = best([scene_times(args.scene, args.variant) for _ in range(args.repeat + 1)][1:])
+    ours, others = _run(MODULES.replace("OURS", repr(OURS)), args.scene,
+                        args.variant or "").splitlines()
+    alone = best([scene_times(args.scene, args.variant, ours, others.split())
+                  for _ in range(args.repeat)])
     print(f"`cosim run {args.scene} --variant {args.variant}`, best of {args.repeat}")
     print(f"{'self import time of':<24}{'best sum [ms]':>14}{'/ numpy':>9}"
           f"{'sum of bests [ms]':>19}{'/ numpy':>9}")
@@ -165,17 +192,19 @@ def main(argv=None):
     cum, ours_best = imp[NUMPY_CUMULATIVE], per_module["ours"]
     print(f"numpy with what it imports (cumulative): {1e3 * cum:.1f} ms; ours (sum of bests) "
           f"/ that = {ours_best / cum:.2f}")
-    print(f"{'in process (perf_counter)':<34}{'[ms]':>8}{'/ numpy':>9}")
+    print(f"{'in process':<34}{'wall [ms]':>10}{'/ numpy':>9}{'CPU [ms]':>10}{'/ numpy':>9}")
     rows = [("import numpy", cold["numpy"]),
             ("import cosim.run, cosim.scene", cold["import"]),
             ("import cosim._multibody_step", cold["extension"]),
             ("load_scene, with its imports", cold["load"]),
             ("build_system, with its imports", cold["build"]),
-            ("load_scene alone", warm["load"]),
-            ("build_system alone", warm["build"]),
-            ("scene read and build alone", warm["load"] + warm["build"])]
-    for label, value in rows:
-        print(f"{label:<34}{1e3 * value:>8.1f}{value / cold['numpy']:>9.2f}")
+            ("our modules alone", alone["ours"]),
+            ("load_scene alone", alone["load"]),
+            ("build_system alone", alone["build"]),
+            ("scene read and build alone", [a + b for a, b in zip(alone["load"], alone["build"])])]
+    for label, (wall, cpu) in rows:
+        print(f"{label:<34}{1e3 * wall:>10.1f}{wall / cold['numpy'][0]:>9.2f}"
+              f"{1e3 * cpu:>10.1f}{cpu / cold['numpy'][1]:>9.2f}")
 
 
 if __name__ == "__main__":
