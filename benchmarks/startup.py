@@ -189,6 +189,16 @@ def main(argv=None):
     for g in GROUPS:
         print(f"{labels.get(g, g):<24}{1e3 * imp[g]:>14.1f}{imp[g] / imp['numpy']:>9.2f}"
               f"{1e3 * per_module[g]:>19.1f}{per_module[g] / per_module['numpy']:>9.2f}")
+    loaded = [m for m in runs[0] if group(m) in OURS]
+    print(f"our modules imported: {len(loaded)} (" + ", ".join(
+        f"{p} {sum(group(m) == p for m in loaded)}" for p in OURS) + ")")
+    numpy_own = set(_run("import sys, numpy; print(*sys.modules)").split())
+    beyond = {m: min(r.get(m, math.inf) for r in runs) for m in runs[0]
+              if group(m) == "other" and m not in numpy_own and m != NUMPY_CUMULATIVE}
+    print(f"other modules that numpy does not import itself: {len(beyond)}, "
+          f"{1e3 * sum(beyond.values()):.1f} ms (sum of bests; largest: " + ", ".join(
+              f"{m} {1e3 * t:.1f}" for m, t in sorted(beyond.items(), key=lambda kv: -kv[1])[:4])
+          + ")")
     cum, ours_best = imp[NUMPY_CUMULATIVE], per_module["ours"]
     print(f"numpy with what it imports (cumulative): {1e3 * cum:.1f} ms; ours (sum of bests) "
           f"/ that = {ours_best / cum:.2f}")
