@@ -1,9 +1,15 @@
-"""CPU of every shipped scene under its default scheme (the README's
-performance table), and of three_mass f100 under the monolithic reference.
+"""CPU of the shipped scenes with the compiled kernel and with the numpy
+reference, from one run (the README's scenes table).
 
-Run from the project root: ``python benchmarks/scenes.py``.  It prints the
-machine it ran on; each time is the process CPU of the run itself (the
-``cpu_time_s`` of its summary), the best of ``--repeat`` runs.
+Run from the project root::
+
+    python benchmarks/scenes.py [--repeat N] [--kernels compiled,numpy] [--only NAME,...]
+
+It prints the machine, then one row per run: the process CPU of the solve
+(the ``cpu_time_s`` of its summary), the best of ``--repeat`` runs, with each
+kernel (``COSIM_KERNEL``, see :mod:`cosim.kernel`), their ratio, and the target
+of the row where there is one.  Both kernels run in the same process, one
+after the other, so the ratio holds whatever the machine's speed.
 """
 import argparse
 import os
@@ -12,30 +18,61 @@ import warnings
 
 import cosim
 
-RUNS = [("spring_drop", None, None), ("manipulator_wall", "mu0.03", None),
-        ("manipulator_wall", "mu0.03", "monolithic"), ("rod_impact", None, None),
-        ("ground_multicontact", None, None), ("three_mass", "f100", None),
-        ("three_mass", "f100", "monolithic"), ("beam_impact", None, None)]
+#: (scene, variant, scheme, overrides, target CPU [s] or None)
+RUNS = [("spring_drop", None, None, (), 0.05),
+        ("manipulator_wall", "mu0.03", None, (), None),
+        ("manipulator_wall", "mu0.03", "monolithic", (), None),
+        ("rod_impact", None, None, (), None),
+        ("ground_multicontact", None, None, (), 0.3),
+        ("three_mass", "f100", None, (), None),
+        ("three_mass", "f100", "monolithic", (), None),
+        ("beam_impact", None, None, (), None),
+        ("beam_impact", None, None, ("t_end=10",), 3.0),
+        ("brachiation", None, None, (), 0.3)]
+
+
+def solve_cpu(name, variant, scheme, overrides, kernel, repeat):
+    """Best ``cpu_time_s`` of ``repeat`` runs with ``kernel``, and the summary."""
+    os.environ["COSIM_KERNEL"] = kernel
+    best, summary = None, None
+    for _ in range(repeat):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            scene = cosim.load_scene(f"cases/{name}.toml", variant, overrides=overrides,
+                                     scheme=scheme)
+        summary = cosim.simulate(scene).summary
+        cpu = summary["cpu_time_s"]
+        best = cpu if best is None else min(best, cpu)
+    return best, summary
 
 
 def main():
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--repeat", type=int, default=1)
+    p.add_argument("--kernels", default="compiled,numpy",
+                   help="comma-separated: compiled, numpy (default both)")
+    p.add_argument("--only", default="", help="comma-separated scene names")
     args = p.parse_args()
+    kernels = [k for k in args.kernels.split(",") if k]
+    only = {s for s in args.only.split(",") if s}
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores, Python "
-          f"{platform.python_version()}, {platform.system()} {platform.release()}")
-    print(f"{'scene':<22}{'variant':<9}{'scheme':<14}{'simulated [s]':>14}{'CPU [s]':>9}")
-    for name, variant, scheme in RUNS:
-        best = None
-        for _ in range(args.repeat):
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                scene = cosim.load_scene(f"cases/{name}.toml", variant, scheme=scheme)
-            res = cosim.simulate(scene)
-            cpu = res.summary["cpu_time_s"]
-            best = cpu if best is None else min(best, cpu)
-        print(f"{name:<22}{variant or '-':<9}{res.summary['scheme']:<14}"
-              f"{res.summary['t_end']:>14.3g}{best:>9.2f}")
+          f"{platform.python_version()}, {platform.system()} {platform.release()}; "
+          f"load average {os.getloadavg()[0]:.2f}")
+    head = "".join(f"{k + ' CPU [s]':>18}" for k in kernels)
+    print(f"{'scene':<22}{'variant':<9}{'scheme':<14}{'simulated [s]':>14}{head}"
+          f"{'ratio':>8}{'target [s]':>12}")
+    for name, variant, scheme, over, target in RUNS:
+        if only and name not in only:
+            continue
+        cpus, summary = [], None
+        for k in kernels:
+            cpu, summary = solve_cpu(name, variant, scheme, over, k, args.repeat)
+            cpus.append(cpu)
+        ratio = f"{cpus[0] / cpus[1]:8.3f}" if len(cpus) == 2 else f"{'':8}"
+        cells = "".join(f"{c:>18.3f}" for c in cpus)
+        tgt = f"{target:>12.2f}" if target is not None else f"{'-':>12}"
+        print(f"{name:<22}{variant or '-':<9}{summary['scheme']:<14}"
+              f"{summary['t_end']:>14.3g}{cells}{ratio}{tgt}", flush=True)
 
 
 if __name__ == "__main__":

@@ -43,12 +43,14 @@ def test_default_scheme_hosts_c_in_the_beam_and_matches_the_monolithic_reference
                           impact_metrics(ref, "C", "robot/arm"))
     assert err["count"] == 0 and err["peak"] < 0.01 and err["exit_velocity"] < 0.01, err
 
-def c_contact(elements):
+def c_contact(elements, follow=True):
     """C's count, peak penetration [m], first touch and last release [s], and
     the arm's exit velocity [rad/s], under the scene's default scheme with the
-    beam cut to ``elements`` elements and 12 modes."""
+    beam cut to ``elements`` elements and 12 modes (and C's struck point
+    sliding with the arm, as shipped, or held at its material point)."""
     res = cosim.simulate(cosim.load_scene(CASES / "beam_impact.toml", overrides=[
-        *SHORT, f"subsystems.beam.elements={elements}"]))
+        *SHORT, f"subsystems.beam.elements={elements}",
+        f"contacts.C.follow={str(follow).lower()}"]))
     assert res.success, res.message
     m = impact_metrics(res, "C", "robot/arm")
     iv = res.summary["contacts"]["C"]["intervals"]
@@ -56,36 +58,53 @@ def c_contact(elements):
             "exit": m["exit_velocity"]}
 
 
+def _rate(runs, key):
+    h = np.array([1 / 16, 1 / 32, 1 / 64])
+    diff = np.abs(np.diff([r[key] for r in runs]))
+    return np.polyfit(np.log(h), np.log(diff), 1)[0], diff
+
+
 def test_c_converges_with_the_mesh():
     """16, 32, 64 and 128 elements (0.45 m is no node of any: 7.2, 14.4, 28.8
     and 57.6 element lengths), 12 modes kept in each so that only the mesh
     changes (with the scene's 20 kHz cutoff the kept modes grow with the mesh,
-    16, 25, 28, 29, 29 for 8 to 128 elements, a second, stepwise change).
-    Cubic Hermite elements approximate each mode's frequency and shape to
-    O(h^4), and so does the contact: the differences between successive
-    meshes fall at the fitted rates 4.0 (last release: 1.46e-6, 9.9e-8,
-    5.9e-9 s) and 4.1 (the arm's exit velocity: 6.8e-3, 3.0e-4, 2.3e-5 rad/s).
-    C's peak penetration (3.13055, 3.13068, 3.13060, 3.13060 mm) settles
-    without a clean rate: its differences (1.3e-7, 7.9e-8, 7.4e-9 m) shrink,
-    at the level where the co-simulation's own error (6e-8 m) and the follow
-    point's steps compete.  The first touch depends on the static sag only,
-    which Hermite elements give exactly at the nodes: 0.10283388 s on every
-    mesh to 1e-9 s.  C closes twice on every mesh."""
-    runs = [c_contact(n) for n in (16, 32, 64, 128)]
+    16, 25, 28, 29, 29 for 8 to 128 elements, a second, stepwise change), C
+    struck at a fixed material point so that only the beam's discretisation
+    is measured.  Cubic Hermite elements approximate each mode's frequency
+    and shape to O(h^4), and so does the contact: the differences between
+    successive meshes fall at the fitted rates 4.4 (last release: 1.40e-6,
+    1.14e-7, 3.1e-9 s), 3.95 (the arm's exit velocity: 6.3e-3, 2.2e-4,
+    2.6e-5 rad/s) and 3.7 (C's peak penetration: 2.3e-7, 1.2e-7, 1.4e-9 m).
+    The first touch depends on the static sag only, which Hermite elements
+    give exactly at the nodes: the same on every mesh to 1e-9 s.  C closes
+    twice on every mesh."""
+    runs = [c_contact(n, follow=False) for n in (16, 32, 64, 128)]
     assert [r["count"] for r in runs] == [2, 2, 2, 2]
-    h = np.array([1 / 16, 1 / 32, 1 / 64])
-    for key, ceiling in (("last", 1e-8), ("exit", 1e-4)):
-        x = np.array([r[key] for r in runs])
-        diff = np.abs(np.diff(x))
-        slope = np.polyfit(np.log(h), np.log(diff), 1)[0]
+    for key, ceiling in (("last", 1e-8), ("exit", 1e-4), ("peak", 1e-8)):
+        slope, diff = _rate(runs, key)
         assert abs(slope - 4.0) < 0.5, f"{key}: observed rate {slope:.2f}, differences {diff}"
         assert diff[-1] < ceiling, (key, diff)
-    peak = np.array([r["peak"] for r in runs])
-    dp = np.abs(np.diff(peak))
-    assert dp[0] > dp[1] > dp[2], dp
-    assert dp[-1] / peak[-1] < 1e-5, dp
     first = np.array([r["first"] for r in runs])
     assert np.ptp(first) < 1e-9, first
+
+
+def test_sliding_c_settles_with_the_mesh():
+    """The shipped scene: C's struck point slides under the arm
+    (``follow``), the force along the bent surface's normal.  The last
+    release still converges at rate 3.9 (1.44e-6, 9.5e-8, 6.2e-9 s), but the
+    exit velocity's differences (4.0e-3, 1.8e-4, 5.6e-5 rad/s, rate 3.1) and
+    the peak's (1.1e-7, 8.1e-8, 7.1e-9 m) shrink without a clean rate: the
+    surface point moves, and its slope is taken, once per macro step, and
+    that error does not depend on the mesh alone.  What is held here: the
+    count, the release's rate, and differences that shrink to below the same
+    ceilings."""
+    runs = [c_contact(n) for n in (16, 32, 64, 128)]
+    assert [r["count"] for r in runs] == [2, 2, 2, 2]
+    slope, diff = _rate(runs, "last")
+    assert abs(slope - 4.0) < 0.5, f"last: observed rate {slope:.2f}, differences {diff}"
+    for key, ceiling in (("last", 1e-8), ("exit", 1e-4), ("peak", 1e-8)):
+        diff = np.abs(np.diff([r[key] for r in runs]))
+        assert diff[0] > diff[1] > diff[2] and diff[-1] < ceiling, (key, diff)
 
 
 def test_where_the_nodes_fall_does_not_matter():

@@ -46,3 +46,26 @@ def test_cli_info_json_and_text(capsys):
     assert cli.main(["info", str(CASES / "spring_drop.toml")]) == 0
     out = capsys.readouterr().out
     assert "contact wall: linear (embedded)" in out and "frequency 159.2 Hz" in out
+
+
+def test_info_and_the_preflight_check_give_the_same_limit_between_moving_sides():
+    """Issue 18: `cosim info` gave 1.0e-5 s for Gauss-Seidel on three_mass f1000
+    with C exchanged (the formula for a rigid partner), the scheme refused above
+    2.9e-6 s.  Both now ask `preflight.partner_first`: the step info gives runs,
+    1 % more is refused."""
+    from cosim.errors import UnsafeStepError
+    over = ['contacts.C.placement="coupler"']
+    info = scene_info(load_scene(CASES / "three_mass.toml", "f1000", overrides=over))
+    limits = info["contacts"]["C"]["max_macro_step_s"]
+    assert limits["gauss_seidel"] == pytest.approx(2.87e-6, rel=1e-2)
+    for scheme in ("gauss_seidel", "jacobi"):
+        for factor, refused in ((0.999, False), (1.01, True)):
+            scene = load_scene(CASES / "three_mass.toml", "f1000", scheme=scheme, overrides=over + [
+                f"scheme.contact_step={limits[scheme] * factor!r}"])
+            system, sch = scene.build()
+            if refused:
+                with pytest.raises(UnsafeStepError, match=r"contact `C`: macro step .* The "
+                                                          r"largest safe macro step is "):
+                    sch.preflight(system)
+            else:
+                sch.preflight(system)

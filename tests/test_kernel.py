@@ -125,12 +125,12 @@ def test_compiled_matches_reference(monkeypatch, path, variant):
 
 
 def test_kernel_takes_the_steps_it_covers(monkeypatch):
-    """Penalty contacts on a tree without joint effects step in the kernel;
-    a robot with drives and a grasp (brachiation) steps in the reference."""
+    """Penalty and rigid contacts, joint drives (brachiation's PD drive)
+    step in the kernel; with ``COSIM_KERNEL=numpy`` the reference steps."""
     from cosim.build import build_system
     monkeypatch.setenv("COSIM_KERNEL", "compiled")
     for stem, expected in (("three_mass", "compiled"), ("spring_drop", "compiled"),
-                           ("manipulator_wall", "compiled"), ("brachiation", "numpy")):
+                           ("manipulator_wall", "compiled"), ("brachiation", "compiled")):
         system, _ = build_system(cosim.load_scene(CASES / f"{stem}.toml"))
         kinds = {s.kernel for s in system.subsystems if isinstance(s, MultibodySubsystem)}
         assert kinds == {expected}, stem
@@ -139,7 +139,7 @@ def test_kernel_takes_the_steps_it_covers(monkeypatch):
     assert {s.kernel for s in system.subsystems if isinstance(s, MultibodySubsystem)} == {"numpy"}
 
 
-def _random_tree_step(seed):
+def _random_tree_step(seed, effects=None):
     """A random 4-joint tree (mixed joints, gravity, two ports, a hosted
     Hunt-Crossley and a Kelvin-Voigt contact against moving partners)."""
     from couplers import PointContact
@@ -158,7 +158,8 @@ def _random_tree_step(seed):
     model = TreeModel(bodies, joints)
     ports = {"p": (2, (0.25, -0.1)), "r": (3, (0.1, 0.1))}
     sub = MultibodySubsystem("tree", model, rng.normal(size=4), rng.normal(size=4), ports,
-                             gravity=(0.0, -9.81), integrator=RK4(max_step=1e-4, free_step=1e-3))
+                             gravity=(0.0, -9.81), integrator=RK4(max_step=1e-4, free_step=1e-3),
+                             effects=effects)
     hc = HuntCrossleyLaw(contact_stiffness=2e5, exponent=1.5, hysteresis_damping=0.3)
     kv = KelvinVoigtLaw(contact_stiffness=1e5, contact_damping=40.0)
     x, _ = sub.outputs(0.0, sub.x)
@@ -191,3 +192,39 @@ def test_kernel_step_against_reference_on_a_random_tree(monkeypatch, seed):
     np.testing.assert_allclose(x1, x0, rtol=1e-11, atol=1e-12)
     np.testing.assert_allclose(a1, a0, rtol=1e-10, atol=1e-12)
     np.testing.assert_allclose(m1, m0, rtol=1e-11, atol=1e-13)
+
+
+def _effects(kind):
+    from multibody import JointEffects
+    from multibody.effects import (ConstantTorque, JointDamper, JointSpring, MinimumJerk,
+                                   PDTracking, Sinusoid, Table, TorqueTable)
+    base = [JointSpring(1, 30.0, 0.2), JointDamper(2, 0.4), JointSpring(3, 50.0, -0.01)]
+    drives = {
+        "constant": [ConstantTorque(1, 2.5)],
+        "table": [TorqueTable(2, Table((0.0, 0.004, 0.011, 0.03), (0.0, 3.0, -1.0, 2.0)))],
+        "pd_table": [PDTracking(1, 80.0, 3.0, Table((0.0, 0.01, 0.02), (0.0, 0.5, 0.2)))],
+        "pd_minimum_jerk": [PDTracking(2, 100.0, 5.0, MinimumJerk(0.0, 1.3, 0.002, 0.015),
+                                       max_torque=4.0)],
+        "pd_sinusoid": [PDTracking(1, 60.0, 2.0, Sinusoid(0.3, 40.0, 0.1, -0.2))],
+    }[kind]
+    return JointEffects(4, base + drives)
+
+
+@pytest.mark.parametrize("kind", ["constant", "table", "pd_table", "pd_minimum_jerk",
+                                  "pd_sinusoid"])
+def test_kernel_joint_effects_against_reference(monkeypatch, kind):
+    """Springs, dampers and every kind of drive and reference: state, the
+    dampers' and drives' ledger and the energy agree with the reference."""
+    out = {}
+    for kernel in ("numpy", "compiled"):
+        monkeypatch.setenv("COSIM_KERNEL", kernel)
+        sub, u = _random_tree_step(4, _effects(kind))
+        sub.step(0.0, 0.02, u)
+        assert sub.kernel == kernel
+        out[kernel] = (sub.x.copy(), sub.aux.copy(), sub.energy(), sub.ledger())
+    (x0, a0, e0, l0), (x1, a1, e1, l1) = out["numpy"], out["compiled"]
+    np.testing.assert_allclose(x1, x0, rtol=1e-11, atol=1e-12)
+    np.testing.assert_allclose(a1, a0, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(e1, e0, rtol=1e-12)
+    np.testing.assert_allclose(l1, l0, rtol=1e-10, atol=1e-14)
+    assert l0[1] != 0.0 and l0[0] > 0.0       # the drive supplied, the damper dissipated

@@ -34,12 +34,59 @@ cdef enum:
     KELVIN_VOIGT = 1    # f = max(k d + c dd, 0), switch min(d, d + c/k dd)
     POWER = 2           # f = k d^n (1 + chi dd), switch d or min(d, d (1 + chi dd))
     RIGID = 3           # no force; switch d marks touch-down
+    # joint drives (multibody.effects) and the references a PD drive tracks
+    DRIVE_CONSTANT = 0
+    DRIVE_TABLE = 1
+    DRIVE_PD = 2
+    REF_TABLE = 0
+    REF_MINIMUM_JERK = 1
+    REF_SINUSOID = 2
     # largest number of polynomial coefficients of a partner's motion or an input
     MAX_COEF = 8
     # most contacts one subsystem hosts in the kernel
     MAX_CONTACTS = 64
 
 LAW_KINDS = {"linear": LINEAR, "kelvin_voigt": KELVIN_VOIGT, "power": POWER, "rigid": RIGID}
+DRIVE_KINDS = {"constant": DRIVE_CONSTANT, "table": DRIVE_TABLE, "pd": DRIVE_PD}
+REFERENCE_KINDS = {"table": REF_TABLE, "minimum_jerk": REF_MINIMUM_JERK,
+                   "sinusoid": REF_SINUSOID}
+
+
+cdef double _interp(double t, const double* ts, const double* vs, int m) noexcept nogil:
+    """``numpy.interp`` on one value: held outside the table."""
+    cdef int lo = 0, hi = m - 1, mid
+    cdef double slope, r
+    if t < ts[0] or m == 1:
+        return vs[0]
+    if t >= ts[m - 1]:
+        return vs[m - 1]
+    while hi - lo > 1:                  # ts[lo] <= t < ts[hi]
+        mid = (lo + hi) // 2
+        if ts[mid] <= t:
+            lo = mid
+        else:
+            hi = mid
+    if t == ts[lo]:
+        return vs[lo]
+    slope = (vs[lo + 1] - vs[lo]) / (ts[lo + 1] - ts[lo])
+    r = slope * (t - ts[lo]) + vs[lo]
+    if r != r:
+        r = slope * (t - ts[lo + 1]) + vs[lo + 1]
+    return r
+
+
+cdef double _table_rate(double t, const double* ts, const double* vs, int m) noexcept nogil:
+    """The slope of the table's segment at ``t`` (zero outside and at its ends)."""
+    cdef int lo = 0, hi = m - 1, mid
+    if m < 2 or t <= ts[0] or t >= ts[m - 1]:
+        return 0.0
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if ts[mid] <= t:
+            lo = mid
+        else:
+            hi = mid
+    return (vs[lo + 1] - vs[lo]) / (ts[lo + 1] - ts[lo])
 
 
 cdef inline double _hermite(double y0, double f0, double y1, double f1, double h,
@@ -48,6 +95,37 @@ cdef inline double _hermite(double y0, double f0, double y1, double f1, double h
     cdef double t3 = t2 * theta
     return ((2 * t3 - 3 * t2 + 1) * y0 + (t3 - 2 * t2 + theta) * h * f0
             + (-2 * t3 + 3 * t2) * y1 + (t3 - t2) * h * f1)
+
+
+cdef void _substep_peaks(double* peak, const double* d0, const double* v0, const double* d1,
+                         const double* v1, double h, int n) noexcept nogil:
+    """Raise each ``peak[j]`` to the largest value of the cubic Hermite
+    through ``d0[j]``, ``d1[j]`` with rates ``v0[j]``, ``v1[j]`` over one
+    accepted sub-step of ``h`` (:func:`cosim.integrators.substep_peaks`, the
+    same arithmetic)."""
+    cdef int j
+    cdef double p, dd, c1, c2, c3, qa, qb, disc, r, q, s, x
+    for j in range(n):
+        p = d1[j]
+        if v0[j] > 0.0 and 0.0 > v1[j]:
+            dd = d1[j] - d0[j]
+            c1 = h * v0[j]
+            c2 = 3.0 * dd - h * (2.0 * v0[j] + v1[j])
+            c3 = -2.0 * dd + h * (v0[j] + v1[j])
+            qa = 3.0 * c3
+            qb = 2.0 * c2
+            disc = qb * qb - 4.0 * qa * c1
+            r = sqrt(disc) if disc > 0.0 else 0.0
+            q = -0.5 * (qb + (r if qb >= 0.0 else -r))
+            s = c1 / q if q != 0.0 else 1.0
+            if not (0.0 < s < 1.0) and qa != 0.0:
+                s = q / qa
+            if 0.0 < s < 1.0:
+                x = d0[j] + s * (c1 + s * (c2 + s * c3))
+                if x > p:
+                    p = x
+        if p > peak[j]:
+            peak[j] = p
 
 
 cdef class MultibodyStep:
@@ -102,11 +180,20 @@ cdef class MultibodyStep:
     cdef double[::1] F, b, u_re, u_im, sw_tmp
     cdef double[:, ::1] stage          # rows: k1, k2, k3, k4, tmp, y1, k1n, yi, ya, ka
     cdef double[:, ::1] sws            # rows: s0, s1, s, snew
+    cdef double[:, ::1] pen            # rows: d, dd at the last rhs; d, dd at the last sub-step end
+    # joint effects
+    cdef bint has_springs, has_dampers
+    cdef int nd
+    cdef double[::1] e_k, e_rest, e_c, tau
+    cdef long[::1] d_joint, d_kind, d_ref, d_off, d_len
+    cdef double[:, ::1] d_pd                   # (n_d, 3): kp, kd, max torque (or the torque)
+    cdef double[:, ::1] d_par                  # (n_d, 4): the reference's parameters
+    cdef double[::1] d_tab                     # tables: times then values, per drive
     #: number of right-hand-side evaluations so far
     cdef public long n_rhs
 
     def __init__(self, parent, revolute, offset, axis, angle0, ancestors, mass, inertia, com,
-                 rot_mass, gravity, port_body, port_local, contacts):
+                 rot_mass, gravity, port_body, port_local, contacts, effects=None):
         cdef int n = len(parent)
         self.n = n
         self.np_ = len(port_body)
@@ -172,7 +259,39 @@ cdef class MultibodyStep:
         self.sw_tmp = np.zeros(max(self.nc, 1))
         self.stage = np.zeros((10, self.ny))
         self.sws = np.zeros((4, max(self.nc, 1)))
+        self.pen = np.zeros((4, max(self.nc, 1)))
         self.n_rhs = 0
+        self._set_effects(n, effects)
+
+    def _set_effects(self, int n, effects):
+        """Joint springs, dampers and drives from ``effects``: None, or
+        ``(stiffness, rest, damping, drives)`` with per-joint arrays and
+        drives ``(joint, kind, gains (3,), reference kind, reference
+        params (4,), table times, table values)`` (see
+        :func:`cosim.bodies.kernel_effects`)."""
+        self.tau = np.zeros(n)
+        if effects is None:
+            self.has_springs = self.has_dampers = False
+            self.e_k = self.e_rest = self.e_c = np.zeros(n)
+            drives = []
+        else:
+            k, rest, c, drives = effects
+            self.e_k = np.ascontiguousarray(k, dtype=float)
+            self.e_rest = np.ascontiguousarray(rest, dtype=float)
+            self.e_c = np.ascontiguousarray(c, dtype=float)
+            self.has_springs = bool(np.any(self.e_k))
+            self.has_dampers = bool(np.any(self.e_c))
+        self.nd = len(drives)
+        m = max(self.nd, 1)
+        self.d_joint = np.array([d[0] for d in drives] or [0], dtype=np.int_)
+        self.d_kind = np.array([d[1] for d in drives] or [0], dtype=np.int_)
+        self.d_pd = np.array([list(d[2]) for d in drives] or [[0.0] * 3], dtype=float)
+        self.d_ref = np.array([d[3] for d in drives] or [0], dtype=np.int_)
+        self.d_par = np.array([list(d[4]) for d in drives] or [[0.0] * 4], dtype=float)
+        tabs = [(np.asarray(d[5], float), np.asarray(d[6], float)) for d in drives]
+        self.d_len = np.array([t.size for t, _ in tabs] or [0], dtype=np.int_)
+        self.d_off = np.array(np.cumsum([0] + [2 * t.size for t, _ in tabs])[:m], dtype=np.int_)
+        self.d_tab = np.concatenate([np.concatenate([t, v]) for t, v in tabs] + [np.zeros(1)])
 
     # ------------------------------------------------------------ the step
     def set_step(self, double t0, double h, inputs, embedded):
@@ -221,11 +340,12 @@ cdef class MultibodyStep:
                     self.dm_im[k, i - 1] = mc[i].imag * i / mh
 
     def step(self, double t, double h, x, aux, inputs, embedded, double max_step,
-             double free_step, on_switch):
+             double free_step, on_switch, peak=None):
         """One macro step of the host: ``x = [q, dq]`` and ``aux`` (the
         embedded contacts' quadratures, whose first moments restart at zero)
-        are advanced in place by RK4 (:meth:`integrate`); returns the port
-        velocity moments ``int v s^j dt``, ``(3, n_p)`` complex."""
+        are advanced in place by RK4 (:meth:`integrate`, which raises
+        ``peak`` to the contacts' peaks); returns the port velocity moments
+        ``int v s^j dt``, ``(3, n_p)`` complex."""
         cdef double[::1] xv = x
         cdef double[::1] av = aux
         cdef int i, nx = xv.shape[0], na = av.shape[0]
@@ -241,7 +361,7 @@ cdef class MultibodyStep:
             yv[i] = xv[i]
         for i in range(na):
             yv[nx + i] = av[i]
-        y1 = self.integrate(t, y0, t + h, max_step, free_step, True, on_switch)
+        y1 = self.integrate(t, y0, t + h, max_step, free_step, True, on_switch, peak)
         yv = y1
         for i in range(nx):
             xv[i] = yv[i]
@@ -473,6 +593,8 @@ cdef class MultibodyStep:
         for k in range(self.nc):
             p = self.c_port[k]
             self._penetration(k, t, &d, &dd)
+            self.pen[0, k] = d
+            self.pen[1, k] = dd
             self._law(k, d, dd, &f, &pw, &swk)
             fr = self.c_side[k] * f * self.c_nre[k]
             fi = self.c_side[k] * f * self.c_nim[k]
@@ -483,7 +605,11 @@ cdef class MultibodyStep:
             out[base + 4 * k + 2] = f * tau
             out[base + 4 * k + 3] = fr * self.pv_re[n + p] + fi * self.pv_im[n + p]
             sw[k] = swk
-        # generalised forces Re(J^H u) - F, then ddq
+        # generalised forces Re(J^H u) - (F - effects), then ddq
+        if self.nd or self.has_springs or self.has_dampers:
+            self._effects(t, q, dq, &out[2 * n + 4 * self.nc])
+            for i in range(n):
+                self.F[i] = self.F[i] - self.tau[i]
         for i in range(n):
             s = 0.0
             for p in range(npt):
@@ -494,8 +620,9 @@ cdef class MultibodyStep:
         if self._solve(out + n) != 0:
             return -1
         base = 2 * n + 4 * self.nc
-        out[base] = 0.0
-        out[base + 1] = 0.0
+        if not (self.nd or self.has_springs or self.has_dampers):
+            out[base] = 0.0
+            out[base + 1] = 0.0
         base += 2
         s = tau / self.h
         for p in range(npt):
@@ -506,6 +633,76 @@ cdef class MultibodyStep:
             out[base + 4 * npt + 2 * p] = (s * s) * self.pv_re[n + p]
             out[base + 4 * npt + 2 * p + 1] = (s * s) * self.pv_im[n + p]
         return 0
+
+    cdef double _reference(self, int k, double t, bint rate) noexcept nogil:
+        """The value (or rate) of drive ``k``'s reference at ``t``
+        (:mod:`multibody.effects` trajectories)."""
+        cdef int kind = self.d_ref[k]
+        cdef double x, a, w
+        cdef const double* ts
+        if kind == REF_TABLE:
+            ts = &self.d_tab[self.d_off[k]]
+            if rate:
+                return _table_rate(t, ts, ts + self.d_len[k], self.d_len[k])
+            return _interp(t, ts, ts + self.d_len[k], self.d_len[k])
+        if kind == REF_MINIMUM_JERK:    # params: start, end, t_start, t_end
+            x = (t - self.d_par[k, 2]) / (self.d_par[k, 3] - self.d_par[k, 2])
+            x = 0.0 if x < 0.0 else x
+            x = 1.0 if x > 1.0 else x
+            if rate:
+                a = (self.d_par[k, 1] - self.d_par[k, 0]) / (self.d_par[k, 3] - self.d_par[k, 2])
+                return a * 30 * x * x * pow(1 - x, 2.0)
+            return (self.d_par[k, 0] + (self.d_par[k, 1] - self.d_par[k, 0]) * pow(x, 3.0)
+                    * (10 - 15 * x + 6 * x * x))
+        # sinusoid: amplitude, frequency, phase, offset
+        w = 2 * 3.141592653589793 * self.d_par[k, 1]
+        if rate:
+            return self.d_par[k, 0] * w * cos(w * t + self.d_par[k, 2])
+        return self.d_par[k, 3] + self.d_par[k, 0] * sin(2 * 3.141592653589793
+                                                         * self.d_par[k, 1] * t
+                                                         + self.d_par[k, 2])
+
+    cdef void _effects(self, double t, const double* q, const double* dq,
+                       double* rates) noexcept nogil:
+        """Joint effects' generalised forces into ``tau`` and the power the
+        dampers dissipate and the drives supply into ``rates[0:2]``
+        (:class:`multibody.JointEffects`)."""
+        cdef int i, k, j, kind
+        cdef double tq, diss = 0.0, sup = 0.0, r, rd
+        cdef const double* ts
+        for i in range(self.n):
+            self.tau[i] = 0.0
+        for k in range(self.nd):
+            j = self.d_joint[k]
+            kind = self.d_kind[k]
+            if kind == DRIVE_CONSTANT:
+                tq = self.d_pd[k, 0]
+            elif kind == DRIVE_TABLE:
+                ts = &self.d_tab[self.d_off[k]]
+                tq = _interp(t, ts, ts + self.d_len[k], self.d_len[k])
+            else:                       # PD
+                r = self._reference(k, t, False)
+                rd = self._reference(k, t, True)
+                tq = self.d_pd[k, 0] * (r - q[j]) + self.d_pd[k, 1] * (rd - dq[j])
+                if tq < -self.d_pd[k, 2]:
+                    tq = -self.d_pd[k, 2]
+                if tq > self.d_pd[k, 2]:
+                    tq = self.d_pd[k, 2]
+            self.tau[j] += tq
+        if self.nd:
+            for i in range(self.n):
+                sup += self.tau[i] * dq[i]
+        if self.has_dampers:
+            for i in range(self.n):
+                diss += self.e_c[i] * dq[i] * dq[i]
+        if self.has_springs:
+            for i in range(self.n):
+                self.tau[i] -= self.e_k[i] * (q[i] - self.e_rest[i])
+        if self.has_dampers:
+            for i in range(self.n):
+                self.tau[i] -= self.e_c[i] * dq[i]
+        rates[0] = diss
+        rates[1] = sup
 
     cdef void _switch(self, double t, const double* y, double* sw) noexcept nogil:
         """The contacts' switch values at ``(t, y)``: port kinematics only."""
@@ -592,11 +789,28 @@ cdef class MultibodyStep:
     cdef _fail(self, double t):
         raise FloatingPointError(f"the mass matrix is not positive definite at t = {t:.6g} s")
 
+    cdef void _watch(self, double* peak, double h) noexcept nogil:
+        """One accepted sub-step of ``h`` whose end the last right-hand side
+        evaluated: raise ``peak`` over it; its end becomes the next start."""
+        _substep_peaks(peak, &self.pen[2, 0], &self.pen[3, 0], &self.pen[0, 0], &self.pen[1, 0],
+                       h, self.nc)
+        self._watched()
+
+    cdef void _watched(self) noexcept nogil:
+        """The last right-hand side's penetrations start the next sub-step."""
+        cdef int k
+        for k in range(self.nc):
+            self.pen[2, k] = self.pen[0, k]
+            self.pen[3, k] = self.pen[1, k]
+
     def integrate(self, double t0, y0, double t1, double max_step, double free_step,
-                  bint coarse, on_switch=None):
+                  bint coarse, on_switch=None, peak=None):
         """Advance ``y0`` from ``t0`` to ``t1`` (see
         :meth:`cosim.integrators.TimeStepper.integrate`, whose algorithm this
-        is); ``free_step <= 0`` means none.  Returns the new state."""
+        is); ``free_step <= 0`` means none.  With ``peak`` (one entry per
+        contact), each contact's largest penetration over the step is located
+        on the accepted sub-steps' cubic Hermite and raised into it, as the
+        reference's ``probe``/``peak`` do.  Returns the new state."""
         cdef int ny = self.ny, nc = self.nc, i, n, it, k
         cdef double t = t0, te, h, dt, step, ts
         cdef bint any_closed, any_flip, has_sw = nc > 0
@@ -612,8 +826,17 @@ cdef class MultibodyStep:
         cdef double* s1 = &self.sws[1, 0]
         cdef double* snew = &self.sws[3, 0]
         cdef char flipped[MAX_CONTACTS]
+        cdef double[::1] pkv
+        cdef double* pk = NULL
+        if peak is not None and nc > 0:
+            pkv = peak
+            if pkv.shape[0] != nc:
+                raise ValueError(f"`peak` must have {nc} entries, got {pkv.shape[0]}")
+            pk = &pkv[0]
         if self._rhs(t, y, k1, s0):
             self._fail(t)
+        if pk != NULL:
+            self._watched()
         step = max_step
         if coarse and free_step > 0.0:
             any_closed = False
@@ -655,15 +878,25 @@ cdef class MultibodyStep:
                         if self._single(t, y, ts - t, k1, &self.stage[8, 0]):
                             self._fail(t)
                         memcpy(y, &self.stage[8, 0], ny * sizeof(double))
+                        if self._rhs(ts, y, k1, snew):
+                            self._fail(ts)
+                        if pk != NULL:
+                            self._watch(pk, ts - t)
                         t = ts
-                        if self._rhs(t, y, k1, snew):
-                            self._fail(t)
                         if on_switch is not None:
                             self._notify(on_switch, t, y, k1, s0, snew)
+                            if pk != NULL:
+                                self._watched()     # after a jump of the rates
                         memcpy(s0, snew, nc * sizeof(double))
                         continue
+                    if pk != NULL:
+                        self._watch(pk, h)
                     if on_switch is not None:
                         self._notify(on_switch, te, y1, k1n, s0, s1)
+                        if pk != NULL:
+                            self._watched()
+                elif pk != NULL:
+                    self._watch(pk, h)
                 memcpy(s0, s1, nc * sizeof(double))
             t = te
             memcpy(y, y1, ny * sizeof(double))
@@ -694,6 +927,32 @@ cdef class MultibodyStep:
             for k in range(self.nc):
                 out[k] = self.sws[2, k]
         return out
+
+    def evaluate(self, y):
+        """``M``, ``F`` and the ports' complex positions, velocities and
+        Jacobian rows at state ``y = [q, dq, ...]``: what
+        :meth:`multibody.TreeModel.evaluate` returns (less the
+        velocity-product terms), for a right-hand side written in Python."""
+        yin = np.ascontiguousarray(y, dtype=float)
+        cdef double[::1] yv = yin
+        cdef int i, j, n = self.n, npt = self.np_
+        self._frames(&yv[0], &yv[n])
+        for i in range(n):
+            self._point(i, i, self.com_re[i], self.com_im[i], &yv[n], True)
+        for i in range(npt):
+            self._point(n + i, self.port_body[i], self.pl_re[i], self.pl_im[i], &yv[n], True)
+        self._mass_and_forces()
+        M = np.array(self.M)
+        F = np.array(self.F)
+        x = np.empty(npt, complex)
+        v = np.empty(npt, complex)
+        J = np.empty((npt, n), complex)
+        for i in range(npt):
+            x[i] = complex(self.px_re[n + i], self.px_im[n + i])
+            v[i] = complex(self.pv_re[n + i], self.pv_im[n + i])
+            for j in range(n):
+                J[i, j] = complex(self.J_re[n + i, j], self.J_im[n + i, j])
+        return M, F, x, v, J
 
     def outputs(self, y):
         """Port positions and velocities, each ``(n_p, 2)`` [m], [m/s], at

@@ -13,7 +13,8 @@ from multibody import TreeModel
 from .errors import SimulationError
 from .integrators import INTEGRATORS, RK4, TimeStepper
 from .kernel import compiled_module
-from .subsystem import EmbeddedContact, StepInput, Subsystem
+from .subsystem import (DISSIPATED, IMPULSE, MOMENT, QUADRATURES, WORK, EmbeddedContact,
+                        StepInput, Subsystem)
 
 if TYPE_CHECKING:
     from multibody import JointEffects
@@ -35,6 +36,38 @@ def kernel_law(law):
     if kind is RigidLaw:
         return (3, 0.0, 0.0, 1.0)
     return None
+
+
+def kernel_effects(effects: JointEffects | None):
+    """Joint effects as the compiled kernel takes them:
+    ``(stiffness, rest, damping, drives)``, or None for no effects; raises
+    ``TypeError`` for a drive or reference the kernel does not know."""
+    if effects is None:
+        return None
+    # where a tree has effects, multibody.effects is loaded already (a scene built them)
+    from multibody.effects import (ConstantTorque, MinimumJerk, PDTracking, Sinusoid, Table,
+                                   TorqueTable)
+    drives = []
+    for d in effects.drives:
+        ref_kind, ref_par, ts, vs = 0, (0.0,) * 4, (), ()
+        if type(d) is ConstantTorque:
+            kind, gains = 0, (d.torque, 0.0, 0.0)
+        elif type(d) is TorqueTable:
+            kind, gains, ts, vs = 1, (0.0,) * 3, d.torque.times, d.torque.values
+        elif type(d) is PDTracking:
+            kind, gains, r = 2, (d.kp, d.kd, d.max_torque), d.reference
+            if type(r) is Table:
+                ts, vs = r.times, r.values
+            elif type(r) is MinimumJerk:
+                ref_kind, ref_par = 1, (r.start, r.end, r.t_start, r.t_end)
+            elif type(r) is Sinusoid:
+                ref_kind, ref_par = 2, (r.amplitude, r.frequency, r.phase, r.offset)
+            else:
+                raise TypeError(f"reference {type(r).__name__}")
+        else:
+            raise TypeError(f"drive {type(d).__name__}")
+        drives.append((d.joint, kind, gains, ref_kind, ref_par, ts, vs))
+    return effects.stiffness, effects.rest, effects.damping, drives
 
 
 #: integrators whose steps the compiled kernel takes (RK4) or feeds (adaptive)
@@ -61,8 +94,11 @@ class MultibodySubsystem(Subsystem):
 
     Notes
     -----
-    ``aux`` holds, per embedded contact, its impulse and dissipated energy,
-    then the energy dissipated by joint dampers and supplied by drives.
+    ``aux`` holds, per embedded contact, its :data:`~cosim.subsystem.QUADRATURES`
+    (impulse, dissipated energy, the step's first moment of the force, work),
+    then the energy dissipated by joint dampers and supplied by drives.  The
+    integrated state is ``[q, dq, aux, port velocity moments]``, the layout the
+    compiled kernel shares (:mod:`cosim._multibody_step`).
     """
 
     def __init__(self, name: str, model: TreeModel, q0, dq0, ports: dict,
@@ -145,7 +181,7 @@ class MultibodySubsystem(Subsystem):
         this subsystem [J] so far, and the current step's first moment of the
         force ``int f (t - t0) dt`` [N s^2], in the order impulse, dissipated,
         moment, work."""
-        return self.aux[:-2].reshape(-1, 4)
+        return self.aux[:-2].reshape(-1, len(QUADRATURES))
 
     def ledger(self):
         return float(self.aux[-2]), float(self.aux[-1])
@@ -177,6 +213,9 @@ class MultibodySubsystem(Subsystem):
     def _evaluate(self, y):
         n = self.n_dof
         q, dq = y[:n], y[n:2 * n]
+        kernel = self._compiled()
+        if kernel is not None:       # the tree's part of a right-hand side in Python
+            return (dq, *kernel.evaluate(y))
         M, F, x, v, J, _ = self.model.evaluate(q, dq, self._g, self._port_body,
                                                self._port_local_c)
         return dq, M, F, x, v, J
@@ -245,9 +284,9 @@ class MultibodySubsystem(Subsystem):
 
     def _compiled_step(self, inputs):
         """The compiled kernel where it takes this step, or None where the
-        reference must: the kernel not built or not chosen, joint effects,
-        grasp or friction connections, a user's own law or integrator, or an
-        input that is not a :class:`StepInput`."""
+        reference must: the kernel not built or not chosen, grasp or friction
+        connections embedded here, a user's own law, drive or integrator, or
+        an input that is not a :class:`StepInput`."""
         kernel = self._compiled()
         if kernel is None or not self._kernel_steps:
             return None
@@ -260,7 +299,13 @@ class MultibodySubsystem(Subsystem):
         if module is None:
             return None
         laws = [kernel_law(e.law) for e in self._embedded]
-        self._kernel_steps = (self.effects is None and not self._connections
+        try:
+            effects = kernel_effects(self.effects)
+        except TypeError:               # a user's own drive: the reference steps
+            effects, known = None, False
+        else:
+            known = True
+        self._kernel_steps = (known and not self._connections
                               and type(self.integrator) in KERNEL_INTEGRATORS
                               and all(law is not None for law in laws))
         contacts = ([(e.port, e.side, e.normal, e.offset, *law)
@@ -268,7 +313,8 @@ class MultibodySubsystem(Subsystem):
         m = self.model
         return module.MultibodyStep(m.parent, m.revolute, m._offset, m._axis, m._angle0,
                                     m.ancestors, m.mass, m.inertia, m._com, m._rot_mass, self._g,
-                                    self._port_body, self._port_local_c, contacts)
+                                    self._port_body, self._port_local_c, contacts,
+                                    effects if self._kernel_steps else None)
 
     @property
     def kernel(self) -> str:
@@ -288,7 +334,7 @@ class MultibodySubsystem(Subsystem):
                                             integ.max_step, integ.free_step or 0.0,
                                             self._on_switch)
             return
-        self.aux[2:-2:4] = 0.0          # first moments are per step
+        self.aux[MOMENT:-2:len(QUADRATURES)] = 0.0      # first moments are per step
         y0 = np.concatenate([self.x, self.aux, np.zeros(6 * self.n_ports)])
         if kernel is not None:           # an adaptive method: compiled right-hand side
             kernel.set_step(t, h, inputs, self._embedded)
@@ -374,10 +420,11 @@ class MultibodySubsystem(Subsystem):
             p_i = float(res.normal_impulse[i])
             if y.size > 2 * n:           # the stepping state carries the quadratures
                 share = res.energy_loss * (p_i / total if total else 0.0)
-                out[2 * n + 4 * k] += p_i
-                out[2 * n + 4 * k + 1] += share
-                out[2 * n + 4 * k + 2] += p_i * (t - self._t0)
-                out[2 * n + 4 * k + 3] -= share       # the kinetic energy the impact took
+                quad = out[2 * n + len(QUADRATURES) * k:]   # contact k's quadratures
+                quad[IMPULSE] += p_i
+                quad[DISSIPATED] += share
+                quad[MOMENT] += p_i * (t - self._t0)
+                quad[WORK] -= share    # the kinetic energy the impact took
             if k != slot:
                 self.switch_log.append((t, k, True))
             self.impact_log.append({

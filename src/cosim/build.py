@@ -210,8 +210,8 @@ def build_system(scene: Scene, scheme: str | None = None):
         if sname not in moving:
             raise SceneError(scene.path, f"scheme.substeps.{sname}",
                              f"names no moving subsystem; moving subsystems are {moving}")
-        hosts = [system.links[c].contact.name for c, (h, *_) in system.hosted.items()
-                 if subs[h].name == sname]
+        hosts = [system.links[c].contact.name for c, hc in system.hosted.items()
+                 if subs[hc.host].name == sname]
         if m > 1 and hosts:
             raise SceneError(scene.path, f"scheme.substeps.{sname}",
                              f"`{sname}` hosts contacts {hosts}, which its integrator "

@@ -25,6 +25,8 @@ def _print_summary(s: dict, out: Path | None) -> None:
                   f"in touch {c['in_touch_time']:.6g} s)")
     print(f"  energy: initial {e['initial']:.6g} J, final {e['final']:.6g} J, dissipated "
           f"{e['dissipated']:.4g} J, max drift {e['max_abs_drift']:.3g} J")
+    for w in s.get("warnings", []):
+        print(f"  warning: {w['message']}")
     for imp in s["impacts"]:
         vn, vt = imp["normal_velocity"], imp["tangential_velocity"]
         slip = " -> ".join(m for _, _, m in imp["slip_history"]) or "frictionless"

@@ -36,6 +36,15 @@ message says the rest came from inside the subsystems' integrators.
 
 The check costs three sums and two comparisons per step, and nothing else
 unless it trips.
+
+Below the stop lies a warning level: a run that finishes having created more
+than ``energy_warning`` times its energy scale (1 % by default; the largest
+created energy over the samples, against the scale the stop would use at the
+end), or with a contact whose ``coupling_error`` exceeds ``coupling_warning``
+times that scale in magnitude (1 % too), carries ``warnings`` in its summary
+(:meth:`Guard.warnings`), each naming the contact and the energy, and the
+command line prints them.  Both levels respect ``energy_floor``.  They cost
+one comparison per sample (the recorder keeps the largest created energy).
 """
 from __future__ import annotations
 
@@ -47,12 +56,17 @@ import numpy as np
 from .errors import SimulationError
 
 __all__ = ["GuardOptions", "Guard", "GuardError", "nonfinite_cause", "energy_scale",
-           "peak_stored_energy", "DEFAULT_ENERGY_GROWTH", "DEFAULT_ENERGY_FLOOR"]
+           "peak_stored_energy", "DEFAULT_ENERGY_GROWTH", "DEFAULT_ENERGY_FLOOR",
+           "DEFAULT_ENERGY_WARNING", "DEFAULT_COUPLING_WARNING"]
 
 #: default bound on the created energy, relative to the energy scale
 DEFAULT_ENERGY_GROWTH = 0.1
 #: [J] default least bound (a scene that starts with next to no energy)
 DEFAULT_ENERGY_FLOOR = 1e-3
+#: default warning level of the created energy, relative to the energy scale
+DEFAULT_ENERGY_WARNING = 0.01
+#: default warning level of a contact's |coupling_error|, relative to the energy scale
+DEFAULT_COUPLING_WARNING = 0.01
 
 
 class GuardError(SimulationError):
@@ -86,18 +100,30 @@ class GuardOptions:
         False turns the energy bound off; non-finite values stop a run
         whatever this says.
     energy_floor : float
-        Created energy below this never stops a run [J], >= 0.
+        Created energy below this never stops a run, nor warns [J], >= 0.
+    energy_warning : float
+        Created energy that makes a finished run warn, relative to its energy
+        scale, > 0 (``inf``: never).
+    coupling_warning : float
+        A contact's ``|coupling_error|`` that makes a run warn, relative to
+        the energy scale, > 0 (``inf``: never).
     """
 
     energy_growth: float = DEFAULT_ENERGY_GROWTH
     energy_check: bool = True
     energy_floor: float = DEFAULT_ENERGY_FLOOR
+    energy_warning: float = DEFAULT_ENERGY_WARNING
+    coupling_warning: float = DEFAULT_COUPLING_WARNING
 
     def __post_init__(self):
         g = self.energy_growth
         if isinstance(g, bool) or not isinstance(g, (int, float)) or not (
                 math.isfinite(g) and g > 0):
             raise ValueError(f"`energy_growth` must be a finite number > 0, got {g!r}")
+        for key in ("energy_warning", "coupling_warning"):
+            w = getattr(self, key)
+            if isinstance(w, bool) or not isinstance(w, (int, float)) or not w > 0:
+                raise ValueError(f"`{key}` must be a number > 0 (inf: never), got {w!r}")
         e = self.energy_floor
         if isinstance(e, bool) or not isinstance(e, (int, float)) or not (
                 math.isfinite(e) and e >= 0):
@@ -204,6 +230,63 @@ class Guard:
         s = d.sum() + dd.sum() + f.sum()
         if s - s != 0 or not created <= self._bound(self.scale, supplied):
             self._judge(t, d, dd, f, created, supplied, dissipated, work, peak)
+
+    def warnings(self, created: float, supplied: float, coupling_errors: dict, d,
+                 peak=None) -> list[dict]:
+        """What a run that did not stop should still say about its accuracy.
+
+        Parameters
+        ----------
+        created : float
+            The largest energy created at any sample [J].
+        supplied : float
+            Energy supplied by drives by the end [J].
+        coupling_errors : dict
+            Contact name -> its ledger's ``coupling_error`` at the end [J].
+        d : (n_rows,) ndarray
+            The last sample's penetrations [m] (the tangential rows' stored
+            energy is part of the scale).
+        peak : (n_contacts,) ndarray, optional
+            Each contact's largest penetration [m].
+
+        Returns
+        -------
+        list of dict
+            One per warning: ``kind`` (``"energy"`` or ``"coupling_error"``),
+            ``contact`` (its name, or None), ``energy`` [J], ``level`` [J] and
+            ``message``.  The scale is the one the stop uses: the start's,
+            raised to the energy the contacts stored at their peaks.
+        """
+        if self.scale is None:
+            return []
+        opts, system = self.options, self.system
+        scale = self.scale
+        if peak is not None and system.n_contacts:
+            scale = max(scale, peak_stored_energy(system, d, peak))
+        scale += abs(supplied)
+        out = []
+        level = max(opts.energy_warning * scale, opts.energy_floor)
+        if created > level:
+            worst = max(coupling_errors, key=coupling_errors.get, default=None)
+            contact = worst if worst is not None and coupling_errors[worst] > 0 else None
+            text = (f"the run created up to {created:.4g} J ({created / scale:.2%} of the "
+                    f"energy scale {scale:.4g} J; warning level `guard.energy_warning` = "
+                    f"{opts.energy_warning:g})")
+            text += (f"; contact `{contact}` has the largest coupling error at the end, "
+                     f"{coupling_errors[contact]:.4g} J" if contact is not None else
+                     "; no contact's coupling error is positive at the end")
+            out.append({"kind": "energy", "contact": contact, "energy": float(created),
+                        "level": float(level), "message": text})
+        level = max(opts.coupling_warning * scale, opts.energy_floor)
+        for name, err in coupling_errors.items():
+            if abs(err) > level:
+                out.append({"kind": "coupling_error", "contact": name, "energy": float(err),
+                            "level": float(level),
+                            "message": f"contact `{name}`'s coupling error is {err:.4g} J "
+                                       f"({'created' if err > 0 else 'removed'} by the "
+                                       f"coupling; warning level `guard.coupling_warning` = "
+                                       f"{opts.coupling_warning:g} of {scale:.4g} J)"})
+        return out
 
     def _bound(self, scale: float, supplied: float) -> float:
         if self.growth == math.inf:

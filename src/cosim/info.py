@@ -46,7 +46,7 @@ def _contact_info(system, c, scene) -> dict:
         else:
             steps[name] = preflight.largest_safe_step(
                 m, k, cd, 10 * math.pi / omega, order, gain,
-                name == "gauss_seidel" and order > 0)
+                preflight.partner_first(system, c, name, order))
     out["max_macro_step_s"] = steps
     if ln.placement == "embedded":
         host = system.embedded[c][0]

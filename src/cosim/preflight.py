@@ -21,7 +21,21 @@ import math
 
 import numpy as np
 
-__all__ = ["step_map", "contact_energy_gain", "is_safe", "largest_safe_step", "stiffest_normal"]
+__all__ = ["step_map", "contact_energy_gain", "is_safe", "largest_safe_step",
+           "partner_first", "stiffest_normal"]
+
+
+def partner_first(system, c, scheme: str, order: int) -> bool:
+    """Whether scheme ``scheme`` hands contact ``c``'s force to a side after
+    its partner has stepped, at extrapolation order ``order``: Gauss-Seidel
+    does so only against a rigid partner (whose motion is known over the
+    step) and with the stepping side's own motion extrapolated (order > 0).
+    Between two moving sides the force is extrapolated as in Jacobi.  The
+    schemes' pre-flight check and ``cosim info`` both ask here, so they give
+    the same largest safe step."""
+    ln = system.links[c]
+    return (scheme == "gauss_seidel" and order > 0
+            and (system.subsystems[ln.sub_a].rigid or system.subsystems[ln.sub_b].rigid))
 
 
 def stiffest_normal(link) -> tuple[float, float]:

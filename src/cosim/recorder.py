@@ -140,6 +140,7 @@ class Recorder:
         self.impacts: list[dict] = []
         self.supplied = 0.0
         self.max_drift = 0.0
+        self.max_created = 0.0        # [J] the largest energy created at any sample
         self.last = None
         self._d0 = None
         self._stored0 = None         # contacts' stored energy at the start, in their modes then
@@ -178,6 +179,8 @@ class Recorder:
             self.guard.check(t, d, dd, f, drift, internal[1], dissipated, work, self.peak)
         self.supplied = internal[1]
         self.max_drift = max(self.max_drift, abs(drift))
+        if drift > self.max_created:
+            self.max_created = drift
         active = self.system.in_touch(f)
         nc = self.system.n_contacts
         switched, released = [], set()
@@ -399,6 +402,12 @@ class Recorder:
             events += [{"contact": name, "t_on": float(a), "t_off": float(b)} for a, b in iv]
         events.sort(key=lambda e: e["t_on"])
         e_final = self.last[3] if self.last else 0.0
+        warnings = []
+        if self.guard is not None and self.last:
+            warnings = self.guard.warnings(
+                self.max_created, self.supplied,
+                {n: c["coupling_error"] for n, c in contacts.items() if "coupling_error" in c},
+                self.last[6], self.peak)
         summary = {
             "scene": self.scene,
             "scheme": self.scheme,
@@ -416,6 +425,7 @@ class Recorder:
                 "dissipated": float(self.last[4]) if self.last else 0.0,
                 "supplied": float(self.supplied),
             },
+            "warnings": warnings,
             "contacts": contacts,
             "impacts": sorted(self.impacts, key=lambda i: i["time"]),
             "switches": [{k: e[k] for k in ("time", "contact", "from", "to")}

@@ -113,9 +113,9 @@ def simulate(scene: Scene, *, scheme: str | None = None, progress=None,
         stop = exc
         status = "error"
         message = (f"stopped by {type(exc).__name__} at t = {_reached(rec):.6g} s: {exc}")
+    if status != "finished":            # the counters up to where the run stopped
+        counters = sch.counters()
     if stop is not None:
-        counters = {"n_windows": max(0, rec._count - 1),
-                    "n_iterations": getattr(sch, "n_iterations", 0)}
         log.error("%s", message)
     res = rec.finish(status, message, time.process_time() - cpu0, counters)
     if out is not None:

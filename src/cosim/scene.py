@@ -17,7 +17,8 @@ import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .guard import DEFAULT_ENERGY_FLOOR, DEFAULT_ENERGY_GROWTH, GuardOptions
+from .guard import (DEFAULT_COUPLING_WARNING, DEFAULT_ENERGY_FLOOR, DEFAULT_ENERGY_GROWTH,
+                    DEFAULT_ENERGY_WARNING, GuardOptions)
 
 
 __all__ = ["SceneError", "Scene", "load_scene", "parse_override", "SUBSYSTEM_TYPES"]
@@ -375,7 +376,11 @@ def _validate(data: dict, file, variant) -> Scene:
                                                  rule=">0"),
                          energy_check=gd.boolean("energy_check", True),
                          energy_floor=gd.number("energy_floor", DEFAULT_ENERGY_FLOOR,
-                                                rule=">=0", unit="J"))
+                                                rule=">=0", unit="J"),
+                         energy_warning=gd.number("energy_warning", DEFAULT_ENERGY_WARNING,
+                                                  rule=">0"),
+                         coupling_warning=gd.number("coupling_warning",
+                                                    DEFAULT_COUPLING_WARNING, rule=">0"))
     gd.finish()
 
     subs = []

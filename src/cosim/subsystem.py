@@ -15,8 +15,19 @@ from abc import ABC, abstractmethod
 
 import numpy as np
 
-__all__ = ["StepInput", "Subsystem", "RigidReference", "SubsystemState", "EmbeddedContact",
+from couplers.contact import penetration_c
+
+__all__ = ["QUADRATURES", "IMPULSE", "DISSIPATED", "MOMENT", "WORK", "StepInput", "Subsystem", "RigidReference", "SubsystemState", "EmbeddedContact",
            "reparametrised", "hermite_coefficients"]
+
+
+#: What each contact embedded in a subsystem integrates along the
+#: subsystem's state, in this order (its block of ``aux``): the impulse [N s],
+#: the energy dissipated [J], the step's first moment of the force
+#: ``int f (t - t0) dt`` [N s^2] (restarted every step) and the work the
+#: contact did on the subsystem [J].
+QUADRATURES = ("impulse", "dissipated", "moment", "work")
+IMPULSE, DISSIPATED, MOMENT, WORK = range(len(QUADRATURES))
 
 
 def hermite_coefficients(x0, v0, x1, v1, h: float) -> tuple:
@@ -126,18 +137,15 @@ class EmbeddedContact:
         s = (np.asarray(t, float) - self.t0) / self.h
         xp = np.polyval(self.motion[::-1], s)
         vp = np.polyval(self._dmotion[::-1], s)
-        nc = self.normal.conjugate()
-        return (self.offset - self.side * (nc * (x - xp)).real,
-                -self.side * (nc * (v - vp)).real)
+        return penetration_c(self.normal, self.offset, self.side * (x - xp),
+                             self.side * (v - vp))
 
     def penetration(self, t: float, x: complex, v: complex) -> tuple[float, float]:
         """Penetration [m] and its rate [m/s] for host port position ``x``
         and velocity ``v`` (complex) at ``t``."""
         xp, vp = self.partner(t)
-        nc = self.normal.conjugate()
-        d = self.offset - self.side * (nc * (x - xp)).real
-        dd = -self.side * (nc * (v - vp)).real
-        return d, dd
+        return penetration_c(self.normal, self.offset, self.side * (x - xp),
+                             self.side * (v - vp))
 
 
 class SubsystemState:

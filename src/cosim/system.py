@@ -2,21 +2,36 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
+from couplers.contact import penetrations
 from couplers.modes import GRASPED
 
-from .subsystem import StepInput, Subsystem
+from .subsystem import EmbeddedContact, StepInput, Subsystem
 
 if TYPE_CHECKING:
     from couplers import Connection, PointContact
 
-__all__ = ["ContactLink", "CoupledSystem", "PLACEMENTS"]
+__all__ = ["ContactLink", "CoupledSystem", "HostedContact", "PLACEMENTS"]
 
 #: Where a contact's penalty law is evaluated in a co-simulation.
 PLACEMENTS = ("embedded", "coupler")
+
+
+class HostedContact(NamedTuple):
+    """A contact evaluated inside one side's integrator against a moving partner."""
+
+    #: index of the subsystem whose integrator evaluates the contact
+    host: int
+    #: the contact's slot among the host's embedded contacts (its ``aux`` block)
+    slot: int
+    #: index of the partner subsystem, and its port
+    partner: int
+    partner_port: int
+    #: the host's view of the contact (the partner's motion over the step)
+    embedded: EmbeddedContact
 
 
 @dataclass(frozen=True)
@@ -70,9 +85,8 @@ class CoupledSystem:
         self._init_rows()
         # embedded: contact index -> (subsystem index, slot in its aux)
         self.embedded: dict[int, tuple[int, int]] = {}
-        # hosted (embedded against a moving partner): contact index ->
-        # (host, slot, partner, partner port, EmbeddedContact)
-        self.hosted: dict[int, tuple] = {}
+        # hosted (embedded against a moving partner): contact index -> HostedContact
+        self.hosted: dict[int, HostedContact] = {}
         slots = [0] * len(self.subsystems)
         for i, ln in enumerate(self.links):
             if ln.placement != "embedded":
@@ -102,7 +116,7 @@ class CoupledSystem:
                     raise ValueError(f"contact `{ln.contact.name}`: a grasp or friction "
                                      f"between two moving sides is exchanged by the scheme; "
                                      f"use placement `coupler`")
-                self.hosted[i] = (own, slots[own], partner, partner_port, emb)
+                self.hosted[i] = HostedContact(own, slots[own], partner, partner_port, emb)
             if ln.connection is not None:
                 if not hasattr(self.subsystems[own], "attach_connection"):
                     raise ValueError(f"contact `{ln.contact.name}`: subsystem "
@@ -112,11 +126,28 @@ class CoupledSystem:
                 self.subsystems[own].attach_connection(
                     slots[own], EmbeddedConnection(self.connections, i, ln.contact.normal, side))
             slots[own] += 1
+        # embedded contacts grouped by host: (host, contact indices, slots)
+        hosts = sorted({s for s, _ in self.embedded.values()})
+        self._embedded_groups = [
+            (s, np.array([c for c, (h, _) in self.embedded.items() if h == s], dtype=int),
+             np.array([k for h, k in self.embedded.values() if h == s], dtype=int))
+            for s in hosts]
         self._followers = [ln for ln in self.links if ln.follow]
         for ln in self._followers:
             if not hasattr(self.subsystems[ln.sub_b], "move_port"):
                 raise ValueError(f"contact `{ln.contact.name}`: `follow` needs a structure as "
                                  f"side b")
+            if ln.placement == "embedded" and ln.host == ln.sub_a:
+                raise ValueError(f"contact `{ln.contact.name}`: a following contact hosted by "
+                                 f"its point's side (`{self.subsystems[ln.sub_a].name}`) "
+                                 f"would miss the surface's slope force; host it in "
+                                 f"`{self.subsystems[ln.sub_b].name}` or use placement "
+                                 f"`coupler`")
+        #: following contacts: index, and n . dx_b/ds at the surface point now
+        self._follow_index = np.array([c for c, ln in enumerate(self.links) if ln.follow],
+                                      dtype=int)
+        self._follow_slope = np.zeros(self._follow_index.size)
+        self._follow_axis = np.zeros((self._follow_index.size, 2))
         self._normals = np.array([ln.contact.normal for ln in self.links]).reshape(-1, 2)
         self._offsets = np.array([ln.contact.offset for ln in self.links])
         self._laws = [ln.contact.law for ln in self.links]
@@ -142,11 +173,11 @@ class CoupledSystem:
         for s, G in enumerate(self._G):
             mask = np.zeros(self.n_rows)
             mask[self.coupler_rows] = 1.0
-            for c, (_, _, partner, _, _) in self.hosted.items():
+            for c, partner in ((c, h.partner) for c, h in self.hosted.items()):
                 if partner == s:
                     mask[c] = 1.0
             self._Gc.append(G * mask)
-        self._applied: dict[int, np.ndarray] = {}      # force polynomials of the step
+        self._applied: dict[int, tuple] = {}   # force polynomials of the step, and their maps
         self._work = np.zeros(self.n_rows)
         #: the rows whose force a scheme hands over (coupler rows, hosted contacts)
         self.exchanged = np.array(sorted(set(self.coupler_rows.tolist()) | set(self.hosted)),
@@ -229,12 +260,67 @@ class CoupledSystem:
         return on
 
     # ---------------------------------------------------- moving surface points
-    def update_followers(self, outs) -> None:
-        """Move each following contact's surface port under its point: the
-        material coordinate of side ``b`` below side ``a``'s port."""
-        for ln in self._followers:
+    def update_followers(self, outs, states=None) -> None:
+        """Move each following contact's surface port under its point, and
+        turn the force on the point to the deformed surface's normal.
+
+        Side ``b``'s port moves to the material coordinate ``s`` below side
+        ``a``'s point ``x_a``: ``s = (x_a - o) . e`` with the structure's
+        origin ``o`` and axis ``e``.  The surface point is then
+        ``x_b(s, t) = o + s e + w(s, t) r`` (``r`` the deflection direction),
+        and the penetration ``d = offset - n . (x_a - x_b(s, t))`` depends on
+        ``x_a`` through ``s`` as well.  Its rate is
+
+            dd = -n . (v_a - w_t r) + sigma (e . v_a),   sigma = n . (e + w' r),
+
+        where ``w_t r`` is the port's material velocity (what
+        :meth:`penetrations` takes for ``v_b``) and ``w' = dw/ds``.  A spring of
+        potential ``V(d)`` and force ``f = V'(d)`` therefore acts with
+        ``-dV/dx_a = f (n - sigma e)`` on the point and with ``-f n`` on the
+        material point ``s`` (its consistent nodal load), and the power balance
+        is exact:
+
+            f (n - sigma e) . v_a - f n . (w_t r) = -f dd = -dV/dt.
+
+        A force along ``n`` alone, as before, leaves ``-f sigma (e . v_a)``
+        (the slope term ``w' ds/dt`` of the spring's stretch) unpaid: the
+        spring's energy changed without work on either side.  So the column
+        of side ``a``'s port-force maps for the contact's row becomes
+        ``n - sigma e`` (``sigma = 0`` where ``s`` is clipped to the
+        structure's ends, for there ``s`` no longer moves with ``x_a``), and
+        :meth:`penetrations` adds the slope term to ``dd``.
+
+        Parameters
+        ----------
+        outs : list
+            Every subsystem's port positions and velocities.
+        states : list of arrays, optional
+            The subsystems' states that gave ``outs`` (default: their own
+            ``x``); side ``b``'s gives ``w'``.
+        """
+        for i, c in enumerate(self._follow_index):
+            ln = self.links[c]
             sub = self.subsystems[ln.sub_b]
-            sub.move_port(ln.port_b, sub.material_coordinate(outs[ln.sub_a][0][ln.port_a]))
+            s_raw = sub.material_coordinate(outs[ln.sub_a][0][ln.port_a])
+            s = sub.move_port(ln.port_b, s_raw)
+            x = sub.x if states is None else states[ln.sub_b]
+            axis = np.asarray(sub.structure.axis, float)
+            n = ln.contact.normal
+            sigma = float(n @ sub.surface_tangent(ln.port_b, x)) if s == s_raw else 0.0
+            if s != s_raw:
+                axis = np.zeros(2)
+            self._follow_slope[i] = sigma
+            self._follow_axis[i] = axis
+            col = np.asarray(n, float) - sigma * axis
+            rows = slice(2 * ln.port_a, 2 * ln.port_a + 2)
+            # new arrays, not in place: a step's work is taken with the maps
+            # its forces were applied through
+            for maps in (self._G, self._Gc):
+                G = maps[ln.sub_a]
+                if G[rows, c].any() and not np.array_equal(G[rows, c], col):
+                    G = G.copy()
+                    G[rows, c] = col
+                    maps[ln.sub_a] = G
 
     # ------------------------------------------------------------- states
     def outputs(self, states=None):
@@ -246,15 +332,18 @@ class CoupledSystem:
         """Penetration and rate of every contact, from subsystem outputs."""
         pos = np.concatenate([o[0] for o in outs])
         vel = np.concatenate([o[1] for o in outs])
-        xa, xb, va, vb = pos[self._row_a], pos[self._row_b], vel[self._row_a], vel[self._row_b]
-        n = self._normals
-        d = self._offsets - np.einsum("cx,cx->c", xa - xb, n)
-        dd = -np.einsum("cx,cx->c", va - vb, n)
+        dx = pos[self._row_a] - pos[self._row_b]
+        dv = vel[self._row_a] - vel[self._row_b]
+        d, dd = penetrations(self._normals, self._offsets, dx, dv)
+        if self._follow_index.size:     # the surface point moves with x_a (update_followers)
+            fi = self._follow_index
+            dd[fi] += self._follow_slope * np.einsum("cx,cx->c", vel[self._row_a[fi]],
+                                                     self._follow_axis)
         if self.n_rows > self.n_contacts:
             nc, ct = self.n_contacts, self.row_contact[self.n_contacts:]
             t = self._row_dir[nc:]
-            e = np.einsum("cx,cx->c", (xa - xb)[ct], t) - self.connections.anchor[ct]
-            de = np.einsum("cx,cx->c", (va - vb)[ct], t)
+            e = np.einsum("cx,cx->c", dx[ct], t) - self.connections.anchor[ct]
+            de = np.einsum("cx,cx->c", dv[ct], t)
             d, dd = np.concatenate([d, e]), np.concatenate([dd, de])
         return d, dd
 
@@ -316,7 +405,7 @@ class CoupledSystem:
         """Port forces of subsystem ``s`` from contact-force polynomial
         coefficients ``coeffs`` (order + 1, n_rows)."""
         sub = self.subsystems[s]
-        self._applied[s] = coeffs
+        self._applied[s] = (coeffs, self._Gc[s])
         c = coeffs @ self._Gc[s].T
         return StepInput(t0, h, c.reshape(len(coeffs), sub.n_ports, 2))
 
@@ -324,12 +413,12 @@ class CoupledSystem:
         """Add the work the exchanged forces did on subsystem ``s`` over its
         last step (the force polynomial it was handed against its ports'
         velocity moments: exact for the polynomial)."""
-        coeffs = self._applied.pop(s, None)
+        coeffs, G = self._applied.pop(s, (None, None))
         if coeffs is None:
             return
         mom = self.subsystems[s].port_moments.view(float).reshape(3, -1)
         p = coeffs.shape[0]
-        self._work += np.einsum("jc,jc->c", coeffs, mom[:p] @ self._Gc[s])
+        self._work += np.einsum("jc,jc->c", coeffs, mom[:p] @ G)
 
     def exchange_work(self) -> np.ndarray:
         """(n_contacts,) work [J] the exchanged contact forces (all rows of a
@@ -349,22 +438,22 @@ class CoupledSystem:
     def embedded_work(self) -> np.ndarray:
         """(n_contacts,) work [J] embedded contacts did on their hosts so far."""
         out = np.zeros(self.n_contacts)
-        for c, (s, slot) in self.embedded.items():
-            out[c] = self.subsystems[s].embedded_quadratures()[slot, 3]
+        for s, contacts, slots in self._embedded_groups:
+            out[contacts] = self.subsystems[s].embedded_quadratures()[slots, 3]
         return out
 
     def embedded_quadratures(self):
         """(n_contacts, 2) impulse and dissipated energy of embedded contacts."""
         out = np.zeros((self.n_contacts, 2))
-        for c, (s, slot) in self.embedded.items():
-            out[c] = self.subsystems[s].embedded_quadratures()[slot, :2]
+        for s, contacts, slots in self._embedded_groups:
+            out[contacts] = self.subsystems[s].embedded_quadratures()[slots, :2]
         return out
 
     def hosted_view_forces(self, outs) -> dict:
         """Force of each hosted contact as its host sees it now, against the
         partner motion it was given, from outputs ``outs``."""
         out = {}
-        for c, (host, _, _, _, emb) in self.hosted.items():
+        for c, (host, _, _, _, emb) in self.hosted.items():   # HostedContact
             sub = self.subsystems[host]
             pos, vel = outs[host]
             d, dd = emb.penetration(sub.t, complex(*pos[emb.port]), complex(*vel[emb.port]))

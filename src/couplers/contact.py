@@ -7,7 +7,35 @@ import numpy as np
 
 from .laws import ContactLaw
 
-__all__ = ["PointContact"]
+__all__ = ["PointContact", "penetrations", "penetration_c"]
+
+
+def penetrations(normals, offsets, dx, dv):
+    """Penetration [m] and its rate [m/s] of many contacts at once.
+
+    Parameters
+    ----------
+    normals : (c, 2) array
+        Unit normals, from side ``b`` towards side ``a``.
+    offsets : (c,) array
+        [m]
+    dx, dv : (c, 2) arrays
+        ``x_a - x_b`` [m] and ``v_a - v_b`` [m/s].
+
+    Returns
+    -------
+    d, dd : (c,) arrays
+        ``offset - n . dx`` and ``-n . dv``: positive when the sides overlap.
+    """
+    return (offsets - np.einsum("cx,cx->c", dx, normals),
+            -np.einsum("cx,cx->c", dv, normals))
+
+
+def penetration_c(normal: complex, offset, dx, dv):
+    """:func:`penetrations` with planar vectors as complex numbers
+    ``x + iy`` (scalars or arrays): ``n . z = Re(conj(n) z)``."""
+    nc = normal.conjugate()
+    return offset - (nc * dx).real, -(nc * dv).real
 
 
 @dataclass(frozen=True)
@@ -44,7 +72,8 @@ class PointContact:
 
     def penetration(self, xa, va, xb, vb):
         """Penetration ``d`` [m] and its rate ``dd`` [m/s] (arrays of 2-vectors)."""
-        n = np.asarray(self.normal)
-        d = self.offset - (xa - xb) @ n
-        dd = -((va - vb) @ n)
-        return d, dd
+        dx, dv = np.subtract(xa, xb), np.subtract(va, vb)
+        d, dd = penetrations(np.broadcast_to(self.normal, dx.shape).reshape(-1, 2),
+                             np.full(dx.size // 2, self.offset), dx.reshape(-1, 2),
+                             dv.reshape(-1, 2))
+        return d.reshape(dx.shape[:-1]), dd.reshape(dv.shape[:-1])

@@ -30,6 +30,10 @@ def _pos(v):
     return v > 0 and math.isfinite(v)
 
 
+#: j + 1 for the rows j of force polynomials: int s^j ds over [0, 1] is 1 / (j + 1)
+_POWERS_PLUS_ONE = np.arange(1.0, 9.0)[:, None]
+
+
 
 
 def extrapolation_coeffs(hist: list, order: int, ratio: float = 1.0) -> np.ndarray:
@@ -54,6 +58,16 @@ def _substeps_ok(v) -> bool:
         for k, n in v.items())
 
 
+class _Topology(NamedTuple):
+    """The layout of a coupled system as the macro loop reads it."""
+
+    system: Any
+    #: indices of the subsystems that move (not rigid)
+    moving: list
+    #: per subsystem, the coupler rows with it on a side
+    rows: tuple
+
+
 class CouplingScheme(ABC):
     """A way of advancing a :class:`~cosim.system.CoupledSystem` in time.
 
@@ -66,6 +80,15 @@ class CouplingScheme(ABC):
     #: option name -> Option; the scene loader validates them.
     options: ClassVar[dict] = {}
     explicit: ClassVar[bool] = False
+    #: counters so far, kept as a run goes (a run that stops early reports them)
+    n_windows: int = 0
+    n_iterations: int = 0
+    n_rejected: int = 0
+
+    def counters(self) -> dict:
+        """The counters so far: ``n_windows``, ``n_iterations``, ``n_rejected``."""
+        return {"n_windows": self.n_windows, "n_iterations": self.n_iterations,
+                "n_rejected": self.n_rejected}
 
     def __init__(self, **opts):
         unknown = set(opts) - set(self.options)
@@ -156,7 +179,7 @@ class CoSimulationScheme(CouplingScheme):
             raise ValueError(f"scheme `{self.name}` needs `macro_step` [s]")
         self.preflight(system)
         self._system = system
-        self.n_iterations = 0
+        self.n_iterations = self.n_windows = self.n_rejected = 0
         nc = system.n_contacts
         coupler = system.coupler
         outs = system.outputs()
@@ -201,6 +224,7 @@ class CoSimulationScheme(CouplingScheme):
                     system.set_state(saved)
                     system.discard_work()
                     n_rejected += 1
+                    self.n_rejected = n_rejected
                     self._h_next = h_new
                     self._outs = system.outputs()
                     continue
@@ -217,6 +241,7 @@ class CoSimulationScheme(CouplingScheme):
                     system.set_state(saved)
                     system.discard_work()
                     n_rejected += 1
+                    self.n_rejected = n_rejected
                     self._h_next, self._aimed = onset
                     self._outs = system.outputs()
                     continue
@@ -229,6 +254,7 @@ class CoSimulationScheme(CouplingScheme):
                 f = system.forces(d, dd)
             h_prev = h
             k += 1
+            self.n_windows = k          # kept as they go: a run that fails reports them
             self._outs, self._f = outs, f
             self._hist = (self._hist + [f])[-3:]
             work += system.exchange_work()
@@ -250,7 +276,7 @@ class CoSimulationScheme(CouplingScheme):
                         recorder.edge(c, ts, False)
             for s in self._moving(system):
                 recorder.impacts += getattr(system.subsystems[s], "impact_log", [])
-            if not (np.all(np.isfinite(d)) and np.all(np.isfinite(dd))):
+            if not (np.isfinite(d).all() and np.isfinite(dd).all()):
                 cause = nonfinite_cause(system, d, dd, f)
                 raise GuardError(f"run stopped at t = {t + h:.6g} s: "
                                  f"{cause[0] if cause else 'non-finite state'}", t + h,
@@ -486,12 +512,9 @@ class CoSimulationScheme(CouplingScheme):
             out.append((x0 + dt * v0 + 0.5 * dt * dt * a, v0 + dt * a))
         return out
 
-    @staticmethod
-    def _rows_of(system, s: int) -> list:
+    def _rows_of(self, system, s: int) -> list:
         """The coupler rows (normal, then tangential) with subsystem ``s`` on a side."""
-        return [r for r in system.coupler_rows
-                if s in (system.links[system.row_contact[r]].sub_a,
-                         system.links[system.row_contact[r]].sub_b)]
+        return self._topology(system).rows[s]
 
     def _step_side(self, system, s: int, t: float, h: float, coeffs: np.ndarray,
                    after: dict) -> np.ndarray:
@@ -507,8 +530,7 @@ class CoSimulationScheme(CouplingScheme):
         if m == 1:
             sub.step(t, h, system.step_input(s, t, h, coeffs))
             system.collect_work(s)
-            j = np.arange(coeffs.shape[0])[:, None]
-            return h * np.sum(coeffs / (j + 1), axis=0)
+            return h * (coeffs / _POWERS_PLUS_ONE[:coeffs.shape[0]]).sum(axis=0)
         hk = h / m
         mine = self._rows_of(system, s)
         width = max(2, coeffs.shape[0])
@@ -534,4 +556,18 @@ class CoSimulationScheme(CouplingScheme):
         return impulse
 
     def _moving(self, system):
-        return [s for s, sub in enumerate(system.subsystems) if not sub.rigid]
+        return self._topology(system).moving
+
+    def _topology(self, system) -> "_Topology":
+        """What the macro loop reads of the system's layout at every step,
+        worked out once per system."""
+        topo = self.__dict__.get("_topo")
+        if topo is None or topo.system is not system:
+            links, rc = system.links, system.row_contact
+            rows = tuple([r for r in system.coupler_rows
+                          if s in (links[rc[r]].sub_a, links[rc[r]].sub_b)]
+                         for s in range(len(system.subsystems)))
+            topo = _Topology(system, [s for s, sub in enumerate(system.subsystems)
+                                      if not sub.rigid], rows)
+            self._topo = topo
+        return topo

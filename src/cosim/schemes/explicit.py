@@ -5,6 +5,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from .. import preflight
 from .base import CoSimulationScheme, Option
 
 __all__ = ["Jacobi", "GaussSeidel"]
@@ -51,9 +52,7 @@ class GaussSeidel(CoSimulationScheme):
                 if not system.subsystems[system.names.index(n)].rigid]
 
     def _partner_first(self, system, c):
-        ln = system.links[c]
-        rigid = [system.subsystems[ln.sub_a].rigid, system.subsystems[ln.sub_b].rigid]
-        return self.extrapolation_order > 0 and any(rigid)
+        return preflight.partner_first(system, c, self.name, self.extrapolation_order)
 
     def advance(self, system, t, h, ratio):
         base = self._extrapolated(ratio)

@@ -256,7 +256,7 @@ class Implicit(CoSimulationScheme):
     def advance(self, system, t, h, ratio):
         coupler = system.coupler_rows      # normal and tangential rows exchanged
         hosted = list(system.hosted)
-        hosts = {system.hosted[c][0] for c in hosted}
+        hosts = {system.hosted[c].host for c in hosted}
         # hosts step first in each pass, so their partners get this pass's force
         moving = sorted(self._moving(system), key=lambda s: s not in hosts)
         f_n = self._f
@@ -332,7 +332,7 @@ class Implicit(CoSimulationScheme):
         else:
             c = hosted[i - nc]
             what = (f"contact `{system.contact_names[c]}` (hosted by "
-                    f"`{system.names[system.hosted[c][0]]}`): its partner's motion has a "
+                    f"`{system.names[system.hosted[c].host]}`): its partner's motion has a "
                     f"residual of {worst[i]:.3g} N (stiffness times position, or times "
                     f"step times velocity)")
         raise CouplingError(
@@ -348,7 +348,7 @@ class Implicit(CoSimulationScheme):
         out = []
         for c in hosted:
             self._set_partner_motion(system, c, t, h)
-            out.append(system.hosted[c][4].partner(t + h))
+            out.append(system.hosted[c].embedded.partner(t + h))
         return out
 
     def _set_hermite(self, system, c, t, h, x1, v1):

@@ -72,7 +72,7 @@ class Monolithic(CouplingScheme):
             xs = split(y)
             outs = [sub.outputs(0.0, xs[s]) for s, sub in enumerate(subs)]
             if system._followers:      # surface points move with the point above them
-                system.update_followers(outs)
+                system.update_followers(outs, xs)
                 outs = [sub.outputs(0.0, xs[s]) for s, sub in enumerate(subs)]
             d, dd = system.penetrations(outs)
             f = np.array([max(float(laws[c].force_active(d[c], dd[c])), 0.0) if active[c]
@@ -141,7 +141,7 @@ class Monolithic(CouplingScheme):
                 recorder.edge(c, 0.0, True)
         record(0.0, y)
         t = 0.0
-        n_segments = 0
+        n_segments = self.n_windows = 0
         next_out = dt_out
         while t < t_end * (1 - 1e-14):
             for c, ev in enumerate(switches):
@@ -156,6 +156,7 @@ class Monolithic(CouplingScheme):
                             atol=self.atol, max_step=self.max_step, dense_output=True,
                             events=switches + peaks + extra)
             n_segments += 1
+            self.n_windows = n_segments
             if sol.status == -1:
                 raise CouplingError(f"monolithic solver failed at t = {sol.t[-1]:.6g} s: "
                                     f"{sol.message}")
