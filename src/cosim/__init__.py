@@ -3,15 +3,42 @@
 The orchestra: the subsystem protocol, the coupling schemes, the scene
 loader, the recorder and the command line.  The only package that imports
 ``multibody``, ``fem`` and ``couplers``.
+
+Importing this package defines nothing heavy: each public name, and each
+submodule (``cosim.run``, ``cosim.plot``, ...), is imported when it is first
+asked for (``from cosim import simulate`` and ``cosim.load_scene`` work as
+before), so ``cosim --help`` or ``cosim plot`` do not pay for the schemes and
+``cosim run`` pays only for what its scene uses.
 """
 from .errors import CouplingError, SimulationError, UnsafeStepError
-from .integrators import INTEGRATORS, RK4, TimeStepper
-from .result import SimulationResult, write_outputs
-from .run import run_scene, simulate
-from .scene import Scene, SceneError, load_scene
-from .schemes import COUPLING_SCHEMES
-from .subsystem import RigidReference, StepInput, Subsystem
 
 __all__ = ["Subsystem", "RigidReference", "StepInput", "SimulationResult", "write_outputs",
            "simulate", "run_scene", "Scene", "SceneError", "load_scene", "COUPLING_SCHEMES",
            "CouplingError", "SimulationError", "UnsafeStepError", "INTEGRATORS", "RK4", "TimeStepper"]
+
+#: public name -> the submodule that defines it, imported on first use
+_LAZY = {**dict.fromkeys(("INTEGRATORS", "RK4", "TimeStepper"), "integrators"),
+         **dict.fromkeys(("SimulationResult", "write_outputs"), "result"),
+         **dict.fromkeys(("simulate", "run_scene"), "run"),
+         **dict.fromkeys(("Scene", "SceneError", "load_scene"), "scene"),
+         "COUPLING_SCHEMES": "schemes",
+         **dict.fromkeys(("RigidReference", "StepInput", "Subsystem"), "subsystem")}
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        # the import statement's machinery, which `python -X importtime` reports
+        value = getattr(__import__(f"{__name__}.{_LAZY[name]}", fromlist=[name]), name)
+        globals()[name] = value
+        return value
+    if not name.startswith("__"):         # a submodule: ``cosim.run``, ``cosim.plot``, ...
+        try:
+            return __import__(f"{__name__}.{name}", fromlist=["__name__"])
+        except ModuleNotFoundError as exc:
+            if exc.name != f"{__name__}.{name}":
+                raise                     # the submodule exists but misses a dependency
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(__all__))

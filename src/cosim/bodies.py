@@ -1,21 +1,23 @@
 """The multibody side as a subsystem: a planar tree stepped by its own integrator."""
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from couplers import PointContact
 from couplers.laws import (FloresLaw, HertzLaw, HuntCrossleyLaw, KelvinVoigtLaw,
                            LankaraniNikraveshLaw, LinearLaw, RigidLaw)
-from multibody import JointEffects, TreeModel
-from multibody.effects import (ConstantTorque, MinimumJerk, PDTracking, Sinusoid, Table,
-                               TorqueTable)
-from multibody.impact import frictional_impact, frictionless_impact
+from multibody import TreeModel
 
 from .errors import SimulationError
 from .integrators import INTEGRATORS, RK4, TimeStepper
 from .kernel import compiled_module
 from .subsystem import (DISSIPATED, IMPULSE, MOMENT, QUADRATURES, WORK, EmbeddedContact,
                         StepInput, Subsystem)
+
+if TYPE_CHECKING:
+    from multibody import JointEffects
 
 __all__ = ["MultibodySubsystem", "kernel_law"]
 
@@ -42,6 +44,9 @@ def kernel_effects(effects: JointEffects | None):
     ``TypeError`` for a drive or reference the kernel does not know."""
     if effects is None:
         return None
+    # where a tree has effects, multibody.effects is loaded already (a scene built them)
+    from multibody.effects import (ConstantTorque, MinimumJerk, PDTracking, Sinusoid, Table,
+                                   TorqueTable)
     drives = []
     for d in effects.drives:
         ref_kind, ref_par, ts, vs = 0, (0.0,) * 4, (), ()
@@ -400,6 +405,7 @@ class MultibodySubsystem(Subsystem):
             sustained rigid contact is not modelled; use a penalty law.  Or if
             several contacts with friction strike at once.
         """
+        from multibody.impact import frictional_impact, frictionless_impact  # where first needed
         n = self.n_dof
         q, dq = y[:n], y[n:2 * n]
         M, _, x, v, J, _ = self.model.evaluate(q, dq, None, self._port_body,

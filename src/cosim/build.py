@@ -7,11 +7,12 @@ import warnings
 import numpy as np
 
 from couplers import PointContact
-from multibody import Body, Joint, JointEffects, TreeModel
+import multibody                     # its joint effects load where a scene has some
+from multibody import Body, Joint, TreeModel
 
 from .bodies import MultibodySubsystem
-from .connections import stiffest_normal
 from .integrators import get_integrator
+from .preflight import stiffest_normal
 from .scene import Scene, SceneError
 from .schemes import get_scheme
 from .subsystem import RigidReference
@@ -43,7 +44,7 @@ def _multibody(spec, scene: Scene, default_step):
     effects = [e for j in spec["joints"] for e in j["effects"]]
     _check_mass_matrix(model, q0, spec, scene)
     return MultibodySubsystem(spec["name"], model, q0, dq0, spec["ports"], scene.gravity, integ,
-                              JointEffects(model.n_dof, effects) if effects else None)
+                              multibody.JointEffects(model.n_dof, effects) if effects else None)
 
 
 def _check_mass_matrix(model, q0, spec, scene: Scene) -> None:

@@ -35,17 +35,9 @@ import numpy as np
 from couplers.connection import (GRASPED, MODES, OPEN, RELEASED, connection_forces,
                                  connection_potential, connection_power, connection_switch)
 
+from .preflight import stiffest_normal  # noqa: F401  (it lived here; the checks need it alone)
+
 __all__ = ["ConnectionSet", "EmbeddedConnection", "stiffest_normal"]
-
-
-def stiffest_normal(link) -> tuple[float, float]:
-    """Linearised normal stiffness [N/m] and damping [N s/m] of a
-    :class:`~cosim.system.ContactLink` for stability checks: its law's, or
-    its grasp's when that is stiffer."""
-    law, conn = link.contact.law, link.connection
-    if conn is not None and conn.grasp is not None and conn.grasp.stiffness > law.stiffness:
-        return conn.grasp.stiffness, conn.grasp.damping
-    return law.stiffness, law.damping
 
 
 class ConnectionSet:

@@ -4,7 +4,7 @@ from __future__ import annotations
 import math
 
 from . import preflight
-from .connections import stiffest_normal
+from .preflight import stiffest_normal
 from .schemes import COUPLING_SCHEMES
 
 __all__ = ["scene_info"]

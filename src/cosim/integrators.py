@@ -233,7 +233,8 @@ class TimeStepper(ABC):
         return t + hi * h
 
 
-@dataclass(frozen=True)
+# no field of its own: TimeStepper's generated dataclass methods serve it as
+# they are (decorating it again would only rebuild them at import)
 class RK4(TimeStepper):
     """Classical fourth-order Runge-Kutta with fixed sub-steps."""
 
@@ -344,11 +345,11 @@ class ScipyStepper(TimeStepper):
 
 
 def _scipy(method_name: str, scipy_method: str, doc: str):
-    cls = type(f"Scipy{scipy_method}", (ScipyStepper,), {
+    # no field of its own: ScipyStepper's dataclass methods serve it as they are
+    return type(f"Scipy{scipy_method}", (ScipyStepper,), {
         "__doc__": doc, "name": method_name, "method": scipy_method,
         "order": {"RK45": 5, "DOP853": 8, "Radau": 5, "BDF": 5}[scipy_method],
         "__annotations__": {}})
-    return dataclass(frozen=True)(cls)
 
 
 RK45 = _scipy("rk45", "RK45", "Adaptive explicit Dormand-Prince 5(4) (scipy).")

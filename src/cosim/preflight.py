@@ -22,7 +22,7 @@ import math
 import numpy as np
 
 __all__ = ["step_map", "contact_energy_gain", "is_safe", "largest_safe_step",
-           "partner_first"]
+           "partner_first", "stiffest_normal"]
 
 
 def partner_first(system, c, scheme: str, order: int) -> bool:
@@ -36,6 +36,16 @@ def partner_first(system, c, scheme: str, order: int) -> bool:
     ln = system.links[c]
     return (scheme == "gauss_seidel" and order > 0
             and (system.subsystems[ln.sub_a].rigid or system.subsystems[ln.sub_b].rigid))
+
+
+def stiffest_normal(link) -> tuple[float, float]:
+    """Linearised normal stiffness [N/m] and damping [N s/m] of a
+    :class:`~cosim.system.ContactLink` for stability checks: its law's, or
+    its grasp's when that is stiffer."""
+    law, conn = link.contact.law, link.connection
+    if conn is not None and conn.grasp is not None and conn.grasp.stiffness > law.stiffness:
+        return conn.grasp.stiffness, conn.grasp.damping
+    return law.stiffness, law.damping
 
 
 def _poly_rows(order: int, gs_partner_first: bool, k: float, c: float, H: float):

@@ -17,7 +17,9 @@ __all__ = ["SimulationResult", "write_outputs", "check_output_dir", "resolved_sc
            "written_by_a_run"]
 
 
-@dataclass(frozen=True)
+# eq=False: a result holds arrays, so the generated == could only raise (its truth value
+# is ambiguous); two results are equal when they are one, and hash by identity
+@dataclass(frozen=True, eq=False)
 class SimulationResult:
     """What :func:`cosim.simulate` returns.
 

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import logging
+import sys
 import time
 from pathlib import Path
 
@@ -9,7 +10,6 @@ from .guard import Guard
 from .recorder import Recorder
 from .scene import Scene, load_scene
 from .errors import OutputError, SimulationError, UnsafeStepError
-from .schemes import Monolithic
 
 __all__ = ["simulate", "run_scene", "RunInterrupted"]
 
@@ -114,7 +114,7 @@ def _simulate(scene, scheme, progress, progress_interval, out, overwrite):
         if hasattr(sch, "preflight"):
             sch.preflight(system)          # a refusal writes nothing
         write_scene(scene, out)
-    if isinstance(sch, Monolithic):
+    if _is_monolithic(sch):
         auto = False                       # it locates every switch itself
     else:                                  # embedded contacts: their integrator does
         auto = [c not in system.embedded for c in range(system.n_contacts)]
@@ -175,6 +175,13 @@ def _simulate(scene, scheme, progress, progress_interval, out, overwrite):
         stop.partial_result = res
         raise stop
     return res
+
+
+def _is_monolithic(sch) -> bool:
+    """``isinstance(sch, Monolithic)`` without importing the monolithic scheme
+    for a run that does not use it (an instance means its module is loaded)."""
+    module = sys.modules.get("cosim.schemes.monolithic")
+    return module is not None and isinstance(sch, module.Monolithic)
 
 
 def _lost(exc: OutputError, what: str, out) -> OutputError:

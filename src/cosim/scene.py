@@ -361,7 +361,6 @@ def _validate(data: dict, file, variant) -> Scene:
     sch = top.table("scheme")
     scheme_name = sch.string("name", choices=COUPLING_SCHEMES)
     cls = COUPLING_SCHEMES[scheme_name]
-    all_options = {k for c in COUPLING_SCHEMES.values() for k in c.options}
     opts, ignored, tables = {}, [], {}
     for k in list(sch.data):
         if k == "name":
@@ -377,7 +376,7 @@ def _validate(data: dict, file, variant) -> Scene:
             sub.finish()
             continue
         sch.used.add(k)
-        if k not in all_options:
+        if k not in cls.options and not any(k in c.options for c in COUPLING_SCHEMES.values()):
             sch.error(k, f"is not an option of any scheme; options of `{scheme_name}` are "
                          f"{sorted(cls.options)}")
         if k not in cls.options:
@@ -678,6 +677,8 @@ def _trajectory(t: _Table):
 
 def _joint_effects(jt: _Table, index: int) -> list:
     """Springs, dampers and drives declared on a joint (none unless declared)."""
+    if not any(jt.has(k) for k in ("spring", "damper", "drive")):
+        return []                    # multibody.effects loads for the joints that need it
     from multibody import (ConstantTorque, JointDamper, JointSpring, PDTracking, Table,
                            TorqueTable)
     out = []
@@ -909,6 +910,8 @@ def _trigger(t: _Table, k: str, release: bool):
 def _connection_spec(t: _Table, law):
     """A contact's ``grasp`` and ``friction`` tables, or None when it has neither
     (a friction coefficient of 0 builds no friction)."""
+    if not (t.has("grasp") or t.has("friction")):
+        return None                  # couplers.connection loads for the contacts that need it
     from couplers import Connection, Friction, Grasp
     grasp = close = release = friction = None
     if t.has("grasp"):

@@ -2,16 +2,17 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
-from couplers import Connection, PointContact
-from couplers.connection import GRASPED
 from couplers.contact import penetrations
+from couplers.modes import GRASPED
 
-from .connections import ConnectionSet, EmbeddedConnection
 from .subsystem import EmbeddedContact, StepInput, Subsystem
+
+if TYPE_CHECKING:
+    from couplers import Connection, PointContact
 
 __all__ = ["ContactLink", "CoupledSystem", "HostedContact", "PLACEMENTS"]
 
@@ -121,6 +122,7 @@ class CoupledSystem:
                     raise ValueError(f"contact `{ln.contact.name}`: subsystem "
                                      f"`{self.subsystems[own].name}` cannot carry an embedded "
                                      f"grasp or friction; use placement `coupler`")
+                from .connections import EmbeddedConnection   # only where a contact has one
                 self.subsystems[own].attach_connection(
                     slots[own], EmbeddedConnection(self.connections, i, ln.contact.normal, side))
             slots[own] += 1
@@ -189,6 +191,7 @@ class CoupledSystem:
         conns = [ln.connection for ln in self.links]
         self.connections = None
         if any(k is not None for k in conns):
+            from .connections import ConnectionSet       # only where a contact has one
             self.connections = ConnectionSet(self.contact_names,
                                              [ln.contact.law for ln in self.links], conns)
         self.tangent_row = np.full(nc, -1, dtype=int)

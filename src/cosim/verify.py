@@ -121,7 +121,7 @@ def reference_step(cases: Path, variant: str, scheme: str, placement: str) -> fl
     otherwise (C hosted by the chain, or the implicit scheme), which the
     check does not limit, a tenth of C's contact time ``pi / omega``."""
     from . import preflight
-    from .connections import stiffest_normal
+    from .preflight import stiffest_normal
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

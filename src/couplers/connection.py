@@ -26,14 +26,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from .laws import ContactLaw, _positive
+from .modes import GRASPED, MODES, OPEN, RELEASED
 
 __all__ = ["Grasp", "Friction", "Trigger", "Connection", "MODES", "OPEN", "GRASPED", "RELEASED",
            "TRIGGER_KINDS", "connection_forces", "connection_power", "connection_potential",
            "connection_switch"]
 
-#: Modes of a connection, in the only order they can follow each other.
-MODES = ("open", "grasped", "released")
-OPEN, GRASPED, RELEASED = range(3)
 #: What can close (all) or release (``time`` and ``after`` only) a grasp.
 TRIGGER_KINDS = ("start", "touch", "time", "after")
 #: Events another connection's trigger may name with ``after``.

@@ -355,7 +355,8 @@ class _PowerLaw(ContactLaw):
         return hunt_crossley_restitution(self._chi() * v, self.exponent)
 
 
-@dataclass(frozen=True)
+# no field of its own: _PowerLaw's generated dataclass methods serve it as
+# they are (decorating it again would only rebuild them at import)
 class HertzLaw(_PowerLaw):
     """Elastic power law, ``f = k d^n`` for ``d > 0``.
 
@@ -501,7 +502,8 @@ class _ImpactCalibratedLaw(_PowerLaw):
         return law
 
 
-@dataclass(frozen=True)
+# no field of its own: _ImpactCalibratedLaw's generated dataclass methods serve it as
+# they are (decorating it again would only rebuild them at import)
 class LankaraniNikraveshLaw(_ImpactCalibratedLaw):
     """Hunt-Crossley law with Lankarani and Nikravesh's damping,
     ``chi = 3 (1 - e^2) / (4 v_impact)``.
@@ -558,7 +560,8 @@ class LankaraniNikraveshLaw(_ImpactCalibratedLaw):
         return 0.75 * (1.0 - restitution * restitution)
 
 
-@dataclass(frozen=True)
+# no field of its own: _ImpactCalibratedLaw's generated dataclass methods serve it as
+# they are (decorating it again would only rebuild them at import)
 class FloresLaw(_ImpactCalibratedLaw):
     """Hunt-Crossley law with the damping of Flores et al. (2011),
     ``chi = 8 (1 - e) / (5 e v_impact)``, meant for the whole range of ``e``.

@@ -8,9 +8,9 @@ from typing import Any, Callable, ClassVar, NamedTuple
 import numpy as np
 
 from .. import preflight
-from ..connections import stiffest_normal
 from ..errors import CouplingError, UnsafeStepError
 from ..guard import GuardError, nonfinite_cause
+from ..preflight import stiffest_normal
 from ..subsystem import hermite_coefficients, reparametrised
 
 __all__ = ["Option", "CouplingScheme", "CoSimulationScheme", "UnsafeStepError", "CouplingError",
