@@ -330,8 +330,9 @@ class StructureSubsystem(Subsystem):
                 [(e.t0, e.h, e.motion, e._dmotion) for e in self._embedded]):
             self.port_moments = pm = np.zeros((3, self.n_ports), complex)
             if self._embedded:
+                # the peaks array read at each step (embed_contact rebinds it)
                 self.switch_log = kernel.step(self.x, self.aux, pm.view(float),
-                                              self._closed_end)
+                                              self._closed_end, self.peak)
             else:
                 kernel.step_free(self.x, pm.view(float))
             return
