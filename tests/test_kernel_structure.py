@@ -280,3 +280,25 @@ def test_a_touch_on_the_step_boundary_is_logged_at_the_step_start(monkeypatch, k
     closing, opening = logs
     assert closing[0][1:] == (0, True) and closing[0][0] == pytest.approx(5e-5, abs=1e-15)
     assert all(not (on and t == pytest.approx(5e-5, abs=1e-15)) for t, _, on in opening)
+
+
+def test_a_kernel_built_from_older_sources_is_not_used(monkeypatch, caplog):
+    """A source tree updated without rebuilding holds a kernel whose step
+    takes other arguments: the reference steps instead, and says so once."""
+    import logging
+
+    import cosim._structure_step as k
+    from cosim import structure
+    monkeypatch.setenv("COSIM_KERNEL", "compiled")
+    monkeypatch.delattr(k, "STEP_API")           # as built before the interface was named
+    monkeypatch.setattr(structure, "_stale_said", False)
+    with caplog.at_level(logging.WARNING, logger="cosim.structure"):
+        subs = [_chain_with_spring() for _ in range(2)]
+        for sub in subs:
+            sub.step(0.0, 3e-3)
+    assert [sub.kernel for sub in subs] == ["numpy", "numpy"]
+    said = [r.getMessage() for r in caplog.records if "older sources" in r.getMessage()]
+    assert said == ["the compiled kernel `cosim._structure_step` was built from older sources "
+                    "(interface 1, these sources need 2): using the numpy reference, which is "
+                    "slower; rebuild it with `pip install .`"]
+    assert subs[0].peak[0] > 0 and [on for _, _, on in subs[0].switch_log] == [True, False]

@@ -33,6 +33,10 @@ from libc.float cimport DBL_EPSILON
 
 import numpy as np
 
+#: the interface the host (:mod:`cosim.structure`, its ``STEP_API``) calls:
+#: bumped when a call changes (2: ``StructureStep.step`` takes ``peak``)
+STEP_API = 2
+
 cdef enum:
     # rows of a load polynomial (degree <= 3) and of a partner's motion
     DEG1 = 4

@@ -20,6 +20,7 @@ force, the switch located inside the sub-step (as for a robot).
 """
 from __future__ import annotations
 
+import logging
 import math
 
 import numpy as np
@@ -33,6 +34,15 @@ from .kernel import compiled_module
 from .subsystem import EmbeddedContact, StepInput, Subsystem, reparametrised
 
 __all__ = ["StructureSubsystem"]
+
+logger = logging.getLogger(__name__)
+
+#: the interface of ``cosim._structure_step`` this module calls (its
+#: ``STEP_API``): 2 since ``StructureStep.step`` raises the host's peaks.  A
+#: kernel built from older sources is not used (said once), for its step
+#: would not match the reference.
+STEP_API = 2
+_stale_said = False
 
 
 class StructureSubsystem(Subsystem):
@@ -307,6 +317,15 @@ class StructureSubsystem(Subsystem):
             return None
         module = compiled_module("_structure_step")
         if module is None:
+            return None
+        if getattr(module, "STEP_API", 1) != STEP_API:
+            global _stale_said
+            if not _stale_said:
+                _stale_said = True
+                logger.warning("the compiled kernel `cosim._structure_step` was built from "
+                               "older sources (interface %s, these sources need %s): using "
+                               "the numpy reference, which is slower; rebuild it with "
+                               "`pip install .`", getattr(module, "STEP_API", 1), STEP_API)
             return None
         contacts = []
         for e in self._embedded:
