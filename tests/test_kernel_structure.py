@@ -94,6 +94,94 @@ def test_one_step_with_a_touch_and_a_release_matches_the_reference(monkeypatch):
     # the impulse is the spring's, and the first moment lies inside the contact
     impulse, _, moment, work = ref.embedded_quadratures()[0]
     assert impulse > 0 and t_ref[0] < moment / impulse < t_ref[1]
+    # the located peak (issue 19): the kernel raises the host's `peak` as the
+    # reference does, to the penetration where the rate falls through zero
+    assert ref.peak[0] > 0
+    np.testing.assert_allclose(com.peak, ref.peak, rtol=1e-12, atol=0)
+
+
+def _probed_peaks(sub, h):
+    """The spring's largest penetration seen on the switch search's probes of
+    one step from a fresh chain (``n = max(ceil(2 L omega_max), 2)`` instants
+    per segment, as the reference places them), without locating it."""
+    from cosim import structure
+    seen = []
+    original = structure.StructureSubsystem._segment_peaks
+
+    def spy(self, tc, seg, active, taus, D, V):
+        seen.append(float(np.max(D[:, 0])))
+        return original(self, tc, seg, active, taus, D, V)
+
+    structure.StructureSubsystem._segment_peaks = spy
+    try:
+        sub.step(0.0, h)
+    finally:
+        structure.StructureSubsystem._segment_peaks = original
+    return max(seen)
+
+
+def test_the_kernel_locates_the_peak_between_probes(monkeypatch):
+    """The peak lies between the probes of the switch search, where the
+    rate falls through zero: both kernels find it there, above every probed
+    value, and agree to round-off."""
+    monkeypatch.setenv("COSIM_KERNEL", "numpy")
+    probed = _probed_peaks(_chain_with_spring(), 3e-3)
+    ref = _chain_with_spring()
+    ref.step(0.0, 3e-3)
+    monkeypatch.setenv("COSIM_KERNEL", "compiled")
+    com = _chain_with_spring()
+    com.step(0.0, 3e-3)
+    assert com.kernel == "compiled"
+    assert ref.peak[0] > probed * (1 + 1e-9)
+    np.testing.assert_allclose(com.peak, ref.peak, rtol=1e-12, atol=0)
+
+
+def test_a_long_step_probes_without_a_cap(monkeypatch):
+    """A step of 0.6 s over the chain: 2 L omega_max asks for about 1900
+    probes, and the spring's contacts last 0.39 ms, shorter than the 1.2 ms
+    between 512 probes, the count the kernel used to stop at.  Every touch
+    and release, the state and the peak agree with the reference."""
+    h = 0.6
+    out = {}
+    for kernel in ("numpy", "compiled"):
+        monkeypatch.setenv("COSIM_KERNEL", kernel)
+        sub = _chain_with_spring()
+        sub.step(0.0, h)
+        assert sub.kernel == kernel
+        out[kernel] = sub
+    ref, com = out["numpy"], out["compiled"]
+    times = np.array([t for t, _, _ in ref.switch_log])
+    assert [on for _, _, on in ref.switch_log] == [True, False] * (len(times) // 2)
+    shortest = float(np.min(times[1::2] - times[0::2]))
+    assert len(times) > 100 and shortest < h / 512, (len(times), shortest)
+    assert [(j, on) for _, j, on in com.switch_log] == [(j, on) for _, j, on in ref.switch_log]
+    np.testing.assert_allclose([t for t, _, _ in com.switch_log], times, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(com.x, ref.x, rtol=0, atol=1e-9 * np.abs(ref.x).max())
+    np.testing.assert_allclose(com.aux, ref.aux, rtol=0, atol=1e-9 * np.abs(ref.aux).max())
+    np.testing.assert_allclose(com.peak, ref.peak, rtol=1e-10, atol=0)
+
+
+def test_the_kernel_raises_the_peak_array_the_host_holds_now(monkeypatch):
+    """The recorder resets ``peak`` in place (take_peaks), set_state writes
+    it in place, and a host may rebind it: the kernel raises whichever array
+    the host holds at the step, never one it kept."""
+    monkeypatch.setenv("COSIM_KERNEL", "compiled")
+    sub = _chain_with_spring()
+    saved = sub.get_state()
+    sub.step(0.0, 3e-3)
+    first = float(sub.peak[0])
+    assert first > 0
+    assert sub.take_peaks()[0] == first and sub.peak[0] == 0.0
+    sub.set_state(saved)                     # the saved peak: 0
+    assert sub.peak[0] == 0.0
+    old = sub.peak
+    sub.peak = np.zeros(1)                   # rebound
+    sub.step(0.0, 3e-3)
+    assert sub.peak[0] == first and old[0] == 0.0
+    # rolled back, a step that ends before the touch (at 0.1 ms) raises nothing
+    sub.set_state(saved)
+    sub.step(0.0, 5e-5)
+    assert sub.switch_log == [] and sub.peak[0] == 0.0
 
 
 def test_a_rolled_back_step_is_taken_again_the_same_way(monkeypatch):
@@ -192,3 +280,25 @@ def test_a_touch_on_the_step_boundary_is_logged_at_the_step_start(monkeypatch, k
     closing, opening = logs
     assert closing[0][1:] == (0, True) and closing[0][0] == pytest.approx(5e-5, abs=1e-15)
     assert all(not (on and t == pytest.approx(5e-5, abs=1e-15)) for t, _, on in opening)
+
+
+def test_a_kernel_built_from_older_sources_is_not_used(monkeypatch, caplog):
+    """A source tree updated without rebuilding holds a kernel whose step
+    takes other arguments: the reference steps instead, and says so once."""
+    import logging
+
+    import cosim._structure_step as k
+    from cosim import structure
+    monkeypatch.setenv("COSIM_KERNEL", "compiled")
+    monkeypatch.delattr(k, "STEP_API")           # as built before the interface was named
+    monkeypatch.setattr(structure, "_stale_said", False)
+    with caplog.at_level(logging.WARNING, logger="cosim.structure"):
+        subs = [_chain_with_spring() for _ in range(2)]
+        for sub in subs:
+            sub.step(0.0, 3e-3)
+    assert [sub.kernel for sub in subs] == ["numpy", "numpy"]
+    said = [r.getMessage() for r in caplog.records if "older sources" in r.getMessage()]
+    assert said == ["the compiled kernel `cosim._structure_step` was built from older sources "
+                    "(interface 1, these sources need 2): using the numpy reference, which is "
+                    "slower; rebuild it with `pip install .`"]
+    assert subs[0].peak[0] > 0 and [on for _, _, on in subs[0].switch_log] == [True, False]

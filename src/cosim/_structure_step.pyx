@@ -7,7 +7,10 @@ step in closed form: each phase between switches of its hosted linear springs
 is a linear system under a polynomial load, stepped exactly in the modes of
 that phase; touch and release are located on the exact solution (sampled,
 then safeguarded Newton); the springs' impulses, first moments and work and
-the ports' velocity moments are integrated in closed form.  A structure that
+the ports' velocity moments are integrated in closed form; each closed
+spring's largest penetration over a segment is located on the exact solution
+where its rate falls through zero (Illinois regula falsi), and raises the
+host's ``peak``.  A structure that
 hosts no contact is stepped exactly under the port loads, its velocity
 moments by three-point Gauss-Legendre.  It is the compiled twin of the numpy
 reference in :mod:`cosim.structure` (:meth:`StructureSubsystem._step_closed_form`
@@ -25,10 +28,14 @@ in place between steps, as a contact that follows a moving point does): the
 ports' shape rows ``R`` (n_p, m) and reference positions ``ref`` (n_p, 2).
 After changing ``R`` the host calls :meth:`StructureStep.forget_bases`.
 """
-from libc.math cimport sin, cos, pow, ceil, fabs, sqrt, copysign, isfinite
+from libc.math cimport sin, cos, pow, ceil, fabs, sqrt, copysign, isfinite, INFINITY
 from libc.float cimport DBL_EPSILON
 
 import numpy as np
+
+#: the interface the host (:mod:`cosim.structure`, its ``STEP_API``) calls:
+#: bumped when a call changes (2: ``StructureStep.step`` takes ``peak``)
+STEP_API = 2
 
 cdef enum:
     # rows of a load polynomial (degree <= 3) and of a partner's motion
@@ -329,7 +336,7 @@ cdef class StructureStep:
     cdef double[::1] om, b0, b1, b2, b3, A, B
     cdef double[:, ::1] C, S                # trig moments (DEG1, m)
     cdef double[:, ::1] Wm                  # (DEG1, n_p)
-    cdef double[::1] W, DW, W0, WL, d0, dd0, dprev, dcur, ddcur
+    cdef double[::1] W, DW, W0, WL, d0, dd0, dprev, ddprev, dcur, ddcur, seg_peak
     # the rank-one update of one closed spring: workspace, z, lam, V
     cdef double[::1] r1_work, r1_z, r1_lam, r1_V
     cdef long[::1] active
@@ -395,6 +402,7 @@ cdef class StructureStep:
         self.W0 = np.zeros(npp); self.WL = np.zeros(npp)
         self.d0 = np.zeros(nc); self.dd0 = np.zeros(nc); self.dprev = np.zeros(nc)
         self.dcur = np.zeros(nc); self.ddcur = np.zeros(nc)
+        self.ddprev = np.zeros(nc); self.seg_peak = np.zeros(nc)
         self.active = np.zeros(nc, dtype=np.int_)
         self.r1_work = np.zeros(3 * m * m + 16 * m)
         self.r1_z = np.zeros(m)
@@ -903,27 +911,84 @@ cdef class StructureStep:
             x = xn
         return hi
 
-    def step(self, double[::1] x, double[::1] aux, double[:, ::1] pm, signed char[::1] closed):
+    cdef double _rate_root_value(self, int k, double tc, double lo, double hi, double v_lo,
+                                 double v_hi, const double* P) noexcept nogil:
+        """:meth:`StructureSubsystem._rate_root_value`: the penetration of
+        contact ``k`` where its rate, ``v_lo > 0 >= v_hi`` at ``lo`` and ``hi``
+        after ``tc``, falls through zero (Illinois regula falsi, at most 60
+        evaluations)."""
+        cdef int it, side = 0, p = self.c_port[k]
+        cdef double d_best = -INFINITY, x, dx, vx, w, dw, tol
+        x = fabs(tc) + hi
+        tol = 1e-14 * (x if x > 1.0 else 1.0)
+        for it in range(60):
+            if v_hi == v_lo:
+                x = hi
+            else:
+                x = (lo * v_hi - hi * v_lo) / (v_hi - v_lo)
+            if not (lo <= x and x <= hi):
+                x = 0.5 * (lo + hi)
+            w = self._port(x, P, p, &dw)
+            self._gap(k, tc + x, w, dw, &dx, &vx)
+            if dx > d_best:
+                d_best = dx
+            if vx > 0.0:
+                lo = x
+                v_lo = vx
+                if side == 1:
+                    v_hi *= 0.5
+                side = 1
+            else:
+                hi = x
+                v_hi = vx
+                if side == -1:
+                    v_lo *= 0.5
+                side = -1
+            if hi - lo <= tol or vx == 0.0:
+                break
+        return d_best
+
+    cdef void _peak_interval(self, int k, double tc, double lo, double hi, double v_lo,
+                             double d_hi, double v_hi, const double* P) noexcept nogil:
+        """One interval of :meth:`StructureSubsystem._segment_peaks` for the
+        closed contact ``k``: the segment's largest penetration so far
+        ``seg_peak[k]`` raised to the value ``d_hi`` at the interval's end and,
+        where the rate falls through zero inside it, to the penetration there."""
+        cdef double r
+        if d_hi > self.seg_peak[k]:
+            self.seg_peak[k] = d_hi
+        if v_lo > 0.0 and v_hi <= 0.0:
+            r = self._rate_root_value(k, tc, lo, hi, v_lo, v_hi, P)
+            if r > self.seg_peak[k]:
+                self.seg_peak[k] = r
+
+    def step(self, double[::1] x, double[::1] aux, double[:, ::1] pm, signed char[::1] closed,
+             double[::1] peak):
         """Advance the modal state ``x = [q, dq]`` (2 m) over the loaded step
         in closed form with the hosted springs switching, adding to ``aux``
         (4 per contact, as the reference) and to the ports' velocity moments
         ``pm`` (3, 2 n_p; complex interleaved).  ``closed`` (n_c) holds each
         contact's state at the end of the last step (1 closed, 0 open, -1
-        unknown), and on return at the end of this one.  Returns the located
-        switches ``[(time, contact, closed), ...]``."""
-        cdef int m = self.m, npt = self.np_, nc = self.nc, i, j, k, s, n, row, p
+        unknown), and on return at the end of this one.  ``peak`` (n_c), the
+        host's largest penetrations, is raised in place to each closed
+        contact's largest penetration over each segment (the reference's
+        ``_segment_peaks``).  Returns the located switches
+        ``[(time, contact, closed), ...]``."""
+        cdef int m = self.m, npt = self.np_, nc = self.nc, j, k, s, p
+        cdef long i, n, row
         cdef double t1 = self.t + self.h, tc = self.t, eps, L, tau, tol, best, hi, lo0, hi0
-        cdef double d, dd, w, acc, wmax
+        cdef double d, dd, w, acc, wmax, taup
         cdef long long mask
         cdef bint any_active, flipped
         cdef const double* P
         cdef long[64] who
         cdef int n_who
         if x.shape[0] != 2 * m or aux.shape[0] != 4 * nc + 2 or pm.shape[0] != 3 \
-                or pm.shape[1] != 2 * npt or closed.shape[0] != nc:
-            raise ValueError(f"`x`, `aux` and `pm` must have {2 * m}, {4 * nc + 2} and "
-                             f"(3, {2 * npt}) entries, got {x.shape[0]}, {aux.shape[0]} "
-                             f"and ({pm.shape[0]}, {pm.shape[1]})")
+                or pm.shape[1] != 2 * npt or closed.shape[0] != nc or peak.shape[0] != nc:
+            raise ValueError(f"`x`, `aux`, `pm`, `closed` and `peak` must have {2 * m}, "
+                             f"{4 * nc + 2}, (3, {2 * npt}), {nc} and {nc} entries, got "
+                             f"{x.shape[0]}, {aux.shape[0]}, ({pm.shape[0]}, {pm.shape[1]}), "
+                             f"{closed.shape[0]} and {peak.shape[0]}")
         log = []
         for k in range(nc):
             aux[4 * k + 2] = 0.0            # first moments are per step
@@ -970,30 +1035,42 @@ cdef class StructureStep:
             self._to_segment(s)
             self._split(&self.b_lam[s, 0])
             self.n_segments += 1
-            n = <int> ceil(2.0 * L * wmax)
+            # probes half a radian of the fastest mode apart, uncapped (the
+            # reference's count); between two that keep every contact's side,
+            # a closed contact's peak is sought where its rate falls through
+            # zero (the reference's _segment_peaks, interval by interval)
+            n = <long> ceil(2.0 * L * wmax)
             if n < 2:
                 n = 2
-            if n > 512:
-                n = 512
             row = -1
             for k in range(nc):
                 self.dprev[k] = self.d0[k]
+                self.ddprev[k] = self.dd0[k]
+                self.seg_peak[k] = self.d0[k]
+            taup = 0.0
             for i in range(1, n + 1):
                 tau = L * i / n
                 self._ports(tau, P, &self.W[0], &self.DW[0])
                 flipped = False
                 for k in range(nc):
                     p = self.c_port[k]
-                    self._gap(k, tc + tau, self.W[p], self.DW[p], &self.dcur[k], &dd)
+                    self._gap(k, tc + tau, self.W[p], self.DW[p], &self.dcur[k],
+                              &self.ddcur[k])
                     if (self.dcur[k] > 0) != (self.active[k] != 0):
                         flipped = True
                 if flipped:
                     row = i
                     break
                 for k in range(nc):
+                    if self.active[k]:
+                        self._peak_interval(k, tc, taup, tau, self.ddprev[k], self.dcur[k],
+                                            self.ddcur[k], P)
                     self.dprev[k] = self.dcur[k]
+                    self.ddprev[k] = self.ddcur[k]
+                taup = tau
             if row < 0:
                 self._quadratures(aux, pm, tc, L, P, any_active)
+                self._raise_peaks(peak)
                 self._end_state(s, L * n / n)
                 break
             lo0 = L * (row - 1) / n if row > 1 else 0.0
@@ -1014,6 +1091,15 @@ cdef class StructureStep:
                     who[n_who] = k
                     n_who += 1
             self._quadratures(aux, pm, tc, best, P, any_active)
+            if any_active:
+                # the last interval ends at the switch
+                self._ports(best, P, &self.W[0], &self.DW[0])
+                for k in range(nc):
+                    if self.active[k]:
+                        p = self.c_port[k]
+                        self._gap(k, tc + best, self.W[p], self.DW[p], &d, &dd)
+                        self._peak_interval(k, tc, taup, best, self.ddprev[k], d, dd, P)
+                self._raise_peaks(peak)
             self._end_state(s, best)
             tc += best
             for j in range(n_who):
@@ -1023,6 +1109,14 @@ cdef class StructureStep:
             x[i] = self.q[i]
             x[m + i] = self.dq[i]
         return log
+
+    cdef void _raise_peaks(self, double[::1] peak) noexcept nogil:
+        """``peak`` of each closed contact raised to its segment's largest
+        penetration."""
+        cdef int k
+        for k in range(self.nc):
+            if self.active[k] and self.seg_peak[k] > peak[k]:
+                peak[k] = self.seg_peak[k]
 
     def step_free(self, double[::1] x, double[:, ::1] pm):
         """Advance ``x`` exactly over the loaded step with no hosted contact

@@ -20,6 +20,7 @@ force, the switch located inside the sub-step (as for a robot).
 """
 from __future__ import annotations
 
+import logging
 import math
 
 import numpy as np
@@ -33,6 +34,15 @@ from .kernel import compiled_module
 from .subsystem import EmbeddedContact, StepInput, Subsystem, reparametrised
 
 __all__ = ["StructureSubsystem"]
+
+logger = logging.getLogger(__name__)
+
+#: the interface of ``cosim._structure_step`` this module calls (its
+#: ``STEP_API``): 2 since ``StructureStep.step`` raises the host's peaks.  A
+#: kernel built from older sources is not used (said once), for its step
+#: would not match the reference.
+STEP_API = 2
+_stale_said = False
 
 
 class StructureSubsystem(Subsystem):
@@ -308,6 +318,15 @@ class StructureSubsystem(Subsystem):
         module = compiled_module("_structure_step")
         if module is None:
             return None
+        if getattr(module, "STEP_API", 1) != STEP_API:
+            global _stale_said
+            if not _stale_said:
+                _stale_said = True
+                logger.warning("the compiled kernel `cosim._structure_step` was built from "
+                               "older sources (interface %s, these sources need %s): using "
+                               "the numpy reference, which is slower; rebuild it with "
+                               "`pip install .`", getattr(module, "STEP_API", 1), STEP_API)
+            return None
         contacts = []
         for e in self._embedded:
             contacts.append((e.port, e.side, e.normal, e.offset, e.law.contact_stiffness))
@@ -330,8 +349,9 @@ class StructureSubsystem(Subsystem):
                 [(e.t0, e.h, e.motion, e._dmotion) for e in self._embedded]):
             self.port_moments = pm = np.zeros((3, self.n_ports), complex)
             if self._embedded:
+                # the peaks array read at each step (embed_contact rebinds it)
                 self.switch_log = kernel.step(self.x, self.aux, pm.view(float),
-                                              self._closed_end)
+                                              self._closed_end, self.peak)
             else:
                 kernel.step_free(self.x, pm.view(float))
             return
