@@ -37,6 +37,15 @@ import numpy as np
 #: bumped when a call changes (2: ``StructureStep.step`` takes ``peak``)
 STEP_API = 2
 
+
+#: segments (contact switches) one step may take before it is said to stall
+MAX_SEGMENTS = 10000
+
+
+class StalledStep(RuntimeError):
+    """The compiled step stopped advancing (a switch found again and again at
+    one instant); the host redoes the step with the numpy reference."""
+
 cdef enum:
     # rows of a load polynomial (degree <= 3) and of a partner's motion
     DEG1 = 4
@@ -996,7 +1005,13 @@ cdef class StructureStep:
             self.q[i] = x[i]
             self.dq[i] = x[m + i]
         eps = 1e-13 * (fabs(t1) if fabs(t1) > 1.0 else 1.0)
+        cdef long segments = 0
         while t1 - tc > eps:
+            segments += 1
+            if segments > MAX_SEGMENTS:
+                raise StalledStep(f"the compiled structure step made {MAX_SEGMENTS} segments "
+                                  f"in the step from t = {self.t!r} s without reaching its "
+                                  f"end (at t = {tc!r} s)")
             L = t1 - tc
             # the contacts at the segment's start: R q, R dq
             for p in range(npt):
