@@ -600,10 +600,14 @@ class _ProcessPool:
                 if w.conn in ready:
                     try:
                         outcome = w.conn.recv()
-                    except (EOFError, OSError):     # died while answering
+                    except (EOFError, OSError):
+                        # the pipe closed with no result: the process died (a
+                        # killed worker's pipe and its sentinel become ready
+                        # together, in either order)
                         w.proc.join(1.0)
-                        outcome = ("error", f"its worker process died while sending the "
-                                            f"result ({_signal_text(w.proc.exitcode)})")
+                        outcome = ("error", f"its worker process died while running it "
+                                            f"({_signal_text(w.proc.exitcode)}); the other "
+                                            f"points ran on")
                         self._replace(w)
                     else:
                         w.key = w.deadline = None
