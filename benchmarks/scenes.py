@@ -7,7 +7,7 @@ Run from the project root::
 
 It prints the machine, then one row per run: the process CPU of the solve
 (the ``cpu_time_s`` of its summary), the best of ``--repeat`` runs, with each
-kernel (``COSIM_KERNEL``, see :mod:`cosim.kernel`), their ratio, and the target
+kernel (``COSIM_KERNEL``, see :mod:`cosim.sides.kernel`), their ratio, and the target
 of the row where there is one.  Both kernels run in the same process, one
 after the other, so the ratio holds whatever the machine's speed.
 """

@@ -209,7 +209,7 @@ class _StructureClock:
     on the class for the duration of a ``with`` block)."""
 
     def __enter__(self):
-        from cosim.structure import StructureSubsystem
+        from cosim.sides.fem import StructureSubsystem
         self.cls, self.orig, self.total = StructureSubsystem, StructureSubsystem._step_impl, 0.0
         clock = self
 
@@ -230,7 +230,7 @@ class _StructureClock:
 def run_point(series: str, size: int, robot: dict, window: float = WINDOW) -> Point:
     """Build and run one scene of a series; CPU as process time."""
     from cosim import load_scene, simulate
-    from cosim.structure import StructureSubsystem
+    from cosim.sides.fem import StructureSubsystem
     path, variant = _scene_file(series)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -258,7 +258,7 @@ def run_series(series: str, sizes, window: float = WINDOW, budget: float = math.
     """Run a series over ``sizes`` (ascending); stop after a run whose
     ``simulate`` CPU exceeds ``budget`` seconds, as larger ones cost more."""
     from cosim.errors import SimulationError
-    from cosim.scene import SceneError
+    from cosim.scene.load import SceneError
     robot = robot_state(series) if robot is None else robot
     points = []
     for n in sizes:

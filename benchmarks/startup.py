@@ -16,11 +16,11 @@ the environment of the runs, and the first run writes the caches).
   best run, which filters out more of a loaded machine's noise.
 - *in process*: in other fresh processes, wall (``time.perf_counter``) and CPU
   (``time.process_time``, which a loaded machine inflates far less) around
-  ``import numpy``, ``import cosim.run, cosim.scene`` (what the command line
-  imports before it reads the scene), ``import cosim._multibody_step`` (the
+  ``import numpy``, ``import cosim.scene.run, cosim.scene.load`` (what the command line
+  imports before it reads the scene), ``import cosim.sides._multibody_step`` (the
   compiled kernel, which `cosim run` imports through ``importlib``, out of
   ``-X importtime``'s sight), :func:`cosim.load_scene` and
-  :func:`cosim.build.build_system` (with the modules they import where first
+  :func:`cosim.scene.build.build_system` (with the modules they import where first
   needed); then, in processes that import everything else the run imports
   (numpy, the standard library) before the clock starts, our modules alone, and
   load and build alone.
@@ -52,11 +52,11 @@ if mode == "cold":                   # as `cosim run` goes
     import numpy
     lap("numpy", t)
     t = clock()
-    import cosim.run, cosim.scene
+    import cosim.scene.run, cosim.scene.load
     lap("import", t)
     t = clock()
     try:                             # the compiled kernel, timed on its own
-        import cosim._multibody_step
+        import cosim.sides._multibody_step
     except ImportError:
         pass
     lap("extension", t)
@@ -67,7 +67,7 @@ else:                                # the rest first: our modules, then load an
         except ImportError:
             pass
     t = clock()
-    import cosim.run, cosim.scene
+    import cosim.scene.run, cosim.scene.load
     for name in mode.split(","):
         __import__(name)
     lap("ours", t)
@@ -75,7 +75,7 @@ t = clock()
 scene = cosim.load_scene(scene_path, variant)
 lap("load", t)
 t = clock()
-from cosim.build import build_system
+from cosim.scene.build import build_system
 build_system(scene)
 lap("build", t)
 print(json.dumps(out))
@@ -148,7 +148,7 @@ def _run(script: str, *argv: str) -> str:
 
 def scene_times(scene: str, variant: str | None, ours: str = "", others=()) -> dict:
     """Times ``[wall, CPU]`` [s] from one fresh process.  Without ``ours``:
-    ``import numpy``, ``import cosim.run, cosim.scene``, the kernel's import,
+    ``import numpy``, ``import cosim.scene.run, cosim.scene.load``, the kernel's import,
     then ``load_scene`` and ``build_system`` with the imports they trigger.
     With ``ours`` (comma-separated) and ``others``: ``others`` imported before
     the clock starts, then our modules alone, then load and build alone."""
@@ -204,8 +204,8 @@ def main(argv=None):
           f"/ that = {ours_best / cum:.2f}")
     print(f"{'in process':<34}{'wall [ms]':>10}{'/ numpy':>9}{'CPU [ms]':>10}{'/ numpy':>9}")
     rows = [("import numpy", cold["numpy"]),
-            ("import cosim.run, cosim.scene", cold["import"]),
-            ("import cosim._multibody_step", cold["extension"]),
+            ("import cosim.scene.run, cosim.scene.load", cold["import"]),
+            ("import cosim.sides._multibody_step", cold["extension"]),
             ("load_scene, with its imports", cold["load"]),
             ("build_system, with its imports", cold["build"]),
             ("our modules alone", alone["ours"]),

@@ -7,7 +7,7 @@ Run from the project root::
     python benchmarks/sweep_wall.py [--points 200] [--workers 2] [--out DIR]
 
 It measures the solve CPU of one run of the point scene (best of 3), then runs
-the sweep on a local process pool (``cosim.sweep``: one run directory per
+the sweep on a local process pool (``cosim.studies.sweep``: one run directory per
 point and ``sweep.csv`` under ``--out``, default ``runs/sweep-wall``, which is
 replaced) and prints its wall time beside the bound.  The points vary the arm's
 initial rate over a band around the scene's -20 rad/s, so every point strikes
@@ -23,7 +23,7 @@ import warnings
 import numpy as np
 
 import cosim
-from cosim.sweep import sweep
+from cosim.studies.sweep import sweep
 
 SCENE = "cases/three_mass.toml"
 VARIANT = "f10"

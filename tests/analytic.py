@@ -1,6 +1,6 @@
-"""Closed forms for the tests: the single copy lives in ``cosim.analytic``
+"""Closed forms for the tests: the single copy lives in ``cosim.studies.analytic``
 (``cosim verify`` needs them too); this module only names them for tests."""
-from cosim.analytic import (held_force_rebound_factor, hertz_contact, kelvin_voigt_clipped,
+from cosim.studies.analytic import (held_force_rebound_factor, hertz_contact, kelvin_voigt_clipped,
                             linear_contact, mass_on_pinned_beam, two_mass_oscillator)
 
 __all__ = ["linear_contact", "kelvin_voigt_clipped", "held_force_rebound_factor",

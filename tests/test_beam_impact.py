@@ -10,7 +10,7 @@ import pytest
 import cosim
 from analytic import mass_on_pinned_beam
 from conftest import CASES
-from cosim.metrics import impact_metrics, relative_errors
+from cosim.studies.metrics import impact_metrics, relative_errors
 
 E, RHO, L = 210e9, 7850.0, 1.0
 WIDTH, HEIGHT = 0.04, 0.01
@@ -180,7 +180,7 @@ def test_a_point_mass_dropped_on_the_beam_meets_the_continuum(tmp_path):
     """0.2 kg at 1 m/s on x0 = 0.45 m (no node of 16, 32 or 64 elements),
     spring 1.6e6 N/m, no gravity, 12 modes on both sides: the FE beam's first
     contact against the exact solution of the mass and 12 continuum modes
-    (`cosim.analytic.mass_on_pinned_beam`: 1.02171 ms, 0.294397 mm, and the
+    (`cosim.studies.analytic.mass_on_pinned_beam`: 1.02171 ms, 0.294397 mm, and the
     mass leaves upwards at 0.523661 m/s).  The FE modes converge to the
     continuum's at O(h^4), and so does the contact.  Measured relative errors
     (duration, peak, rebound velocity): 16 elements 1.9e-4, 1.2e-4, 1.5e-4;

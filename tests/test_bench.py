@@ -8,9 +8,9 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from cosim.bench import COLUMNS, BenchRow, cheapest_within, reference, run_bench, write_csv
+from cosim.studies.bench import COLUMNS, BenchRow, cheapest_within, reference, run_bench, write_csv
 from cosim.cli import main
-from cosim.metrics import exit_velocity, impact_metrics, relative_errors
+from cosim.studies.metrics import exit_velocity, impact_metrics, relative_errors
 from conftest import CASES
 
 # the study measures the energy long steps gain: the run guard is off

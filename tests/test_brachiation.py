@@ -16,8 +16,8 @@ import pytest
 
 import cosim
 from conftest import CASES, ROOT
-from cosim.build import build_system
-from cosim.scene import SceneError
+from cosim.scene.build import build_system
+from cosim.scene.load import SceneError
 
 SCENE = CASES / "brachiation.toml"
 G = 9.81

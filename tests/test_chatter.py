@@ -11,8 +11,8 @@ import pytest
 
 import cosim
 from conftest import CASES, ROOT
-from cosim.guard import Guard, GuardError, GuardOptions
-from cosim.scene import SceneError
+from cosim.core.guard import Guard, GuardError, GuardOptions
+from cosim.scene.load import SceneError
 
 #: the command of the issue: loose tolerances make the monolithic solver
 #: restart at A's release again and again at t = 0.0132 s.  That is the numpy

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from conftest import CASES, ROOT
-from cosim import cli, verify
+from cosim import cli
+from cosim.studies import verify
 
 
 def test_run_writes_summary_and_series(tmp_path, capsys):

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import cosim
-from cosim.scene import SceneError, load_scene
+from cosim.scene.load import SceneError, load_scene
 
 G = 9.81
 MASS = 2.0

@@ -13,8 +13,8 @@ import pytest
 
 from conftest import CASES
 import cosim
-from cosim import series as series_mod
-from cosim.series import SeriesFile
+from cosim.core import series as series_mod
+from cosim.core.series import SeriesFile
 
 #: summary keys that measure the run rather than describe its outcome
 TIMINGS = ("cpu_time_s",)

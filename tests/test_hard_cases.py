@@ -11,9 +11,9 @@ import pytest
 
 import cosim
 from conftest import CASES
-from cosim.guard import Guard, GuardError, GuardOptions
-from cosim.schemes import COUPLING_SCHEMES
-from cosim.verify import HardCase, hard_matrix, reference_step, run_hard_case
+from cosim.core.guard import Guard, GuardError, GuardOptions
+from cosim.core.schemes import COUPLING_SCHEMES
+from cosim.studies.verify import HardCase, hard_matrix, reference_step, run_hard_case
 
 
 def _spring_system():
@@ -129,7 +129,7 @@ def test_a_nan_in_a_run_stops_it_with_time_and_contact(monkeypatch):
     """A subsystem whose state turns NaN mid-run: the run ends failed at that
     step, the message names the contact and the time, and the series kept
     are finite."""
-    from cosim.schemes.explicit import Jacobi
+    from cosim.core.schemes.explicit import Jacobi
     original = Jacobi.advance
 
     def poisoned(self, system, t, h, ratio):

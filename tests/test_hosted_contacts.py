@@ -113,7 +113,7 @@ def test_interface_error_control_refines_the_contact_steps():
     contact train and lands within 0.1 % and 0.2 %.  (Before peaks were
     located inside the chain's steps, the coarse run's peak read 1 % low:
     most of that was its 100 us samples missing the top of C's spring.)"""
-    from cosim.metrics import impact_metrics, relative_errors
+    from cosim.studies.metrics import impact_metrics, relative_errors
 
     def run(*ov, scheme=None):
         with warnings.catch_warnings():

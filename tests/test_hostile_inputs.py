@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 from conftest import CASES, ROOT
-from cosim import tomlread
-from cosim.scene import MAX_MEMORY, SceneError, load_scene, structure_memory
+from cosim.io import tomlread
+from cosim.scene.load import MAX_MEMORY, SceneError, load_scene, structure_memory
 
 SPRING_DROP = CASES / "spring_drop.toml"
 #: a refusal takes well under a second of its own; the process's start-up is
@@ -70,7 +70,7 @@ def test_nesting_thousands_deep(tmp_path, opening, closing):
     scene = tmp_path / "deep.toml"
     scene.write_text("t_end = 1.0\nname = " + opening * 5000 + "1" + closing * 5000 + "\n")
     refused(tmp_path, scene, "must nest at most 32 levels of tables and arrays "
-                             "(`cosim.tomlread.MAX_DEPTH`), got more than 32 nested arrays or "
+                             "(`cosim.io.tomlread.MAX_DEPTH`), got more than 32 nested arrays or "
                              "inline tables at line 2")
 
 
@@ -80,7 +80,7 @@ def test_a_dotted_key_of_20000_parts(tmp_path):
     scene.write_text("t_end = 1.0\n" + "x" + ".x" * 20000 + " = 1\n")
     assert scene.stat().st_size > 40_000
     refused(tmp_path, scene, "must nest at most 32 levels of tables and arrays "
-                             "(`cosim.tomlread.MAX_DEPTH`), got a dotted key of more than 32 "
+                             "(`cosim.io.tomlread.MAX_DEPTH`), got a dotted key of more than 32 "
                              "parts at line 2")
 
 
@@ -93,7 +93,7 @@ def test_a_table_header_of_many_parts(tmp_path):
 def test_too_many_keys(tmp_path):
     scene = tmp_path / "keys.toml"
     scene.write_text("".join(f"k{i} = {i}\n" for i in range(20_000)))
-    refused(tmp_path, scene, "must hold at most 10000 keys (`cosim.tomlread.MAX_KEYS`; each "
+    refused(tmp_path, scene, "must hold at most 10000 keys (`cosim.io.tomlread.MAX_KEYS`; each "
                              "part of a dotted key counts), got more by line 10001")
 
 
@@ -104,7 +104,7 @@ def test_inline_tables_whose_dotted_keys_nest_deeper_than_the_brackets(tmp_path)
     scene = tmp_path / "deep_keys.toml"
     scene.write_text(f"t_end = 1.0\nname = {{ {key} = {{ {key} = 1 }} }}\n")
     line = refused(tmp_path, scene, "must nest at most 32 levels of tables and arrays "
-                                    "(`cosim.tomlread.MAX_DEPTH`), got deeper")
+                                    "(`cosim.io.tomlread.MAX_DEPTH`), got deeper")
     assert f"error: {scene}: `name.{key}.a.a.a.a.a.a.a.a.a.a.a" in line
 
 
@@ -127,7 +127,7 @@ def test_a_file_over_the_size_limit(tmp_path):
     with open(scene, "wb") as fh:                   # sparse: no disk is used
         fh.truncate(tomlread.MAX_BYTES + 1)
     refused(tmp_path, scene, f"must hold at most {tomlread.MAX_BYTES} bytes (64 MiB, "
-                             f"`cosim.tomlread.MAX_BYTES`), got more")
+                             f"`cosim.io.tomlread.MAX_BYTES`), got more")
 
 
 def test_a_file_at_the_size_limit_is_read(tmp_path):
@@ -140,10 +140,10 @@ def test_a_file_at_the_size_limit_is_read(tmp_path):
 # ------------------------------------------------------------- --set values
 @pytest.mark.parametrize("override,essence", [
     ("name=" + "[" * 5000, "`name` given with --set must nest at most 32 levels of tables and "
-                           "arrays (`cosim.tomlread.MAX_DEPTH`), got more than 32 nested arrays "
+                           "arrays (`cosim.io.tomlread.MAX_DEPTH`), got more than 32 nested arrays "
                            "or inline tables at line 1"),
     ("x" + ".x" * 20000 + "=1", "a --set key must have at most 32 parts "
-                                "(`cosim.tomlread.MAX_DEPTH`), got 20001"),
+                                "(`cosim.io.tomlread.MAX_DEPTH`), got 20001"),
     ("name={" + ", ".join(f"k{i} = 1" for i in range(10_001)) + "}",
      "`name` given with --set must hold at most 10000 keys"),
 ], ids=["deep value", "long key", "many keys"])
@@ -197,8 +197,8 @@ def test_a_chain_of_20000_masses_is_refused_before_it_is_built(tmp_path):
     line = refused(tmp_path, scene, "`subsystems.chain.masses` makes a structure of 20000 DOFs "
                                     "whose model and modes need about 29.8 GiB (dense 20000 x "
                                     "20000 matrices), more than the 4 GiB a scene may use "
-                                    "(`cosim.scene.MAX_MEMORY`)")
-    assert line.endswith("(`cosim.scene.MAX_MEMORY`)")
+                                    "(`cosim.scene.load.MAX_MEMORY`)")
+    assert line.endswith("(`cosim.scene.load.MAX_MEMORY`)")
 
 
 def test_a_fine_beam_keeping_every_mode_is_refused_with_the_advice(tmp_path):
@@ -209,7 +209,7 @@ def test_a_fine_beam_keeping_every_mode_is_refused_with_the_advice(tmp_path):
         f"error: {CASES / 'beam_impact.toml'}: `subsystems.beam.elements` makes a structure of "
         f"40002 DOFs whose model and modes need about 119 GiB (dense 40002 x 40002 matrices "
         f"(every mode is kept: give `modes.count` or `modes.cutoff_hz`)), more than the 4 GiB "
-        f"a scene may use (`cosim.scene.MAX_MEMORY`)\n")
+        f"a scene may use (`cosim.scene.load.MAX_MEMORY`)\n")
     assert not (tmp_path / "o").exists()
 
 

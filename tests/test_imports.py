@@ -21,10 +21,10 @@ from conftest import CASES, ROOT
 
 OURS = ("cosim", "multibody", "fem", "couplers")
 #: our modules that a scene which does not use them must not load
-ON_DEMAND = ("multibody.effects", "multibody.impact", "couplers.connection", "cosim.connections",
-             "fem.beam", "fem.rod", "fem.integrators", "cosim.schemes.monolithic",
-             "cosim.schemes.implicit", "cosim.plot", "cosim.sweep", "cosim.bench",
-             "cosim.export", "cosim.verify", "cosim.info", "cosim.analytic", "cosim.metrics")
+ON_DEMAND = ("multibody.effects", "multibody.impact", "couplers.connection", "cosim.core.connection_modes",
+             "fem.beam", "fem.rod", "fem.integrators", "cosim.core.schemes.monolithic",
+             "cosim.core.schemes.implicit", "cosim.plot", "cosim.studies.sweep", "cosim.studies.bench",
+             "cosim.io.export", "cosim.studies.verify", "cosim.scene.info", "cosim.studies.analytic", "cosim.studies.metrics")
 
 HEAVY = ("skfem", "meshio", "matplotlib", "dask", "distributed")
 
@@ -64,7 +64,7 @@ def test_rigid_ground_and_chain_scenes_need_no_scipy(tmp_path, scene, variant):
     if variant:
         argv += ["--variant", variant]
     mods = loaded(tmp_path, *argv)
-    assert "cosim.run" in mods
+    assert "cosim.scene.run" in mods
     if scene == "three_mass":
         assert "fem.chain" in mods          # the chain was built, without scipy
     assert not packages(mods, HEAVY + ("scipy",)), packages(mods, HEAVY + ("scipy",))
@@ -101,7 +101,7 @@ def test_a_rigid_ground_scene_loads_none_of_the_modules_it_does_not_use(tmp_path
     """spring_drop: a mass, a wall, a linear law, Gauss-Seidel: no structure
     package, no effects, impacts, connections or other schemes."""
     mods = loaded(tmp_path, *run_argv(tmp_path, "spring_drop"))
-    assert "cosim.run" in mods and "cosim.schemes.explicit" in mods
+    assert "cosim.scene.run" in mods and "cosim.core.schemes.explicit" in mods
     assert [m for m in ON_DEMAND if m in mods] == []
     assert packages(mods, ("fem",)) == []
 
@@ -111,16 +111,16 @@ def test_a_chain_scene_loads_only_what_it_steps_with(tmp_path):
     the file has a ``[scheme.monolithic]`` table, which is validated against
     that scheme's options; nothing else on demand is loaded."""
     mods = loaded(tmp_path, *run_argv(tmp_path, "three_mass", "f100"))
-    assert {"fem.chain", "fem.integrators", "cosim.schemes.monolithic"} <= mods
-    needed = ("fem.integrators", "cosim.schemes.monolithic")
+    assert {"fem.chain", "fem.integrators", "cosim.core.schemes.monolithic"} <= mods
+    needed = ("fem.integrators", "cosim.core.schemes.monolithic")
     assert [m for m in ON_DEMAND if m in mods and m not in needed] == []
 
 
 @pytest.mark.parametrize("scene,variant,extra,needs", [
-    ("spring_drop", None, ("--scheme", "implicit"), {"cosim.schemes.implicit"}),
+    ("spring_drop", None, ("--scheme", "implicit"), {"cosim.core.schemes.implicit"}),
     ("manipulator_wall", "mu0.03", ("--set", "contacts.tip.law.restitution=0.5"),
      {"multibody.impact"}),
-    ("brachiation", None, (), {"multibody.effects", "couplers.connection", "cosim.connections",
+    ("brachiation", None, (), {"multibody.effects", "couplers.connection", "cosim.core.connection_modes",
                                "fem.beam"}),
 ])
 def test_a_module_on_demand_loads_where_the_scene_uses_it(tmp_path, scene, variant, extra, needs):
@@ -136,16 +136,16 @@ def test_a_module_on_demand_loads_where_the_scene_uses_it(tmp_path, scene, varia
 
 
 def test_the_compiled_kernel_loads_only_with_a_multibody_side(tmp_path):
-    """``cosim._multibody_step`` steps trees: a rod against a rigid wall and
+    """``cosim.sides._multibody_step`` steps trees: a rod against a rigid wall and
     ``cosim --help`` do not import it; ``cosim run`` of a tree does."""
-    assert "cosim._multibody_step" not in loaded(tmp_path, *run_argv(tmp_path, "rod_impact",
+    assert "cosim.sides._multibody_step" not in loaded(tmp_path, *run_argv(tmp_path, "rod_impact",
                                                                      None, "1e-5"))
-    assert "cosim._multibody_step" not in loaded(tmp_path, "--help")
+    assert "cosim.sides._multibody_step" not in loaded(tmp_path, "--help")
     try:
-        importlib.import_module("cosim._multibody_step")
+        importlib.import_module("cosim.sides._multibody_step")
     except ImportError:
         pytest.skip("the compiled kernel is not built here (tests/test_kernel.py fails then)")
-    assert "cosim._multibody_step" in loaded(tmp_path, *run_argv(tmp_path, "spring_drop",
+    assert "cosim.sides._multibody_step" in loaded(tmp_path, *run_argv(tmp_path, "spring_drop",
                                                                  None, "1e-4", "--overwrite"))
 
 
@@ -169,9 +169,11 @@ def test_every_public_name_imports_as_before(package):
 
 def test_cosim_submodules_load_on_attribute_access():
     code = ("import sys, cosim\n"
-            "assert 'cosim.run' not in sys.modules\n"
-            "assert cosim.run.simulate is cosim.simulate\n"
-            "assert cosim.build.build_system.__module__ == 'cosim.build'\n")
+            "assert 'cosim.scene.run' not in sys.modules\n"
+            "assert cosim.simulate.__module__ == 'cosim.scene.run'\n"
+            "assert 'cosim.studies' not in sys.modules\n"
+            "assert cosim.studies.__name__ == 'cosim.studies'\n"
+            "assert cosim.plot.__name__ == 'cosim.plot'\n")
     proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True,
                           text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
@@ -179,12 +181,12 @@ def test_cosim_submodules_load_on_attribute_access():
 
 def test_the_scheme_registry_imports_a_scheme_on_lookup_only():
     code = ("import sys\n"
-            "from cosim.schemes import COUPLING_SCHEMES, get_scheme\n"
+            "from cosim.core.schemes import COUPLING_SCHEMES, get_scheme\n"
             "names = sorted(COUPLING_SCHEMES)\n"
             "assert 'implicit' in COUPLING_SCHEMES and len(COUPLING_SCHEMES) == 4\n"
-            "assert 'cosim.schemes.implicit' not in sys.modules\n"
+            "assert 'cosim.core.schemes.implicit' not in sys.modules\n"
             "cls = get_scheme('implicit')\n"
-            "assert 'cosim.schemes.implicit' in sys.modules\n"
+            "assert 'cosim.core.schemes.implicit' in sys.modules\n"
             "print(' '.join(names), cls.__name__)")
     proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True,
                           text=True, timeout=300)
@@ -195,7 +197,7 @@ def test_the_scheme_registry_imports_a_scheme_on_lookup_only():
 def test_the_scheme_registry_is_a_registry_as_before():
     """Each name resolves to the class of that name; a user's own class
     registers and resolves as in a dict; unknown names list the valid ones."""
-    from cosim.schemes import COUPLING_SCHEMES, GaussSeidel, Implicit, Monolithic, get_scheme
+    from cosim.core.schemes import COUPLING_SCHEMES, GaussSeidel, Implicit, Monolithic, get_scheme
     assert list(COUPLING_SCHEMES) == ["monolithic", "jacobi", "gauss_seidel", "implicit"]
     assert {n: c.name for n, c in COUPLING_SCHEMES.items()} == {n: n for n in COUPLING_SCHEMES}
     assert COUPLING_SCHEMES["monolithic"] is Monolithic
@@ -232,7 +234,7 @@ def _declared_fields(cls) -> list[str]:
 
 
 def _models():
-    from cosim.integrators import INTEGRATORS
+    from cosim.core.ode import INTEGRATORS
     from test_laws import EXAMPLES
     changes = {"linear": ("contact_stiffness", 2e6), "kelvin_voigt": ("contact_damping", 1.0),
                "rigid": ("restitution", 0.3), "hertz": ("exponent", 1.25),
@@ -264,7 +266,7 @@ def test_registered_models_are_the_frozen_dataclasses_they_were(model, key, othe
 
 def test_models_of_two_classes_with_the_same_fields_differ():
     from couplers import FloresLaw, LankaraniNikraveshLaw
-    from cosim.integrators import INTEGRATORS
+    from cosim.core.ode import INTEGRATORS
     assert LankaraniNikraveshLaw(1e9, 1.5, 0.5, 2.0) != FloresLaw(1e9, 1.5, 0.5, 2.0)
     assert INTEGRATORS["rk45"]() != INTEGRATORS["dop853"]() == INTEGRATORS["dop853"]()
 

@@ -7,7 +7,7 @@ import pytest
 
 from conftest import CASES
 from cosim import cli, load_scene
-from cosim.info import scene_info
+from cosim.scene.info import scene_info
 
 
 def test_spring_drop_contact_frequency_and_limits():

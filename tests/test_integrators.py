@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from cosim.bodies import MultibodySubsystem
-from cosim.integrators import INTEGRATORS
+from cosim.sides.multibody import MultibodySubsystem
+from cosim.core.ode import INTEGRATORS
 from multibody import Body, Joint, TreeModel
 
 L = 0.17
@@ -99,7 +99,7 @@ def _wall(counter):
 
 @pytest.mark.parametrize("coarse", [False, True])
 def test_free_step_keeps_contacts_at_max_step(coarse):
-    from cosim.integrators import RK4
+    from cosim.core.ode import RK4
     calls = [0]
     f, switch = _wall(calls)
     t_touch, t_c = 0.01, np.pi / np.sqrt(K_WALL)
@@ -141,7 +141,7 @@ def test_substep_peaks_is_the_maximum_of_the_cubic_hermite():
     where the rate falls from positive to negative, the interpolant's maximum;
     elsewhere the end value (the start is the previous sub-step's end).
     Entries already above stay."""
-    from cosim.integrators import substep_peaks
+    from cosim.core.ode import substep_peaks
 
     rng = np.random.default_rng(19)
     s = np.linspace(0.0, 1.0, 200001)

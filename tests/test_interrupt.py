@@ -13,10 +13,11 @@ import pytest
 
 from conftest import CASES, ROOT
 import cosim
-from cosim import cli, series as series_mod
+from cosim import cli
+from cosim.core import series as series_mod
 from cosim.errors import OutputExistsError
-from cosim.run import RunInterrupted
-from cosim.schemes.explicit import GaussSeidel
+from cosim.scene.run import RunInterrupted
+from cosim.core.schemes.explicit import GaussSeidel
 
 SPRING_DROP = CASES / "spring_drop.toml"
 

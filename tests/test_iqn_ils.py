@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 import cosim
-from cosim.scene import SceneError
-from cosim.schemes import Implicit
+from cosim.scene.load import SceneError
+from cosim.core.schemes import Implicit
 from conftest import CASES
 
 # A bar (on a vertical slider, free to tilt) pressed by a constant 500 N onto

@@ -1,7 +1,7 @@
 """The compiled steps against the numpy reference.
 
-Each side's step runs in compiled code (``cosim._multibody_step`` and
-``cosim._structure_step``); the numpy modules stay the reference.  Here both run every shipped scene and variant: the
+Each side's step runs in compiled code (``cosim.sides._multibody_step`` and
+``cosim.sides._structure_step``); the numpy modules stay the reference.  Here both run every shipped scene and variant: the
 contact interval counts and impacts agree exactly, every series to 1e-10 of its
 largest magnitude (gaps and forces: of the scene's largest gap or force, since a
 gap is the difference of two positions and a contact may barely touch).  The compiled kernel must be built: this file fails (never
@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 import cosim
-from cosim.bodies import MultibodySubsystem
-from cosim.structure import StructureSubsystem
+from cosim.sides.multibody import MultibodySubsystem
+from cosim.sides.fem import StructureSubsystem
 from conftest import CASES
 
 SERIES_RTOL = 1e-10
@@ -54,13 +54,13 @@ def _run(monkeypatch, kernel, path, variant, structure_kernels=None):
 
 
 def test_compiled_kernel_is_built():
-    from cosim import _multibody_step  # noqa: F401  (ImportError fails CI)
-    from cosim.kernel import compiled_module
+    from cosim.sides import _multibody_step  # noqa: F401  (ImportError fails CI)
+    from cosim.sides.kernel import compiled_module
     assert compiled_module("_multibody_step") is not None
 
 
 def test_kernel_switch(monkeypatch):
-    from cosim.kernel import kernel_choice
+    from cosim.sides.kernel import kernel_choice
     monkeypatch.setenv("COSIM_KERNEL", "numpy")
     assert kernel_choice() == "numpy"
     monkeypatch.setenv("COSIM_KERNEL", "fortran")
@@ -150,7 +150,7 @@ def test_compiled_matches_reference(monkeypatch, path, variant):
 def test_kernel_takes_the_steps_it_covers(monkeypatch):
     """Penalty and rigid contacts, joint drives (brachiation's PD drive)
     step in the kernel; with ``COSIM_KERNEL=numpy`` the reference steps."""
-    from cosim.build import build_system
+    from cosim.scene.build import build_system
     monkeypatch.setenv("COSIM_KERNEL", "compiled")
     for stem, expected in (("three_mass", "compiled"), ("spring_drop", "compiled"),
                            ("manipulator_wall", "compiled"), ("brachiation", "compiled")):
@@ -168,8 +168,8 @@ def _random_tree_step(seed, effects=None):
     from couplers import PointContact
     from couplers.laws import HuntCrossleyLaw, KelvinVoigtLaw
     from multibody import Body, Joint, TreeModel
-    from cosim.integrators import RK4
-    from cosim.subsystem import StepInput
+    from cosim.core.ode import RK4
+    from cosim.core.subsystem import StepInput
 
     rng = np.random.default_rng(seed)
     bodies = [Body(f"b{i}", mass=rng.uniform(0.5, 2), inertia=rng.uniform(0.01, 0.1),

@@ -1,4 +1,4 @@
-"""The compiled structure step (``cosim._structure_step``) against the numpy reference.
+"""The compiled structure step (``cosim.sides._structure_step``) against the numpy reference.
 
 Every shipped scene and variant runs both ways in ``tests/test_kernel.py``
 (both sides' kernels, and there every structure is checked to have stepped
@@ -16,15 +16,15 @@ import pytest
 
 import fem
 from conftest import CASES, ROOT
-from cosim.structure import StructureSubsystem
-from cosim.subsystem import StepInput
+from cosim.sides.fem import StructureSubsystem
+from cosim.core.subsystem import StepInput
 from couplers import LinearLaw, PointContact
 
 RTOL = 1e-10
 
 def test_the_extension_is_built():
     """CI must fail, not fall back, when the kernel did not build."""
-    import cosim._structure_step as k
+    import cosim.sides._structure_step as k
     assert hasattr(k, "StructureStep")
 
 
@@ -32,7 +32,7 @@ def test_compiled_rank_one_update_matches_the_reference():
     """Eigenpairs of diag(d) + z z^T: sorted and unsorted d, a zero entry of
     z (deflation), scales over six decades; declined where the reference
     declines (two equal entries of d that z couples)."""
-    from cosim._structure_step import rank_one_eigh as compiled
+    from cosim.sides._structure_step import rank_one_eigh as compiled
     from fem.rank_one import rank_one_eigh as reference
     rng = np.random.default_rng(7)
     solved = 0
@@ -104,7 +104,7 @@ def _probed_peaks(sub, h):
     """The spring's largest penetration seen on the switch search's probes of
     one step from a fresh chain (``n = max(ceil(2 L omega_max), 2)`` instants
     per segment, as the reference places them), without locating it."""
-    from cosim import structure
+    from cosim.sides import fem as structure
     seen = []
     original = structure.StructureSubsystem._segment_peaks
 
@@ -287,18 +287,18 @@ def test_a_kernel_built_from_older_sources_is_not_used(monkeypatch, caplog):
     takes other arguments: the reference steps instead, and says so once."""
     import logging
 
-    import cosim._structure_step as k
-    from cosim import structure
+    import cosim.sides._structure_step as k
+    from cosim.sides import fem as structure
     monkeypatch.setenv("COSIM_KERNEL", "compiled")
     monkeypatch.delattr(k, "STEP_API")           # as built before the interface was named
     monkeypatch.setattr(structure, "_stale_said", False)
-    with caplog.at_level(logging.WARNING, logger="cosim.structure"):
+    with caplog.at_level(logging.WARNING, logger="cosim.sides.fem"):
         subs = [_chain_with_spring() for _ in range(2)]
         for sub in subs:
             sub.step(0.0, 3e-3)
     assert [sub.kernel for sub in subs] == ["numpy", "numpy"]
     said = [r.getMessage() for r in caplog.records if "older sources" in r.getMessage()]
-    assert said == ["the compiled kernel `cosim._structure_step` was built from older sources "
+    assert said == ["the compiled kernel `cosim.sides._structure_step` was built from older sources "
                     "(interface 1, these sources need 2): using the numpy reference, which is "
                     "slower; rebuild it with `pip install .`"]
     assert subs[0].peak[0] > 0 and [on for _, _, on in subs[0].switch_log] == [True, False]
@@ -317,7 +317,7 @@ def test_a_stalled_compiled_step_is_redone_by_the_reference(monkeypatch, caplog)
     runs = {}
     for kernel in ("numpy", "compiled"):
         monkeypatch.setenv("COSIM_KERNEL", kernel)
-        with caplog.at_level(logging.WARNING, logger="cosim.structure"):
+        with caplog.at_level(logging.WARNING, logger="cosim.sides.fem"):
             runs[kernel] = cosim.simulate(cosim.load_scene(CASES / "three_mass.toml", "f100",
                                                            overrides=over))
     stalled = [r for r in caplog.records if "segments in the step" in r.getMessage()]

@@ -8,7 +8,7 @@ import pytest
 
 import cosim
 from conftest import CASES
-from cosim.analytic import kelvin_voigt_clipped
+from cosim.studies.analytic import kelvin_voigt_clipped
 
 SCENE = CASES / "manipulator_wall.toml"
 L = 0.17

@@ -12,11 +12,11 @@ import tomllib
 import pytest
 
 from conftest import CASES, ROOT
-from cosim.rundir import NAME_MAX, inside, name_problem
+from cosim.io.rundir import NAME_MAX, inside, name_problem
 from cosim.errors import OutputError
-from cosim.scene import SceneError, load_scene
-from cosim.sweep import load_study, point_name
-from cosim.tomlwrite import dumps
+from cosim.scene.load import SceneError, load_scene
+from cosim.studies.sweep import load_study, point_name
+from cosim.io.tomlwrite import dumps
 
 SPRING_DROP = tomllib.loads((CASES / "spring_drop.toml").read_text())
 

@@ -1,5 +1,5 @@
 """Power-law contacts (Hertz, Hunt-Crossley, Lankarani-Nikravesh, Flores): the
-impact of a point mass on each law against the closed forms of cosim.analytic.
+impact of a point mass on each law against the closed forms of cosim.studies.analytic.
 
 The generic checks (never tensile, switch agrees with force, dissipation >= 0,
 potential slope is dV/dd) run from tests/test_laws.py over the registry.
@@ -12,7 +12,7 @@ import pytest
 from scipy.integrate import quad, solve_ivp
 from scipy.optimize import brentq
 
-from cosim.analytic import (hertz_contact, hunt_crossley_damping_for_restitution,
+from cosim.studies.analytic import (hertz_contact, hunt_crossley_damping_for_restitution,
                             hunt_crossley_restitution, linear_contact)
 from couplers import (FloresLaw, HertzLaw, HuntCrossleyLaw, LankaraniNikraveshLaw,
                       get_contact_law)
@@ -314,6 +314,6 @@ def test_explicit_preflight_refuses_a_law_without_linearisation():
     with pytest.raises(cosim.UnsafeStepError, match=r"law `hertz` has no linearised stiffness"):
         cosim.simulate(cosim.load_scene(CASES / "spring_drop.toml", overrides=ov,
                                         scheme="jacobi"))
-    from cosim.info import scene_info
+    from cosim.scene.info import scene_info
     info = scene_info(cosim.load_scene(CASES / "spring_drop.toml", overrides=ov))
     assert info["contacts"]["wall"]["frequency_hz"] is None

@@ -109,7 +109,7 @@ def test_errors_and_the_one_percent_criterion(driver):
 
 
 def test_paper_command_is_the_bench_row(driver):
-    from cosim.bench import PAPER_RK45
+    from cosim.studies.bench import PAPER_RK45
 
     args = driver.paper_args()
     assert args[:2] == ["--scheme", "monolithic"]

@@ -217,7 +217,7 @@ def test_plot_without_matplotlib_names_the_extra(spring_run):
 @pytest.mark.parametrize("path", sorted(CASES.glob("*.toml")), ids=lambda p: p.stem)
 def test_scene_toml_round_trips_every_variant(path):
     """What `cosim run` writes as scene.toml reads back to the table that ran."""
-    from cosim.result import resolved_scene_text
+    from cosim.core.result import resolved_scene_text
 
     for variant in [None, *tomllib.loads(path.read_text()).get("variants", {})]:
         scene = load_scene(path, variant)
@@ -226,7 +226,7 @@ def test_scene_toml_round_trips_every_variant(path):
 
 
 def test_toml_writer_quotes_and_refuses():
-    from cosim.tomlwrite import dumps
+    from cosim.io.tomlwrite import dumps
 
     data = {"a.b": {"x y": [1, 2.5e-07, "q\"uote\n"], "inf": float("inf"), "t": True},
             "top": [{"k": 1}, {"k": 2}], "empty": {}}

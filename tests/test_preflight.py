@@ -6,7 +6,7 @@ import pytest
 import cosim
 from analytic import held_force_rebound_factor
 from conftest import CASES
-from cosim import preflight
+from cosim.core import preflight
 
 M, K = 1.0, 1e6
 W = math.sqrt(K / M)

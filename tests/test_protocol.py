@@ -6,9 +6,9 @@ import pytest
 
 from couplers import LinearLaw, PointContact
 from cosim import RK4, StepInput
-from cosim.bodies import MultibodySubsystem
-from cosim.recorder import hermite_cubic_max
-from cosim.schemes import extrapolation_coeffs
+from cosim.sides.multibody import MultibodySubsystem
+from cosim.core.recorder import hermite_cubic_max
+from cosim.core.schemes import extrapolation_coeffs
 from multibody import Body, Joint, TreeModel
 
 

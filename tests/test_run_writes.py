@@ -21,7 +21,7 @@ import pytest
 from conftest import CASES, ROOT
 import cosim
 from cosim.errors import OutputBusyError, OutputError
-from cosim.rundir import LOCK_NAME, RunLock
+from cosim.io.rundir import LOCK_NAME, RunLock
 
 SPRING_DROP = CASES / "spring_drop.toml"
 SHORT = ("--set", "t_end=0.002")
@@ -237,7 +237,8 @@ def test_sigterm_before_the_run_starts_exits_143(tmp_path):
     """A signal while the scene is read: no run, no folder, exit 128 + 15."""
     proc = python("""
         import os, signal, sys
-        from cosim import cli, scene
+        from cosim import cli
+        from cosim.scene import load as scene
         load = scene.load_scene
         def slow(*a, **k):
             os.kill(os.getpid(), signal.SIGTERM)
@@ -309,7 +310,7 @@ def test_a_full_disk_during_the_run_stops_it_with_a_message(tmp_path):
     """The spool fills chunk by chunk (64 rows here); its second write fails."""
     out = tmp_path / "run"
     proc = python(inject("""
-    from cosim import series
+    from cosim.core import series
     series.CHUNK_BYTES = 1
     opened = series._open_spool
     class Full:

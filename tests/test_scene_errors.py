@@ -14,8 +14,8 @@ import tomllib
 import pytest
 
 from conftest import CASES
-from cosim.integrators import INTEGRATORS
-from cosim.scene import SUBSYSTEM_TYPES, SceneError, load_scene, parse_override
+from cosim.core.ode import INTEGRATORS
+from cosim.scene.load import SUBSYSTEM_TYPES, SceneError, load_scene, parse_override
 from couplers import CONTACT_LAWS, KelvinVoigtLaw, LinearLaw
 
 SPRING_DROP = CASES / "spring_drop.toml"

@@ -21,11 +21,12 @@ from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 from conftest import CASES, ROOT
-from cosim import cli, tomlread
-from cosim.rundir import NAME_MAX, inside, name_problem
-from cosim.scene import MAX_ELEMENTS, MAX_STEPS, SceneError, load_scene
-from cosim.schemes import UnsafeStepError
-from cosim.tomlwrite import dumps
+from cosim import cli
+from cosim.io import tomlread
+from cosim.io.rundir import NAME_MAX, inside, name_problem
+from cosim.scene.load import MAX_ELEMENTS, MAX_STEPS, SceneError, load_scene
+from cosim.core.schemes import UnsafeStepError
+from cosim.io.tomlwrite import dumps
 
 FILES = sorted(CASES.glob("*.toml"))
 FUZZ = settings(max_examples=250, deadline=None,
@@ -352,7 +353,7 @@ def _nest(kind: str, depth: int, leaf: str = "1.0") -> str:
 @given(data=st.data())
 def test_nesting_near_the_limit(data, tmp_path):
     """A value nested ``depth`` levels below its key (arrays, inline tables, a
-    dotted key or a table header): past :data:`cosim.tomlread.MAX_DEPTH` a
+    dotted key or a table header): past :data:`cosim.io.tomlread.MAX_DEPTH` a
     scene error naming the file, at or below it whatever the scene makes of
     it -- never a RecursionError."""
     name = data.draw(st.sampled_from(sorted(TEXTS)), label="scene")
@@ -390,10 +391,10 @@ def test_nesting_near_the_limit(data, tmp_path):
 def test_sizes_are_refused_by_their_estimate_before_anything_is_built(kind, size, modes,
                                                                         monkeypatch):
     """Any size up to the element limit: refused, naming the key and the
-    estimate, exactly when the estimate passes :data:`cosim.scene.MAX_MEMORY`;
+    estimate, exactly when the estimate passes :data:`cosim.scene.load.MAX_MEMORY`;
     nothing is assembled either way (only loaded)."""
     import fem
-    from cosim.scene import MAX_MEMORY, structure_memory
+    from cosim.scene.load import MAX_MEMORY, structure_memory
 
     scene, key, overrides = {
         "chain": ("three_mass.toml", "subsystems.chain.masses",
@@ -417,7 +418,7 @@ def test_sizes_are_refused_by_their_estimate_before_anything_is_built(kind, size
             warnings.simplefilter("ignore")
             load_scene(CASES / scene, overrides=overrides)
     except SceneError as exc:
-        if "cosim.scene.MAX_MEMORY" in str(exc):
+        if "cosim.scene.load.MAX_MEMORY" in str(exc):
             assert nbytes > MAX_MEMORY and exc.key == key, str(exc)
             event("refused for its memory")
             return

@@ -148,7 +148,7 @@ def test_closed_form_segment_integrals_match_a_fine_quadrature(scene_file, varia
     moving along a cubic, port loaded along a line), against Gauss-Legendre on
     1000 panels of the same exact response."""
     from cosim import load_scene
-    from cosim.subsystem import StepInput
+    from cosim.core.subsystem import StepInput
     scene = load_scene(bench.CASES / scene_file, variant)
     system, _ = scene.build()
     sub = next(s for s in system.subsystems if hasattr(s, "_segment_quadratures"))

@@ -10,8 +10,8 @@ import pytest
 import cosim
 import fem
 from conftest import CASES, ROOT
-from cosim.structure import StructureSubsystem
-from cosim.subsystem import StepInput
+from cosim.sides.fem import StructureSubsystem
+from cosim.core.subsystem import StepInput
 
 E, RHO, L = 210e9, 7850.0, 1.0
 SEC = fem.rectangular_section(0.04, 0.01)
@@ -138,7 +138,7 @@ def test_info_lists_the_beam_frequencies():
     """cosim info on beam_impact: the pinned-pinned closed form
     f_n = (n pi / L)^2 sqrt(EI / rho A) / (2 pi); with 32 Hermite elements the
     discretisation error, O(h^4), is 4e-5 for the fifth mode."""
-    from cosim.info import scene_info
+    from cosim.scene.info import scene_info
     info = scene_info(cosim.load_scene(CASES / "beam_impact.toml"))
     f = np.array(info["subsystems"]["beam"]["natural_frequencies_hz"][:5])
     n = np.arange(1, 6)
@@ -211,7 +211,7 @@ def test_following_contact_keeps_the_struck_point_under_c():
     """beam_impact's contact C follows: after each macro step the beam's port
     sits at the material coordinate below C (updated before each step, so
     within one macro step's drift of C)."""
-    from cosim.recorder import Recorder
+    from cosim.core.recorder import Recorder
     scene = cosim.load_scene(CASES / "beam_impact.toml", overrides=["t_end=0.02"])
     system, scheme = scene.build()
     scheme.run(system, scene.t_end, Recorder(system, "b", "implicit", scene.t_end))

@@ -12,7 +12,7 @@ import pytest
 
 from conftest import CASES, ROOT
 from cosim import cli
-from cosim import sweep as sw
+from cosim.studies import sweep as sw
 
 THREE_MASS = CASES / "three_mass.toml"
 STUDIES = ROOT / "studies"
@@ -324,7 +324,7 @@ def test_a_sweep_loads_neither_dask_nor_matplotlib():
     """Only --scheduler loads Dask, only the plot matplotlib (DESIGN.md)."""
     code = (
         "import sys, cosim.cli\n"
-        "from cosim import sweep\n"
+        "from cosim.studies import sweep\n"
         f"rows = sweep.sweep({str(THREE_MASS)!r}, variants=['f1'], grid={{'t_end': [0.01]}},"
         " workers=2)\n"
         "assert rows[0]['status'] == 'finished', rows\n"

@@ -8,7 +8,7 @@ import pytest
 
 import cosim
 from conftest import CASES
-from cosim.metrics import impact_metrics, relative_errors
+from cosim.studies.metrics import impact_metrics, relative_errors
 
 THREE_MASS = CASES / "three_mass.toml"
 

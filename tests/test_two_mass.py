@@ -7,7 +7,7 @@ each tied to the ground by a joint spring, coupled by a spring.  Here the
 coupling spring is a `linear` contact placed `coupler` and preloaded so that
 it never opens (penetration between 0.12 and 0.16 m against oscillations of
 a few cm), so the problem is linear and smooth, and
-:func:`cosim.analytic.two_mass_oscillator` gives the exact answer.
+:func:`cosim.studies.analytic.two_mass_oscillator` gives the exact answer.
 """
 import math
 import warnings

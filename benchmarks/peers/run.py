@@ -15,7 +15,7 @@ It prints the machine, then one row per peer on three_mass f100 (m_s =
   start, imports, model building and writing the series included;
 
 each the best of ``--repeat`` runs (default 5), and the three errors of C
-against the bench's reference (:func:`cosim.bench.reference`, the fine
+against the bench's reference (:func:`cosim.studies.bench.reference`, the fine
 monolithic DOP853 run, cached in ``runs/.bench-cache``): the count of C's
 contacts (absolute difference), C's peak penetration (relative; at the
 run's own samples, and between them on the cubic Hermite interpolant of
@@ -29,7 +29,7 @@ The peers are small scripts run as subprocesses, each printing a JSON line:
   scene's default scheme (``cosim_three_mass.py``);
 - ``paper_rk45``: the same command with the monolithic scheme under scipy's
   RK45, max step 1e-4 s, rtol 1e-4, atol 1e-6 (the bench's ``paper_rk45``
-  row, :data:`cosim.bench.PAPER_RK45`);
+  row, :data:`cosim.studies.bench.PAPER_RK45`);
 - ``exudyn``: this directory's own Exudyn model (``exudyn_three_mass.py``),
   which needs ``pip install ".[peers]"``; it is left out, with a note, when
   exudyn is not installed.
@@ -103,7 +103,7 @@ def hermite_peak(t, penetration, rate) -> float:
     """Largest penetration [m] on the cubic Hermite interpolant of the
     penetration and its rate between consecutive samples (0 if it never
     penetrates)."""
-    from cosim.recorder import hermite_cubic_max
+    from cosim.core.recorder import hermite_cubic_max
 
     t, p, v = (np.asarray(a, float) for a in (t, penetration, rate))
     peak = max(float(p.max()), 0.0)
@@ -118,7 +118,7 @@ def series_metrics(s) -> dict:
     """C's count, peak penetration (at the samples and interpolated) and the
     arm's exit velocity, from a series with ``t``, ``gap/C``,
     ``gap_rate/C`` and ``dq/robot/arm`` (an Exudyn run's)."""
-    from cosim.metrics import exit_velocity
+    from cosim.studies.metrics import exit_velocity
 
     t = s["t"]
     p, v = -np.asarray(s[f"gap/{CONTACT}"]), -np.asarray(s[f"gap_rate/{CONTACT}"])
@@ -134,8 +134,8 @@ def run_dir_metrics(run_dir) -> dict:
     """The same from a cosim run directory: count, intervals and the
     (interpolated or located) peak from ``summary.json``, the peak at the
     recorded samples from ``series.npz``, the exit velocity as
-    :func:`cosim.metrics.impact_metrics` takes it."""
-    from cosim.metrics import exit_velocity
+    :func:`cosim.studies.metrics.impact_metrics` takes it."""
+    from cosim.studies.metrics import exit_velocity
 
     run_dir = Path(run_dir)
     c = json.loads((run_dir / "summary.json").read_text())["contacts"][CONTACT]
@@ -187,7 +187,7 @@ def machine() -> dict:
 
 def paper_args() -> list[str]:
     """``cosim run`` options of the paper's method (the bench's row)."""
-    from cosim.bench import PAPER_RK45
+    from cosim.studies.bench import PAPER_RK45
 
     out = ["--scheme", "monolithic"]
     for k, v in PAPER_RK45.items():
@@ -356,7 +356,7 @@ def main(argv=None) -> int:
     t_end = QUICK_T_END if a.quick else None
     repeat = 1 if a.quick else a.repeat
 
-    from cosim.bench import reference
+    from cosim.studies.bench import reference
 
     ref = reference(SCENE, VARIANT, CONTACT, JOINT,
                     overrides=[f"t_end={t_end!r}"] if t_end else (), cache_dir=a.cache_dir)

@@ -5,24 +5,24 @@ loader, the recorder and the command line.  The only package that imports
 ``multibody``, ``fem`` and ``couplers``.
 
 Importing this package defines nothing heavy: each public name, and each
-submodule (``cosim.run``, ``cosim.plot``, ...), is imported when it is first
+submodule (``cosim.scene.run``, ``cosim.plot``, ...), is imported when it is first
 asked for (``from cosim import simulate`` and ``cosim.load_scene`` work as
 before), so ``cosim --help`` or ``cosim plot`` do not pay for the schemes and
 ``cosim run`` pays only for what its scene uses.
 """
-from .errors import CouplingError, SimulationError, UnsafeStepError
+from cosim.errors import CouplingError, SimulationError, UnsafeStepError
 
 __all__ = ["Subsystem", "RigidReference", "StepInput", "SimulationResult", "write_outputs",
            "simulate", "run_scene", "Scene", "SceneError", "load_scene", "COUPLING_SCHEMES",
            "CouplingError", "SimulationError", "UnsafeStepError", "INTEGRATORS", "RK4", "TimeStepper"]
 
 #: public name -> the submodule that defines it, imported on first use
-_LAZY = {**dict.fromkeys(("INTEGRATORS", "RK4", "TimeStepper"), "integrators"),
-         **dict.fromkeys(("SimulationResult", "write_outputs"), "result"),
-         **dict.fromkeys(("simulate", "run_scene"), "run"),
-         **dict.fromkeys(("Scene", "SceneError", "load_scene"), "scene"),
-         "COUPLING_SCHEMES": "schemes",
-         **dict.fromkeys(("RigidReference", "StepInput", "Subsystem"), "subsystem")}
+_LAZY = {**dict.fromkeys(("INTEGRATORS", "RK4", "TimeStepper"), "core.ode"),
+         **dict.fromkeys(("SimulationResult", "write_outputs"), "core.result"),
+         **dict.fromkeys(("simulate", "run_scene"), "scene.run"),
+         **dict.fromkeys(("Scene", "SceneError", "load_scene"), "scene.load"),
+         "COUPLING_SCHEMES": "core.schemes",
+         **dict.fromkeys(("RigidReference", "StepInput", "Subsystem"), "core.subsystem")}
 
 
 def __getattr__(name: str):
@@ -31,7 +31,7 @@ def __getattr__(name: str):
         value = getattr(__import__(f"{__name__}.{_LAZY[name]}", fromlist=[name]), name)
         globals()[name] = value
         return value
-    if not name.startswith("__"):         # a submodule: ``cosim.run``, ``cosim.plot``, ...
+    if not name.startswith("__"):         # a submodule: ``cosim.scene.run``, ``cosim.plot``, ...
         try:
             return __import__(f"{__name__}.{name}", fromlist=["__name__"])
         except ModuleNotFoundError as exc:

@@ -60,7 +60,7 @@ PROGRESS_DELAY_S = 1.0
 
 
 class _ProgressLine:
-    """Renders :class:`cosim.recorder.Progress` on one carriage-return line of
+    """Renders :class:`cosim.core.recorder.Progress` on one carriage-return line of
     ``stream``: done fraction, simulated time, rate (simulated seconds per
     wall second), contact intervals begun, and the time left.  Nothing shows
     for a run shorter than :data:`PROGRESS_DELAY_S`; :meth:`close` wipes the
@@ -124,7 +124,7 @@ class _StopOnSignals:
 
     def _handler(self, signum, frame):
         import signal
-        from .errors import SignalStop
+        from cosim.errors import SignalStop
         for num in self._old:
             signal.signal(num, signal.SIG_IGN)       # once; the run is stopping
         raise SignalStop(signum)
@@ -146,8 +146,8 @@ def _cmd_run(args) -> int:
 
 
 def _run(args) -> int:
-    from .run import RunInterrupted, simulate
-    from .scene import load_scene
+    from cosim.scene.run import RunInterrupted, simulate
+    from cosim.scene.load import load_scene
 
     scene = load_scene(args.scene, args.variant, args.set or (), args.scheme)
     out = Path(args.out) if args.out else Path("runs") / (
@@ -183,7 +183,7 @@ def _run(args) -> int:
 
 
 def _cmd_verify(args) -> int:
-    from .verify import run_checks
+    from cosim.studies.verify import run_checks
 
     failed = 0
     for check in run_checks(args.cases, hard=args.hard):
@@ -202,8 +202,8 @@ def _fmt(v):
 def _cmd_info(args) -> int:
     import json
 
-    from .info import scene_info
-    from .scene import load_scene
+    from cosim.scene.info import scene_info
+    from cosim.scene.load import load_scene
 
     info = scene_info(load_scene(args.scene, args.variant, args.set or ()))
     if args.json:
@@ -257,7 +257,7 @@ def _machine() -> str:
 def _cmd_bench(args) -> int:
     import math
 
-    from .bench import cheapest_within, plot, run_bench, write_csv
+    from cosim.studies.bench import cheapest_within, plot, run_bench, write_csv
 
     out = Path(args.out) if args.out else Path("runs") / (
         Path(args.scene).stem + (f"-{args.variant}" if args.variant else "") + "-bench")
@@ -306,7 +306,7 @@ def _cmd_bench(args) -> int:
 
 def _cmd_plot(args) -> int:
     try:
-        from . import plot
+        from cosim import plot
     except ImportError as exc:
         if (exc.name or "").split(".")[0] != "matplotlib":
             raise
@@ -329,7 +329,7 @@ def _cmd_plot(args) -> int:
 
 
 def _cmd_sweep(args) -> int:
-    from . import sweep as sw
+    from cosim.studies import sweep as sw
 
     if args.study:
         path = Path(args.study)
@@ -617,15 +617,15 @@ EXIT_BROKEN_PIPE = 141
 
 def _main(argv) -> int:
     args = build_parser().parse_args(argv)
-    from .kernel import kernel_choice
+    from cosim.sides.kernel import kernel_choice
     try:                                 # a bad COSIM_KERNEL is said before anything runs
         kernel_choice()
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    from .errors import OutputError, OutputExistsError
-    from .scene import SceneError
-    from .schemes import UnsafeStepError
+    from cosim.errors import OutputError, OutputExistsError
+    from cosim.scene.load import SceneError
+    from cosim.core.schemes import UnsafeStepError
 
     with warnings.catch_warnings():
         warnings.simplefilter("always")

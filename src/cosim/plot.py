@@ -83,7 +83,7 @@ def load_run(run_dir) -> RunData:
     PlotError
         If there is no readable ``series.npz``.
     """
-    from .tomlread import read_toml
+    from cosim.io.tomlread import read_toml
 
     path = Path(run_dir)
     fseries = path / "series.npz"
@@ -469,7 +469,7 @@ def animate_run(run_dir, out_dir=None, *, max_frames: int = 200, fps: int = 20,
     """
     from matplotlib import animation
 
-    from .scene import SceneError, load_scene
+    from cosim.scene.load import SceneError, load_scene
 
     run = run_dir if isinstance(run_dir, RunData) else load_run(run_dir)
     if run.scene is None:

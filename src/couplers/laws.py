@@ -149,7 +149,7 @@ class KelvinVoigtLaw(LinearLaw):
     ``f = max(k d + c dd, 0)`` for ``d > 0``.  The force starts with a jump
     ``c dd`` at touch-down and vanishes *before* the penetration does, when
     ``k d + c dd`` reaches zero; the restitution is then ``exp(-beta t_c)``,
-    ``beta = c / (2 m)`` (see :func:`cosim.analytic.kelvin_voigt_clipped`).
+    ``beta = c / (2 m)`` (see :func:`cosim.studies.analytic.kelvin_voigt_clipped`).
 
     Parameters
     ----------
@@ -321,7 +321,7 @@ class _PowerLaw(ContactLaw):
         of its own, and the explicit schemes' pre-flight stability check
         cannot judge such a contact.  Give ``reference_penetration`` (e.g.
         the expected largest penetration,
-        :func:`cosim.analytic.hertz_contact`) or accept the step explicitly
+        :func:`cosim.studies.analytic.hertz_contact`) or accept the step explicitly
         (``scheme.accept_unsafe_step``).  The tangent stiffness at ``d_ref``
         is ``n`` times the secant one; the secant one is the stiffness of the
         linear spring storing the same force at ``d_ref``.
@@ -364,7 +364,7 @@ class HertzLaw(_PowerLaw):
     ``k = (4/3) E* sqrt(R)`` with the effective modulus ``E*`` and radius
     ``R`` (Johnson 1985); ``n = 1`` is :class:`LinearLaw`.  No energy is
     lost: the restitution is 1 and the contact time is
-    :func:`cosim.analytic.hertz_contact`.
+    :func:`cosim.studies.analytic.hertz_contact`.
 
     Parameters
     ----------

@@ -1,7 +1,7 @@
 """Restitution of the Hunt-Crossley family of contact laws, in closed form.
 
 The laws (``couplers.laws``) compute their own damping from a requested
-restitution with these relations; ``cosim.analytic`` re-exports them for the
+restitution with these relations; ``cosim.studies.analytic`` re-exports them for the
 verification suite, so they live here once.  scipy is imported on first use.
 """
 from __future__ import annotations

@@ -6,7 +6,7 @@ mode: ``open`` (its unilateral law, with friction if any), ``grasped``
 again, for good).  The modes, the tangential anchors set at grasp, the times
 of the events that ``after`` conditions wait for, the log of switches and
 the energy the switches released are one :class:`ConnectionSet`, owned by
-the :class:`~cosim.system.CoupledSystem`.  Its :meth:`ConnectionSet.snapshot`
+the :class:`~cosim.core.system.CoupledSystem`.  Its :meth:`ConnectionSet.snapshot`
 is part of ``system.get_state()``, so a repeated step (implicit iterations,
 a rejected step of step control) restores the modes with the states.
 
@@ -35,7 +35,7 @@ import numpy as np
 from couplers.connection import (GRASPED, MODES, OPEN, RELEASED, connection_forces,
                                  connection_potential, connection_power, connection_switch)
 
-from .preflight import stiffest_normal  # noqa: F401  (it lived here; the checks need it alone)
+from cosim.core.preflight import stiffest_normal  # noqa: F401  (it lived here; the checks need it alone)
 
 __all__ = ["ConnectionSet", "EmbeddedConnection", "stiffest_normal"]
 

@@ -65,7 +65,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import SimulationError
+from cosim.errors import SimulationError
 
 __all__ = ["GuardOptions", "Guard", "GuardError", "nonfinite_cause", "energy_scale",
            "peak_stored_energy", "DEFAULT_ENERGY_GROWTH", "DEFAULT_ENERGY_FLOOR",

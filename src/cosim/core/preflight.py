@@ -40,7 +40,7 @@ def partner_first(system, c, scheme: str, order: int) -> bool:
 
 def stiffest_normal(link) -> tuple[float, float]:
     """Linearised normal stiffness [N/m] and damping [N s/m] of a
-    :class:`~cosim.system.ContactLink` for stability checks: its law's, or
+    :class:`~cosim.core.system.ContactLink` for stability checks: its law's, or
     its grasp's when that is stiffer."""
     law, conn = link.contact.law, link.connection
     if conn is not None and conn.grasp is not None and conn.grasp.stiffness > law.stiffness:

@@ -6,7 +6,7 @@ cubic Hermite interpolant of its values and rates; the onset and release of
 a contact the scheme exchanges (where the law's switch function changes
 sign) and its peak penetration are located on it.  A contact evaluated
 inside a subsystem's integrator has its switches and its peaks located
-there (:meth:`cosim.system.CoupledSystem.take_peaks`); the series
+there (:meth:`cosim.core.system.CoupledSystem.take_peaks`); the series
 ``peak/CONTACT`` holds each contact's largest penetration since the
 previous stored sample.
 """
@@ -19,8 +19,8 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 
-from .result import SimulationResult
-from .series import SeriesFile, SeriesStore, chunk_rows
+from cosim.core.result import SimulationResult
+from cosim.core.series import SeriesFile, SeriesStore, chunk_rows
 
 __all__ = ["Recorder", "Progress", "hermite_cubic_max"]
 
@@ -102,7 +102,7 @@ class Recorder:
         Stream the series to disk and write them there (``series.npz``) when
         the run finishes; the result then reads them from that file.  Without
         it, the series stay in memory.
-    guard : cosim.guard.Guard, optional
+    guard : cosim.core.guard.Guard, optional
         Checks every sample before it is kept and stops the run (raises)
         on non-finite values or energy growth beyond its bound.
 
@@ -113,7 +113,7 @@ class Recorder:
 
     Samples fill a preallocated chunk of rows (about 1 MB); a full chunk is
     turned into the series' columns and handed to a
-    :class:`~cosim.series.SeriesStore`, which keeps it in memory or appends
+    :class:`~cosim.core.series.SeriesStore`, which keeps it in memory or appends
     it to a spool file beside ``series_path``.  With a ``series_path``, the
     memory a run needs therefore does not grow with its length (contact
     intervals and impacts aside).
@@ -123,7 +123,7 @@ class Recorder:
                  auto_edges: bool = True, *, progress: Callable[[Progress], None] | None = None,
                  progress_interval: float = 0.2, series_path=None, guard=None):
         self.system, self.scene, self.scheme, self.t_end = system, scene, scheme, t_end
-        self.guard = guard           # a cosim.guard.Guard, checking every sample
+        self.guard = guard           # a cosim.core.guard.Guard, checking every sample
         nc = system.n_contacts
         self.every = max(1, int(every))
         self.auto_edges = np.broadcast_to(np.asarray(auto_edges, dtype=bool), (nc,))

@@ -9,9 +9,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import OutputExistsError
-from .rundir import inside
-from .series import atomic_write, write_npz
+from cosim.errors import OutputExistsError
+from cosim.io.rundir import inside
+from cosim.core.series import atomic_write, write_npz
 
 __all__ = ["SimulationResult", "write_outputs", "check_output_dir", "resolved_scene_text",
            "written_by_a_run"]
@@ -31,7 +31,7 @@ class SimulationResult:
         Time series named as in ``series.npz`` (``gap/C``, ``force/C``,
         ``q/SUB/JOINT``, ``dq/SUB/JOINT``, ``energy/total``, ...): a dict,
         or, for a run streamed to disk (``simulate(..., out=DIR)``), a
-        :class:`~cosim.series.SeriesFile` that reads each array from
+        :class:`~cosim.core.series.SeriesFile` that reads each array from
         ``DIR/series.npz`` when asked for.
     summary : dict
         The ``summary.json`` contract.
@@ -175,7 +175,7 @@ def write_outputs(result: SimulationResult, out_dir, scene=None, *,
     -----
     Each file goes to a temporary name beside it and is moved into place, so
     no reader ever sees half a file.  ``series.npz`` has deterministic bytes
-    (see :mod:`cosim.series`).  A result whose series were streamed into
+    (see :mod:`cosim.core.series`).  A result whose series were streamed into
     ``out_dir`` by :func:`cosim.simulate` (``out=``) is not written twice.
     """
     out = Path(out_dir)
@@ -202,7 +202,7 @@ def write_outputs(result: SimulationResult, out_dir, scene=None, *,
 
 def resolved_scene_text(scene) -> str:
     """``scene.toml`` of a run: the scene's merged table as TOML, its origin in a comment."""
-    from .tomlwrite import dumps
+    from cosim.io.tomlwrite import dumps
 
     data = {"name": scene.name, **scene.data}
     origin = Path(scene.path).name.translate({c: "?" for c in (*range(32), 127)})

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .rundir import output_error
+from cosim.io.rundir import output_error
 
 __all__ = ["SeriesStore", "SeriesFile", "write_npz"]
 

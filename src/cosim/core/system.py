@@ -9,7 +9,7 @@ import numpy as np
 from couplers.contact import penetrations
 from couplers.modes import GRASPED
 
-from .subsystem import EmbeddedContact, StepInput, Subsystem
+from cosim.core.subsystem import EmbeddedContact, StepInput, Subsystem
 
 if TYPE_CHECKING:
     from couplers import Connection, PointContact
@@ -122,7 +122,7 @@ class CoupledSystem:
                     raise ValueError(f"contact `{ln.contact.name}`: subsystem "
                                      f"`{self.subsystems[own].name}` cannot carry an embedded "
                                      f"grasp or friction; use placement `coupler`")
-                from .connections import EmbeddedConnection   # only where a contact has one
+                from cosim.core.connection_modes import EmbeddedConnection   # only where a contact has one
                 self.subsystems[own].attach_connection(
                     slots[own], EmbeddedConnection(self.connections, i, ln.contact.normal, side))
             slots[own] += 1
@@ -191,7 +191,7 @@ class CoupledSystem:
         conns = [ln.connection for ln in self.links]
         self.connections = None
         if any(k is not None for k in conns):
-            from .connections import ConnectionSet       # only where a contact has one
+            from cosim.core.connection_modes import ConnectionSet       # only where a contact has one
             self.connections = ConnectionSet(self.contact_names,
                                              [ln.contact.law for ln in self.links], conns)
         self.tangent_row = np.full(nc, -1, dtype=int)

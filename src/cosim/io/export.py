@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .rundir import inside, output_error
+from cosim.io.rundir import inside, output_error
 
 __all__ = ["export_structures"]
 
@@ -19,7 +19,7 @@ def export_structures(scene, result, out_dir) -> list[Path]:
 
     Each file is written under a new temporary name in ``OUT`` and moved into
     place whole; its path is checked to lie in ``OUT``
-    (:func:`cosim.rundir.inside`).  An :class:`OSError` becomes a
+    (:func:`cosim.io.rundir.inside`).  An :class:`OSError` becomes a
     :class:`cosim.errors.OutputError` naming the file.
 
     meshio is imported here only, so runs that export nothing never load it.

@@ -21,7 +21,7 @@ import re
 import stat
 from pathlib import Path
 
-from .errors import OutputBusyError, OutputError
+from cosim.errors import OutputBusyError, OutputError
 
 __all__ = ["NAME_RULE", "NAME_MAX", "LOCK_NAME", "name_problem", "inside", "RunLock",
            "output_error"]

@@ -12,7 +12,7 @@ iteratively for the depth they really have.
 
 Every refusal is a :class:`TomlLimitError` (a ``ValueError``) whose message
 says the rule and what was found; the callers turn it into their own error
-naming the file (``cosim.scene.SceneError``).
+naming the file (``cosim.scene.load.SceneError``).
 """
 from __future__ import annotations
 
@@ -80,7 +80,7 @@ def read_bytes(path, limit: int = MAX_BYTES) -> bytes:
         os.close(fd)
     if size > limit:
         raise TomlLimitError(f"must hold at most {limit} bytes ({limit / 2**20:g} MiB, "
-                             f"`cosim.tomlread.MAX_BYTES`), got more")
+                             f"`cosim.io.tomlread.MAX_BYTES`), got more")
     return b"".join(chunks)
 
 
@@ -134,14 +134,14 @@ def check_text(text: str, max_depth: int = MAX_DEPTH, max_keys: int = MAX_KEYS) 
 
     def too_deep(what: str):
         raise TomlLimitError(f"must nest at most {max_depth} levels of tables and arrays "
-                             f"(`cosim.tomlread.MAX_DEPTH`), got {what} at line {line()}")
+                             f"(`cosim.io.tomlread.MAX_DEPTH`), got {what} at line {line()}")
 
     def count_key():
         nonlocal keys, parts
         keys += parts
         if keys > max_keys:
             raise TomlLimitError(f"must hold at most {max_keys} keys "
-                                 f"(`cosim.tomlread.MAX_KEYS`; each part of a dotted key "
+                                 f"(`cosim.io.tomlread.MAX_KEYS`; each part of a dotted key "
                                  f"counts), got more by line {line()}")
         parts = 1
 
@@ -222,7 +222,7 @@ def check_depth(data, max_depth: int = MAX_DEPTH) -> None:
                 if depth + 1 > max_depth:
                     key = ".".join(sub).replace(".[", "[")
                     raise TomlLimitError(f"must nest at most {max_depth} levels of tables and "
-                                         f"arrays (`cosim.tomlread.MAX_DEPTH`), got deeper",
+                                         f"arrays (`cosim.io.tomlread.MAX_DEPTH`), got deeper",
                                          key)
                 todo.append((v, depth + 1, sub))
 

@@ -10,13 +10,13 @@ from couplers import PointContact
 import multibody                     # its joint effects load where a scene has some
 from multibody import Body, Joint, TreeModel
 
-from .bodies import MultibodySubsystem
-from .integrators import get_integrator
-from .preflight import stiffest_normal
-from .scene import Scene, SceneError
-from .schemes import get_scheme
-from .subsystem import RigidReference
-from .system import ContactLink, CoupledSystem
+from cosim.sides.multibody import MultibodySubsystem
+from cosim.core.ode import get_integrator
+from cosim.core.preflight import stiffest_normal
+from cosim.scene.load import Scene, SceneError
+from cosim.core.schemes import get_scheme
+from cosim.core.subsystem import RigidReference
+from cosim.core.system import ContactLink, CoupledSystem
 
 __all__ = ["build_system"]
 
@@ -71,7 +71,7 @@ def _structure(spec, scene: Scene):
     """Assemble a structure, keep its modes, set its initial state."""
     import fem
 
-    from .structure import StructureSubsystem
+    from cosim.sides.fem import StructureSubsystem
     try:
         structure = spec["model"].assemble()
         basis = fem.modes(structure, **{k: v for k, v in spec["modes"].items() if v})

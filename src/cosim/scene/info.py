@@ -3,9 +3,9 @@ from __future__ import annotations
 
 import math
 
-from . import preflight
-from .preflight import stiffest_normal
-from .schemes import COUPLING_SCHEMES
+from cosim.core import preflight
+from cosim.core.preflight import stiffest_normal
+from cosim.core.schemes import COUPLING_SCHEMES
 
 __all__ = ["scene_info"]
 

@@ -17,11 +17,11 @@ import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from . import tomlread
-from .guard import (DEFAULT_CHATTER_SWITCHES, DEFAULT_CHATTER_WINDOW, DEFAULT_COUPLING_WARNING,
+from cosim.io import tomlread
+from cosim.core.guard import (DEFAULT_CHATTER_SWITCHES, DEFAULT_CHATTER_WINDOW, DEFAULT_COUPLING_WARNING,
                     DEFAULT_ENERGY_FLOOR, DEFAULT_ENERGY_GROWTH, DEFAULT_ENERGY_WARNING,
                     GuardOptions)
-from .rundir import name_problem
+from cosim.io.rundir import name_problem
 
 
 __all__ = ["SceneError", "Scene", "load_scene", "parse_override", "read_toml_file",
@@ -56,7 +56,7 @@ class SceneError(ValueError):
 def _check_name(file, key: str, name, what: str) -> None:
     """Refuse a name that becomes a path or a key (a run folder, an export
     file, a sweep point's folder, a ``series.npz`` member) unless it is a
-    plain word (:data:`cosim.rundir.NAME_RULE`)."""
+    plain word (:data:`cosim.io.rundir.NAME_RULE`)."""
     problem = name_problem(name)
     if problem is not None:
         raise SceneError(file, key, " ".join(filter(None, (what, problem))))
@@ -198,7 +198,7 @@ def parse_override(text: str, file="--set") -> tuple[list[str], object]:
     key, value = text.split("=", 1)
     if key.count(".") >= tomlread.MAX_DEPTH:
         raise SceneError(file, "", f"a --set key must have at most {tomlread.MAX_DEPTH} "
-                                   f"parts (`cosim.tomlread.MAX_DEPTH`), got "
+                                   f"parts (`cosim.io.tomlread.MAX_DEPTH`), got "
                                    f"{key.count('.') + 1}")
     path = [p.strip() for p in key.strip().split(".")]
     if not all(path):
@@ -249,7 +249,7 @@ class Scene:
     guard : GuardOptions
         The run guard's settings (``[guard]``: ``energy_growth``,
         ``energy_check``, ``energy_floor``, ``chatter_switches``,
-        ``chatter_window``), see :mod:`cosim.guard`.
+        ``chatter_window``), see :mod:`cosim.core.guard`.
     """
 
     name: str
@@ -270,7 +270,7 @@ class Scene:
 
     def build(self, scheme: str | None = None):
         """Make the coupled system and the scheme (optionally another one)."""
-        from .build import build_system
+        from cosim.scene.build import build_system
         return build_system(self, scheme)
 
 
@@ -329,7 +329,7 @@ def load_scene(path, variant: str | None = None, overrides=(), scheme: str | Non
 
 
 def read_toml_file(file) -> dict:
-    """Read a scene or a study file within the limits of :mod:`cosim.tomlread`
+    """Read a scene or a study file within the limits of :mod:`cosim.io.tomlread`
     (a regular file of at most 64 MiB, UTF-8, nested at most 32 levels, at
     most 10 000 keys).
 
@@ -349,7 +349,7 @@ def read_toml_file(file) -> dict:
 
 
 def _validate(data: dict, file, variant) -> Scene:
-    from .schemes import COUPLING_SCHEMES
+    from cosim.core.schemes import COUPLING_SCHEMES
 
     top = _Table(data, (), file)
     name = top.string("name", file.stem)
@@ -550,7 +550,7 @@ def _check_memory(subs: list[dict], file) -> None:
         raise SceneError(file, key, f"makes a structure of {n} DOFs whose model and modes "
                                     f"need about {_size_text(nbytes)} ({why}){others}, more "
                                     f"than the {_size_text(MAX_MEMORY)} a scene may use "
-                                    f"(`cosim.scene.MAX_MEMORY`)")
+                                    f"(`cosim.scene.load.MAX_MEMORY`)")
 
 
 def _size_text(nbytes: float) -> str:
@@ -572,7 +572,7 @@ def _subsystem_spec(name: str, t: _Table) -> dict:
             t.error("points", "must name at least one point")
     else:
         integ = t.table("integrator", {})
-        from .integrators import INTEGRATORS
+        from cosim.core.ode import INTEGRATORS
         spec["integrator"] = integ.string("method", "rk4", choices=INTEGRATORS)
         spec["max_step"] = integ.number("max_step", None, rule=">0", unit="s")
         opts = {k: integ.number(k, rule=">0") for k in ("rtol", "atol") if integ.has(k)}

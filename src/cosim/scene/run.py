@@ -6,10 +6,10 @@ import sys
 import time
 from pathlib import Path
 
-from .guard import Guard
-from .recorder import Recorder
-from .scene import Scene, load_scene
-from .errors import OutputError, SimulationError, UnsafeStepError
+from cosim.core.guard import Guard
+from cosim.core.recorder import Recorder
+from cosim.scene.load import Scene, load_scene
+from cosim.errors import OutputError, SimulationError, UnsafeStepError
 
 __all__ = ["simulate", "run_scene", "RunInterrupted"]
 
@@ -29,7 +29,7 @@ class RunInterrupted(KeyboardInterrupt):
 
 def simulate(scene: Scene, *, scheme: str | None = None, progress=None,
              progress_interval: float = 0.2, out=None, overwrite: bool = False):
-    """Run a validated scene and return its :class:`~cosim.result.SimulationResult`.
+    """Run a validated scene and return its :class:`~cosim.core.result.SimulationResult`.
 
     Parameters
     ----------
@@ -37,7 +37,7 @@ def simulate(scene: Scene, *, scheme: str | None = None, progress=None,
     scheme : str, optional
         Another coupling scheme than the scene's.
     progress : callable, optional
-        Called with a :class:`~cosim.recorder.Progress` (simulated time,
+        Called with a :class:`~cosim.core.recorder.Progress` (simulated time,
         end time, contact intervals begun, wall time) as the run goes, at most
         once per ``progress_interval`` seconds of wall-clock time.
     progress_interval : float
@@ -70,10 +70,10 @@ def simulate(scene: Scene, *, scheme: str | None = None, progress=None,
     OutputExistsError
         If ``out`` holds a run and ``overwrite`` is false, or a
         ``scene.toml`` that no run wrote (see
-        :func:`~cosim.result.check_output_dir`); checked first.
+        :func:`~cosim.core.result.check_output_dir`); checked first.
     OutputBusyError
         If another run is writing into ``out`` (it holds the folder's lock,
-        see :class:`~cosim.rundir.RunLock`); nothing is touched then.
+        see :class:`~cosim.io.rundir.RunLock`); nothing is touched then.
     OutputError
         If ``out`` cannot be made or written (a read-only place, a file in
         the path, a full disk); the message names the path and what the run
@@ -88,7 +88,7 @@ def simulate(scene: Scene, *, scheme: str | None = None, progress=None,
         to that point, ``status`` ``error``, is complete (and written to
         ``out``); it is the exception's ``partial_result``.
     """
-    from .rundir import RunLock
+    from cosim.io.rundir import RunLock
 
     lock = None
     if out is not None:
@@ -104,8 +104,8 @@ def simulate(scene: Scene, *, scheme: str | None = None, progress=None,
 
 
 def _simulate(scene, scheme, progress, progress_interval, out, overwrite):
-    from .result import check_output_dir, write_scene, write_summary
-    from .rundir import inside
+    from cosim.core.result import check_output_dir, write_scene, write_summary
+    from cosim.io.rundir import inside
 
     if out is not None:
         check_output_dir(out, overwrite, scene.export)
@@ -163,7 +163,7 @@ def _simulate(scene, scheme, progress, progress_interval, out, overwrite):
             raise _lost(exc, f"{ended} but wrote no summary, so its series.npz is removed "
                              f"too", out) from None
         if scene.export:
-            from .export import export_structures
+            from cosim.io.export import export_structures
             try:
                 export_structures(scene, res, out)
             except OutputError as exc:
@@ -180,7 +180,7 @@ def _simulate(scene, scheme, progress, progress_interval, out, overwrite):
 def _is_monolithic(sch) -> bool:
     """``isinstance(sch, Monolithic)`` without importing the monolithic scheme
     for a run that does not use it (an instance means its module is loaded)."""
-    module = sys.modules.get("cosim.schemes.monolithic")
+    module = sys.modules.get("cosim.core.schemes.monolithic")
     return module is not None and isinstance(sch, module.Monolithic)
 
 

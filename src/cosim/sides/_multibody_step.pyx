@@ -7,9 +7,9 @@ kinematics, ``M(q)`` and ``F(q, dq)``, the small symmetric solve, the penalty
 laws of the contacts evaluated inside the integrator, their impulses,
 dissipated energy, first moments and work, the port velocity moments, and
 the location of every touch and release inside the sub-steps.  It is the
-compiled twin of the numpy reference in :mod:`cosim.bodies`
+compiled twin of the numpy reference in :mod:`cosim.sides.multibody`
 (:meth:`MultibodySubsystem._rhs`), :mod:`multibody.tree`
-(:meth:`TreeModel.evaluate`) and :meth:`cosim.integrators.TimeStepper.integrate`:
+(:meth:`TreeModel.evaluate`) and :meth:`cosim.core.ode.TimeStepper.integrate`:
 the same formulas in the same order, so the two agree to round-off, which
 ``tests/test_kernel.py`` holds them to.
 
@@ -101,7 +101,7 @@ cdef void _substep_peaks(double* peak, const double* d0, const double* v0, const
                          const double* v1, double h, int n) noexcept nogil:
     """Raise each ``peak[j]`` to the largest value of the cubic Hermite
     through ``d0[j]``, ``d1[j]`` with rates ``v0[j]``, ``v1[j]`` over one
-    accepted sub-step of ``h`` (:func:`cosim.integrators.substep_peaks`, the
+    accepted sub-step of ``h`` (:func:`cosim.core.ode.substep_peaks`, the
     same arithmetic)."""
     cdef int j
     cdef double p, dd, c1, c2, c3, qa, qb, disc, r, q, s, x
@@ -129,7 +129,7 @@ cdef void _substep_peaks(double* peak, const double* d0, const double* v0, const
 
 
 cdef class MultibodyStep:
-    """Compiled RK4 step of one :class:`cosim.bodies.MultibodySubsystem`.
+    """Compiled RK4 step of one :class:`cosim.sides.multibody.MultibodySubsystem`.
 
     Parameters
     ----------
@@ -268,7 +268,7 @@ cdef class MultibodyStep:
         ``(stiffness, rest, damping, drives)`` with per-joint arrays and
         drives ``(joint, kind, gains (3,), reference kind, reference
         params (4,), table times, table values)`` (see
-        :func:`cosim.bodies.kernel_effects`)."""
+        :func:`cosim.sides.multibody.kernel_effects`)."""
         self.tau = np.zeros(n)
         if effects is None:
             self.has_springs = self.has_dampers = False
@@ -296,9 +296,9 @@ cdef class MultibodyStep:
     # ------------------------------------------------------------ the step
     def set_step(self, double t0, double h, inputs, embedded):
         """Load the step: its start ``t0`` and length ``h`` [s], the input
-        (a :class:`cosim.subsystem.StepInput` or None) and the partners'
+        (a :class:`cosim.core.subsystem.StepInput` or None) and the partners'
         motion from the host's embedded contacts
-        (:class:`cosim.subsystem.EmbeddedContact`: ``t0``, ``h`` and complex
+        (:class:`cosim.core.subsystem.EmbeddedContact`: ``t0``, ``h`` and complex
         ``motion`` coefficients in the partner's normalised time, lowest
         first)."""
         cdef int j, k, p, i, m
@@ -806,7 +806,7 @@ cdef class MultibodyStep:
     def integrate(self, double t0, y0, double t1, double max_step, double free_step,
                   bint coarse, on_switch=None, peak=None):
         """Advance ``y0`` from ``t0`` to ``t1`` (see
-        :meth:`cosim.integrators.TimeStepper.integrate`, whose algorithm this
+        :meth:`cosim.core.ode.TimeStepper.integrate`, whose algorithm this
         is); ``free_step <= 0`` means none.  With ``peak`` (one entry per
         contact), each contact's largest penetration over the step is located
         on the accepted sub-steps' cubic Hermite and raised into it, as the

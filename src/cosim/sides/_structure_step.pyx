@@ -13,7 +13,7 @@ where its rate falls through zero (Illinois regula falsi), and raises the
 host's ``peak``.  A structure that
 hosts no contact is stepped exactly under the port loads, its velocity
 moments by three-point Gauss-Legendre.  It is the compiled twin of the numpy
-reference in :mod:`cosim.structure` (:meth:`StructureSubsystem._step_closed_form`
+reference in :mod:`cosim.sides.fem` (:meth:`StructureSubsystem._step_closed_form`
 and the open exact step) and :mod:`fem.response`: the same formulas in the
 same order, so the two agree to round-off, which
 ``tests/test_kernel_structure.py`` holds them to.
@@ -33,7 +33,7 @@ from libc.float cimport DBL_EPSILON
 
 import numpy as np
 
-#: the interface the host (:mod:`cosim.structure`, its ``STEP_API``) calls:
+#: the interface the host (:mod:`cosim.sides.fem`, its ``STEP_API``) calls:
 #: bumped when a call changes (2: ``StructureStep.step`` takes ``peak``)
 STEP_API = 2
 
@@ -291,7 +291,7 @@ cdef int _rank_one(int m, const double* d, const double* z, double* lam, double*
 
 
 cdef class StructureStep:
-    """Compiled step of one :class:`cosim.structure.StructureSubsystem`.
+    """Compiled step of one :class:`cosim.sides.fem.StructureSubsystem`.
 
     Parameters
     ----------
@@ -653,7 +653,7 @@ cdef class StructureStep:
 
     cdef inline void _reparam(self, const double* c, int n, double a, double b,
                               double* out) noexcept nogil:
-        """:func:`cosim.subsystem.reparametrised` of one polynomial (``n`` coefficients)."""
+        """:func:`cosim.core.subsystem.reparametrised` of one polynomial (``n`` coefficients)."""
         cdef int i, k
         for k in range(n):
             out[k] = 0.0

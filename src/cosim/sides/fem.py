@@ -29,15 +29,15 @@ from fem.integrators import SMALL_DENSE
 from fem.rank_one import rank_one_eigh
 from fem.response import undamped_moments, undamped_response
 
-from .integrators import RK4
-from .kernel import compiled_module
-from .subsystem import EmbeddedContact, StepInput, Subsystem, reparametrised
+from cosim.core.ode import RK4
+from cosim.sides.kernel import compiled_module
+from cosim.core.subsystem import EmbeddedContact, StepInput, Subsystem, reparametrised
 
 __all__ = ["StructureSubsystem"]
 
 logger = logging.getLogger(__name__)
 
-#: the interface of ``cosim._structure_step`` this module calls (its
+#: the interface of ``cosim.sides._structure_step`` this module calls (its
 #: ``STEP_API``): 2 since ``StructureStep.step`` raises the host's peaks.  A
 #: kernel built from older sources is not used (said once), for its step
 #: would not match the reference.
@@ -217,7 +217,7 @@ class StructureSubsystem(Subsystem):
     # -------------------------------------------------- embedded contacts
     def embed_contact(self, contact, port, own_side, partner_position,
                       partner_velocity=(0.0, 0.0)):
-        """As :meth:`cosim.bodies.MultibodySubsystem.embed_contact`."""
+        """As :meth:`cosim.sides.multibody.MultibodySubsystem.embed_contact`."""
         if contact.law.rigid:
             raise ValueError(f"contact `{contact.name}`: a rigid law on a structure would "
                              f"need an impact law of the continuum; use a penalty law")
@@ -231,7 +231,7 @@ class StructureSubsystem(Subsystem):
         return e
 
     def embedded_quadratures(self):
-        """As :meth:`cosim.bodies.MultibodySubsystem.embedded_quadratures`."""
+        """As :meth:`cosim.sides.multibody.MultibodySubsystem.embedded_quadratures`."""
         return self.aux[:-2].reshape(-1, 4)
 
     def _contacts(self, t, q, dq):
@@ -295,13 +295,13 @@ class StructureSubsystem(Subsystem):
         g = self._modal_force(u) + self._g_modal
         return g - self.modal_damping * x[m:2 * m] - self.omega ** 2 * x[:m]
 
-    #: the compiled step (cosim._structure_step.StructureStep), built on the
+    #: the compiled step (cosim.sides._structure_step.StructureStep), built on the
     #: first step that it covers; False where it does not cover this side
     _kernel = None
 
     def _compiled_step(self, inputs):
         """The compiled kernel for this step, or None where the reference must
-        step: the kernel not built or not chosen (:mod:`cosim.kernel`), a
+        step: the kernel not built or not chosen (:mod:`cosim.sides.kernel`), a
         structure that is not stepped in closed form (damped, a scheme of
         ``fem.STRUCTURAL_INTEGRATORS``, a hosted contact whose law is not
         linear), or an input that is not a :class:`StepInput`."""
@@ -322,7 +322,7 @@ class StructureSubsystem(Subsystem):
             global _stale_said
             if not _stale_said:
                 _stale_said = True
-                logger.warning("the compiled kernel `cosim._structure_step` was built from "
+                logger.warning("the compiled kernel `cosim.sides._structure_step` was built from "
                                "older sources (interface %s, these sources need %s): using "
                                "the numpy reference, which is slower; rebuild it with "
                                "`pip install .`", getattr(module, "STEP_API", 1), STEP_API)

@@ -1,7 +1,7 @@
 """Which implementation steps each side: the compiled kernel or the numpy reference.
 
 Each side's step runs in compiled code (Cython, built by ``pip install .``):
-:mod:`cosim._multibody_step` for the multibody side, :mod:`cosim._structure_step`
+:mod:`cosim.sides._multibody_step` for the multibody side, :mod:`cosim.sides._structure_step`
 for the structure side.  The numpy modules stay the readable reference and are
 what the kernels are tested against (``tests/test_kernel.py``,
 ``tests/test_kernel_structure.py``).
@@ -43,15 +43,15 @@ def kernel_choice() -> str:
 
 
 def compiled_module(name: str):
-    """The compiled kernel module ``cosim.NAME``, or None when the reference is
+    """The compiled kernel module ``cosim.sides.NAME``, or None when the reference is
     chosen or the kernel was not built (said once per module)."""
     if kernel_choice() == "numpy":
         return None
     try:
-        return importlib.import_module(f"cosim.{name}")
+        return importlib.import_module(f"{__package__}.{name}")
     except ImportError as exc:
         if name not in _missing_said:
             _missing_said.add(name)
-            logger.warning("the compiled kernel `cosim.%s` is not built (%s): using the numpy "
+            logger.warning("the compiled kernel `cosim.sides.%s` is not built (%s): using the numpy "
                            "reference, which is slower; reinstall with `pip install .`", name, exc)
         return None

@@ -10,10 +10,10 @@ from couplers.laws import (FloresLaw, HertzLaw, HuntCrossleyLaw, KelvinVoigtLaw,
                            LankaraniNikraveshLaw, LinearLaw, RigidLaw)
 from multibody import TreeModel
 
-from .errors import SimulationError
-from .integrators import INTEGRATORS, RK4, TimeStepper
-from .kernel import compiled_module
-from .subsystem import (DISSIPATED, IMPULSE, MOMENT, QUADRATURES, WORK, EmbeddedContact,
+from cosim.errors import SimulationError
+from cosim.core.ode import INTEGRATORS, RK4, TimeStepper
+from cosim.sides.kernel import compiled_module
+from cosim.core.subsystem import (DISSIPATED, IMPULSE, MOMENT, QUADRATURES, WORK, EmbeddedContact,
                         StepInput, Subsystem)
 
 if TYPE_CHECKING:
@@ -24,7 +24,7 @@ __all__ = ["MultibodySubsystem", "kernel_law"]
 
 def kernel_law(law):
     """``(kind, k, c_or_chi, exponent)`` of a penalty law for the compiled
-    kernel (``cosim._multibody_step``), or None for a law it does not know
+    kernel (``cosim.sides._multibody_step``), or None for a law it does not know
     (a user's own law is stepped by the reference)."""
     kind = type(law)
     if kind is LinearLaw:
@@ -94,13 +94,13 @@ class MultibodySubsystem(Subsystem):
 
     Notes
     -----
-    ``aux`` holds, per embedded contact, its :data:`~cosim.subsystem.QUADRATURES`
+    ``aux`` holds, per embedded contact, its :data:`~cosim.core.subsystem.QUADRATURES`
     (impulse, dissipated energy, the step's first moment of the force, work),
     then the energy dissipated by joint dampers and supplied by drives.  The
     integrated state is ``[q, dq, aux, port velocity moments]``, the layout the
-    compiled kernel shares (:mod:`cosim._multibody_step`).
+    compiled kernel shares (:mod:`cosim.sides._multibody_step`).
     ``peak`` holds each embedded contact's largest penetration, located on
-    the integrator's sub-steps (:func:`cosim.integrators.substep_peaks`).
+    the integrator's sub-steps (:func:`cosim.core.ode.substep_peaks`).
     """
 
     def __init__(self, name: str, model: TreeModel, q0, dq0, ports: dict,
@@ -155,12 +155,12 @@ class MultibodySubsystem(Subsystem):
         self._kernel = None
         return e
 
-    #: embedded slot -> cosim.connections.EmbeddedConnection (grasp, friction)
+    #: embedded slot -> cosim.core.connection_modes.EmbeddedConnection (grasp, friction)
     _connections: dict = {}
 
     def attach_connection(self, slot: int, connection) -> None:
         """Evaluate embedded contact ``slot`` through ``connection`` (a
-        :class:`cosim.connections.EmbeddedConnection`: its mode's normal and
+        :class:`cosim.core.connection_modes.EmbeddedConnection`: its mode's normal and
         tangential forces, friction, and a grasp on the located touch)."""
         self._connections = {**self._connections, int(slot): connection}
         self._kernel = None
@@ -246,7 +246,7 @@ class MultibodySubsystem(Subsystem):
         for k, (e, d, dd) in enumerate(self._embedded_state(t, x, v)):
             pd.append(d)
             pv.append(dd)
-            if k in self._connections:          # a grasp or friction: cosim.connections
+            if k in self._connections:          # a grasp or friction: cosim.core.connection_modes
                 xp, vp = e.partner(t)
                 uk, f, p, sw = self._connections[k].evaluate(x[e.port] - xp, v[e.port] - vp,
                                                              d, dd)
@@ -275,14 +275,14 @@ class MultibodySubsystem(Subsystem):
                          if k in self._connections else float(e.law.switch(d, dd))
                          for k, (e, d, dd) in enumerate(self._embedded_state(t, x, v))])
 
-    #: the compiled kernel (cosim._multibody_step.MultibodyStep): None until
+    #: the compiled kernel (cosim.sides._multibody_step.MultibodyStep): None until
     #: first asked for, False where it is not built or not chosen
     _kernel = None
     #: whether the kernel steps this side (see :meth:`_compiled_step`)
     _kernel_steps = False
 
     def _compiled(self):
-        """The compiled kernel of this tree, or None (:mod:`cosim.kernel`)."""
+        """The compiled kernel of this tree, or None (:mod:`cosim.sides.kernel`)."""
         if self._kernel is None:
             self._kernel = self._build_kernel() or False
         return self._kernel or None

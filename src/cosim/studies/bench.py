@@ -4,7 +4,7 @@
 step sizes, and measures each run's CPU time and its errors against a fine
 monolithic reference (cached per scene, variant and settings): C's peak
 penetration, the count of its contacts, a joint's exit velocity at its last
-release (:mod:`cosim.metrics`) and the energy error.  The seed paper's own
+release (:mod:`cosim.studies.metrics`) and the energy error.  The seed paper's own
 method, the monolithic model under explicit RK45 with max step 1e-4 s, rtol
 1e-4 and atol 1e-6 (MATLAB's ode45 with these settings), is the row
 ``paper_rk45``.
@@ -19,10 +19,10 @@ import warnings
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from .errors import SimulationError, UnsafeStepError
-from .metrics import impact_metrics, relative_errors
-from .run import simulate
-from .scene import load_scene
+from cosim.errors import SimulationError, UnsafeStepError
+from cosim.studies.metrics import impact_metrics, relative_errors
+from cosim.scene.run import simulate
+from cosim.scene.load import load_scene
 
 __all__ = ["BenchRow", "COLUMNS", "reference", "run_bench", "cheapest_within", "write_csv", "plot"]
 

@@ -3,7 +3,7 @@
 The impact scenes are judged by three numbers of a contact (CASES.md
 sections 5-6): how many times it closes, its peak penetration, and the
 velocity a joint leaves with at its last release.  :func:`impact_metrics`
-reads them from a :class:`~cosim.result.SimulationResult`;
+reads them from a :class:`~cosim.core.result.SimulationResult`;
 :func:`relative_errors` compares two such readings.
 """
 from __future__ import annotations

@@ -9,8 +9,8 @@ again skips the points already done; the records go to one CSV table.
 
 The points are loaded and validated here, and written here: a worker (a
 process of the pool, or a Dask worker on another machine) receives the
-validated :class:`~cosim.scene.Scene` and sends back its
-:class:`~cosim.result.SimulationResult`, so workers need cosim but neither the
+validated :class:`~cosim.scene.load.Scene` and sends back its
+:class:`~cosim.core.result.SimulationResult`, so workers need cosim but neither the
 scene file nor the output directory.
 
 Studies (:func:`load_study`) are TOML files that fix a scene, its points, the
@@ -38,11 +38,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import UnsafeStepError
-from .result import _atomic_write, resolved_scene_text, write_outputs
-from .rundir import inside
-from .scene import SceneError, load_scene, parse_override, read_toml_file
-from .tomlread import TomlLimitError, read_bytes
+from cosim.errors import UnsafeStepError
+from cosim.core.result import _atomic_write, resolved_scene_text, write_outputs
+from cosim.io.rundir import inside
+from cosim.scene.load import SceneError, load_scene, parse_override, read_toml_file
+from cosim.io.tomlread import TomlLimitError, read_bytes
 
 __all__ = ["Point", "SweepEvent", "Study", "SweepError", "SweepInterrupted", "sweep", "grid_points", "split_values",
            "parse_grid_option", "impact_regime", "flatten", "write_table", "read_table",
@@ -268,7 +268,7 @@ def impact_regime(summary: dict, series, contact: str = "C", joint: str = "robot
         the first contact's touch and release) and ``exit_velocity`` (its rate
         at the last release, NaN if that is the end of the run).
     """
-    from .metrics import exit_velocity
+    from cosim.studies.metrics import exit_velocity
 
     c = summary["contacts"][contact]
     iv = c["intervals"]
@@ -414,7 +414,7 @@ def _simulate(scene):
     """The task a worker runs: one validated scene.  Returns the result, or
     the reason it was refused or raised (never raises, so one point cannot
     stop the others)."""
-    from .run import simulate
+    from cosim.scene.run import simulate
 
     try:
         with warnings.catch_warnings():
@@ -494,7 +494,7 @@ def _worker_main(conn) -> None:
     """A pool process: run the scenes it is sent, one at a time, until it is
     sent None or its parent is gone.  Ctrl-C is the parent's to handle."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    from . import run  # noqa: F401 - import the models before the clock of a point starts
+    from cosim.scene import run  # noqa: F401 - import the models before the clock of a point starts
     try:
         conn.send("ready")
     except OSError:
@@ -1173,7 +1173,7 @@ def load_study(path) -> Study:
         Naming the file and the key, if a value is missing or of the wrong
         kind.
     """
-    from .scene import _Table
+    from cosim.scene.load import _Table
 
     path = Path(path)
     top = _Table(read_toml_file(path), (), path)

@@ -7,11 +7,11 @@ import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
-from . import analytic
-from .errors import UnsafeStepError
-from .guard import energy_scale, peak_stored_energy
-from .run import simulate
-from .scene import SceneError, load_scene
+from cosim.studies import analytic
+from cosim.errors import UnsafeStepError
+from cosim.core.guard import energy_scale, peak_stored_energy
+from cosim.scene.run import simulate
+from cosim.scene.load import SceneError, load_scene
 
 __all__ = ["Check", "run_checks", "CHECKS", "HardCase", "hard_matrix", "run_hard_case",
            "hard_checks"]
@@ -120,8 +120,8 @@ def reference_step(cases: Path, variant: str, scheme: str, placement: str) -> fl
     C exchanged (``coupler``), the pre-flight check's largest safe step;
     otherwise (C hosted by the chain, or the implicit scheme), which the
     check does not limit, a tenth of C's contact time ``pi / omega``."""
-    from . import preflight
-    from .preflight import stiffest_normal
+    from cosim.core import preflight
+    from cosim.core.preflight import stiffest_normal
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

@@ -2,10 +2,10 @@
 
 The explicit schemes are defined on import; the monolithic and the implicit
 scheme when first looked up in :data:`COUPLING_SCHEMES` or imported by name
-(``from cosim.schemes import Implicit`` works as before).
+(``from cosim.core.schemes import Implicit`` works as before).
 """
-from ..integrators import lookup
-from ..registry import Registry
+from cosim.core.ode import lookup
+from cosim.core.registry import Registry
 from .base import (CoSimulationScheme, CouplingError, CouplingScheme, UnsafeStepError,
                    extrapolation_coeffs)
 from .explicit import GaussSeidel, Jacobi

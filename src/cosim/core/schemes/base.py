@@ -7,11 +7,11 @@ from typing import Any, Callable, ClassVar, NamedTuple
 
 import numpy as np
 
-from .. import preflight
-from ..errors import CouplingError, UnsafeStepError
-from ..guard import GuardError, nonfinite_cause
-from ..preflight import stiffest_normal
-from ..subsystem import hermite_coefficients, reparametrised
+from cosim.core import preflight
+from cosim.errors import CouplingError, UnsafeStepError
+from cosim.core.guard import GuardError, nonfinite_cause
+from cosim.core.preflight import stiffest_normal
+from cosim.core.subsystem import hermite_coefficients, reparametrised
 
 __all__ = ["Option", "CouplingScheme", "CoSimulationScheme", "UnsafeStepError", "CouplingError",
            "extrapolation_coeffs"]
@@ -69,10 +69,10 @@ class _Topology(NamedTuple):
 
 
 class CouplingScheme(ABC):
-    """A way of advancing a :class:`~cosim.system.CoupledSystem` in time.
+    """A way of advancing a :class:`~cosim.core.system.CoupledSystem` in time.
 
     Subclasses declare ``name`` and the option names they accept in
-    ``options``; :meth:`run` fills a :class:`~cosim.recorder.Recorder` and
+    ``options``; :meth:`run` fills a :class:`~cosim.core.recorder.Recorder` and
     returns the counters ``n_windows``, ``n_iterations``, ``n_rejected``.
     """
 

@@ -5,7 +5,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from .. import preflight
+from cosim.core import preflight
 from .base import CoSimulationScheme, Option
 
 __all__ = ["Jacobi", "GaussSeidel"]
