@@ -247,7 +247,7 @@ def test_the_local_dask_cluster_is_private():
     distributed = pytest.importorskip("distributed")
     from distributed.security import Security
 
-    from cosim.studies.sweep import _private_cluster
+    from cosim.studies.sweep.backends import _private_cluster
 
     with _private_cluster(1) as cluster:
         address = cluster.scheduler_address
@@ -266,7 +266,7 @@ def test_without_cryptography_the_local_cluster_has_no_socket(monkeypatch):
     distributed = pytest.importorskip("distributed")
     from distributed.security import Security
 
-    from cosim.studies.sweep import _private_cluster
+    from cosim.studies.sweep.backends import _private_cluster
 
     def missing(*a, **k):
         raise ImportError("no cryptography")

@@ -1,0 +1,106 @@
+"""Studies: TOML files that fix a scene, its points, the axis of the plot and
+a title (``studies/fig8_stiffness.toml`` and ``studies/fig11_chain_mass.toml``
+are the paper's figures 8 and 11), and running one into a folder.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from cosim.scene.load import read_toml_file
+from cosim.studies.sweep.driver import sweep
+from cosim.studies.sweep.plot import plot_sweep
+from cosim.studies.sweep.table import PLOT
+
+__all__ = ["Study", "load_study", "run_study"]
+
+
+@dataclass(frozen=True)
+class Study:
+    """A ready parameter study: a scene, its points, and how to draw them.
+
+    Read from a TOML file by :func:`load_study`::
+
+        title = "..."
+        scene = "../cases/three_mass.toml"     # relative to the study file
+        variants = ["ms6.4", "ms3.2"]
+        contact = "C"                          # optional, default C
+        joint = "robot/arm"                    # optional, default robot/arm
+        [set]                                  # optional grid: key -> values
+        "contacts.C.law.contact_stiffness" = [1.6e5, 3.2e5]
+        [x]                                    # optional plot axis
+        key = "contacts.C.law.contact_stiffness"
+        scale = 6.25e-6
+        label = "f"
+
+    and optionally ``timeout``, the most wall-clock seconds a point may run
+    (see :func:`sweep`).
+    """
+
+    name: str
+    title: str
+    scene: Path
+    variants: tuple = ()
+    grid: dict = field(default_factory=dict)
+    contact: str = "C"
+    joint: str = "robot/arm"
+    x: str | None = None
+    x_scale: float = 1.0
+    x_label: str | None = None
+    timeout: float | None = None
+
+
+def load_study(path) -> Study:
+    """Read a study file (see :class:`Study`).
+
+    Raises
+    ------
+    SceneError
+        Naming the file and the key, if a value is missing or of the wrong
+        kind.
+    """
+    from cosim.scene.load import _Table
+
+    path = Path(path)
+    top = _Table(read_toml_file(path), (), path)
+    title = top.string("title", path.stem)
+    scene = top.string("scene")
+    variants = top.raw("variants", [])
+    if not isinstance(variants, list) or not all(isinstance(v, str) for v in variants):
+        top.error("variants", f"must be a list of names, got {variants!r}")
+    grid = top.raw("set", {})
+    if not isinstance(grid, dict) or not all(isinstance(v, list) and v for v in grid.values()):
+        top.error("set", f"must be a table of key = [values], got {grid!r}")
+    contact = top.string("contact", "C")
+    joint = top.string("joint", "robot/arm")
+    timeout = top.number("timeout", None, rule=">0", unit="s")
+    x = top.table("x", {})
+    key = x.string("key", None)
+    scale = x.number("scale", 1.0)
+    label = x.string("label", None)
+    x.finish()
+    top.finish()
+    return Study(name=path.stem, title=title, scene=path.parent / scene,
+                 variants=tuple(variants), grid=dict(grid), contact=contact, joint=joint,
+                 x=key, x_scale=scale, x_label=label, timeout=timeout)
+
+
+def run_study(study: Study, *, out, workers: int = 1, scheduler=None, scheme=None,
+              retry_failed: bool = False, progress=None, plot: bool = True):
+    """Run a study with :func:`sweep` into ``out`` and draw it there.
+
+    Returns
+    -------
+    rows : list of dict
+    plot : Path or None
+        ``out/sweep.png``; None when ``plot`` is false.
+    """
+    rows = sweep(study.scene, variants=study.variants or None, grid=study.grid,
+                 scheme=scheme, workers=workers, scheduler=scheduler, out=out,
+                 retry_failed=retry_failed, contact=study.contact, joint=study.joint,
+                 progress=progress, timeout=study.timeout)
+    png = None
+    if plot:
+        png = plot_sweep(rows, Path(out) / PLOT, contact=study.contact, x=study.x,
+                         x_scale=study.x_scale, x_label=study.x_label, title=study.title)
+    return rows, png
