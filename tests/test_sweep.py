@@ -13,6 +13,7 @@ import pytest
 from conftest import CASES, ROOT
 from cosim import cli
 from cosim.studies import sweep as sw
+from cosim.studies.metrics import impact_regime
 
 THREE_MASS = CASES / "three_mass.toml"
 STUDIES = ROOT / "studies"
@@ -95,8 +96,10 @@ def test_flatten_joins_keys_with_dots():
 
 # ----------------------------------------------------------------- regimes
 def _run(intervals, t, rate):
-    return {"contacts": {"C": {"intervals": intervals, "count": len(intervals)}}}, {
-        "t": t, "dq/robot/arm": rate}
+    """A made-up run's summary and series, and the contact and joint to read:
+    names of no shipped scene, since the regime reads whichever it is told."""
+    return ({"contacts": {"strike": {"intervals": intervals, "count": len(intervals)}}},
+            {"t": t, "dq/hammer/swing": rate}, "strike", "hammer/swing")
 
 
 @pytest.mark.parametrize("sign", [1.0, -1.0])
@@ -105,15 +108,21 @@ def test_regime_is_what_the_striker_does_in_its_first_contact(sign):
     t = [0.0, 1.0, 2.0, 3.0, 4.0]
     down = [sign * v for v in (-10.0, -10.0, -6.0, -3.0, 2.0)]    # still coming at release
     back = [sign * v for v in (-10.0, -10.0, 4.0, 4.0, 4.0)]      # turned back at release
-    r = sw.impact_regime(*_run([[1.0, 2.0]], t, back))
+    r = impact_regime(*_run([[1.0, 2.0]], t, back))
     assert r["regime"] == "backward"
     assert r["rate_at_touch"] == sign * -10.0 and r["rate_at_release"] == sign * 4.0
-    assert sw.impact_regime(*_run([[1.0, 2.0], [2.5, 3.0]], t, back))["regime"] == "backward+"
-    r = sw.impact_regime(*_run([[1.0, 2.0], [2.5, 3.0]], t, down))
+    assert impact_regime(*_run([[1.0, 2.0], [2.5, 3.0]], t, back))["regime"] == "backward+"
+    r = impact_regime(*_run([[1.0, 2.0], [2.5, 3.0]], t, down))
     assert r["regime"] == "forward" and r["exit_velocity"] == sign * -3.0
-    assert sw.impact_regime(*_run([], t, down))["regime"] == "none"
-    r = sw.impact_regime(*_run([[1.0, 4.0]], t, down))
+    assert impact_regime(*_run([], t, down))["regime"] == "none"
+    r = impact_regime(*_run([[1.0, 4.0]], t, down))
     assert r["regime"] == "open-ended" and math.isnan(r["rate_at_release"])
+
+
+def test_impact_regime_lives_in_metrics_and_the_sweep_still_offers_it():
+    from cosim.studies import metrics
+    assert sw.impact_regime is metrics.impact_regime is impact_regime
+    assert "impact_regime" in metrics.__all__
 
 
 def test_chain_mass_sweep_gives_the_three_regimes(tmp_path):

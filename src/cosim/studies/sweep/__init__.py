@@ -14,10 +14,12 @@ The package is split by concern:
   a process pool with time limits, Dask);
 - :mod:`~cosim.studies.sweep.resume`: which points of a sweep folder are done;
 - :mod:`~cosim.studies.sweep.table`: the records and the CSV table;
-- :mod:`~cosim.studies.sweep.physics`: what a record reads from a run's physics;
 - :mod:`~cosim.studies.sweep.plot`: the figure;
 - :mod:`~cosim.studies.sweep.study`: study files (the paper's figures 8 and 11);
 - :mod:`~cosim.studies.sweep.driver`: :func:`sweep` itself.
+
+The impact regime of a record is :func:`cosim.studies.metrics.impact_regime`
+(offered here too, as before).
 
 Neither Dask nor matplotlib is imported unless a sweep asks for a scheduler
 or a plot.
@@ -26,7 +28,7 @@ from cosim.scene.load import SceneError  # what a bad scene, grid or study file 
 from cosim.studies.sweep.backends import CONNECT_TIMEOUT_S, SweepError, default_workers
 from cosim.studies.sweep.driver import SweepEvent, SweepInterrupted, sweep
 from cosim.studies.sweep.grid import Point, grid_points, parse_grid_option, point_name, split_values
-from cosim.studies.sweep.physics import impact_regime
+from cosim.studies.metrics import impact_regime  # its home is metrics; offered here as before
 from cosim.studies.sweep.plot import plot_sweep
 from cosim.studies.sweep.resume import DONE
 from cosim.studies.sweep.study import Study, load_study, run_study

@@ -98,7 +98,7 @@ def sweep(scene, *, variants=None, grid=None, scheme: str | None = None, workers
         Run the points that failed or were refused before again.
     contact, joint : str
         The contact and the striker's ``SUBSYSTEM/JOINT`` whose impact regime
-        (:func:`impact_regime`) is added as ``impact.*`` columns, where the
+        (:func:`cosim.studies.metrics.impact_regime`) is added as ``impact.*`` columns, where the
         scene has them.
     progress : callable, optional
         Called with a :class:`SweepEvent` after each point.

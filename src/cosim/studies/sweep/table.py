@@ -11,7 +11,7 @@ from pathlib import Path
 
 from cosim.core.result import _atomic_write
 from cosim.studies.sweep.grid import Point
-from cosim.studies.sweep.physics import impact_regime
+from cosim.studies.metrics import impact_regime
 
 __all__ = ["TABLE", "PLOT", "TIMING_COLUMNS", "flatten", "columns", "write_table", "read_table"]
 
