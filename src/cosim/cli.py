@@ -363,6 +363,7 @@ def _cmd_sweep(args) -> int:
     else:
         print("error: give a SCENE or --study", file=sys.stderr)
         return 2
+    contact, joint = sw.strike_names(scene, variants, contact, joint)
     out = Path(args.out) if args.out else default_out
     workers = args.workers or sw.default_workers()
     where = (f"Dask scheduler {args.scheduler}" if args.scheduler
@@ -546,10 +547,11 @@ def build_parser() -> argparse.ArgumentParser:
                          "key otherwise)")
     sw.add_argument("--retry-failed", action="store_true",
                     help="run the points that failed or were refused before again")
-    sw.add_argument("--contact", default="C", help="contact whose regime is classified and "
-                                                   "drawn (default C)")
-    sw.add_argument("--joint", default="robot/arm",
-                    help="SUBSYSTEM/JOINT of the striker (default robot/arm)")
+    sw.add_argument("--contact", help="contact whose regime is classified and drawn (default: "
+                                      "the scene's only contact, else its only contact of a "
+                                      "multibody on a structure)")
+    sw.add_argument("--joint", help="SUBSYSTEM/JOINT of the striker (default: the joint of the "
+                                    "body that carries the contact's point)")
     sw.add_argument("--no-plot", action="store_true", help="write the table only")
     sw.add_argument("--quiet", action="store_true", help="no progress")
     sw.set_defaults(func=_cmd_sweep)

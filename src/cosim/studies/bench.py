@@ -21,6 +21,7 @@ from pathlib import Path
 
 from cosim.errors import SimulationError, UnsafeStepError
 from cosim.studies.metrics import impact_metrics, relative_errors
+from cosim.studies.strike import find_strike
 from cosim.scene.run import simulate
 from cosim.scene.load import load_scene
 
@@ -74,17 +75,26 @@ def _key(scene, contact, joint) -> str:
     return hashlib.sha256(blob.encode()).hexdigest()[:16]
 
 
-def reference(path, variant=None, contact="C", joint="robot/arm", overrides=(),
+def reference(path, variant=None, contact=None, joint=None, overrides=(),
               cache_dir=None) -> dict:
     """Impact metrics of the fine monolithic reference, from the cache when
     the same scene (after variant and overrides) was benched before.
 
+    ``contact`` and ``joint`` are those of :func:`run_bench`.
+
     Returns a dict with ``count``, ``peak``, ``exit_velocity``, ``energy``
     and the reference's ``cpu_time_s``.
+
+    Raises
+    ------
+    SceneError
+        If the scene has no such ``contact`` or ``joint``, or leaves one out
+        and more than one (or no) choice (see :func:`find_strike`).
     """
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         scene = load_scene(path, variant, list(overrides), "monolithic")
+    contact, joint = find_strike(scene, contact, joint)
     cache = None
     if cache_dir is not None:
         cache = Path(cache_dir) / f"{scene.name}-{variant or 'default'}-" \
@@ -124,7 +134,7 @@ def _row(path, variant, overrides, scheme, label, step, tol, ref, contact, joint
                     err["count"], err["exit_velocity"], abs(m["energy"]), "finished")
 
 
-def run_bench(path, variant=None, schemes=None, steps=None, contact="C", joint="robot/arm",
+def run_bench(path, variant=None, schemes=None, steps=None, contact=None, joint=None,
               overrides=(), tolerances=(1e-3, 1e-4, 1e-6, 1e-8), cache_dir=None,
               progress=None) -> tuple[dict, list[BenchRow]]:
     """A work-precision study of a scene.
@@ -141,9 +151,12 @@ def run_bench(path, variant=None, schemes=None, steps=None, contact="C", joint="
         Step sizes [s].  Where the scene sets ``scheme.contact_step``, the
         step in contact is varied (the long free-flight step stays);
         otherwise ``scheme.macro_step``.  Default: 1e-4, 5e-5, 2e-5, 1e-5.
-    contact, joint : str
+    contact, joint : str, optional
         The contact whose peak penetration and count are compared, and the
-        joint (``SUBSYSTEM/JOINT``) whose rate at its last release is.
+        joint (``SUBSYSTEM/JOINT``) whose rate at its last release is.  Left
+        out, the scene chooses them (:func:`cosim.studies.strike.find_strike`:
+        its only contact, else its only contact of a multibody on a
+        structure; the joint of the body that carries the contact's point).
     overrides : sequence of str
         ``key.path=value`` applied to every run.
     tolerances : sequence of float
@@ -157,9 +170,16 @@ def run_bench(path, variant=None, schemes=None, steps=None, contact="C", joint="
     -------
     reference : dict
     rows : list of BenchRow
+
+    Raises
+    ------
+    SceneError
+        If the scene has no such ``contact`` or ``joint``, or leaves one out
+        and more than one (or no) choice.
     """
-    ref = reference(path, variant, contact, joint, overrides, cache_dir)
     scene = load_scene(path, variant, list(overrides))
+    contact, joint = find_strike(scene, contact, joint)
+    ref = reference(path, variant, contact, joint, overrides, cache_dir)
     if schemes is None:
         schemes = ([scene.scheme] if scene.scheme != "monolithic" else []) + ["implicit"]
         schemes = list(dict.fromkeys(schemes))

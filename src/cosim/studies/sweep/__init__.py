@@ -26,7 +26,7 @@ or a plot.
 """
 from cosim.scene.load import SceneError  # what a bad scene, grid or study file raises
 from cosim.studies.sweep.backends import CONNECT_TIMEOUT_S, SweepError, default_workers
-from cosim.studies.sweep.driver import SweepEvent, SweepInterrupted, sweep
+from cosim.studies.sweep.driver import SweepEvent, SweepInterrupted, strike_names, sweep
 from cosim.studies.sweep.grid import Point, grid_points, parse_grid_option, point_name, split_values
 from cosim.studies.metrics import impact_regime  # its home is metrics; offered here as before
 from cosim.studies.sweep.plot import plot_sweep
@@ -36,6 +36,6 @@ from cosim.studies.sweep.table import (PLOT, TABLE, TIMING_COLUMNS, columns, fla
                                        write_table)
 
 __all__ = ["Point", "SweepEvent", "Study", "SweepError", "SweepInterrupted", "sweep", "grid_points",
-           "split_values", "parse_grid_option", "point_name", "impact_regime", "flatten",
+           "strike_names", "split_values", "parse_grid_option", "point_name", "impact_regime", "flatten",
            "columns", "write_table", "read_table", "plot_sweep", "load_study", "run_study",
            "default_workers", "TIMING_COLUMNS", "TABLE", "PLOT", "DONE", "CONNECT_TIMEOUT_S"]

@@ -14,12 +14,13 @@ from cosim.core.result import _atomic_write, resolved_scene_text, write_outputs
 from cosim.io.rundir import inside
 from cosim.io.tomlread import TomlLimitError
 from cosim.scene.load import SceneError, load_scene, read_toml_file
+from cosim.studies.strike import find_strike
 from cosim.studies.sweep.backends import _Runner
 from cosim.studies.sweep.grid import Point, grid_points
 from cosim.studies.sweep.resume import _file_hash, _load_done, _spec
 from cosim.studies.sweep.table import TABLE, _record, write_table
 
-__all__ = ["SweepEvent", "SweepInterrupted", "sweep"]
+__all__ = ["SweepEvent", "SweepInterrupted", "sweep", "strike_names"]
 
 log = logging.getLogger(__name__)
 
@@ -63,8 +64,8 @@ class SweepInterrupted(KeyboardInterrupt):
 
 
 def sweep(scene, *, variants=None, grid=None, scheme: str | None = None, workers: int = 1,
-          scheduler=None, out=None, retry_failed: bool = False, contact: str = "C",
-          joint: str = "robot/arm", progress=None, timeout: float | None = None
+          scheduler=None, out=None, retry_failed: bool = False,
+          contact: str | None = None, joint: str | None = None, progress=None, timeout: float | None = None
           ) -> list[dict]:
     """Run a scene over a grid of variants and overrides; one record per point.
 
@@ -96,10 +97,14 @@ def sweep(scene, *, variants=None, grid=None, scheme: str | None = None, workers
         nothing is skipped.
     retry_failed : bool
         Run the points that failed or were refused before again.
-    contact, joint : str
+    contact, joint : str, optional
         The contact and the striker's ``SUBSYSTEM/JOINT`` whose impact regime
-        (:func:`cosim.studies.metrics.impact_regime`) is added as ``impact.*`` columns, where the
-        scene has them.
+        (:func:`cosim.studies.metrics.impact_regime`) is added as ``impact.*``
+        columns.  Left out, each variant's scene chooses them
+        (:func:`cosim.studies.strike.find_strike`: its only contact, else its
+        only contact of a multibody on a structure, struck by the joint of the
+        body that carries the contact's point); a scene that leaves no single
+        choice gets no ``impact.*`` columns.
     progress : callable, optional
         Called with a :class:`SweepEvent` after each point.
     timeout : float, optional
@@ -124,7 +129,8 @@ def sweep(scene, *, variants=None, grid=None, scheme: str | None = None, workers
     Raises
     ------
     SceneError
-        If the scene file cannot be read.
+        If the scene file cannot be read, or ``contact`` or ``joint`` is given
+        and a variant's scene has no such contact or joint (nothing written).
     ValueError
         If the grid is malformed.
     SweepError
@@ -160,6 +166,7 @@ def sweep(scene, *, variants=None, grid=None, scheme: str | None = None, workers
         default = table.get("default_variant")
         variants = [default] if isinstance(default, str) else None
     points = grid_points(variants, grid)
+    strikes = _strikes(scene_path, [p.variant for p in points], contact, joint)
     out = Path(out) if out is not None else None
     total = len(points)
     rows: dict[int, dict] = {}
@@ -180,7 +187,7 @@ def sweep(scene, *, variants=None, grid=None, scheme: str | None = None, workers
                     done = _load_done(out / p.name, spec, retry_failed)
                     if done is not None:
                         meta, summary, series = done
-                        rows[p.index] = _record(p, meta, summary, series, contact, joint)
+                        rows[p.index] = _record(p, meta, summary, series, *strikes[p.variant])
                         report(p, meta["status"], meta["message"], True)
                         continue
                 try:
@@ -188,7 +195,8 @@ def sweep(scene, *, variants=None, grid=None, scheme: str | None = None, workers
                         warnings.simplefilter("always")
                         sc = load_scene(scene_path, p.variant, p.overrides, scheme)
                 except SceneError as exc:
-                    _finish(p, spec, out, None, None, "refused", str(exc), rows, contact, joint)
+                    _finish(p, spec, out, None, None, "refused", str(exc), rows,
+                            *strikes[p.variant])
                     report(p, "refused", str(exc), False)
                     continue
                 for w in caught:                # each warning once per sweep, not per point
@@ -203,11 +211,11 @@ def sweep(scene, *, variants=None, grid=None, scheme: str | None = None, workers
                     if kind == "ran":
                         res = payload
                         _finish(p, spec, out, res, scenes[index], res.status, res.message,
-                                rows, contact, joint)
+                                rows, *strikes[p.variant])
                         report(p, res.status, res.message, False)
                     else:
                         _finish(p, spec, out, None, scenes[index], kind, payload, rows,
-                                contact, joint)
+                                *strikes[p.variant])
                         report(p, kind, payload, False)
         except KeyboardInterrupt as exc:
             # the runner's exit ends the workers; the table keeps what ended
@@ -220,13 +228,51 @@ def sweep(scene, *, variants=None, grid=None, scheme: str | None = None, workers
                                             "status": "interrupted",
                                             "message": f"the sweep was stopped ({name}) "
                                                        f"before this point ended"},
-                                        None, None, contact, joint)
+                                        None, None, *strikes[p.variant])
     records = [rows[p.index] for p in points]
     if out is not None:
         write_table(records, out / TABLE)
     if stopped is not None:
         raise SweepInterrupted(records, name) from None
     return records
+
+
+def _strikes(scene_path, variants, contact, joint) -> dict:
+    """Variant -> (contact, joint) whose impact regime its records get, or
+    (None, None): chosen by :func:`~cosim.studies.strike.find_strike` on the
+    variant's scene.  A variant whose scene does not load gets (None, None):
+    its points are refused when they load.  A name given that a scene lacks
+    raises :class:`SceneError` before anything runs."""
+    out = {}
+    for variant in dict.fromkeys(variants):
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")     # the points' own loads show them
+                scene = load_scene(scene_path, variant)
+        except SceneError:
+            out[variant] = (None, None)
+            continue
+        out[variant] = find_strike(scene, contact, joint, required=False) or (None, None)
+    return out
+
+
+def strike_names(scene, variants=None, contact: str | None = None, joint: str | None = None
+                 ) -> tuple:
+    """The contact and the striker's joint that a sweep of ``variants`` reads
+    (see ``contact`` and ``joint`` of :func:`sweep`): those of the first
+    variant whose scene loads and leaves a choice, else ``contact`` and
+    ``joint`` as given.  A caller that labels or draws the sweep uses them.
+
+    Raises
+    ------
+    SceneError
+        If ``contact`` or ``joint`` is given and a variant's scene has no such
+        contact or joint.
+    """
+    for names in _strikes(Path(scene), list(variants or [None]), contact, joint).values():
+        if names != (None, None):
+            return names
+    return contact, joint
 
 
 def _finish(point, spec, out, res, scene, status, message, rows, contact, joint):

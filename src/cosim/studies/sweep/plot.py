@@ -43,7 +43,7 @@ _REGIME_STYLE = {"backward": ("o", "tab:blue"), "backward+": ("s", "tab:green"),
                  "open-ended": ("x", "0.5")}
 
 
-def plot_sweep(rows: list[dict], path, *, contact: str = "C", x: str | None = None,
+def plot_sweep(rows: list[dict], path, *, contact: str | None = None, x: str | None = None,
                x_scale: float = 1.0, x_label: str | None = None, title: str | None = None
                ) -> Path:
     """Draw a sweep: the contact's count, and its time in touch and span (first
@@ -56,24 +56,34 @@ def plot_sweep(rows: list[dict], path, *, contact: str = "C", x: str | None = No
         Records of :func:`sweep` (or :func:`read_table`).
     path : path-like
         The image to write (its suffix picks the format).
-    contact : str
+    contact : str, optional
+        The contact drawn; by default the first contact of the table (the
+        axes' labels name it): name it where the scene has several.
     x : str, optional
         The grid key on the abscissa; by default the only grid key that
         varies, else the number ending the variants' names.
     x_scale : float
         Multiplies the abscissa (a stiffness over c_ref gives f).
     x_label, title : str, optional
+
+    Raises
+    ------
+    ValueError
+        If ``contact`` is given and the table holds other contacts only.
     """
+    named = list(dict.fromkeys(k.split(".")[1] for r in rows for k in r
+                               if k.startswith("contacts.") and k.endswith(".count")))
+    if contact is None:
+        contact = named[0] if named else "the contact"
+    elif named and contact not in named:
+        raise ValueError(f"`contact` must be one of the table's contacts "
+                         f"({', '.join(named)}), got {contact!r}")
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     xs, label, ticks, x_key = _axis(rows, x)
     xs = [v * x_scale for v in xs] if ticks is None else xs
-    if not any(f"contacts.{contact}.count" in r for r in rows):     # another scene's contact
-        named = [k.split(".")[1] for r in rows for k in r
-                 if k.startswith("contacts.") and k.endswith(".count")]
-        contact = named[0] if named else contact
     ok = [i for i, r in enumerate(rows) if r.get(f"contacts.{contact}.count") is not None]
     ratio = [(rows[i].get("impact.rate_at_release"), rows[i].get("impact.rate_at_touch"))
              for i in ok]

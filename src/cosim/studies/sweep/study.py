@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from cosim.scene.load import read_toml_file
-from cosim.studies.sweep.driver import sweep
+from cosim.studies.sweep.driver import strike_names, sweep
 from cosim.studies.sweep.plot import plot_sweep
 from cosim.studies.sweep.table import PLOT
 
@@ -24,8 +24,8 @@ class Study:
         title = "..."
         scene = "../cases/three_mass.toml"     # relative to the study file
         variants = ["ms6.4", "ms3.2"]
-        contact = "C"                          # optional, default C
-        joint = "robot/arm"                    # optional, default robot/arm
+        contact = "C"                          # optional: the scene's strike
+        joint = "robot/arm"                    # optional: the joint that strikes
         [set]                                  # optional grid: key -> values
         "contacts.C.law.contact_stiffness" = [1.6e5, 3.2e5]
         [x]                                    # optional plot axis
@@ -34,7 +34,8 @@ class Study:
         label = "f"
 
     and optionally ``timeout``, the most wall-clock seconds a point may run
-    (see :func:`sweep`).
+    (see :func:`sweep`).  Without ``contact`` or ``joint``, the scene chooses
+    them (:func:`cosim.studies.strike.find_strike`).
     """
 
     name: str
@@ -42,8 +43,8 @@ class Study:
     scene: Path
     variants: tuple = ()
     grid: dict = field(default_factory=dict)
-    contact: str = "C"
-    joint: str = "robot/arm"
+    contact: str | None = None
+    joint: str | None = None
     x: str | None = None
     x_scale: float = 1.0
     x_label: str | None = None
@@ -71,8 +72,8 @@ def load_study(path) -> Study:
     grid = top.raw("set", {})
     if not isinstance(grid, dict) or not all(isinstance(v, list) and v for v in grid.values()):
         top.error("set", f"must be a table of key = [values], got {grid!r}")
-    contact = top.string("contact", "C")
-    joint = top.string("joint", "robot/arm")
+    contact = top.string("contact", None)
+    joint = top.string("joint", None)
     timeout = top.number("timeout", None, rule=">0", unit="s")
     x = top.table("x", {})
     key = x.string("key", None)
@@ -95,12 +96,13 @@ def run_study(study: Study, *, out, workers: int = 1, scheduler=None, scheme=Non
     plot : Path or None
         ``out/sweep.png``; None when ``plot`` is false.
     """
+    contact, joint = strike_names(study.scene, study.variants, study.contact, study.joint)
     rows = sweep(study.scene, variants=study.variants or None, grid=study.grid,
                  scheme=scheme, workers=workers, scheduler=scheduler, out=out,
-                 retry_failed=retry_failed, contact=study.contact, joint=study.joint,
+                 retry_failed=retry_failed, contact=contact, joint=joint,
                  progress=progress, timeout=study.timeout)
     png = None
     if plot:
-        png = plot_sweep(rows, Path(out) / PLOT, contact=study.contact, x=study.x,
+        png = plot_sweep(rows, Path(out) / PLOT, contact=contact, x=study.x,
                          x_scale=study.x_scale, x_label=study.x_label, title=study.title)
     return rows, png
