@@ -95,7 +95,8 @@ def test_rollback_refused_without_fmu_state(fmus, version):
     sub = FMUSubsystem("arm", fmus[version, False], {"tip": port})
     assert not sub.can_get_set_state
     with pytest.raises(RuntimeError, match=r"subsystem `arm`: FMU arm2_fmi\d_nostate.fmu cannot "
-                                           r"get and set its state \(`canGetAndSetFMUstate` is "
+                                           r"get and set its state \(`canGetAndSetFMU"
+                                           + ("S" if version == 3 else "s") + r"tate` is "
                                            r"false\)"):
         sub.get_state()
 
@@ -130,8 +131,9 @@ def test_scene_refuses_rollback_without_fmu_state(fmus, version, how):
     scene = _scene(fmus[version, False], variant="controlled" if how == "controlled" else None,
                    scheme="implicit" if how == "implicit" else None)
     what = "the `implicit` scheme" if how == "implicit" else r"macro-step control \(`scheme."
+    flag = "canGetAndSetFMUState" if version == 3 else "canGetAndSetFMUstate"
     with pytest.raises(SceneError, match=r"`subsystems.arm.path` names an FMU that cannot get "
-                                         r"and set its state.*" + what):
+                                         rf"and set its state \(`{flag}` is false\).*" + what):
         scene.build()
 
 
@@ -341,3 +343,21 @@ def test_fmu_without_state_runs_the_explicit_schemes(fmus, multibody_runs):
                                   scheme)
             np.testing.assert_array_equal(got[0], with_state[0])
             assert got[1] == with_state[1]
+
+
+def test_no_compiler_is_found_on_an_empty_path(monkeypatch):
+    """Where no C compiler is found the FMU tests skip (the `fmus` fixture)."""
+    monkeypatch.delenv("CC", raising=False)
+    monkeypatch.setenv("PATH", "")
+    assert _load_build().find_compiler() is None
+
+
+def test_example_runs(fmus):
+    """examples/fmu_arm_on_beam.py builds the FMU and runs the four couplings."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT / "src")}
+    done = subprocess.run([sys.executable, str(EXAMPLES / "fmu_arm_on_beam.py"), "--t-end",
+                           "0.0165"], capture_output=True, text=True, env=env, check=True)
+    lines = done.stdout.splitlines()
+    assert lines[0] == "built arm2_fmi2.fmu"
+    for label in ("jacobi", "gauss_seidel", "implicit", "gauss_seidel, controlled"):
+        assert sum(ln.startswith(f"{label:26s} ") for ln in lines) == 2, done.stdout

@@ -147,10 +147,12 @@ def build_fmu(spec: dict, scene, scheme: str, opts: dict):
                          f"model-exchange face; use `jacobi`, `gauss_seidel` or `implicit`")
     why = needs_rollback(scheme, opts)
     if why is not None and not spec["can_get_set_state"]:
+        flag = ("canGetAndSetFMUState" if spec["fmi_version"].startswith("3")
+                else "canGetAndSetFMUstate")
         raise SceneError(scene.path, f"{key}.path",
-                         f"names an FMU that cannot get and set its state "
-                         f"(`canGetAndSetFMUstate` is false), and {why}; use `jacobi` or "
-                         f"`gauss_seidel` without `contact_step`")
+                         f"names an FMU that cannot get and set its state (`{flag}` is "
+                         f"false), and {why}; use `jacobi` or `gauss_seidel` without "
+                         f"`contact_step`")
     if spec["energy"] is None and scene.guard.energy_check:
         raise SceneError(scene.path, f"{key}.energy",
                          "is required while the run guard checks energy: name the FMU's "

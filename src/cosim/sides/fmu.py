@@ -345,10 +345,11 @@ class FMUSubsystem(Subsystem):
     # ------------------------------------------------------------ rollback
     def get_state(self) -> FMUState:
         if not self.can_get_set_state:
+            flag = "canGetAndSetFMUState" if self.fmi_version == 3 else "canGetAndSetFMUstate"
             raise RuntimeError(
                 f"subsystem `{self.name}`: FMU {self.path.name} cannot get and set its state "
-                f"(`canGetAndSetFMUstate` is false), so it cannot be rolled back; use the "
-                f"`jacobi` or `gauss_seidel` scheme without `contact_step`")
+                f"(`{flag}` is false), so it cannot be rolled back; use the `jacobi` or "
+                f"`gauss_seidel` scheme without `contact_step`")
         handle = (self._fmu.getFMUState() if self.fmi_version == 3
                   else self._fmu.getFMUstate())
         st = FMUState(self.t, self.x.copy(), self.aux.copy(), self.n_steps, self.status,
