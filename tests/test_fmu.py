@@ -191,7 +191,12 @@ def test_scene_path_is_relative_to_the_scene_file(fmus, tmp_path):
                                          r"'arm2_fmi2.fmu'"):
         load_scene(scene_file)
     (tmp_path / "arm2_fmi2.fmu").write_bytes(fmus[2, True].read_bytes())
-    assert load_scene(scene_file).subsystems[0]["path"] == str(tmp_path / "arm2_fmi2.fmu")
+    scene = load_scene(scene_file, overrides=["t_end=0.001"])
+    assert scene.subsystems[0]["path"] == str(tmp_path / "arm2_fmi2.fmu")
+    # the run folder's scene.toml names the FMU where it was found: it rebuilds from there
+    simulate(scene, out=tmp_path / "run")
+    again = load_scene(tmp_path / "run" / "scene.toml")
+    assert again.subsystems[0]["path"] == str(tmp_path / "arm2_fmi2.fmu")
     (tmp_path / "arm2_fmi2.fmu").write_text("not a zip")
     with pytest.raises(SceneError, match=r"`subsystems.arm.path` 'arm2_fmi2.fmu' is not an FMU "
                                          r"that FMPy can read"):

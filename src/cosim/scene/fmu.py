@@ -55,6 +55,9 @@ def fmu_spec(t) -> dict:
     if not path.is_file():
         t.error("path", f"must name an .fmu file (relative to the scene file), got {rel!r}: "
                         f"{path} does not exist")
+    # the run folder's scene.toml records where the FMU was found, so that the
+    # run can be rebuilt from there (`cosim plot --animate`)
+    t.data["path"] = str(path)
     try:
         md, variables = read_fmu_variables(path)
     except ImportError as exc:
