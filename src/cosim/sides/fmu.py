@@ -200,7 +200,10 @@ class FMUSubsystem(Subsystem):
         self._unzipped = tempfile.mkdtemp(prefix="cosim-fmu-")
         try:
             fmpy.extract(str(self.path), self._unzipped)
-            cls = fmpy.fmi3.FMU3Slave if self.fmi_version == 3 else fmpy.fmi2.FMU2Slave
+            if self.fmi_version == 3:
+                from fmpy.fmi3 import FMU3Slave as cls
+            else:
+                from fmpy.fmi2 import FMU2Slave as cls
             token = md.instantiationToken if self.fmi_version == 3 else md.guid
             self._fmu = cls(guid=token, unzipDirectory=self._unzipped,
                             modelIdentifier=md.coSimulation.modelIdentifier,
