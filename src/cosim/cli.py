@@ -219,6 +219,15 @@ def _cmd_info(args) -> int:
             line += ", lowest frequencies [Hz] " + ", ".join(
                 f"{f:.4g}" for f in s["natural_frequencies_hz"][:6])
         print(line)
+        if "fmu" in s:                  # an FMU side: its variables (cosim.scene.info.fmu_info)
+            f = s["fmu"]
+            print(f"    FMU {f['file']} (FMI {f['fmi_version']}), get/set state "
+                  f"{'yes' if f['can_get_set_state'] else 'no'}, variables:")
+            for v in f["variables"]:
+                start = "" if v["start"] is None else f" = {v['start']}"
+                unit = f" [{v['unit']}]" if v["unit"] else ""
+                print(f"      {v['name']}{start}{unit}: {v['causality']} {v['variability']} "
+                      f"{v['type']}" + (f", {v['description']}" if v["description"] else ""))
     for name, c in info["contacts"].items():
         where = c["placement"] + (f" in {c['host']}" if "host" in c else "")
         print(f"  contact {name}: {c['law']} ({where}) between {c['between'][0]} and "

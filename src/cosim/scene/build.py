@@ -152,6 +152,9 @@ def build_system(scene: Scene, scheme: str | None = None):
             subs.append(RigidReference(spec["name"], spec["points"]))
         elif spec["type"] == "multibody":
             subs.append(_multibody(spec, scene, default_step))
+        elif spec["type"] == "fmu":          # a Functional Mock-up Unit: cosim.scene.fmu
+            from cosim.scene.fmu import build_fmu
+            subs.append(build_fmu(spec, scene, name, opts))
         else:
             subs.append(_structure(spec, scene))
     names = [s.name for s in subs]
@@ -174,6 +177,9 @@ def build_system(scene: Scene, scheme: str | None = None):
                 host = sa if mob_a >= mob_b else sb
         links.append(ContactLink(contact, sa, pa, sb, pb, placement, c["follow"], host,
                                  c.get("connection")))
+    if any(spec["type"] == "fmu" for spec in scene.subsystems):
+        from cosim.scene.fmu import settle_fmu_contacts
+        links = settle_fmu_contacts(scene, subs, links)
     system = CoupledSystem(subs, links)
     for c, ln in enumerate(links):
         if ln.placement != "embedded":

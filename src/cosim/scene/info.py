@@ -7,7 +7,7 @@ from cosim.core import preflight
 from cosim.core.preflight import stiffest_normal
 from cosim.core.schemes import COUPLING_SCHEMES
 
-__all__ = ["scene_info"]
+__all__ = ["scene_info", "fmu_info"]
 
 #: RK4's stability limit on an undamped oscillator, omega * dt.
 RK4_LIMIT = 2.0 * math.sqrt(2.0)
@@ -100,6 +100,21 @@ def _contact_info(system, c, scene) -> dict:
     return out
 
 
+def fmu_info(sub) -> dict:
+    """What ``cosim info`` tells of an FMU side (:class:`cosim.sides.fmu.FMUSubsystem`):
+    its file, FMI version, whether it can get and set its state (rollback)
+    and interpolate its inputs, and every variable of its model
+    description (name, causality, variability, type, start, unit,
+    description).  ``dofs`` of an FMU counts its named ``coordinates``."""
+    return {"file": sub.path.name, "fmi_version": sub.model_description.fmiVersion,
+            "can_get_set_state": sub.can_get_set_state,
+            "interpolates_inputs": sub.interpolates_inputs,
+            "variables": [{"name": v.name, "causality": v.causality,
+                           "variability": v.variability, "type": v.type,
+                           "start": v.start, "unit": v.unit, "description": v.description}
+                          for v in sub.variables.values()]}
+
+
 def scene_info(scene) -> dict:
     """DOFs and natural frequencies of each subsystem, and each contact's
     frequency, contact time, largest stable macro step per scheme, and how
@@ -118,6 +133,9 @@ def scene_info(scene) -> dict:
         coords = sub.coordinates()
         if coords:
             entry["coordinates"] = list(coords)
+        if hasattr(sub, "model_description"):    # an FMU: cosim.sides.fmu
+            entry["dofs"] = len(coords)
+            entry["fmu"] = fmu_info(sub)
         freqs = getattr(sub, "natural_frequencies_hz", None)
         if freqs is not None:       # a structure: physical DOFs, kept and dropped modes
             entry["dofs"] = sub.structure.n_dof

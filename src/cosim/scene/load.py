@@ -30,7 +30,7 @@ __all__ = ["SceneError", "Scene", "load_scene", "parse_override", "read_toml_fil
 log = logging.getLogger(__name__)
 
 STRUCTURE_TYPES = ("chain", "beam", "cable", "string", "rod")
-SUBSYSTEM_TYPES = ("multibody", "rigid") + STRUCTURE_TYPES
+SUBSYSTEM_TYPES = ("multibody", "rigid", "fmu") + STRUCTURE_TYPES
 _MISSING = object()
 #: most elements (or masses) a structure may have: a mesh beyond it is refused
 #: when the scene is read, before anything is assembled
@@ -565,6 +565,9 @@ def _subsystem_spec(name: str, t: _Table) -> dict:
     spec = {"name": name, "type": kind, "key": t.key()}
     if kind in STRUCTURE_TYPES:
         spec.update(_structure_spec(t, kind))
+    elif kind == "fmu":              # a Functional Mock-up Unit: cosim.scene.fmu
+        from cosim.scene.fmu import fmu_spec
+        spec.update(fmu_spec(t))
     elif kind == "rigid":
         pts = t.table("points")
         spec["points"] = {p: pts.vec2(p) for p in list(pts.data)}

@@ -1,0 +1,397 @@
+"""A Functional Mock-up Unit as a subsystem: a co-simulation FMU stepped through FMPy.
+
+The FMU is a black box that offers only the co-simulation face of the
+subsystem protocol: it advances its own state over a macro step
+(``doStep``) under the port forces it is given and reports its ports'
+positions and velocities as outputs.  Contacts with an FMU side are
+therefore exchanged by the coupling scheme (placement ``coupler``) or
+hosted by the other side; the FMU never evaluates a contact law itself.
+
+FMI 2.0 and 3.0 co-simulation FMUs are supported.  FMPy is imported only
+when an FMU is loaded; without it :func:`fmpy_module` raises an
+``ImportError`` that names the ``fmi`` extra.
+
+Rollback (the implicit scheme, macro-step control) goes through the FMU's
+own state: ``fmi2GetFMUstate``/``fmi3GetFMUState`` and their setters, which
+an FMU offers when its model description says ``canGetAndSetFMUstate``
+(FMI 2.0) or ``canGetAndSetFMUState`` (FMI 3.0).
+"""
+from __future__ import annotations
+
+import shutil
+import tempfile
+import weakref
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from cosim.core.subsystem import StepInput, Subsystem, SubsystemState, hermite_coefficients
+
+__all__ = ["FMUSubsystem", "FMUPort", "FMUVariable", "fmpy_module", "read_fmu_variables",
+           "FMI_EXTRA"]
+
+#: how a user installs what an FMU needs
+FMI_EXTRA = 'pip install "cosim[fmi]"'
+
+#: int_0^1 s^j ds (j = 0, 1, 2): the mean of a polynomial input over a step
+_MEAN = np.array([1.0, 1.0 / 2.0, 1.0 / 3.0, 1.0 / 4.0])
+
+
+def fmpy_module():
+    """FMPy, imported on first use.
+
+    Raises
+    ------
+    ImportError
+        Naming the ``fmi`` extra, when FMPy is not installed.
+    """
+    try:
+        import fmpy
+    except ImportError:
+        raise ImportError(f"an `fmu` subsystem needs FMPy, which is not installed: "
+                          f"{FMI_EXTRA}", name="fmpy") from None
+    return fmpy
+
+
+@dataclass(frozen=True)
+class FMUVariable:
+    """One scalar variable of an FMU's model description."""
+
+    name: str
+    value_reference: int
+    #: ``parameter``, ``input``, ``output``, ``local``, ``independent``, ...
+    causality: str
+    variability: str
+    #: ``Real`` (FMI 2.0) or ``Float64`` (FMI 3.0), ...
+    type: str
+    start: object = None
+    unit: str | None = None
+    description: str | None = None
+
+    @property
+    def real(self) -> bool:
+        """Whether the variable holds a 64-bit real."""
+        return self.type in ("Real", "Float64")
+
+
+def read_fmu_variables(path) -> tuple[object, dict[str, FMUVariable]]:
+    """The model description of the FMU at ``path`` and its variables by name.
+
+    Raises
+    ------
+    ImportError
+        If FMPy is not installed.
+    ValueError
+        If the file is not an FMU FMPy can read, or not a co-simulation FMU
+        of FMI 2.0 or 3.0.
+    """
+    fmpy = fmpy_module()
+    try:
+        md = fmpy.read_model_description(str(path), validate=False)
+    except Exception as exc:            # FMPy raises bare Exception on a broken file
+        raise ValueError(f"is not an FMU that FMPy can read ({exc})") from None
+    if md.fmiVersion not in ("2.0", "3.0") and not str(md.fmiVersion).startswith("3."):
+        raise ValueError(f"must be an FMI 2.0 or 3.0 FMU, got FMI {md.fmiVersion}")
+    if md.coSimulation is None:
+        raise ValueError("must be a co-simulation FMU (its model description has no "
+                         "`CoSimulation` element; model exchange FMUs are not supported)")
+    out = {}
+    for v in md.modelVariables:
+        out[v.name] = FMUVariable(v.name, int(v.valueReference), v.causality, v.variability,
+                                  v.type, v.start, getattr(v, "unit", None), v.description)
+    return md, out
+
+
+def can_get_set_state(md) -> bool:
+    """Whether the FMU says it can get and set its state."""
+    cs = md.coSimulation
+    return bool(getattr(cs, "canGetAndSetFMUstate", False)
+                or getattr(cs, "canGetAndSetFMUState", False))
+
+
+@dataclass(frozen=True)
+class FMUPort:
+    """A port of an FMU: the names of its variables.
+
+    Attributes
+    ----------
+    position, velocity : (str, str)
+        Output variables of the port's x and y position [m] and velocity [m/s].
+    force : (str, str)
+        Input variables of the force on the port, x and y [N].
+    mass : float or str
+        The mass the port presents to a contact [kg], for the pre-flight
+        stability check and for choosing the host of a contact: a number, or
+        the name of an output variable the FMU reports it in.
+    """
+
+    position: tuple[str, str]
+    velocity: tuple[str, str]
+    force: tuple[str, str]
+    mass: float | str
+
+
+class FMUState(SubsystemState):
+    """A snapshot of an FMU subsystem: the base snapshot plus the FMU's own
+    state handle (freed when the snapshot is dropped)."""
+
+    __slots__ = ("handle", "__weakref__")
+
+
+class FMUSubsystem(Subsystem):
+    """A co-simulation FMU (FMI 2.0 or 3.0) whose ports are named variables.
+
+    Parameters
+    ----------
+    name : str
+    path : path-like
+        The ``.fmu`` file.
+    ports : dict[str, FMUPort]
+        Port name -> its variables.
+    parameters : dict[str, float], optional
+        Start values set before initialisation (parameters of the FMU).
+    coordinates : dict[str, (str, str)], optional
+        Named coordinates reported in the results: name -> (output variable
+        of the coordinate, output variable of its rate).
+    energy : str, optional
+        Output variable holding the mechanical energy of the FMU [J], for the
+        energy ledger and the run guard.  Without it the FMU counts as
+        holding no energy.
+
+    Notes
+    -----
+    ``x`` holds the outputs read after the last step: the coordinates, their
+    rates, the port positions and velocities and the energy.  Over a step
+    the port force is a polynomial in time (:class:`StepInput`); an FMI 2.0
+    FMU that can interpolate its inputs (``canInterpolateInputs``) receives
+    its value and first two derivatives at the step's start
+    (``fmi2SetRealInputDerivatives``); any other FMU receives the force's
+    mean over the step, held, which hands over the same impulse.  The work a
+    force does is taken along the cubic Hermite of the port between its
+    positions and velocities at the step's ends.
+    """
+
+    def __init__(self, name: str, path, ports: dict, parameters: dict | None = None,
+                 coordinates: dict | None = None, energy: str | None = None):
+        super().__init__(name, ports.keys())
+        fmpy = fmpy_module()
+        self.path = Path(path)
+        self.model_description, self.variables = read_fmu_variables(self.path)
+        md = self.model_description
+        self.fmi_version = 3 if str(md.fmiVersion).startswith("3") else 2
+        self.can_get_set_state = can_get_set_state(md)
+        self.interpolates_inputs = (self.fmi_version == 2
+                                    and bool(md.coSimulation.canInterpolateInputs))
+        self.ports = dict(ports)
+        self.parameters = dict(parameters or {})
+        self.coordinate_names = dict(coordinates or {})
+        self.energy_variable = energy
+        vr = self._vr
+        self._force_vr = [vr(n) for p in self.ports.values() for n in p.force]
+        names = ([q for q, _ in self.coordinate_names.values()]
+                 + [dq for _, dq in self.coordinate_names.values()]
+                 + [n for p in self.ports.values() for n in p.position]
+                 + [n for p in self.ports.values() for n in p.velocity]
+                 + ([energy] if energy else []))
+        self._out_vr = [vr(n) for n in names]
+        self._mass_vr = {k: vr(p.mass) for k, p in enumerate(self.ports.values())
+                         if isinstance(p.mass, str)}
+        self._unzipped = tempfile.mkdtemp(prefix="cosim-fmu-")
+        try:
+            fmpy.extract(str(self.path), self._unzipped)
+            if self.fmi_version == 3:
+                from fmpy.fmi3 import FMU3Slave as cls
+            else:
+                from fmpy.fmi2 import FMU2Slave as cls
+            token = md.instantiationToken if self.fmi_version == 3 else md.guid
+            self._fmu = cls(guid=token, unzipDirectory=self._unzipped,
+                            modelIdentifier=md.coSimulation.modelIdentifier,
+                            instanceName=name)
+            self._fmu.instantiate()
+            if self.fmi_version == 2:
+                self._fmu.setupExperiment(startTime=0.0)
+            self._set_parameters()
+            if self.fmi_version == 3:
+                self._fmu.enterInitializationMode(startTime=0.0)
+            else:
+                self._fmu.enterInitializationMode()
+            self._fmu.exitInitializationMode()
+        except Exception as exc:
+            shutil.rmtree(self._unzipped, ignore_errors=True)
+            raise RuntimeError(f"subsystem `{name}`: FMU {self.path.name} could not be "
+                               f"instantiated and initialised: {exc}") from exc
+        self._alive = True
+        self._closer = weakref.finalize(self, _close, self._fmu, self._unzipped, self.fmi_version)
+        nq = len(self.coordinate_names)
+        np_ = self.n_ports
+        self._slices = (slice(0, nq), slice(nq, 2 * nq), slice(2 * nq, 2 * nq + 2 * np_),
+                        slice(2 * nq + 2 * np_, 2 * nq + 4 * np_))
+        self.x = np.zeros(len(self._out_vr))
+        self._read()
+        self.port_moments = np.zeros((3, self.n_ports), complex)
+
+    # ---------------------------------------------------------------- FMI
+    def _vr(self, name: str) -> int:
+        try:
+            return self.variables[name].value_reference
+        except KeyError:
+            raise KeyError(f"FMU {self.path.name} of subsystem `{self.name}` has no variable "
+                           f"`{name}`") from None
+
+    def _get(self, vrs) -> list:
+        return (self._fmu.getFloat64(vrs) if self.fmi_version == 3
+                else self._fmu.getReal(vrs))
+
+    def _set(self, vrs, values) -> None:
+        values = [float(v) for v in values]
+        if self.fmi_version == 3:
+            self._fmu.setFloat64(vrs, values)
+        else:
+            self._fmu.setReal(vrs, values)
+
+    def _set_parameters(self) -> None:
+        if self.parameters:
+            self._set([self._vr(k) for k in self.parameters], self.parameters.values())
+
+    def _read(self) -> None:
+        if self._out_vr:
+            self.x[:] = self._get(self._out_vr)
+
+    def close(self) -> None:
+        """Terminate the FMU and free its instance (also done when the
+        subsystem is garbage-collected)."""
+        self._alive = False
+        self._closer()
+
+    # ------------------------------------------------------------ protocol
+    def _step_impl(self, t, h, inputs):
+        u0, du, ddu = self._forces(t, h, inputs)
+        if self._force_vr:
+            self._set(self._force_vr, u0.ravel())
+            if self.interpolates_inputs:
+                n = len(self._force_vr)
+                self._fmu.setRealInputDerivatives(self._force_vr, [1] * n, list(du.ravel()))
+                self._fmu.setRealInputDerivatives(self._force_vr, [2] * n, list(ddu.ravel()))
+        pos0, vel0 = self.outputs(t, self.x)
+        if self.fmi_version == 3:
+            _, terminate, early, last = self._fmu.doStep(currentCommunicationPoint=t,
+                                                         communicationStepSize=h)
+            if terminate or early:
+                raise RuntimeError(f"subsystem `{self.name}`: FMU {self.path.name} stopped "
+                                   f"inside the step from t = {t:.6g} s (reached "
+                                   f"{last:.6g} s, terminate = {terminate})")
+        else:
+            self._fmu.doStep(currentCommunicationPoint=t, communicationStepSize=h)
+        self._read()
+        pos1, vel1 = self.outputs(t + h, self.x)
+        self.port_moments = _velocity_moments(pos0, vel0, pos1, vel1, h)
+
+    def _forces(self, t, h, inputs):
+        """The force on each port at the step's start and its first two time
+        derivatives there, (n_ports, 2) each; for an FMU that holds its
+        inputs, the mean over the step and zero derivatives."""
+        zero = np.zeros((self.n_ports, 2))
+        if inputs is None:
+            return zero, zero, zero
+        if type(inputs) is StepInput:
+            c = inputs.coeffs
+            if self.interpolates_inputs and c.shape[0] <= 3:
+                du = c[1] / h if c.shape[0] > 1 else zero
+                ddu = 2.0 * c[2] / (h * h) if c.shape[0] > 2 else zero
+                return c[0], du, ddu
+            if c.shape[0] <= len(_MEAN):
+                return np.tensordot(_MEAN[:c.shape[0]], c, axes=1), zero, zero
+        # any other input function: its mean by 3-point Gauss-Legendre
+        nodes = 0.5 + 0.5 * np.sqrt(0.6) * np.array([-1.0, 0.0, 1.0])
+        weights = np.array([5.0, 8.0, 5.0]) / 18.0
+        mean = sum(w * np.asarray(inputs(t + s * h), float) for s, w in zip(nodes, weights))
+        return mean, zero, zero
+
+    def derivatives(self, t, x, u):
+        raise RuntimeError(f"subsystem `{self.name}` is a co-simulation FMU: it has no "
+                           f"model-exchange face, so the monolithic scheme cannot stack it; "
+                           f"use `jacobi`, `gauss_seidel` or `implicit`")
+
+    def outputs(self, t, x):
+        _, _, sp, sv = self._slices      # copies: schemes keep outputs while x moves on
+        return x[sp].reshape(-1, 2).copy(), x[sv].reshape(-1, 2).copy()
+
+    def energy(self, x=None):
+        if self.energy_variable is None:
+            return 0.0
+        x = self.x if x is None else x
+        return float(x[-1])
+
+    def port_mass(self, port: int) -> float:
+        """The mass port ``port`` presents to a contact [kg]: the declared
+        number, or the value of the FMU's variable now."""
+        m = list(self.ports.values())[port].mass
+        if isinstance(m, str):
+            m = float(self._get([self._mass_vr[port]])[0])
+        return float(m)
+
+    def port_mobility(self, port, direction):
+        m = self.port_mass(port)
+        n = np.asarray(direction, float)
+        return float(n @ n) / m if m > 0 else float("inf")
+
+    def coordinates(self):
+        nq = len(self.coordinate_names)
+        return {name: (i, nq + i) for i, name in enumerate(self.coordinate_names)}
+
+    def embed_contact(self, contact, *args, **kwargs):
+        raise ValueError(f"contact `{contact.name}`: subsystem `{self.name}` is an FMU, a "
+                         f"black box that cannot evaluate a contact law; place the contact in "
+                         f"the coupler (`placement = \"coupler\"`) or let the other side host it")
+
+    # ------------------------------------------------------------ rollback
+    def get_state(self) -> FMUState:
+        if not self.can_get_set_state:
+            flag = "canGetAndSetFMUState" if self.fmi_version == 3 else "canGetAndSetFMUstate"
+            raise RuntimeError(
+                f"subsystem `{self.name}`: FMU {self.path.name} cannot get and set its state "
+                f"(`{flag}` is false), so it cannot be rolled back; use the `jacobi` or "
+                f"`gauss_seidel` scheme without `contact_step`")
+        handle = (self._fmu.getFMUState() if self.fmi_version == 3
+                  else self._fmu.getFMUstate())
+        st = FMUState(self.t, self.x.copy(), self.aux.copy(), self.n_steps, self.status,
+                      self.peak.copy())
+        st.handle = handle
+        weakref.finalize(st, self._free_state, handle)
+        return st
+
+    def set_state(self, state: FMUState) -> None:
+        if self.fmi_version == 3:
+            self._fmu.setFMUState(state.handle)
+        else:
+            self._fmu.setFMUstate(state.handle)
+        super().set_state(state)
+
+    def _free_state(self, handle) -> None:
+        if not self._alive:
+            return
+        if self.fmi_version == 3:
+            self._fmu.freeFMUState(handle)
+        else:
+            self._fmu.freeFMUstate(handle)
+
+
+def _velocity_moments(pos0, vel0, pos1, vel1, h) -> np.ndarray:
+    """``int v(t) s^j dt`` over the step (j = 0, 1, 2; (3, n_ports) complex
+    [m]) of the cubic Hermite through the ports' end positions and
+    velocities: ``int_0^1 x'(s) s^j ds`` with ``x'(s) = c1 + 2 c2 s + 3 c3 s^2``."""
+    c = lambda a: a[:, 0] + 1j * a[:, 1]          # noqa: E731
+    _, c1, c2, c3 = hermite_coefficients(c(pos0), c(vel0), c(pos1), c(vel1), h)
+    j = np.arange(3)[:, None]
+    return c1 / (j + 1) + 2 * c2 / (j + 2) + 3 * c3 / (j + 3)
+
+
+def _close(fmu, unzipped, version) -> None:
+    """Terminate and free an FMU instance and remove its unzipped folder."""
+    try:
+        fmu.terminate()
+        fmu.freeInstance()
+    except Exception:                   # an FMU that failed may refuse to terminate
+        pass
+    shutil.rmtree(unzipped, ignore_errors=True)
