@@ -27,7 +27,6 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--t-end", type=float, default=0.13, help="end time [s] (C strikes at 0.103 s)")
     parser.add_argument("--out", type=Path, default=Path("runs/examples/compare_schemes"))
-    parser.add_argument("--scene", type=Path, default=SCENE)
     args = parser.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
 
@@ -35,7 +34,7 @@ def main(argv=None):
     for name in SCHEMES:
         with warnings.catch_warnings():     # "scheme X ignores the options [...]" is expected
             warnings.simplefilter("ignore", UserWarning)
-            scene = cosim.load_scene(args.scene, "f100", [f"t_end={args.t_end}"], scheme=name)
+            scene = cosim.load_scene(SCENE, "f100", [f"t_end={args.t_end}"], scheme=name)
         result = cosim.simulate(scene)
         c = result.summary["contacts"]["C"]
         k = scene.data["contacts"]["C"]["law"]["contact_stiffness"]

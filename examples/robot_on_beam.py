@@ -30,11 +30,10 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--t-end", type=float, default=0.13, help="end time [s] (C strikes at 0.103 s)")
     parser.add_argument("--out", type=Path, default=Path("runs/examples/robot_on_beam"))
-    parser.add_argument("--scene", type=Path, default=SCENE)
     args = parser.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
 
-    scene = cosim.load_scene(args.scene, overrides=[f"t_end={args.t_end}"])
+    scene = cosim.load_scene(SCENE, overrides=[f"t_end={args.t_end}"])
     result = cosim.simulate(scene)
     t, force = result.series["t"], result.series["force/C"]
 

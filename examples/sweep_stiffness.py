@@ -29,14 +29,13 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--t-end", type=float, default=0.02, help="end time [s] (touch at 10 ms)")
     parser.add_argument("--out", type=Path, default=Path("runs/examples/sweep_stiffness"))
-    parser.add_argument("--scene", type=Path, default=SCENE)
     args = parser.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
 
     stiffness = np.geomspace(1e5, 1e8, 7)                           # [N/m]
     peak_force, contact_time = np.full(7, np.nan), np.full(7, np.nan)
     for i, k in enumerate(stiffness):
-        result = cosim.run_scene(args.scene, overrides=[f"t_end={args.t_end}",
+        result = cosim.run_scene(SCENE, overrides=[f"t_end={args.t_end}",
                                                         f"contacts.wall.law.contact_stiffness={k}"])
         wall = result.summary["contacts"]["wall"]
         if wall["count"] == 1 and wall["intervals"][0][1] < args.t_end:     # touched and left
