@@ -102,6 +102,7 @@ def main(argv=None):
     ax_d.axvline(d_max * 1e3, color="0.6", ls=":", label="closed-form peak penetration")
     ax_t.set(xlabel="time [ms]", ylabel="contact force [N]", xlim=(9.0, 11.0 + t_c * 1e3))
     ax_d.set(xlabel="penetration [mm]", ylabel="contact force [N]", xlim=(0.0, d_max * 1.1e3))
+    ax_t.set_ylim(top=1.35 * ax_t.get_ylim()[1])         # room for the legend
     ax_t.legend(loc="upper right", fontsize="small")
     ax_d.legend(loc="upper left", fontsize="small")
     fig.savefig(args.out / "custom_law.png")
