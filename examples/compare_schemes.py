@@ -25,7 +25,8 @@ SCHEMES = ["monolithic", "jacobi", "gauss_seidel", "implicit"]
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--t-end", type=float, default=0.13, help="end time [s] (C strikes at 0.103 s)")
+    parser.add_argument("--t-end", type=float, default=0.13,
+                        help="end time [s] (C strikes at 0.103 s)")
     parser.add_argument("--out", type=Path, default=Path("runs/examples/compare_schemes"))
     args = parser.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
@@ -53,7 +54,8 @@ def main(argv=None):
     for i, (name, r) in enumerate(rows.items()):
         spans = [(1e3 * a, 1e3 * (b - a)) for a, b in r["intervals"]]
         ax_t.broken_barh(spans, (i - 0.35, 0.7), color=f"C{i}")
-    ax_t.set_yticks(range(len(rows)), [f"{n}\n{r['cpu_time_s']:.2f} s CPU" for n, r in rows.items()])
+    ax_t.set_yticks(range(len(rows)),
+                    [f"{n}\n{r['cpu_time_s']:.2f} s CPU" for n, r in rows.items()])
     ax_t.invert_yaxis()
     ax_t.set_xlabel("time [ms]")
     ax_t.set_title("contact intervals of C")

@@ -1,13 +1,11 @@
 """A contact law of your own: one class, registered by name, used from a scene file.
 
-``SphereOnFlat`` is Hertz's law of an elastic sphere pressed on a rigid flat, given by
-material data instead of a stiffness: ``f = (4/3) E/(1 - nu^2) sqrt(R) d^1.5``. It
-subclasses ``couplers.ContactLaw`` (the force on the active branch and the elastic potential;
-the base class clips the force so it never pulls and books the energy), and registering it in
-``couplers.CONTACT_LAWS`` makes ``law = { type = "sphere_on_flat", ... }`` valid in a scene,
-checked like any other law. The script drops spring_drop's 1 kg mass at 1 m/s on a rubber
-ball through it, then checks the run against Hertz's closed form for the contact time and the
-largest penetration, and against the built-in ``hertz`` law with the same constant.
+``SphereOnFlat`` is Hertz's law of an elastic sphere on a rigid flat, from material data:
+``f = (4/3) E/(1 - nu^2) sqrt(R) d^1.5``. It subclasses ``couplers.ContactLaw`` (the base
+class clips the force so it never pulls and books the energy); once in
+``couplers.CONTACT_LAWS``, ``law = { type = "sphere_on_flat", ... }`` is valid in a scene and
+checked like any law. spring_drop's 1 kg mass, at 1 m/s, strikes through it; the run is
+checked against Hertz's closed form and against the built-in ``hertz`` law.
 
 The figure ``docs/_static/examples/custom_law.png`` was made by::
 

@@ -26,7 +26,8 @@ SCENE = Path(__file__).resolve().parents[1] / "cases" / "three_mass.toml"
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--t-end", type=float, default=0.25, help="end time [s] (C strikes at 0.103 s)")
+    parser.add_argument("--t-end", type=float, default=0.25,
+                        help="end time [s] (C strikes at 0.103 s)")
     parser.add_argument("--out", type=Path, default=Path("runs/examples/read_run"))
     parser.add_argument("--run", type=Path, help="read this run folder instead of making one")
     args = parser.parse_args(argv)
@@ -50,9 +51,10 @@ def main(argv=None):
     print(f"{summary['scene']} under {summary['scheme']}: {len(t)} samples, "
           f"{summary['contacts']['C']['count']} contacts of C, "
           f"energy drift {summary['energy']['max_abs_drift']:.3g} J")
-    print(f"samples with force on C outside its intervals: {np.count_nonzero((force > 0) & ~closed)}")
+    outside = int(np.count_nonzero((force > 0) & ~closed))
+    print(f"samples with force on C outside its intervals: {outside}")
     (args.out / "read_run.json").write_text(json.dumps(
-        {"samples": len(t), "forced_outside": int(np.count_nonzero((force > 0) & ~closed)),
+        {"samples": len(t), "forced_outside": outside,
          "forced_inside": int(np.count_nonzero((force > 0) & closed)),
          "energy_initial": summary["energy"]["initial"],
          "energy_first_sample": float(series["energy/total"][0])}, indent=1))

@@ -28,7 +28,8 @@ SCENE = Path(__file__).resolve().parents[1] / "cases" / "beam_impact.toml"
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--t-end", type=float, default=0.13, help="end time [s] (C strikes at 0.103 s)")
+    parser.add_argument("--t-end", type=float, default=0.13,
+                        help="end time [s] (C strikes at 0.103 s)")
     parser.add_argument("--out", type=Path, default=Path("runs/examples/robot_on_beam"))
     args = parser.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
