@@ -48,7 +48,7 @@ def main(argv=None):
     w = weights @ np.array([result.series[f"q/beam/{beam.dof_names[i]}"] for i in dofs])
 
     L, EI = b["length"], b["youngs_modulus"] * section.second_moment
-    q = b["density"] * section.area * 9.81                        # weight per length [N/m]
+    q = b["density"] * section.area * scene.data["effects"]["gravity"]   # weight [N/m]
     sag = -q * s * (L**3 - 2 * L * s**2 + s**3) / (24 * EI)       # static sag at s [m]
     intervals = result.summary["contacts"]["C"]["intervals"]
     print(f"C's contacts: {intervals}")
