@@ -11,7 +11,8 @@ from cosim.core import preflight
 from cosim.errors import CouplingError, UnsafeStepError
 from cosim.core.guard import GuardError, nonfinite_cause
 from cosim.core.preflight import stiffest_normal
-from cosim.core.subsystem import hermite_coefficients, reparametrised
+from cosim.core.hermite import hermite_coefficients, hermite_point
+from cosim.core.subsystem import reparametrised
 
 __all__ = ["Option", "CouplingScheme", "CoSimulationScheme", "UnsafeStepError", "CouplingError",
            "extrapolation_coeffs"]
@@ -501,9 +502,7 @@ class CoSimulationScheme(CouplingScheme):
                 continue
             x0, v0 = self._outs[p]
             if p in after:
-                _, c1, c2, c3 = hermite_coefficients(x0, v0, *after[p], h)
-                out.append((x0 + sg * (c1 + sg * (c2 + sg * c3)),
-                            (c1 + sg * (2 * c2 + 3 * sg * c3)) / h))
+                out.append(hermite_point(x0, v0, *after[p], h, sg))
                 continue
             a = 0.0
             if self.extrapolation_order > 0 and self._outs_prev is not None:
