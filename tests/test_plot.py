@@ -12,6 +12,7 @@ import pytest
 
 from conftest import CASES, ROOT
 from cosim import cli, load_scene, simulate
+from cosim.cli import terminal
 
 PNG = b"\x89PNG\r\n\x1a\n"
 FIGURES = ("penetration", "force", "joint_velocity", "energy")
@@ -182,10 +183,10 @@ def test_progress_hook_reports_increasing_time():
 
 def test_run_progress_line_only_on_a_terminal_and_not_quiet(monkeypatch, tmp_path, capsys):
     scene = str(CASES / "spring_drop.toml")
-    monkeypatch.setattr(cli, "PROGRESS_DELAY_S", 0.0)
+    monkeypatch.setattr(terminal, "PROGRESS_DELAY_S", 0.0)
     assert cli.main(["run", scene, "--out", str(tmp_path / "a")]) == 0
     assert capsys.readouterr().err == ""                           # not a terminal
-    monkeypatch.setattr(cli, "_on_terminal", lambda: True)
+    monkeypatch.setattr(terminal, "_on_terminal", lambda: True)
     assert cli.main(["run", scene, "--out", str(tmp_path / "b"), "--quiet"]) == 0
     assert capsys.readouterr().err == ""
     assert cli.main(["run", scene, "--out", str(tmp_path / "c")]) == 0
