@@ -19,7 +19,7 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 
-from cosim.core.hermite import hermite_cubic_max
+from cosim.core.hermite import hermite_cubic_max, hermite_point
 from cosim.core.result import SimulationResult
 from cosim.core.series import SeriesFile, SeriesStore, chunk_rows
 
@@ -325,7 +325,7 @@ class Recorder:
         lo, hi = 0.0, 1.0
         for _ in range(60):
             mid = 0.5 * (lo + hi)
-            p, dp = _hcubic(d0, v0, d1, v1, h, mid)
+            p, dp = hermite_point(d0, v0, d1, v1, h, mid)
             if (float(law.switch(p, dp)) > 0) == was_active:
                 lo = mid
             else:
