@@ -47,9 +47,14 @@ def hermite_value(y0, f0, y1, f1, h: float, s):
 def hermite_point(x0, v0, x1, v1, h: float, s) -> tuple:
     """Value and rate (per second) at ``s`` in [0, 1] of the cubic Hermite
     through ``x0``, ``x1`` with rates ``v0``, ``v1`` at the ends of a step
-    ``h`` [s] (scalars or arrays, real or complex)."""
-    c0, c1, c2, c3 = hermite_coefficients(x0, v0, x1, v1, h)
-    return c0 + s * (c1 + s * (c2 + s * c3)), (c1 + s * (2 * c2 + 3 * s * c3)) / h
+    ``h`` [s] (scalars or arrays, real or complex).
+
+    The coefficients are those of :func:`hermite_coefficients`, formed here
+    without calling it: a multirate side asks for this at every sub-step.
+    """
+    dx = x1 - x0
+    c1, c2, c3 = h * v0, 3 * dx - h * (2 * v0 + v1), -2 * dx + h * (v0 + v1)
+    return x0 + s * (c1 + s * (c2 + s * c3)), (c1 + s * (2 * c2 + 3 * s * c3)) / h
 
 
 def _stationary(c1: float, c2: float, c3: float) -> tuple[float, float]:
