@@ -12,6 +12,7 @@ import pytest
 
 from conftest import CASES, ROOT
 from cosim import cli, load_scene, simulate
+from cosim.cli import terminal
 
 PNG = b"\x89PNG\r\n\x1a\n"
 FIGURES = ("penetration", "force", "joint_velocity", "energy")
@@ -66,10 +67,11 @@ def test_plot_writes_png_and_svg(spring_run, tmp_path, capsys):
 
 def test_figures_have_units_and_the_ledger(spring_run):
     from cosim import plot
+    from cosim.plot import figures
 
     run = plot.load_run(spring_run)
     assert run.incomplete == "" and run.t_end == pytest.approx(0.02)
-    for name, make in plot._FIGURES:
+    for name, make in figures._FIGURES:
         fig = make(run)
         if fig is None:
             assert name == "structure"
@@ -78,12 +80,12 @@ def test_figures_have_units_and_the_ledger(spring_run):
         assert axes[-1].get_xlabel() == "time [s]", name
         for ax in axes:
             assert re.search(r"\[(m|N|J|m/s|rad/s)\]", ax.get_ylabel()), (name, ax.get_ylabel())
-    joints = plot._joint_velocity_figure(run).get_axes()
+    joints = figures._joint_velocity_figure(run).get_axes()
     assert joints[0].get_ylabel() == "velocity [m/s]"              # a prismatic joint
-    energy = plot._energy_figure(run).get_axes()
+    energy = figures._energy_figure(run).get_axes()
     notes = " ".join(t.get_text() for ax in energy for t in ax.texts)
     assert "coupling error wall" in notes
-    pen = plot._penetration_figure(run).get_axes()[0]
+    pen = figures._penetration_figure(run).get_axes()[0]
     assert len(pen.patches) == 1                                   # the one contact interval
     a, b = run.summary["contacts"]["wall"]["intervals"][0]
     x = pen.patches[0].get_path().transformed(pen.patches[0].get_patch_transform()).vertices[:, 0]
@@ -92,6 +94,7 @@ def test_figures_have_units_and_the_ledger(spring_run):
 
 def test_plot_draws_an_interrupted_run_and_says_so(spring_run, tmp_path, capsys):
     from cosim import plot
+    from cosim.plot import figures
 
     part = _partial(spring_run, tmp_path / "part")
     assert cli.main(["plot", str(part)]) == 0
@@ -101,7 +104,7 @@ def test_plot_draws_an_interrupted_run_and_says_so(spring_run, tmp_path, capsys)
     for name in FIGURES:
         assert (part / f"{name}.png").read_bytes()[:8] == PNG
     run = plot.load_run(part)
-    assert "INCOMPLETE" in plot._force_figure(run)._suptitle.get_text()
+    assert "INCOMPLETE" in figures._force_figure(run)._suptitle.get_text()
     # no summary at all (killed before writing it): still drawn, still marked
     (part / "summary.json").unlink()
     assert cli.main(["plot", str(part), "--out", str(tmp_path / "nosum")]) == 0
@@ -144,15 +147,16 @@ def test_animation_has_frames(spring_run, tmp_path, capsys):
 def test_animation_poses_the_recorded_state(tmp_path):
     """The drawn robot and chain sit where the series put them."""
     from cosim import plot
+    from cosim.plot import animation
 
     out = tmp_path / "tm"
     assert cli.main(["run", str(CASES / "three_mass.toml"), "--variant", "f100",
                      "--set", "t_end=0.02", "--out", str(out), "--quiet"]) == 0
     run = plot.load_run(out)
     system, _ = load_scene(out / "scene.toml").build()
-    idx = plot._frames(len(run.t), 7)
+    idx = animation._frames(len(run.t), 7)
     assert idx[0] == 0 and idx[-1] == len(run.t) - 1 and len(idx) == 7
-    robots, structures, fixed, contacts = plot._geometry(run, system, idx, 1.0)
+    robots, structures, fixed, contacts = animation._geometry(run, system, idx, 1.0)
     (_, lines, joints), = robots
     # the first two joints are sliders along x and y from the ground
     assert np.allclose([j[0].real for j in joints], run.series["q/robot/x"][idx])
@@ -182,10 +186,10 @@ def test_progress_hook_reports_increasing_time():
 
 def test_run_progress_line_only_on_a_terminal_and_not_quiet(monkeypatch, tmp_path, capsys):
     scene = str(CASES / "spring_drop.toml")
-    monkeypatch.setattr(cli, "PROGRESS_DELAY_S", 0.0)
+    monkeypatch.setattr(terminal, "PROGRESS_DELAY_S", 0.0)
     assert cli.main(["run", scene, "--out", str(tmp_path / "a")]) == 0
     assert capsys.readouterr().err == ""                           # not a terminal
-    monkeypatch.setattr(cli, "_on_terminal", lambda: True)
+    monkeypatch.setattr(terminal, "_on_terminal", lambda: True)
     assert cli.main(["run", scene, "--out", str(tmp_path / "b"), "--quiet"]) == 0
     assert capsys.readouterr().err == ""
     assert cli.main(["run", scene, "--out", str(tmp_path / "c")]) == 0

@@ -11,10 +11,10 @@ mesh-based model is assembled and meshio when a field is exported.  A scene
 with a chain or without any structure pays for none of them.
 """
 from .chain import Chain, ChainStructure
+from .linear_structure import LinearStructure, LineStructure
 from .modal import DENSE_LIMIT, ModalBasis, modes, natural_frequencies, residual_compliance
 from .rank_one import rank_one_eigh
 from .response import undamped_moments, undamped_response
-from .structures import LinearStructure, LineStructure
 
 __all__ = ["Beam", "String", "Section", "rectangular_section", "circular_section", "Chain",
            "ChainStructure", "Rod", "LinearStructure", "LineStructure", "ModalBasis", "modes",

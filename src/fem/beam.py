@@ -31,8 +31,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .structures import (LineStructure, _assemble_line, _choice, _count, _line_structure,
-                         _place, _positive)
+from .linear_structure import (LineStructure, _assemble_line, _choice, _count, _line_structure,
+                               _place, _positive)
 
 __all__ = ["Beam", "String", "Section", "rectangular_section", "circular_section",
            "BEAM_ENDS"]

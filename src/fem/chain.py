@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .structures import LinearStructure, _place, _positive
+from .linear_structure import LinearStructure, _place, _positive
 
 __all__ = ["Chain", "ChainStructure"]
 

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .structures import LinearStructure, _count, _positive
+from .linear_structure import LinearStructure, _count, _positive
 
 __all__ = ["ModalBasis", "modes", "natural_frequencies", "residual_compliance",
            "DENSE_LIMIT"]

@@ -21,8 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .structures import (LineStructure, _assemble_line, _choice, _count, _line_structure,
-                         _place, _positive)
+from .linear_structure import (LineStructure, _assemble_line, _choice, _count, _line_structure,
+                               _place, _positive)
 
 __all__ = ["Rod", "ROD_ENDS"]
 

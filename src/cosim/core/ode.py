@@ -14,58 +14,10 @@ from typing import Callable, ClassVar
 
 import numpy as np
 
+from cosim.core.hermite import hermite_value, substep_peaks
+
 __all__ = ["TimeStepper", "RK4", "ScipyStepper", "INTEGRATORS", "get_integrator",
            "substep_peaks"]
-
-
-def _hermite(y0, f0, y1, f1, h, theta):
-    t2 = theta * theta
-    t3 = t2 * theta
-    return ((2 * t3 - 3 * t2 + 1) * y0 + (t3 - 2 * t2 + theta) * h * f0
-            + (-2 * t3 + 3 * t2) * y1 + (t3 - t2) * h * f1)
-
-
-def substep_peaks(peak, d0, v0, d1, v1, h: float) -> None:
-    """Raise each ``peak[j]`` to the largest value on one accepted sub-step
-    of the cubic Hermite through ``d0[j]``, ``d1[j]`` with rates ``v0[j]``,
-    ``v1[j]`` at its two ends, ``h`` [s] apart.
-
-    This is all the per-sub-step work of locating peak penetrations: the
-    end value, and where the rate goes from positive to negative (a maximum
-    inside the sub-step) the one root of the interpolant's derivative there.
-    With ``p(s) = d0 + c1 s + c2 s^2 + c3 s^3`` on ``s`` in [0, 1]
-    (``c1 = h v0``, ``c2 = 3 (d1 - d0) - h (2 v0 + v1)``,
-    ``c3 = -2 (d1 - d0) + h (v0 + v1)``), ``p'(s) = c1 + 2 c2 s + 3 c3 s^2``
-    has ``p'(0) > 0 > p'(1)``, so exactly one root in (0, 1).
-
-    Parameters
-    ----------
-    peak : (n,) float array, updated in place
-    d0, v0, d1, v1 : sequences of n floats
-        Values [m] and rates [m/s] at the sub-step's start and end.
-    h : float
-        The sub-step's length [s].
-    """
-    for j in range(len(peak)):
-        p = d1[j]
-        if v0[j] > 0.0 > v1[j]:
-            dd = d1[j] - d0[j]
-            c1 = h * v0[j]
-            c2 = 3.0 * dd - h * (2.0 * v0[j] + v1[j])
-            c3 = -2.0 * dd + h * (v0[j] + v1[j])
-            # root of 3 c3 s^2 + 2 c2 s + c1 in (0, 1), in the form that does
-            # not cancel (c1 > 0 and the root's sign is fixed)
-            qa, qb = 3.0 * c3, 2.0 * c2
-            disc = qb * qb - 4.0 * qa * c1
-            r = math.sqrt(disc) if disc > 0.0 else 0.0
-            q = -0.5 * (qb + (r if qb >= 0.0 else -r))
-            s = c1 / q if q != 0.0 else 1.0
-            if not 0.0 < s < 1.0 and qa != 0.0:
-                s = q / qa
-            if 0.0 < s < 1.0:
-                p = max(p, d0[j] + s * (c1 + s * (c2 + s * c3)))
-        if p > peak[j]:
-            peak[j] = p
 
 
 @dataclass(frozen=True)
@@ -221,7 +173,7 @@ class TimeStepper(ABC):
         sign0 = s0 > 0
         for _ in range(60):
             mid = 0.5 * (lo + hi)
-            s = switch(t + mid * h, _hermite(y0, f0, y1, f1, h, mid))
+            s = switch(t + mid * h, hermite_value(y0, f0, y1, f1, h, mid))
             if np.any(((s > 0) != sign0) & flipped):
                 hi = mid
             else:

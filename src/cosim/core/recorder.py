@@ -19,6 +19,7 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 
+from cosim.core.hermite import hermite_cubic_max, hermite_point
 from cosim.core.result import SimulationResult
 from cosim.core.series import SeriesFile, SeriesStore, chunk_rows
 
@@ -44,37 +45,6 @@ class Progress(NamedTuple):
     t_end: float
     contacts: int
     elapsed_s: float
-
-
-def _hcubic(d0, v0, d1, v1, h, th):
-    t2, t3 = th * th, th * th * th
-    p = (2 * t3 - 3 * t2 + 1) * d0 + (t3 - 2 * t2 + th) * h * v0 + (-2 * t3 + 3 * t2) * d1 \
-        + (t3 - t2) * h * v1
-    dp = ((6 * t2 - 6 * th) * d0 + (3 * t2 - 4 * th + 1) * h * v0 + (-6 * t2 + 6 * th) * d1
-          + (3 * t2 - 2 * th) * h * v1) / h
-    return p, dp
-
-
-def hermite_cubic_max(d0, v0, d1, v1, h) -> tuple[float, float]:
-    """Largest value of the cubic Hermite interpolant on [0, h] and where it is."""
-    a = 6 * d0 + 3 * h * v0 - 6 * d1 + 3 * h * v1
-    b = -6 * d0 - 4 * h * v0 + 6 * d1 - 2 * h * v1
-    c = h * v0
-    cands = [0.0, 1.0]
-    if abs(a) > 1e-300:
-        disc = b * b - 4 * a * c
-        if disc >= 0:
-            r = math.sqrt(disc)
-            cands += [(-b + r) / (2 * a), (-b - r) / (2 * a)]
-    elif abs(b) > 1e-300:
-        cands.append(-c / b)
-    best = (-math.inf, 0.0)
-    for th in cands:
-        if 0.0 <= th <= 1.0:
-            p, _ = _hcubic(d0, v0, d1, v1, h, th)
-            if p > best[0]:
-                best = (p, th * h)
-    return best
 
 
 class Recorder:
@@ -355,7 +325,7 @@ class Recorder:
         lo, hi = 0.0, 1.0
         for _ in range(60):
             mid = 0.5 * (lo + hi)
-            p, dp = _hcubic(d0, v0, d1, v1, h, mid)
+            p, dp = hermite_point(d0, v0, d1, v1, h, mid)
             if (float(law.switch(p, dp)) > 0) == was_active:
                 lo = mid
             else:

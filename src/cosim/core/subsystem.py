@@ -17,6 +17,8 @@ import numpy as np
 
 from couplers.contact import penetration_c
 
+from cosim.core.hermite import hermite_coefficients
+
 __all__ = ["QUADRATURES", "IMPULSE", "DISSIPATED", "MOMENT", "WORK", "StepInput", "Subsystem", "RigidReference", "SubsystemState", "EmbeddedContact",
            "reparametrised", "hermite_coefficients"]
 
@@ -28,14 +30,6 @@ __all__ = ["QUADRATURES", "IMPULSE", "DISSIPATED", "MOMENT", "WORK", "StepInput"
 #: contact did on the subsystem [J].
 QUADRATURES = ("impulse", "dissipated", "moment", "work")
 IMPULSE, DISSIPATED, MOMENT, WORK = range(len(QUADRATURES))
-
-
-def hermite_coefficients(x0, v0, x1, v1, h: float) -> tuple:
-    """Coefficients in ``s = (t - t0) / h`` (lowest first) of the cubic
-    Hermite through positions ``x0``, ``x1`` with velocities ``v0``, ``v1``
-    at the two ends of a step ``h`` (scalars or arrays, real or complex)."""
-    dx = x1 - x0
-    return x0, h * v0, 3 * dx - h * (2 * v0 + v1), -2 * dx + h * (v0 + v1)
 
 
 def reparametrised(coeffs, a: float, b: float) -> np.ndarray:

@@ -1,61 +1,16 @@
-"""The coupled system: subsystems, and the contacts that link their ports."""
+"""The coupled system: subsystems, and the contacts that link their ports
+(each a :class:`~cosim.core.links.ContactLink`)."""
 from __future__ import annotations
-
-from dataclasses import dataclass
-from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
 from couplers.contact import penetrations
 from couplers.modes import GRASPED
 
-from cosim.core.subsystem import EmbeddedContact, StepInput, Subsystem
-
-if TYPE_CHECKING:
-    from couplers import Connection, PointContact
+from cosim.core.links import PLACEMENTS, ContactLink, HostedContact
+from cosim.core.subsystem import StepInput, Subsystem
 
 __all__ = ["ContactLink", "CoupledSystem", "HostedContact", "PLACEMENTS"]
-
-#: Where a contact's penalty law is evaluated in a co-simulation.
-PLACEMENTS = ("embedded", "coupler")
-
-
-class HostedContact(NamedTuple):
-    """A contact evaluated inside one side's integrator against a moving partner."""
-
-    #: index of the subsystem whose integrator evaluates the contact
-    host: int
-    #: the contact's slot among the host's embedded contacts (its ``aux`` block)
-    slot: int
-    #: index of the partner subsystem, and its port
-    partner: int
-    partner_port: int
-    #: the host's view of the contact (the partner's motion over the step)
-    embedded: EmbeddedContact
-
-
-@dataclass(frozen=True)
-class ContactLink:
-    """A contact between port ``port_a`` of subsystem ``sub_a`` (the point)
-    and port ``port_b`` of subsystem ``sub_b`` (the surface).
-
-    ``placement`` is ``"embedded"`` (evaluated inside one side's integrator:
-    the moving side against a rigid partner, or the side ``host`` against the
-    other side's port moving as the scheme extrapolates or interpolates it)
-    or ``"coupler"`` (the coupling scheme exchanges the force).
-    """
-
-    contact: PointContact
-    sub_a: int
-    port_a: int
-    sub_b: int
-    port_b: int
-    placement: str
-    follow: bool = False
-    host: int | None = None
-    #: grasp and friction beyond the unilateral law (None: a plain contact)
-    connection: Connection | None = None
-
 
 class CoupledSystem:
     """Subsystems and contacts, with the bookkeeping every scheme shares.

@@ -1,4 +1,8 @@
-"""The multibody side as a subsystem: a planar tree stepped by its own integrator."""
+"""The multibody side as a subsystem: a planar tree stepped by its own integrator.
+
+What the compiled kernel ``cosim.sides._multibody_step`` is handed of the
+contact laws and joint effects is in :mod:`cosim.sides.multibody_kernel`.
+"""
 from __future__ import annotations
 
 from typing import TYPE_CHECKING
@@ -6,13 +10,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from couplers import PointContact
-from couplers.laws import (FloresLaw, HertzLaw, HuntCrossleyLaw, KelvinVoigtLaw,
-                           LankaraniNikraveshLaw, LinearLaw, RigidLaw)
 from multibody import TreeModel
 
 from cosim.errors import SimulationError
 from cosim.core.ode import INTEGRATORS, RK4, TimeStepper
 from cosim.sides.kernel import compiled_module
+from cosim.sides.multibody_kernel import kernel_effects, kernel_law
 from cosim.core.subsystem import (DISSIPATED, IMPULSE, MOMENT, QUADRATURES, WORK, EmbeddedContact,
                         StepInput, Subsystem)
 
@@ -20,54 +23,6 @@ if TYPE_CHECKING:
     from multibody import JointEffects
 
 __all__ = ["MultibodySubsystem", "kernel_law"]
-
-
-def kernel_law(law):
-    """``(kind, k, c_or_chi, exponent)`` of a penalty law for the compiled
-    kernel (``cosim.sides._multibody_step``), or None for a law it does not know
-    (a user's own law is stepped by the reference)."""
-    kind = type(law)
-    if kind is LinearLaw:
-        return (0, law.contact_stiffness, 0.0, 1.0)
-    if kind is KelvinVoigtLaw:
-        return (1, law.contact_stiffness, law.contact_damping, 1.0)
-    if kind in (HertzLaw, HuntCrossleyLaw, LankaraniNikraveshLaw, FloresLaw):
-        return (2, law.contact_stiffness, law._chi(), law.exponent)
-    if kind is RigidLaw:
-        return (3, 0.0, 0.0, 1.0)
-    return None
-
-
-def kernel_effects(effects: JointEffects | None):
-    """Joint effects as the compiled kernel takes them:
-    ``(stiffness, rest, damping, drives)``, or None for no effects; raises
-    ``TypeError`` for a drive or reference the kernel does not know."""
-    if effects is None:
-        return None
-    # where a tree has effects, multibody.effects is loaded already (a scene built them)
-    from multibody.effects import (ConstantTorque, MinimumJerk, PDTracking, Sinusoid, Table,
-                                   TorqueTable)
-    drives = []
-    for d in effects.drives:
-        ref_kind, ref_par, ts, vs = 0, (0.0,) * 4, (), ()
-        if type(d) is ConstantTorque:
-            kind, gains = 0, (d.torque, 0.0, 0.0)
-        elif type(d) is TorqueTable:
-            kind, gains, ts, vs = 1, (0.0,) * 3, d.torque.times, d.torque.values
-        elif type(d) is PDTracking:
-            kind, gains, r = 2, (d.kp, d.kd, d.max_torque), d.reference
-            if type(r) is Table:
-                ts, vs = r.times, r.values
-            elif type(r) is MinimumJerk:
-                ref_kind, ref_par = 1, (r.start, r.end, r.t_start, r.t_end)
-            elif type(r) is Sinusoid:
-                ref_kind, ref_par = 2, (r.amplitude, r.frequency, r.phase, r.offset)
-            else:
-                raise TypeError(f"reference {type(r).__name__}")
-        else:
-            raise TypeError(f"drive {type(d).__name__}")
-        drives.append((d.joint, kind, gains, ref_kind, ref_par, ts, vs))
-    return effects.stiffness, effects.rest, effects.damping, drives
 
 
 #: integrators whose steps the compiled kernel takes (RK4) or feeds (adaptive)

@@ -1,4 +1,8 @@
-"""Base classes of coupling schemes."""
+"""Base classes of coupling schemes: :class:`CouplingScheme` (options,
+counters) and :class:`CoSimulationScheme`, the macro-step loop the
+co-simulation schemes share.  Its macro-step control is in
+:mod:`cosim.core.schemes.step_control`, the extrapolation of the inputs over
+a step in :mod:`cosim.core.schemes.extrapolation`."""
 from __future__ import annotations
 
 import math
@@ -11,7 +15,9 @@ from cosim.core import preflight
 from cosim.errors import CouplingError, UnsafeStepError
 from cosim.core.guard import GuardError, nonfinite_cause
 from cosim.core.preflight import stiffest_normal
-from cosim.core.subsystem import hermite_coefficients, reparametrised
+from cosim.core.schemes.extrapolation import InputExtrapolation, extrapolation_coeffs
+from cosim.core.schemes.step_control import MacroStepControl
+from cosim.core.subsystem import reparametrised
 
 __all__ = ["Option", "CouplingScheme", "CoSimulationScheme", "UnsafeStepError", "CouplingError",
            "extrapolation_coeffs"]
@@ -32,24 +38,6 @@ def _pos(v):
 
 #: j + 1 for the rows j of force polynomials: int s^j ds over [0, 1] is 1 / (j + 1)
 _POWERS_PLUS_ONE = np.arange(1.0, 9.0)[:, None]
-
-
-
-
-def extrapolation_coeffs(hist: list, order: int, ratio: float = 1.0) -> np.ndarray:
-    """Coefficients (order + 1, n) of the force over the next step, in the
-    step's normalised time ``s`` in [0, 1], extrapolated from the history
-    ``[..., f_{n-1}, f_n]`` at equal spacing; ``ratio`` is the next step's
-    length over the previous one's."""
-    p = min(order, len(hist) - 1)
-    fn = hist[-1]
-    if p == 0:
-        return fn[None, :]
-    if p == 1:
-        return np.stack([fn, (fn - hist[-2]) * ratio])
-    f1, f2 = hist[-2], hist[-3]
-    return np.stack([fn, 0.5 * (3 * fn - 4 * f1 + f2) * ratio,
-                     0.5 * (fn - 2 * f1 + f2) * ratio * ratio])
 
 
 def _substeps_ok(v) -> bool:
@@ -107,7 +95,7 @@ class CouplingScheme(ABC):
         """Advance the system to ``t_end``, recording as it goes."""
 
 
-class CoSimulationScheme(CouplingScheme):
+class CoSimulationScheme(MacroStepControl, InputExtrapolation, CouplingScheme):
     """Macro-step loop shared by the co-simulation schemes.
 
     Contacts placed ``coupler`` are exchanged as forces: at each
@@ -296,221 +284,16 @@ class CoSimulationScheme(CouplingScheme):
     _h_adapt = None         # step in contact under interface error control
     _f_scale = None         # largest force seen per contact [N]
 
-    def _predicted_end_forces(self, system, ratio):
-        """Force each coupler contact is predicted to carry at the step's
-        end: the extrapolated force at ``s = 1``.  (A hosted contact's
-        prediction is the force its host saw at the step's end, against the
-        partner's extrapolated motion; it is read after the step.)"""
-        return np.sum(self._extrapolated(ratio), axis=0)
-
-    def _error_control(self, f, predicted, h):
-        """Interface error estimate (predictor against corrector): the
-        largest difference between the force each exchanged contact was
-        predicted to carry at the step's end and the force it carries,
-        relative to the largest force it has carried so far.  Returns a
-        shorter step to retry with when it exceeds ``interface_tolerance``,
-        else None, and sets the next contact step from it (Schierz, Arnold
-        and Clauss 2012: elementary controller on the extrapolation error,
-        whose order is ``extrapolation_order + 1``).  The step in contact
-        stays between ``contact_step / 64`` and ``contact_step``."""
-        c = self._system.exchanged
-        if self._f_scale is None:
-            self._f_scale = np.zeros(self._system.n_rows)
-        self._f_scale[c] = np.maximum(self._f_scale[c], np.abs(f[c]))
-        scale = np.maximum(self._f_scale[c], 1e-300)
-        err = float(np.max(np.abs(f[c] - predicted[c]) / scale)) if len(c) else 0.0
-        if not np.any(self._f_scale[c] > 0):
-            return None
-        tol, p = self.interface_tolerance, self.extrapolation_order + 1
-        fac = 2.0 if err == 0 else min(2.0, max(0.2, 0.9 * (tol / err) ** (1.0 / (p + 1))))
-        floor = self.contact_step / 64.0
-        if err > tol and h > floor * (1 + 1e-9):
-            return max(fac * h, floor)
-        # never above contact_step: an end-point estimate cannot see a
-        # contact that opens and closes again inside a longer step
-        self._h_adapt = min(max(fac * h, floor), self.contact_step)
-        return None
-
-    def _controlled_step(self, d, dd, f, remaining):
-        """The next macro step: the onset found by a rejected step, else
-        ``contact_step`` while a coupler contact is closed or would close
-        within a long step (penetration predicted linearly), else
-        ``macro_step``."""
-        if self._h_next is not None:
-            h, self._h_next = self._h_next, None
-            return min(h, remaining)
-        c = self._system.exchanged
-        H = self.macro_step
-        # short steps while a contact is closed, was closed a step ago (so the
-        # extrapolation history is clear of force before the step grows), or
-        # would close within a long step
-        recent = len(self._hist) > 1 and np.any(self._hist[-2][c] != 0)
-        normal = c[c < self._system.n_contacts]
-        if np.any(self._system.in_touch(f)[self._system.row_contact[c]]) or recent \
-                or np.any(d[normal] + H * dd[normal] > 0):
-            h = self.contact_step
-            if self.interface_tolerance and self._h_adapt is not None:
-                h = self._h_adapt
-            return min(h, remaining)
-        self._h_adapt = None            # contacts open: start again from contact_step
-        return min(H, remaining)
-
-    def _onset(self, d0, dd0, d1, dd1, t, h):
-        """Length of the step to retry after an exchanged contact closed
-        inside a step of length ``h``, and whether it ends at the onset;
-        None if no contact closed in the step.
-
-        A hosted contact's onset was located by its host's integrator: the
-        retried step ends there and is accepted.  For a coupler contact, the
-        end state of the rejected step already holds the contact's response,
-        so the onset is predicted from the free motion before it:
-        ``d0 + dd0 tau + a tau^2 / 2 = 0``, the relative acceleration ``a``
-        from the last two outputs (exact under a constant push).  When every
-        closing contact has a root inside the step, the retried step ends
-        at the earliest and is accepted as it is.  Otherwise (no history
-        yet, or no root) it is half the step, or the earliest root if
-        sooner, and it is checked again like any long step: a guess must
-        not carry a contact through its onset with the force still at zero."""
-        system = self._system
-        hosted = [ts - t for c, (host, slot, _, _, _) in system.hosted.items()
-                  for ts, j, on in system.subsystems[host].switch_log if j == slot and on]
-        if hosted:
-            return max(min(hosted), 1e-12 * h), True
-        c = system.coupler
-        closing = c[(d0[c] <= 0) & (d1[c] > 0)]
-        if not len(closing):
-            return None
-        found, all_found = [], True
-        for i in closing:
-            a = 0.0
-            if self._dd_prev is not None:
-                a = (dd0[i] - self._dd_prev[i]) / self._h_prev_step
-            roots = np.roots([0.5 * a, dd0[i], d0[i]]) if a else (
-                [-d0[i] / dd0[i]] if dd0[i] > 0 else [])
-            tau = [r.real for r in np.atleast_1d(roots) if abs(r.imag) < 1e-12 and
-                   0 < r.real < h]
-            found += tau
-            all_found = all_found and bool(tau)
-        if all_found:
-            return max(min(found), 1e-12 * h), True
-        return max(min([0.5 * h, *found]), 1e-12 * h), False
-
-    def _touched(self, stepped) -> bool:
-        """Whether a long step gave a coupler contact open at its start a
-        force: the contact touched inside the step, though it may be open
-        again at the end (Gauss-Seidel's force interpolated towards a partner
-        that has stepped, an implicit iterate), and the step must be
-        shortened like one over an onset."""
-        r = self._system.coupler_rows
-        return bool(np.any((self._f[r] == 0.0) & (stepped[r] != 0.0)))
-
-    def _overshot(self, d0, d1, dd1, h):
-        """Check a step aimed at a predicted coupler onset: the prediction
-        (free motion with a constant relative acceleration) can fall late when
-        a side vibrates, and the step then carries the contact closed with no
-        force in it.  When a coupler contact closed more than ``contact_step``
-        before the step's end (its penetration over its rate, the time since
-        touch-down at that rate), returns half the step, to be checked again
-        like any long step; else None."""
-        c = self._system.coupler
-        late = (d0[c] <= 0) & (d1[c] > np.maximum(dd1[c], 0.0) * self.contact_step)
-        if np.any(late):
-            return 0.5 * h, False
-        return None
-
-    def _starting_history(self, system, d, dd, f, H):
-        """Force history to extrapolate the first steps from.  A contact
-        closed at the start has a force rate ``df/dt = f'(d) d'`` (taken by a
-        central difference of the law along the motion), so a point one
-        step back, ``f - H df/dt``, lets the first window extrapolate
-        linearly instead of holding the force: held, its O(H) error would
-        cap quadratic extrapolation at second order from a generic start."""
-        if self.extrapolation_order == 0 or not np.any(f):
-            return [f]
-        rate = np.zeros_like(f)
-        for c in np.flatnonzero(f[:system.n_contacts]):
-            if system.links[c].connection is not None:
-                continue                # a grasp or friction: held for the first step
-            law = system.links[c].contact.law
-            eps = 1e-6 * max(abs(d[c]), 1e-12)
-            fp = float(law.force_active(d[c] + eps, dd[c]))
-            fm = float(law.force_active(d[c] - eps, dd[c]))
-            rate[c] = (fp - fm) / (2 * eps) * dd[c]
-        return [f - H * rate, f]
-
     @staticmethod
     def _internal(system):
         led = [s.ledger() for s in system.subsystems]
         return sum(a for a, _ in led), sum(b for _, b in led)
-
-    def _extrapolated(self, ratio: float) -> np.ndarray:
-        """Force polynomials for the next step.
-
-        When the step grows (``ratio > 1``, as step control lengthens it after
-        a release), a contact open at ``t`` is held at zero: extrapolating its
-        falling force over the longer step would pull hard.  With equal steps
-        the extrapolation is kept: its small overshoot into tension after
-        release offsets its lag before, and holding it would double the
-        rebound error of linear extrapolation."""
-        co = extrapolation_coeffs(self._hist, self.extrapolation_order, ratio)
-        if ratio > 1.0 + 1e-9:
-            co[1:, self._hist[-1] == 0.0] = 0.0
-        return co
-
-    def _set_partner_motion(self, system, c: int, t: float, h: float, after=None) -> None:
-        """Give hosted contact ``c``'s host the partner port's motion over
-        ``[t, t + h]``: the cubic Hermite between its outputs at ``t`` and
-        ``after`` (the partner's outputs at ``t + h``, when it has already
-        stepped), else extrapolated from ``t``: ``x + v tau`` at order 0,
-        ``+ a tau^2 / 2`` at order >= 1 with ``a`` from the last two
-        velocities."""
-        _, _, partner, port, emb = system.hosted[c]
-        pos, vel = self._outs[partner]
-        x0, v0 = complex(*pos[port]), complex(*vel[port])
-        if after is not None:
-            x1, v1 = complex(*after[0][port]), complex(*after[1][port])
-            emb.set_motion(t, h, hermite_coefficients(x0, v0, x1, v1, h))
-            return
-        a = 0j
-        if self.extrapolation_order > 0 and self._outs_prev is not None:
-            a = (v0 - complex(*self._outs_prev[partner][1][port])) / self._h_prev_step
-        emb.set_motion(t, h, (x0, h * v0, 0.5 * a * h * h))
 
     @staticmethod
     def _hosted_impulses(system) -> dict:
         """Impulse so far of each hosted contact, before a step."""
         return {c: system.subsystems[host].embedded_quadratures()[slot, 0]
                 for c, (host, slot, _, _, _) in system.hosted.items()}
-
-    def _predicted_outputs(self, system, s: int, tau: float, t: float, h: float, after: dict,
-                           own_ahead: float = 0.0):
-        """Every subsystem's port outputs at ``tau`` in ``[t, t + h]`` as
-        subsystem ``s`` sees them: its own now (moved on by ``own_ahead``
-        seconds at its velocity), a subsystem that has stepped to ``t + h``
-        by cubic Hermite between ``t`` and ``t + h``, one that has not
-        extrapolated from ``t`` (with the acceleration of the last two
-        velocities at order >= 1), a rigid one as it is."""
-        out = []
-        sg = (tau - t) / h
-        for p, sub in enumerate(system.subsystems):
-            if p == s or sub.rigid:
-                pos, vel = sub.outputs(sub.t, sub.x)
-                if p == s and own_ahead:
-                    pos = pos + own_ahead * vel
-                out.append((pos, vel))
-                continue
-            x0, v0 = self._outs[p]
-            if p in after:
-                _, c1, c2, c3 = hermite_coefficients(x0, v0, *after[p], h)
-                out.append((x0 + sg * (c1 + sg * (c2 + sg * c3)),
-                            (c1 + sg * (2 * c2 + 3 * sg * c3)) / h))
-                continue
-            a = 0.0
-            if self.extrapolation_order > 0 and self._outs_prev is not None:
-                a = (v0 - self._outs_prev[p][1]) / self._h_prev_step
-            dt = tau - t
-            out.append((x0 + dt * v0 + 0.5 * dt * dt * a, v0 + dt * a))
-        return out
 
     def _rows_of(self, system, s: int) -> list:
         """The coupler rows (normal, then tangential) with subsystem ``s`` on a side."""

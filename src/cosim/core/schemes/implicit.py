@@ -7,7 +7,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from cosim.core.subsystem import hermite_coefficients
+from cosim.core.hermite import hermite_coefficients
 from .base import CoSimulationScheme, CouplingError, Option, _pos
 
 __all__ = ["Implicit", "Aitken", "IQNILS", "ACCELERATIONS"]

@@ -1,15 +1,17 @@
-"""The `cosim` command line.  The only module that talks to the terminal."""
+"""The sub-commands of `cosim`: each ``_cmd_NAME(args)`` runs one and returns
+its exit status (the parser in :mod:`cosim.cli.parser` names them)."""
 from __future__ import annotations
 
-import argparse
 import contextlib
 import math
 import signal
 import sys
-import warnings
 from pathlib import Path
 
-__all__ = ["main"]
+from cosim.cli.signals import _StopOnSignals, _stop_code
+from cosim.cli.terminal import _on_terminal, _progress_line, _raw
+
+__all__: list[str] = []
 
 
 def _print_summary(s: dict, out: Path | None) -> None:
@@ -53,91 +55,6 @@ def _print_summary(s: dict, out: Path | None) -> None:
         print(f"  message: {s['message']}")
     if out is not None:
         print(f"  wrote {out / 'summary.json'}, {out / 'series.npz'} and {out / 'scene.toml'}")
-
-
-#: wall-clock time a run goes on before its progress line appears [s]
-PROGRESS_DELAY_S = 1.0
-
-
-class _ProgressLine:
-    """Renders :class:`cosim.core.recorder.Progress` on one carriage-return line of
-    ``stream``: done fraction, simulated time, rate (simulated seconds per
-    wall second), contact intervals begun, and the time left.  Nothing shows
-    for a run shorter than :data:`PROGRESS_DELAY_S`; :meth:`close` wipes the
-    line so the summary starts clean."""
-
-    def __init__(self, stream):
-        self.stream = stream
-        self._width = 0
-
-    def __call__(self, p) -> None:
-        if p.elapsed_s < PROGRESS_DELAY_S:
-            return
-        rate = p.t / p.elapsed_s if p.elapsed_s > 0 else 0.0
-        frac = min(max(p.t / p.t_end, 0.0), 1.0) if p.t_end > 0 else 1.0
-        left = f"~{(p.t_end - p.t) / rate:.0f} s left" if rate > 0 else "time left unknown"
-        line = (f"{100 * frac:3.0f}% [{'#' * int(20 * frac):<20}] t {p.t:.4g}/{p.t_end:.4g} s, "
-                f"{rate:.3g} s/s, contacts {p.contacts}, {left}")
-        self.stream.write("\r" + line.ljust(self._width))
-        self.stream.flush()
-        self._width = len(line)
-
-    def close(self) -> None:
-        if self._width:
-            self.stream.write("\r" + " " * self._width + "\r")
-            self.stream.flush()
-
-
-def _on_terminal() -> bool:
-    return sys.stdout.isatty() and sys.stderr.isatty()
-
-
-def _progress_line(quiet: bool):
-    """A progress renderer, or None when quiet or not talking to a terminal."""
-    if quiet or not _on_terminal():
-        return None
-    return _ProgressLine(_raw(sys.stderr))
-
-
-#: signals that stop a run as Ctrl-C does (a scheduler's stop, `timeout`, a closed terminal)
-STOP_SIGNALS = ("SIGTERM", "SIGHUP")
-
-
-class _StopOnSignals:
-    """While in effect, SIGTERM and SIGHUP raise :class:`cosim.errors.SignalStop`
-    (a KeyboardInterrupt) once, as SIGINT raises KeyboardInterrupt: the run
-    writes its outputs up to then.  Repeats of them are ignored meanwhile, so
-    that the outputs are written whole; the previous handlers come back on
-    exit."""
-
-    def __enter__(self):
-        import signal
-        self._old = {}
-        for name in STOP_SIGNALS:
-            num = getattr(signal, name, None)
-            if num is not None:
-                try:
-                    self._old[num] = signal.signal(num, self._handler)
-                except ValueError:                   # not the main thread: leave them be
-                    break
-        return self
-
-    def _handler(self, signum, frame):
-        import signal
-        from cosim.errors import SignalStop
-        for num in self._old:
-            signal.signal(num, signal.SIG_IGN)       # once; the run is stopping
-        raise SignalStop(signum)
-
-    def __exit__(self, *exc):
-        import signal
-        for num, old in self._old.items():
-            signal.signal(num, old)
-
-
-def _stop_code(exc: BaseException) -> int:
-    """Exit status of a run stopped by ``exc``: 128 + the signal (130 for Ctrl-C)."""
-    return 128 + getattr(exc, "signum", 2)
 
 
 def _cmd_run(args) -> int:
@@ -246,13 +163,6 @@ def _cmd_info(args) -> int:
             if "sampling_note" in c:
                 print(f"    note: {c['sampling_note']}")
     return 0
-
-
-def _floats(text: str) -> list[float]:
-    try:
-        return [float(x) for x in text.split(",") if x.strip()]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected numbers separated by commas, got {text!r}")
 
 
 def _machine() -> str:
@@ -494,183 +404,3 @@ class _SweepProgress:
     def close(self) -> None:
         if self._bar is not None:
             self._bar.close()
-
-
-def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="cosim", description="Co-simulation of impacts between "
-                                "robots and vibrating structures.")
-    sub = p.add_subparsers(dest="command", required=True)
-    r = sub.add_parser("run", help="run a scene, print a summary, write summary.json and "
-                                   "series.npz")
-    r.add_argument("scene", help="scene file (TOML)")
-    r.add_argument("--variant", help="apply the scene's [variants.NAME] table")
-    r.add_argument("--scheme", help="coupling scheme (monolithic, jacobi, gauss_seidel, "
-                                    "implicit)")
-    r.add_argument("--set", action="append", metavar="KEY=VALUE",
-                   help="override a scene value (after the variant); repeatable")
-    r.add_argument("--out", help="output directory (default runs/SCENE[-VARIANT])")
-    r.add_argument("--overwrite", action="store_true",
-                   help="replace a run that the output directory already holds")
-    r.add_argument("--quiet", action="store_true",
-                   help="no progress line (it shows only on a terminal, after a second)")
-    r.set_defaults(func=_cmd_run)
-    i = sub.add_parser("info", help="what a run will meet: DOFs, frequencies, stable steps")
-    i.add_argument("scene", help="scene file (TOML)")
-    i.add_argument("--variant")
-    i.add_argument("--set", action="append", metavar="KEY=VALUE")
-    i.add_argument("--json", action="store_true", help="print JSON")
-    i.set_defaults(func=_cmd_info)
-    bn = sub.add_parser("bench", help="work-precision: error against CPU time over schemes "
-                                      "and steps, against a cached monolithic reference")
-    bn.add_argument("scene")
-    bn.add_argument("--variant")
-    bn.add_argument("--schemes", type=lambda t: [x for x in t.split(",") if x],
-                    help="co-simulation schemes, comma separated")
-    bn.add_argument("--steps", type=_floats, help="step sizes [s], comma separated")
-    bn.add_argument("--contact", default="C", help="contact compared (default C)")
-    bn.add_argument("--joint", default="robot/arm",
-                    help="SUBSYSTEM/JOINT whose rate at the last release is compared")
-    bn.add_argument("--set", action="append", metavar="KEY=VALUE")
-    bn.add_argument("--out")
-    bn.set_defaults(func=_cmd_bench)
-    sw = sub.add_parser("sweep", help="a parameter study: every combination of variants "
-                                      "and values, on a process pool or a Dask cluster; one "
-                                      "table")
-    sw.add_argument("scene", nargs="?", help="scene file (TOML); not with --study")
-    sw.add_argument("--study", help="a study file, or the name of one in studies/ "
-                                    "(fig8_stiffness, fig11_chain_mass)")
-    sw.add_argument("--variants", help="variants, comma separated (default: the scene's)")
-    sw.add_argument("--set", action="append", metavar="KEY=V1,V2,...",
-                    help="values of a scene key (TOML; commas inside [] and quotes stay); "
-                         "repeatable: every combination runs")
-    sw.add_argument("--scheme", help="coupling scheme of every point")
-    sw.add_argument("--workers", type=int, help="local processes (default: the CPUs; 1 runs "
-                                                "here); with --scheduler local, Dask workers")
-    sw.add_argument("--scheduler", metavar="ADDRESS",
-                    help="run on a Dask distributed cluster (tcp://host:8786), or `local` to "
-                         "start one here; needs the dask extra")
-    sw.add_argument("--out", help="sweep directory (default runs/SCENE-sweep or runs/STUDY)")
-    sw.add_argument("--timeout", type=float, metavar="SECONDS",
-                    help="most wall-clock seconds a point may run; a point past it is "
-                         "stopped and recorded with status `timeout` (a study's `timeout` "
-                         "key otherwise)")
-    sw.add_argument("--retry-failed", action="store_true",
-                    help="run the points that failed or were refused before again")
-    sw.add_argument("--contact", help="contact whose regime is classified and drawn (default: "
-                                      "the scene's only contact, else its only contact of a "
-                                      "multibody on a structure)")
-    sw.add_argument("--joint", help="SUBSYSTEM/JOINT of the striker (default: the joint of the "
-                                    "body that carries the contact's point)")
-    sw.add_argument("--no-plot", action="store_true", help="write the table only")
-    sw.add_argument("--quiet", action="store_true", help="no progress")
-    sw.set_defaults(func=_cmd_sweep)
-    pl = sub.add_parser("plot", help="draw a run directory (finished or interrupted): "
-                                     "penetrations, forces, velocities, energy")
-    pl.add_argument("run_dir", help="directory written by `cosim run`")
-    pl.add_argument("--format", choices=("png", "svg", "pdf"), default="png",
-                    help="figure format (default png)")
-    pl.add_argument("--animate", action="store_true",
-                    help="also write an animation of the robot and the structure (GIF with "
-                         "Pillow, else MP4 with ffmpeg); needs the run's scene.toml")
-    pl.add_argument("--frames", type=int, default=200,
-                    help="most frames in the animation (default 200)")
-    pl.add_argument("--magnify", type=float, default=1.0,
-                    help="scale of the structures' deflection in the animation (default 1)")
-    pl.add_argument("--out", help="output directory (default RUN_DIR)")
-    pl.set_defaults(func=_cmd_plot)
-    v = sub.add_parser("verify", help="run the verification cases; exit 1 if any fails")
-    v.add_argument("--cases", default="cases", help="folder of the scene files (default cases)")
-    v.add_argument("--hard", action="store_true",
-                   help="also run the hard-case matrix (three_mass f1000 and ms0.01, every "
-                        "scheme and placement of C, steps up to ten times the stability limit)")
-    v.set_defaults(func=_cmd_verify)
-    return p
-
-
-#: control characters (ANSI escapes, carriage returns, bidirectional overrides) and
-#: how the terminal is shown them: escaped, never raw
-_CONTROL = {c: f"\\x{c:02x}" for c in (*range(32), *range(127, 160)) if c not in (9, 10)}
-_CONTROL.update({c: f"\\u{c:04x}" for c in (0x200E, 0x200F, *range(0x202A, 0x202F),
-                                            *range(0x2066, 0x206A))})
-
-
-class _Printable:
-    """A text stream that shows control characters escaped (``\\x1b``), so no
-    name, path or message from a scene file can drive the terminal.  ``raw``
-    is the stream itself, for the progress line's own carriage returns."""
-
-    def __init__(self, stream):
-        self.raw = stream
-
-    def write(self, text: str) -> int:
-        return self.raw.write(text.translate(_CONTROL))
-
-    def __getattr__(self, name):
-        return getattr(self.raw, name)
-
-
-def _raw(stream):
-    return getattr(stream, "raw", stream) if isinstance(stream, _Printable) else stream
-
-
-def main(argv=None) -> int:
-    stdout, stderr = sys.stdout, sys.stderr
-    sys.stdout, sys.stderr = _Printable(stdout), _Printable(stderr)
-    try:
-        return _main(argv)
-    finally:
-        sys.stdout, sys.stderr = stdout, stderr
-
-
-#: exit status when the reader of our output went away (`cosim run ... | head`): 128 + SIGPIPE
-EXIT_BROKEN_PIPE = 141
-
-
-def _main(argv) -> int:
-    args = build_parser().parse_args(argv)
-    from cosim.sides.kernel import kernel_choice
-    try:                                 # a bad COSIM_KERNEL is said before anything runs
-        kernel_choice()
-    except ValueError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    from cosim.errors import OutputError, OutputExistsError
-    from cosim.scene.load import SceneError
-    from cosim.core.schemes import UnsafeStepError
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("always")
-        warnings.showwarning = lambda msg, *a, **k: print(f"warning: {msg}", file=sys.stderr)
-        try:
-            try:
-                code = args.func(args)
-                sys.stdout.flush()             # a closed pipe shows here, not at exit
-                return code
-            except (SceneError, UnsafeStepError, OutputExistsError, OutputError) as exc:
-                print(f"error: {exc}", file=sys.stderr)
-                return 2
-            except KeyboardInterrupt as exc:   # outside a run (a run's own is handled there)
-                name = getattr(exc, "signal_name", None)
-                print("error: interrupted" + (f" ({name})" if name else ""), file=sys.stderr)
-                return _stop_code(exc)
-        except BrokenPipeError:
-            _quiet_pipes()
-            return EXIT_BROKEN_PIPE
-
-
-def _quiet_pipes() -> None:
-    """After a reader closed our pipe: point stdout and stderr at the null
-    device, so that nothing else (not even the interpreter's flush at exit)
-    fails on it."""
-    import os
-    devnull = os.open(os.devnull, os.O_WRONLY)
-    for stream in (sys.__stdout__, sys.__stderr__):
-        try:
-            os.dup2(devnull, stream.fileno())
-        except (OSError, ValueError, AttributeError):
-            pass
-    os.close(devnull)
-
-
-if __name__ == "__main__":  # pragma: no cover - `python -m cosim.cli`
-    sys.exit(main())

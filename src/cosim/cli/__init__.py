@@ -1,0 +1,63 @@
+"""The `cosim` command line.  The only package that talks to the terminal.
+
+:func:`main` is the console script (``cosim = "cosim.cli:main"``) and runs
+under ``python -m cosim.cli`` too.  The parser is in :mod:`cosim.cli.parser`,
+the sub-commands in :mod:`cosim.cli.commands`, the progress line and the
+escaping of control characters in :mod:`cosim.cli.terminal`, the stop on
+SIGTERM and SIGHUP in :mod:`cosim.cli.signals`.
+"""
+from __future__ import annotations
+
+import sys
+import warnings
+
+from cosim.cli.parser import build_parser
+from cosim.cli.signals import _stop_code
+from cosim.cli.terminal import _Printable, _quiet_pipes
+
+__all__ = ["main", "build_parser"]
+
+
+def main(argv=None) -> int:
+    stdout, stderr = sys.stdout, sys.stderr
+    sys.stdout, sys.stderr = _Printable(stdout), _Printable(stderr)
+    try:
+        return _main(argv)
+    finally:
+        sys.stdout, sys.stderr = stdout, stderr
+
+
+#: exit status when the reader of our output went away (`cosim run ... | head`): 128 + SIGPIPE
+EXIT_BROKEN_PIPE = 141
+
+
+def _main(argv) -> int:
+    args = build_parser().parse_args(argv)
+    from cosim.sides.kernel import kernel_choice
+    try:                                 # a bad COSIM_KERNEL is said before anything runs
+        kernel_choice()
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    from cosim.errors import OutputError, OutputExistsError
+    from cosim.scene.load import SceneError
+    from cosim.core.schemes import UnsafeStepError
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("always")
+        warnings.showwarning = lambda msg, *a, **k: print(f"warning: {msg}", file=sys.stderr)
+        try:
+            try:
+                code = args.func(args)
+                sys.stdout.flush()             # a closed pipe shows here, not at exit
+                return code
+            except (SceneError, UnsafeStepError, OutputExistsError, OutputError) as exc:
+                print(f"error: {exc}", file=sys.stderr)
+                return 2
+            except KeyboardInterrupt as exc:   # outside a run (a run's own is handled there)
+                name = getattr(exc, "signal_name", None)
+                print("error: interrupted" + (f" ({name})" if name else ""), file=sys.stderr)
+                return _stop_code(exc)
+        except BrokenPipeError:
+            _quiet_pipes()
+            return EXIT_BROKEN_PIPE

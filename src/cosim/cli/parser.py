@@ -1,0 +1,109 @@
+"""The argument parser of `cosim`: one sub-command each for run, info, bench,
+sweep, plot and verify, each bound to its ``_cmd_NAME`` in
+:mod:`cosim.cli.commands`."""
+from __future__ import annotations
+
+import argparse
+
+from cosim.cli.commands import (_cmd_bench, _cmd_info, _cmd_plot, _cmd_run, _cmd_sweep,
+                                _cmd_verify)
+
+__all__ = ["build_parser"]
+
+
+def _floats(text: str) -> list[float]:
+    try:
+        return [float(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected numbers separated by commas, got {text!r}")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="cosim", description="Co-simulation of impacts between "
+                                "robots and vibrating structures.")
+    sub = p.add_subparsers(dest="command", required=True)
+    r = sub.add_parser("run", help="run a scene, print a summary, write summary.json and "
+                                   "series.npz")
+    r.add_argument("scene", help="scene file (TOML)")
+    r.add_argument("--variant", help="apply the scene's [variants.NAME] table")
+    r.add_argument("--scheme", help="coupling scheme (monolithic, jacobi, gauss_seidel, "
+                                    "implicit)")
+    r.add_argument("--set", action="append", metavar="KEY=VALUE",
+                   help="override a scene value (after the variant); repeatable")
+    r.add_argument("--out", help="output directory (default runs/SCENE[-VARIANT])")
+    r.add_argument("--overwrite", action="store_true",
+                   help="replace a run that the output directory already holds")
+    r.add_argument("--quiet", action="store_true",
+                   help="no progress line (it shows only on a terminal, after a second)")
+    r.set_defaults(func=_cmd_run)
+    i = sub.add_parser("info", help="what a run will meet: DOFs, frequencies, stable steps")
+    i.add_argument("scene", help="scene file (TOML)")
+    i.add_argument("--variant")
+    i.add_argument("--set", action="append", metavar="KEY=VALUE")
+    i.add_argument("--json", action="store_true", help="print JSON")
+    i.set_defaults(func=_cmd_info)
+    bn = sub.add_parser("bench", help="work-precision: error against CPU time over schemes "
+                                      "and steps, against a cached monolithic reference")
+    bn.add_argument("scene")
+    bn.add_argument("--variant")
+    bn.add_argument("--schemes", type=lambda t: [x for x in t.split(",") if x],
+                    help="co-simulation schemes, comma separated")
+    bn.add_argument("--steps", type=_floats, help="step sizes [s], comma separated")
+    bn.add_argument("--contact", default="C", help="contact compared (default C)")
+    bn.add_argument("--joint", default="robot/arm",
+                    help="SUBSYSTEM/JOINT whose rate at the last release is compared")
+    bn.add_argument("--set", action="append", metavar="KEY=VALUE")
+    bn.add_argument("--out")
+    bn.set_defaults(func=_cmd_bench)
+    sw = sub.add_parser("sweep", help="a parameter study: every combination of variants "
+                                      "and values, on a process pool or a Dask cluster; one "
+                                      "table")
+    sw.add_argument("scene", nargs="?", help="scene file (TOML); not with --study")
+    sw.add_argument("--study", help="a study file, or the name of one in studies/ "
+                                    "(fig8_stiffness, fig11_chain_mass)")
+    sw.add_argument("--variants", help="variants, comma separated (default: the scene's)")
+    sw.add_argument("--set", action="append", metavar="KEY=V1,V2,...",
+                    help="values of a scene key (TOML; commas inside [] and quotes stay); "
+                         "repeatable: every combination runs")
+    sw.add_argument("--scheme", help="coupling scheme of every point")
+    sw.add_argument("--workers", type=int, help="local processes (default: the CPUs; 1 runs "
+                                                "here); with --scheduler local, Dask workers")
+    sw.add_argument("--scheduler", metavar="ADDRESS",
+                    help="run on a Dask distributed cluster (tcp://host:8786), or `local` to "
+                         "start one here; needs the dask extra")
+    sw.add_argument("--out", help="sweep directory (default runs/SCENE-sweep or runs/STUDY)")
+    sw.add_argument("--timeout", type=float, metavar="SECONDS",
+                    help="most wall-clock seconds a point may run; a point past it is "
+                         "stopped and recorded with status `timeout` (a study's `timeout` "
+                         "key otherwise)")
+    sw.add_argument("--retry-failed", action="store_true",
+                    help="run the points that failed or were refused before again")
+    sw.add_argument("--contact", help="contact whose regime is classified and drawn (default: "
+                                      "the scene's only contact, else its only contact of a "
+                                      "multibody on a structure)")
+    sw.add_argument("--joint", help="SUBSYSTEM/JOINT of the striker (default: the joint of the "
+                                    "body that carries the contact's point)")
+    sw.add_argument("--no-plot", action="store_true", help="write the table only")
+    sw.add_argument("--quiet", action="store_true", help="no progress")
+    sw.set_defaults(func=_cmd_sweep)
+    pl = sub.add_parser("plot", help="draw a run directory (finished or interrupted): "
+                                     "penetrations, forces, velocities, energy")
+    pl.add_argument("run_dir", help="directory written by `cosim run`")
+    pl.add_argument("--format", choices=("png", "svg", "pdf"), default="png",
+                    help="figure format (default png)")
+    pl.add_argument("--animate", action="store_true",
+                    help="also write an animation of the robot and the structure (GIF with "
+                         "Pillow, else MP4 with ffmpeg); needs the run's scene.toml")
+    pl.add_argument("--frames", type=int, default=200,
+                    help="most frames in the animation (default 200)")
+    pl.add_argument("--magnify", type=float, default=1.0,
+                    help="scale of the structures' deflection in the animation (default 1)")
+    pl.add_argument("--out", help="output directory (default RUN_DIR)")
+    pl.set_defaults(func=_cmd_plot)
+    v = sub.add_parser("verify", help="run the verification cases; exit 1 if any fails")
+    v.add_argument("--cases", default="cases", help="folder of the scene files (default cases)")
+    v.add_argument("--hard", action="store_true",
+                   help="also run the hard-case matrix (three_mass f1000 and ms0.01, every "
+                        "scheme and placement of C, steps up to ten times the stability limit)")
+    v.set_defaults(func=_cmd_verify)
+    return p

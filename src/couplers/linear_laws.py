@@ -1,0 +1,145 @@
+"""The laws linear in the penetration: :class:`LinearLaw` (a spring),
+:class:`KelvinVoigtLaw` (a spring and a dashpot, clipped at zero force) and
+:class:`RigidLaw` (no penetration: resolved by impulses)."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+
+from .law_base import ContactLaw, _positive
+
+__all__ = ["LinearLaw", "KelvinVoigtLaw", "RigidLaw"]
+
+
+@dataclass(frozen=True)
+class LinearLaw(ContactLaw):
+    """Unilateral linear spring, ``f = k d`` for ``d > 0``.
+
+    Parameters
+    ----------
+    contact_stiffness : float
+        ``k`` [N/m].
+    """
+
+    contact_stiffness: float
+    name: ClassVar[str] = "linear"
+
+    def __post_init__(self):
+        object.__setattr__(self, "contact_stiffness",
+                           _positive(self.contact_stiffness, "contact_stiffness", "N/m"))
+
+    def force_active(self, d, dd):
+        return self.contact_stiffness * d
+
+    def potential(self, d):
+        if isinstance(d, float):        # one value (numpy's float64 too): no array calls
+            dp = d if d > 0.0 else 0.0
+        else:
+            dp = np.maximum(d, 0.0)
+        return 0.5 * self.contact_stiffness * dp * dp
+
+    def potential_slope(self, d):
+        if isinstance(d, float):
+            return self.contact_stiffness * (d if d > 0.0 else 0.0)
+        return self.contact_stiffness * np.maximum(d, 0.0)
+
+    def evaluate(self, d, dd):
+        # the spring stores all it takes: no dissipation
+        return (self.contact_stiffness * d if d > 0.0 else 0.0), 0.0, d
+
+    @property
+    def stiffness(self) -> float:
+        return self.contact_stiffness
+
+
+@dataclass(frozen=True)
+class KelvinVoigtLaw(LinearLaw):
+    """Spring and dashpot in parallel, clipped so it never pulls.
+
+    ``f = max(k d + c dd, 0)`` for ``d > 0``.  The force starts with a jump
+    ``c dd`` at touch-down and vanishes *before* the penetration does, when
+    ``k d + c dd`` reaches zero; the restitution is then ``exp(-beta t_c)``,
+    ``beta = c / (2 m)`` (see :func:`cosim.studies.analytic.kelvin_voigt_clipped`).
+
+    Parameters
+    ----------
+    contact_stiffness : float
+        ``k`` [N/m].
+    contact_damping : float
+        ``c`` [N s/m], ``>= 0``.
+    """
+
+    contact_damping: float = 0.0
+    name: ClassVar[str] = "kelvin_voigt"
+
+    def __post_init__(self):
+        super().__post_init__()
+        object.__setattr__(self, "contact_damping",
+                           _positive(self.contact_damping, "contact_damping", "N s/m", True))
+
+    def evaluate(self, d, dd):
+        # ContactLaw.evaluate's formulas on one value, without array calls
+        k, c = self.contact_stiffness, self.contact_damping
+        a = d + (c / k) * dd
+        s = d if d < a else a
+        fa = k * d + c * dd
+        f = (fa if fa > 0.0 else 0.0) if s > 0.0 else 0.0
+        return f, (f - k * (d if d > 0.0 else 0.0)) * dd, s
+
+    def force_active(self, d, dd):
+        return self.contact_stiffness * d + self.contact_damping * dd
+
+    def switch(self, d, dd):
+        return np.minimum(d, d + (self.contact_damping / self.contact_stiffness) * dd)
+
+    @property
+    def damping(self) -> float:
+        return self.contact_damping
+
+
+@dataclass(frozen=True)
+class RigidLaw(ContactLaw):
+    """A rigid contact: no force and no penetration, an impulse at touch-down.
+
+    The impact is resolved by the moving side's integrator with Poisson
+    restitution and Coulomb friction (``multibody.impact``).  The law itself
+    has no force, no potential, and its switch ``d`` marks touch-down.
+
+    Parameters
+    ----------
+    restitution : float
+        Poisson's kinetic coefficient, in [0, 1].
+    friction : float
+        Coulomb friction coefficient ``mu >= 0``.
+    """
+
+    restitution: float = 0.0
+    friction: float = 0.0
+    name: ClassVar[str] = "rigid"
+    rigid: ClassVar[bool] = True
+
+    def __post_init__(self):
+        e = self.restitution
+        if isinstance(e, bool) or not isinstance(e, (int, float)) or not 0.0 <= e <= 1.0:
+            raise ValueError(f"`restitution` must be in [0, 1], got {e!r}")
+        object.__setattr__(self, "restitution", float(e))
+        object.__setattr__(self, "friction", _positive(self.friction, "friction", "", True))
+
+    def evaluate(self, d, dd):
+        return 0.0, 0.0, d
+
+    def force_active(self, d, dd):
+        return 0.0 * d
+
+    def potential(self, d):
+        return 0.0 * d
+
+    def potential_slope(self, d):
+        return 0.0 * d
+
+    @property
+    def stiffness(self) -> float:
+        return math.inf
