@@ -31,23 +31,13 @@ from typing import ClassVar
 
 import numpy as np
 
+from .checks import positive
+
 __all__ = ["ContactLaw", "LinearLaw", "KelvinVoigtLaw", "RigidLaw", "HertzLaw", "HuntCrossleyLaw",
            "LankaraniNikraveshLaw", "FloresLaw", "CONTACT_LAWS", "get_contact_law"]
 
 # Largest |actual - requested| restitution ``for_restitution`` accepts silently.
 _RESTITUTION_WARNING = 0.05
-
-
-def _positive(value, name: str, unit: str, allow_zero: bool = False) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise TypeError(f"`{name}` must be a number [{unit}], got {value!r}") from None
-    ok = math.isfinite(v) and (v >= 0 if allow_zero else v > 0)
-    if not ok:
-        rule = ">= 0" if allow_zero else "> 0"
-        raise ValueError(f"`{name}` must be {rule} {unit}, got {value!r}")
-    return v
 
 
 @dataclass(frozen=True)
@@ -116,7 +106,7 @@ class LinearLaw(ContactLaw):
 
     def __post_init__(self):
         object.__setattr__(self, "contact_stiffness",
-                           _positive(self.contact_stiffness, "contact_stiffness", "N/m"))
+                           positive(self.contact_stiffness, "contact_stiffness", "N/m"))
 
     def force_active(self, d, dd):
         return self.contact_stiffness * d
@@ -165,7 +155,7 @@ class KelvinVoigtLaw(LinearLaw):
     def __post_init__(self):
         super().__post_init__()
         object.__setattr__(self, "contact_damping",
-                           _positive(self.contact_damping, "contact_damping", "N s/m", True))
+                           positive(self.contact_damping, "contact_damping", "N s/m", True))
 
     def evaluate(self, d, dd):
         # ContactLaw.evaluate's formulas on one value, without array calls
@@ -213,7 +203,7 @@ class RigidLaw(ContactLaw):
         if isinstance(e, bool) or not isinstance(e, (int, float)) or not 0.0 <= e <= 1.0:
             raise ValueError(f"`restitution` must be in [0, 1], got {e!r}")
         object.__setattr__(self, "restitution", float(e))
-        object.__setattr__(self, "friction", _positive(self.friction, "friction", "", True))
+        object.__setattr__(self, "friction", positive(self.friction, "friction", "", True))
 
     def evaluate(self, d, dd):
         return 0.0, 0.0, d
@@ -266,10 +256,10 @@ class _PowerLaw(ContactLaw):
         object.__setattr__(self, "exponent", n)
         unit = "N/m" if n == 1.0 else f"N/m^{n:g}"
         object.__setattr__(self, "contact_stiffness",
-                           _positive(self.contact_stiffness, "contact_stiffness", unit))
+                           positive(self.contact_stiffness, "contact_stiffness", unit))
         if self.reference_penetration is not None:
             object.__setattr__(self, "reference_penetration",
-                               _positive(self.reference_penetration, "reference_penetration", "m"))
+                               positive(self.reference_penetration, "reference_penetration", "m"))
 
     @abstractmethod
     def _chi(self) -> float:
@@ -351,7 +341,7 @@ class _PowerLaw(ContactLaw):
         (:func:`couplers.restitution.hunt_crossley_restitution`)."""
         from .restitution import hunt_crossley_restitution
 
-        v = _positive(impact_speed, "impact_speed", "m/s")
+        v = positive(impact_speed, "impact_speed", "m/s")
         return hunt_crossley_restitution(self._chi() * v, self.exponent)
 
 
@@ -432,7 +422,7 @@ class HuntCrossleyLaw(_PowerLaw):
     def __post_init__(self):
         super().__post_init__()
         object.__setattr__(self, "hysteresis_damping",
-                           _positive(self.hysteresis_damping, "hysteresis_damping", "s/m", True))
+                           positive(self.hysteresis_damping, "hysteresis_damping", "s/m", True))
 
     def _chi(self) -> float:
         return self.hysteresis_damping
@@ -448,7 +438,7 @@ class HuntCrossleyLaw(_PowerLaw):
 
         e = _restitution(restitution, zero_allowed=False)
         n = _exponent(exponent)
-        v = _positive(impact_speed, "impact_speed", "m/s")
+        v = positive(impact_speed, "impact_speed", "m/s")
         chi = hunt_crossley_damping_for_restitution(e, n) / v
         return cls(contact_stiffness, n, chi, reference_penetration=reference_penetration)
 
@@ -467,7 +457,7 @@ class _ImpactCalibratedLaw(_PowerLaw):
         object.__setattr__(self, "restitution",
                            _restitution(self.restitution, self._zero_restitution))
         object.__setattr__(self, "impact_speed",
-                           _positive(self.impact_speed, "impact_speed", "m/s"))
+                           positive(self.impact_speed, "impact_speed", "m/s"))
 
     @staticmethod
     @abstractmethod

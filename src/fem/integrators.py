@@ -30,21 +30,13 @@ from typing import ClassVar
 
 import numpy as np
 
+from .checks import real
+
 __all__ = ["StructuralIntegrator", "Newmark", "HHTAlpha", "GeneralizedAlpha",
            "CentralDifference", "ExactModal", "STRUCTURAL_INTEGRATORS",
            "get_structural_integrator"]
 
 _CACHE_SIZE = 8     # step sizes whose operators are kept (oldest dropped first)
-
-
-def _real(name, value, lo=-math.inf, hi=math.inf, rule=""):
-    """``float(value)``; ValueError unless a finite real in ``[lo, hi]`` (``rule``)."""
-    if isinstance(value, bool) or not isinstance(value, numbers.Real) \
-            or not math.isfinite(value):
-        raise ValueError(f"`{name}` must be a finite real number, got {value!r}")
-    if not lo <= value <= hi:
-        raise ValueError(f"`{name}` must be {rule}, got {value!r}")
-    return float(value)
 
 
 def _issparse(A) -> bool:
@@ -299,8 +291,8 @@ class Newmark(_AlphaFamily):
 
     def __init__(self, M, C, K, *, beta=0.25, gamma=0.5):
         super().__init__(M, C, K)
-        self.beta = _real("beta", beta, 0.0, rule=">= 0")
-        self.gamma = _real("gamma", gamma, 0.5, rule=">= 1/2")
+        self.beta = real("beta", beta, 0.0, rule=">= 0")
+        self.gamma = real("gamma", gamma, 0.5, rule=">= 1/2")
 
     def max_stable_step(self) -> float:
         """``Omega_crit / omega_max`` [s] with ``Omega_crit = (gamma/2 - beta)^(-1/2)``
@@ -354,7 +346,7 @@ class HHTAlpha(_AlphaFamily):
 
     def __init__(self, M, C, K, *, alpha=-0.05):
         super().__init__(M, C, K)
-        self.alpha = _real("alpha", alpha, -1 / 3, 0.0, "in [-1/3, 0]")
+        self.alpha = real("alpha", alpha, -1 / 3, 0.0, "in [-1/3, 0]")
         self.alpha_m, self.alpha_f = 0.0, -self.alpha
         self.beta, self.gamma = (1 - self.alpha) ** 2 / 4, 0.5 - self.alpha
 
@@ -382,7 +374,7 @@ class GeneralizedAlpha(_AlphaFamily):
 
     def __init__(self, M, C, K, *, rho_inf=0.8):
         super().__init__(M, C, K)
-        r = self.rho_inf = _real("rho_inf", rho_inf, 0.0, 1.0, "in [0, 1]")
+        r = self.rho_inf = real("rho_inf", rho_inf, 0.0, 1.0, "in [0, 1]")
         self.alpha_m, self.alpha_f = (2 * r - 1) / (r + 1), r / (r + 1)
         self.gamma = 0.5 - self.alpha_m + self.alpha_f
         self.beta = 0.25 * (1 - self.alpha_m + self.alpha_f) ** 2
@@ -460,7 +452,7 @@ class ExactModal(StructuralIntegrator):
                                  f"got {n_modes!r}")
             keep &= np.argsort(np.argsort(omega)) < n_modes
         if cutoff is not None:
-            if _real("cutoff", cutoff) <= 0:
+            if real("cutoff", cutoff) <= 0:
                 raise ValueError(f"`cutoff` must be > 0 rad/s, got {cutoff!r}")
             keep &= omega <= cutoff
             if not keep.any():
