@@ -70,3 +70,18 @@ def test_no_private_check_crosses_a_module(package):
                                r"unit_interval)\b", m.group(1)):
                 found.append(f"{path.name}: {line.strip()}")
     assert not found, found
+
+
+def test_the_scene_loader_refuses_true_as_a_number():
+    from cosim.scene.checks import SceneError
+    from cosim.scene.load import load_scene
+    scene = CASES / "spring_drop.toml"
+    for key, text in (("contacts.wall.law.contact_stiffness", "must be a number, got a "
+                                                              "boolean True"),
+                      ("subsystems.body.bodies.mass.mass", "must be a number [kg], got a "
+                                                           "boolean True"),
+                      ("contacts.wall.normal", "must be an array of two numbers [1], got "
+                                               "[True, 0.0]")):
+        value = "[true, 0.0]" if key.endswith("normal") else "true"
+        with pytest.raises(SceneError, match=re.escape(f"`{key}` {text}")):
+            load_scene(scene, overrides=[f"{key}={value}"])

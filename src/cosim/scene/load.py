@@ -72,7 +72,7 @@ def _validate(data: dict, file, variant) -> Scene:
     top.string("description")
     t_end = top.number("t_end", rule=">0", unit="s")
     scheme_name, given, tables = _scheme_table(top.table("scheme", section="top"))
-    spec = resolve_scheme(scheme_name, given, tables, file=file, t_end=t_end, stacklevel=4)
+    spec = resolve_scheme(scheme_name, given, tables, file=file, t_end=t_end, stacklevel=3)
 
     out = top.table("output", section="output")
     every = out.integer("every", low=1)
