@@ -21,7 +21,7 @@ from typing import ClassVar
 
 from cosim.core.guard import GuardOptions
 from cosim.scene.checks import MAX_STEPS, SceneError
-from cosim.scene.keys import DEFAULT_MULTIBODY_STEP
+from cosim.scene.keys import DEFAULT_CONTACT_STEP, DEFAULT_MULTIBODY_STEP
 
 __all__ = ["Scene", "SchemeSpec", "MultibodySpec", "BodySpec", "JointSpec", "RigidSpec",
            "StructureSpec", "ContactSpec", "resolve_scheme", "STRUCTURE_TYPES",
@@ -194,7 +194,7 @@ class StructureSpec(_ByKey):
     ports: dict
     n_modes: int | None = None
     cutoff_hz: float | None = None
-    contact_step: float = 1e-6
+    contact_step: float = DEFAULT_CONTACT_STEP
     integrator: str = "exact"
     integrator_options: dict = field(default_factory=dict)
     initial_velocity: float = 0.0
