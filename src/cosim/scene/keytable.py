@@ -96,15 +96,14 @@ class Section:
     when: str
     keys: tuple
 
+    def __post_init__(self):
+        object.__setattr__(self, "_index", {k.name: k for k in self.keys})
+        object.__setattr__(self, "_placeholder",
+                           next((k for k in self.keys if k.placeholder), None))
+
     def find(self, name: str) -> Key | None:
         """The key ``name``, or the placeholder key that stands for it, or None."""
-        for k in self.keys:
-            if k.name == name:
-                return k
-        for k in self.keys:
-            if k.placeholder:
-                return k
-        return None
+        return self._index.get(name, self._placeholder)
 
     @property
     def names(self) -> list[str]:
