@@ -63,6 +63,20 @@ def _write(tmp_path, text, name="scene.toml"):
     return p
 
 
+def test_every_fmu_key_of_the_table_is_accepted(fmus):
+    """The rows of the FMU sections of the table of keys are the keys the FMU
+    scene reaches (tests/test_scene_keys.py walks every other section)."""
+    from cosim.scene import keys
+    from cosim.scene.checks import record_keys
+    with record_keys() as found:
+        _scene(fmus[(2, True)])
+    covered = {(sid, name) for sid, name, _ in found if sid and sid.startswith("fmu")}
+    rows = {(sid, k.name) for sid, sec in keys.SECTIONS.items()
+            if sid == "fmu" or sid.startswith("fmu.") for k in sec.keys}
+    assert covered <= rows
+    assert not rows - covered - {("fmu", "type")}, sorted(rows - covered)
+
+
 # ------------------------------------------------------------ the subsystem
 @pytest.mark.parametrize("version", [2, 3])
 def test_rollback_repeats_a_step_exactly(fmus, version):

@@ -1,4 +1,4 @@
-"""Errors of a run (the scene loader's SceneError lives in cosim.scene.load)."""
+"""Errors of a run (the scene loader's SceneError lives in cosim.scene.checks)."""
 
 __all__ = ["SimulationError", "CouplingError", "UnsafeStepError", "OutputExistsError",
            "OutputError", "OutputBusyError", "SignalStop"]

@@ -25,7 +25,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .laws import ContactLaw, _positive
+from .checks import positive
+from .laws import ContactLaw
 from .modes import GRASPED, MODES, OPEN, RELEASED
 
 __all__ = ["Grasp", "Friction", "Trigger", "Connection", "MODES", "OPEN", "GRASPED", "RELEASED",
@@ -60,10 +61,10 @@ class Grasp:
     tangential_damping: float
 
     def __post_init__(self):
-        object.__setattr__(self, "stiffness", _positive(self.stiffness, "stiffness", "N/m"))
+        object.__setattr__(self, "stiffness", positive(self.stiffness, "stiffness", "N/m"))
         for name, unit in (("damping", "N s/m"), ("tangential_stiffness", "N/m"),
                            ("tangential_damping", "N s/m")):
-            object.__setattr__(self, name, _positive(getattr(self, name), name, unit,
+            object.__setattr__(self, name, positive(getattr(self, name), name, unit,
                                                      allow_zero=True))
 
     def normal_force(self, d, dd):
@@ -106,9 +107,9 @@ class Friction:
     slip_velocity: float
 
     def __post_init__(self):
-        object.__setattr__(self, "coefficient", _positive(self.coefficient, "coefficient", "(-)"))
+        object.__setattr__(self, "coefficient", positive(self.coefficient, "coefficient", "(-)"))
         object.__setattr__(self, "slip_velocity",
-                           _positive(self.slip_velocity, "slip_velocity", "m/s"))
+                           positive(self.slip_velocity, "slip_velocity", "m/s"))
 
     def force(self, normal_force, de):
         """Tangential force [N] under normal force ``normal_force`` >= 0 and
@@ -143,7 +144,7 @@ class Trigger:
         if self.kind not in TRIGGER_KINDS:
             raise ValueError(f"`kind` must be one of {list(TRIGGER_KINDS)}, got {self.kind!r}")
         if self.kind == "time":
-            object.__setattr__(self, "time", _positive(self.time, "time", "s", allow_zero=True))
+            object.__setattr__(self, "time", positive(self.time, "time", "s", allow_zero=True))
         elif self.time is not None:
             raise ValueError(f"`time` belongs to a trigger of kind `time`, not {self.kind!r}")
         if self.kind == "after":
@@ -154,7 +155,7 @@ class Trigger:
                                  f"got {ev!r}")
         elif self.event is not None:
             raise ValueError(f"`after` belongs to a trigger of kind `after`, not {self.kind!r}")
-        object.__setattr__(self, "delay", _positive(self.delay, "delay", "s", allow_zero=True))
+        object.__setattr__(self, "delay", positive(self.delay, "delay", "s", allow_zero=True))
 
     def due(self, t: float, events: dict) -> bool:
         """True once the trigger's time or condition has come at time ``t``

@@ -13,17 +13,6 @@ import numpy as np
 __all__ = ["ContactLaw"]
 
 
-def _positive(value, name: str, unit: str, allow_zero: bool = False) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise TypeError(f"`{name}` must be a number [{unit}], got {value!r}") from None
-    ok = math.isfinite(v) and (v >= 0 if allow_zero else v > 0)
-    if not ok:
-        rule = ">= 0" if allow_zero else "> 0"
-        raise ValueError(f"`{name}` must be {rule} {unit}, got {value!r}")
-    return v
-
 
 @dataclass(frozen=True)
 class ContactLaw(ABC):

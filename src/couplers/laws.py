@@ -27,7 +27,7 @@ this module names them all and holds the registry :data:`CONTACT_LAWS`.
 """
 from __future__ import annotations
 
-from .law_base import ContactLaw, _positive  # noqa: F401  (_positive: couplers.connection)
+from .law_base import ContactLaw
 from .linear_laws import KelvinVoigtLaw, LinearLaw, RigidLaw
 from .power_laws import FloresLaw, HertzLaw, HuntCrossleyLaw, LankaraniNikraveshLaw
 

@@ -9,7 +9,8 @@ from typing import ClassVar
 
 import numpy as np
 
-from .law_base import ContactLaw, _positive
+from .checks import positive
+from .law_base import ContactLaw
 
 __all__ = ["LinearLaw", "KelvinVoigtLaw", "RigidLaw"]
 
@@ -29,7 +30,7 @@ class LinearLaw(ContactLaw):
 
     def __post_init__(self):
         object.__setattr__(self, "contact_stiffness",
-                           _positive(self.contact_stiffness, "contact_stiffness", "N/m"))
+                           positive(self.contact_stiffness, "contact_stiffness", "N/m"))
 
     def force_active(self, d, dd):
         return self.contact_stiffness * d
@@ -78,7 +79,7 @@ class KelvinVoigtLaw(LinearLaw):
     def __post_init__(self):
         super().__post_init__()
         object.__setattr__(self, "contact_damping",
-                           _positive(self.contact_damping, "contact_damping", "N s/m", True))
+                           positive(self.contact_damping, "contact_damping", "N s/m", True))
 
     def evaluate(self, d, dd):
         # ContactLaw.evaluate's formulas on one value, without array calls
@@ -126,7 +127,7 @@ class RigidLaw(ContactLaw):
         if isinstance(e, bool) or not isinstance(e, (int, float)) or not 0.0 <= e <= 1.0:
             raise ValueError(f"`restitution` must be in [0, 1], got {e!r}")
         object.__setattr__(self, "restitution", float(e))
-        object.__setattr__(self, "friction", _positive(self.friction, "friction", "", True))
+        object.__setattr__(self, "friction", positive(self.friction, "friction", "", True))
 
     def evaluate(self, d, dd):
         return 0.0, 0.0, d

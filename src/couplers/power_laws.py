@@ -12,7 +12,8 @@ from typing import ClassVar
 
 import numpy as np
 
-from .law_base import ContactLaw, _positive
+from .checks import positive
+from .law_base import ContactLaw
 
 __all__ = ["HertzLaw", "HuntCrossleyLaw", "LankaraniNikraveshLaw", "FloresLaw"]
 
@@ -54,10 +55,10 @@ class _PowerLaw(ContactLaw):
         object.__setattr__(self, "exponent", n)
         unit = "N/m" if n == 1.0 else f"N/m^{n:g}"
         object.__setattr__(self, "contact_stiffness",
-                           _positive(self.contact_stiffness, "contact_stiffness", unit))
+                           positive(self.contact_stiffness, "contact_stiffness", unit))
         if self.reference_penetration is not None:
             object.__setattr__(self, "reference_penetration",
-                               _positive(self.reference_penetration, "reference_penetration", "m"))
+                               positive(self.reference_penetration, "reference_penetration", "m"))
 
     @abstractmethod
     def _chi(self) -> float:
@@ -139,7 +140,7 @@ class _PowerLaw(ContactLaw):
         (:func:`couplers.restitution.hunt_crossley_restitution`)."""
         from .restitution import hunt_crossley_restitution
 
-        v = _positive(impact_speed, "impact_speed", "m/s")
+        v = positive(impact_speed, "impact_speed", "m/s")
         return hunt_crossley_restitution(self._chi() * v, self.exponent)
 
 
@@ -220,7 +221,7 @@ class HuntCrossleyLaw(_PowerLaw):
     def __post_init__(self):
         super().__post_init__()
         object.__setattr__(self, "hysteresis_damping",
-                           _positive(self.hysteresis_damping, "hysteresis_damping", "s/m", True))
+                           positive(self.hysteresis_damping, "hysteresis_damping", "s/m", True))
 
     def _chi(self) -> float:
         return self.hysteresis_damping
@@ -236,7 +237,7 @@ class HuntCrossleyLaw(_PowerLaw):
 
         e = _restitution(restitution, zero_allowed=False)
         n = _exponent(exponent)
-        v = _positive(impact_speed, "impact_speed", "m/s")
+        v = positive(impact_speed, "impact_speed", "m/s")
         chi = hunt_crossley_damping_for_restitution(e, n) / v
         return cls(contact_stiffness, n, chi, reference_penetration=reference_penetration)
 
@@ -255,7 +256,7 @@ class _ImpactCalibratedLaw(_PowerLaw):
         object.__setattr__(self, "restitution",
                            _restitution(self.restitution, self._zero_restitution))
         object.__setattr__(self, "impact_speed",
-                           _positive(self.impact_speed, "impact_speed", "m/s"))
+                           positive(self.impact_speed, "impact_speed", "m/s"))
 
     @staticmethod
     @abstractmethod

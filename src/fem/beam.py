@@ -31,8 +31,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .linear_structure import (LineStructure, _assemble_line, _choice, _count, _line_structure,
-                               _place, _positive)
+from .checks import choice, count, positive
+from .linear_structure import LineStructure, _assemble_line, _line_structure, _place
 
 __all__ = ["Beam", "String", "Section", "rectangular_section", "circular_section",
            "BEAM_ENDS"]
@@ -77,14 +77,14 @@ def rectangular_section(width: float, height: float) -> Section:
     ...             density=7850.0, area=sec.area, n_elements=20,
     ...             left="pinned", right="pinned")
     """
-    b = _positive(width, "width", "m")
-    h = _positive(height, "height", "m")
+    b = positive(width, "width", "m")
+    h = positive(height, "height", "m")
     return Section(area=b * h, second_moment=b * h ** 3 / 12.0)
 
 
 def circular_section(diameter: float) -> Section:
     """Solid circle: ``A = pi d^2/4`` [m^2], ``I = pi d^4/64`` [m^4]."""
-    d = _positive(diameter, "diameter", "m")
+    d = positive(diameter, "diameter", "m")
     return Section(area=np.pi * d * d / 4.0, second_moment=np.pi * d ** 4 / 64.0)
 
 
@@ -149,15 +149,15 @@ class Beam:
 
     def __post_init__(self):
         put = object.__setattr__
-        put(self, "length", _positive(self.length, "length", "m"))
-        put(self, "youngs_modulus", _positive(self.youngs_modulus, "youngs_modulus", "Pa"))
-        put(self, "second_moment", _positive(self.second_moment, "second_moment", "m^4"))
-        put(self, "density", _positive(self.density, "density", "kg/m^3"))
-        put(self, "area", _positive(self.area, "area", "m^2"))
-        put(self, "n_elements", _count(self.n_elements, "n_elements"))
-        put(self, "left", _choice(self.left, "left", BEAM_ENDS))
-        put(self, "right", _choice(self.right, "right", BEAM_ENDS))
-        put(self, "tension", _positive(self.tension, "tension", "N", allow_zero=True))
+        put(self, "length", positive(self.length, "length", "m"))
+        put(self, "youngs_modulus", positive(self.youngs_modulus, "youngs_modulus", "Pa"))
+        put(self, "second_moment", positive(self.second_moment, "second_moment", "m^4"))
+        put(self, "density", positive(self.density, "density", "kg/m^3"))
+        put(self, "area", positive(self.area, "area", "m^2"))
+        put(self, "n_elements", count(self.n_elements, "n_elements"))
+        put(self, "left", choice(self.left, "left", BEAM_ENDS))
+        put(self, "right", choice(self.right, "right", BEAM_ENDS))
+        put(self, "tension", positive(self.tension, "tension", "N", allow_zero=True))
         _place(self, "origin", "axis", "direction", "rayleigh")
 
     @property
@@ -236,11 +236,11 @@ class String:
 
     def __post_init__(self):
         put = object.__setattr__
-        put(self, "length", _positive(self.length, "length", "m"))
-        put(self, "tension", _positive(self.tension, "tension", "N"))
-        put(self, "density", _positive(self.density, "density", "kg/m^3"))
-        put(self, "area", _positive(self.area, "area", "m^2"))
-        put(self, "n_elements", _count(self.n_elements, "n_elements", minimum=2))
+        put(self, "length", positive(self.length, "length", "m"))
+        put(self, "tension", positive(self.tension, "tension", "N"))
+        put(self, "density", positive(self.density, "density", "kg/m^3"))
+        put(self, "area", positive(self.area, "area", "m^2"))
+        put(self, "n_elements", count(self.n_elements, "n_elements", minimum=2))
         _place(self, "origin", "axis", "direction", "rayleigh")
 
     @property

@@ -14,7 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .linear_structure import LinearStructure, _place, _positive
+from .checks import positive
+from .linear_structure import LinearStructure, _place
 
 __all__ = ["Chain", "ChainStructure"]
 
@@ -26,7 +27,7 @@ def _entries(values, name: str, unit: str) -> tuple[float, ...]:
         raise TypeError(f"`{name}` must be a sequence of numbers [{unit}], got {values!r}") from None
     if not items:
         raise ValueError(f"`{name}` must hold at least one value, got {values!r}")
-    return tuple(_positive(v, f"{name}[{i}]", unit) for i, v in enumerate(items))
+    return tuple(positive(v, f"{name}[{i}]", unit) for i, v in enumerate(items))
 
 
 @dataclass(frozen=True)
@@ -94,7 +95,7 @@ class Chain:
             raise ValueError("give exactly one of `spacing` [m] and `positions` (n, 2) [m], got "
                              f"spacing={self.spacing!r}, positions={self.positions!r}")
         if self.spacing is not None:
-            put(self, "spacing", _positive(self.spacing, "spacing", "m"))
+            put(self, "spacing", positive(self.spacing, "spacing", "m"))
         else:
             p = np.asarray(self.positions, dtype=float)
             if p.shape != (n, 2) or not np.all(np.isfinite(p)):

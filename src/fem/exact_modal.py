@@ -7,7 +7,8 @@ import numbers
 
 import numpy as np
 
-from .integrator_base import StructuralIntegrator, _dense, _max_abs, _real, generalized_eigh
+from .checks import real
+from .integrator_base import StructuralIntegrator, _dense, _max_abs, generalized_eigh
 
 __all__ = ["ExactModal"]
 
@@ -84,7 +85,7 @@ class ExactModal(StructuralIntegrator):
                                  f"got {n_modes!r}")
             keep &= np.argsort(np.argsort(omega)) < n_modes
         if cutoff is not None:
-            if _real("cutoff", cutoff) <= 0:
+            if real("cutoff", cutoff) <= 0:
                 raise ValueError(f"`cutoff` must be > 0 rad/s, got {cutoff!r}")
             keep &= omega <= cutoff
             if not keep.any():

@@ -19,15 +19,6 @@ __all__ = ["StructuralIntegrator", "SMALL_DENSE", "generalized_eigh"]
 _CACHE_SIZE = 8     # step sizes whose operators are kept (oldest dropped first)
 
 
-def _real(name, value, lo=-math.inf, hi=math.inf, rule=""):
-    """``float(value)``; ValueError unless a finite real in ``[lo, hi]`` (``rule``)."""
-    if isinstance(value, bool) or not isinstance(value, numbers.Real) \
-            or not math.isfinite(value):
-        raise ValueError(f"`{name}` must be a finite real number, got {value!r}")
-    if not lo <= value <= hi:
-        raise ValueError(f"`{name}` must be {rule}, got {value!r}")
-    return float(value)
-
 
 def _issparse(A) -> bool:
     """A scipy.sparse matrix (told without importing scipy.sparse)."""

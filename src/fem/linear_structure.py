@@ -26,50 +26,9 @@ from abc import ABC, abstractmethod
 
 import numpy as np
 
+from .checks import choice, count, positive, vector
+
 __all__ = ["LinearStructure", "LineStructure"]
-
-
-# --------------------------------------------------------------------------
-# Parameter checks shared by the models (private to the package).
-# --------------------------------------------------------------------------
-def _positive(value, name: str, unit: str, allow_zero: bool = False) -> float:
-    """Return ``value`` as a finite float > 0 (or >= 0), else raise."""
-    if isinstance(value, bool):
-        raise TypeError(f"`{name}` must be a number [{unit}], got {value!r}")
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise TypeError(f"`{name}` must be a number [{unit}], got {value!r}") from None
-    ok = math.isfinite(v) and (v >= 0.0 if allow_zero else v > 0.0)
-    if not ok:
-        rule = ">= 0" if allow_zero else "> 0"
-        raise ValueError(f"`{name}` must be {rule} {unit}, got {value!r}")
-    return v
-
-
-def _count(value, name: str, minimum: int = 1) -> int:
-    """Return ``value`` as an int >= ``minimum``, else raise."""
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise TypeError(f"`{name}` must be an integer >= {minimum}, got {value!r}")
-    if value < minimum:
-        raise ValueError(f"`{name}` must be an integer >= {minimum}, got {value!r}")
-    return int(value)
-
-
-def _vector(value, name: str, unit: bool) -> tuple[float, float]:
-    """Return a finite 2-vector as a tuple; normalised when ``unit``."""
-    try:
-        v = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        raise TypeError(f"`{name}` must be a 2-vector, got {value!r}") from None
-    if v.shape != (2,) or not np.all(np.isfinite(v)):
-        raise ValueError(f"`{name}` must be a finite 2-vector, got {value!r}")
-    if unit:
-        n = float(np.hypot(v[0], v[1]))
-        if n == 0.0:
-            raise ValueError(f"`{name}` must be a non-zero 2-vector, got {value!r}")
-        v = v / n
-    return (float(v[0]), float(v[1]))
 
 
 def _place(obj, *names: str) -> None:
@@ -80,7 +39,7 @@ def _place(obj, *names: str) -> None:
         if name == "rayleigh":
             value = _rayleigh(obj.rayleigh)
         else:
-            value = _vector(getattr(obj, name), name, unit=name != "origin")
+            value = vector(getattr(obj, name), name, unit=name != "origin")
         object.__setattr__(obj, name, value)
     if "axis" in names and "direction" in names:
         _perpendicular(obj.axis, obj.direction)
@@ -105,13 +64,6 @@ def _rayleigh(value):
         raise ValueError("`rayleigh` must be a pair (a0 [1/s], a1 [s]) of numbers >= 0, "
                          f"got {value!r}")
     return (a0, a1)
-
-
-def _choice(value, name: str, allowed) -> str:
-    if value not in allowed:
-        valid = ", ".join(repr(a) for a in sorted(allowed))
-        raise ValueError(f"`{name}` must be one of {valid}, got {value!r}")
-    return value
 
 
 def _as_matrix(a):

@@ -22,7 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .linear_structure import LinearStructure, _count, _positive
+from .checks import count, positive
+from .linear_structure import LinearStructure
 
 __all__ = ["ModalBasis", "modes", "natural_frequencies", "residual_compliance",
            "DENSE_LIMIT"]
@@ -186,9 +187,9 @@ def modes(structure, n_modes: int | None = None, cutoff_hz: float | None = None)
     """
     s = _as_structure(structure)
     if n_modes is not None:
-        n_modes = _count(n_modes, "n_modes")
+        n_modes = count(n_modes, "n_modes")
     if cutoff_hz is not None:
-        cutoff_hz = _positive(cutoff_hz, "cutoff_hz", "Hz")
+        cutoff_hz = positive(cutoff_hz, "cutoff_hz", "Hz")
     n = s.n_dof
     want = n if n_modes is None else min(n_modes, n)
     n_rigid = s.rigid_body_modes().shape[1]

@@ -19,7 +19,8 @@ from __future__ import annotations
 
 import math
 
-from .integrator_base import StructuralIntegrator, _factorize, _real
+from .checks import real
+from .integrator_base import StructuralIntegrator, _factorize
 
 __all__ = ["Newmark", "CentralDifference", "HHTAlpha", "GeneralizedAlpha"]
 
@@ -98,8 +99,8 @@ class Newmark(_AlphaFamily):
 
     def __init__(self, M, C, K, *, beta=0.25, gamma=0.5):
         super().__init__(M, C, K)
-        self.beta = _real("beta", beta, 0.0, rule=">= 0")
-        self.gamma = _real("gamma", gamma, 0.5, rule=">= 1/2")
+        self.beta = real("beta", beta, 0.0, rule=">= 0")
+        self.gamma = real("gamma", gamma, 0.5, rule=">= 1/2")
 
     def max_stable_step(self) -> float:
         """``Omega_crit / omega_max`` [s] with ``Omega_crit = (gamma/2 - beta)^(-1/2)``
@@ -153,7 +154,7 @@ class HHTAlpha(_AlphaFamily):
 
     def __init__(self, M, C, K, *, alpha=-0.05):
         super().__init__(M, C, K)
-        self.alpha = _real("alpha", alpha, -1 / 3, 0.0, "in [-1/3, 0]")
+        self.alpha = real("alpha", alpha, -1 / 3, 0.0, "in [-1/3, 0]")
         self.alpha_m, self.alpha_f = 0.0, -self.alpha
         self.beta, self.gamma = (1 - self.alpha) ** 2 / 4, 0.5 - self.alpha
 
@@ -181,7 +182,7 @@ class GeneralizedAlpha(_AlphaFamily):
 
     def __init__(self, M, C, K, *, rho_inf=0.8):
         super().__init__(M, C, K)
-        r = self.rho_inf = _real("rho_inf", rho_inf, 0.0, 1.0, "in [0, 1]")
+        r = self.rho_inf = real("rho_inf", rho_inf, 0.0, 1.0, "in [0, 1]")
         self.alpha_m, self.alpha_f = (2 * r - 1) / (r + 1), r / (r + 1)
         self.gamma = 0.5 - self.alpha_m + self.alpha_f
         self.beta = 0.25 * (1 - self.alpha_m + self.alpha_f) ** 2

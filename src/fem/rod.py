@@ -21,8 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .linear_structure import (LineStructure, _assemble_line, _choice, _count, _line_structure,
-                               _place, _positive)
+from .checks import choice, count, positive
+from .linear_structure import LineStructure, _assemble_line, _line_structure, _place
 
 __all__ = ["Rod", "ROD_ENDS"]
 
@@ -77,13 +77,13 @@ class Rod:
 
     def __post_init__(self):
         put = object.__setattr__
-        put(self, "length", _positive(self.length, "length", "m"))
-        put(self, "youngs_modulus", _positive(self.youngs_modulus, "youngs_modulus", "Pa"))
-        put(self, "density", _positive(self.density, "density", "kg/m^3"))
-        put(self, "area", _positive(self.area, "area", "m^2"))
-        put(self, "n_elements", _count(self.n_elements, "n_elements"))
-        put(self, "left", _choice(self.left, "left", ROD_ENDS))
-        put(self, "right", _choice(self.right, "right", ROD_ENDS))
+        put(self, "length", positive(self.length, "length", "m"))
+        put(self, "youngs_modulus", positive(self.youngs_modulus, "youngs_modulus", "Pa"))
+        put(self, "density", positive(self.density, "density", "kg/m^3"))
+        put(self, "area", positive(self.area, "area", "m^2"))
+        put(self, "n_elements", count(self.n_elements, "n_elements"))
+        put(self, "left", choice(self.left, "left", ROD_ENDS))
+        put(self, "right", choice(self.right, "right", ROD_ENDS))
         _place(self, "origin", "axis", "rayleigh")
 
     @property

@@ -14,21 +14,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .checks import finite, nonnegative
+
 __all__ = ["Table", "MinimumJerk", "Sinusoid", "JointSpring", "JointDamper", "ConstantTorque",
            "TorqueTable", "PDTracking", "JointEffects", "TRAJECTORIES"]
-
-
-def _finite(value, name):
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise ValueError(f"`{name}` must be a finite number, got {value!r}")
-    return float(value)
-
-
-def _nonneg(value, name, unit):
-    v = _finite(value, name)
-    if v < 0:
-        raise ValueError(f"`{name}` must be >= 0 {unit}, got {value!r}")
-    return v
 
 
 # ------------------------------------------------------------ trajectories
@@ -98,7 +87,7 @@ class MinimumJerk:
 
     def __post_init__(self):
         for k in ("start", "end", "t_start", "t_end"):
-            _finite(getattr(self, k), k)
+            finite(getattr(self, k), k)
         if self.t_end <= self.t_start:
             raise ValueError(f"`t_end` must be > `t_start`, got {self.t_end!r} <= "
                              f"{self.t_start!r}")
@@ -127,7 +116,7 @@ class Sinusoid:
 
     def __post_init__(self):
         for k in ("amplitude", "frequency", "phase", "offset"):
-            _finite(getattr(self, k), k)
+            finite(getattr(self, k), k)
 
     def __call__(self, t):
         return self.offset + self.amplitude * math.sin(2 * math.pi * self.frequency * t
@@ -151,8 +140,8 @@ class JointSpring:
     rest: float = 0.0
 
     def __post_init__(self):
-        object.__setattr__(self, "stiffness", _nonneg(self.stiffness, "stiffness", "N m/rad"))
-        object.__setattr__(self, "rest", _finite(self.rest, "rest"))
+        object.__setattr__(self, "stiffness", nonnegative(self.stiffness, "stiffness", "N m/rad"))
+        object.__setattr__(self, "rest", finite(self.rest, "rest"))
 
 
 @dataclass(frozen=True)
@@ -163,7 +152,7 @@ class JointDamper:
     damping: float
 
     def __post_init__(self):
-        object.__setattr__(self, "damping", _nonneg(self.damping, "damping", "N m s/rad"))
+        object.__setattr__(self, "damping", nonnegative(self.damping, "damping", "N m s/rad"))
 
 
 @dataclass(frozen=True)
@@ -174,7 +163,7 @@ class ConstantTorque:
     torque: float
 
     def __post_init__(self):
-        object.__setattr__(self, "torque", _finite(self.torque, "torque"))
+        object.__setattr__(self, "torque", finite(self.torque, "torque"))
 
     def __call__(self, t, q, dq):
         return self.torque
@@ -203,8 +192,8 @@ class PDTracking:
     max_torque: float = math.inf
 
     def __post_init__(self):
-        object.__setattr__(self, "kp", _nonneg(self.kp, "kp", "N m/rad"))
-        object.__setattr__(self, "kd", _nonneg(self.kd, "kd", "N m s/rad"))
+        object.__setattr__(self, "kp", nonnegative(self.kp, "kp", "N m/rad"))
+        object.__setattr__(self, "kd", nonnegative(self.kd, "kd", "N m s/rad"))
         if not self.max_torque > 0:
             raise ValueError(f"`max_torque` must be > 0, got {self.max_torque!r}")
 

@@ -28,6 +28,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .checks import unit_interval
+
 __all__ = ["ImpactResult", "frictionless_impact", "frictional_impact", "kinetic_energy"]
 
 MAX_CONTACTS = 12   # the LCP solver enumerates 2^k active sets
@@ -117,20 +119,13 @@ def _rows(J, n: int, name: str) -> np.ndarray:
     return J
 
 
-def _unit_interval(e, name: str) -> float:
-    x = math.nan if isinstance(e, bool) else float(e)
-    if not 0.0 <= x <= 1.0:
-        raise ValueError(f"`{name}` must be in [0, 1], got {e if isinstance(e, bool) else x:g}")
-    return x
-
-
 def _restitution(e, k: int) -> np.ndarray:
     arr = np.asarray(e, dtype=float)
     if arr.ndim == 0:
         arr = np.full(k, float(arr))
     if arr.shape != (k,):
         raise ValueError(f"`restitution` must be a number or {k} numbers, got shape {arr.shape}")
-    return np.array([_unit_interval(x, "restitution") for x in arr])
+    return np.array([unit_interval(x, "restitution") for x in arr])
 
 
 def kinetic_energy(M, dq) -> float:
@@ -313,7 +308,7 @@ def frictional_impact(M, dq_minus, Jn, Jt, restitution, friction) -> ImpactResul
     Jn, Jt = _rows(Jn, n, "Jn"), _rows(Jt, n, "Jt")
     if Jn.shape[0] != 1 or Jt.shape[0] != 1:
         raise ValueError(f"`Jn` and `Jt` must be single rows, got {Jn.shape[0]} and {Jt.shape[0]}")
-    e = _unit_interval(restitution, "restitution")
+    e = unit_interval(restitution, "restitution")
     mu = math.nan if isinstance(friction, bool) else float(friction)
     if not 0.0 <= mu < math.inf:
         raise ValueError(f"`friction` must be finite and >= 0, got {friction}")

@@ -30,16 +30,11 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .checks import vec2
+
 __all__ = ["Body", "Joint", "TreeModel", "Frames", "PointKinematics", "JOINT_KINDS"]
 
 JOINT_KINDS = ("revolute", "prismatic")
-
-
-def _vec2(value, name: str) -> tuple[float, float]:
-    arr = np.asarray(value, dtype=float)
-    if arr.shape != (2,) or not np.all(np.isfinite(arr)):
-        raise ValueError(f"`{name}` must be two finite numbers [m], got {value!r}")
-    return (float(arr[0]), float(arr[1]))
 
 
 @dataclass(frozen=True)
@@ -72,9 +67,9 @@ class Body:
         if not (math.isfinite(self.inertia) and self.inertia >= 0):
             raise ValueError(
                 f"`inertia` of body `{self.name}` must be >= 0 kg m^2, got {self.inertia!r}")
-        object.__setattr__(self, "com", _vec2(self.com, f"{self.name}.com"))
+        object.__setattr__(self, "com", vec2(self.com, f"{self.name}.com"))
         object.__setattr__(self, "points", {
-            str(k): _vec2(v, f"{self.name}.points.{k}") for k, v in dict(self.points).items()})
+            str(k): vec2(v, f"{self.name}.points.{k}") for k, v in dict(self.points).items()})
 
 
 @dataclass(frozen=True)
@@ -108,8 +103,8 @@ class Joint:
         if self.kind not in JOINT_KINDS:
             raise ValueError(
                 f"`kind` of joint `{self.name}` must be one of {JOINT_KINDS}, got {self.kind!r}")
-        object.__setattr__(self, "offset", _vec2(self.offset, f"{self.name}.offset"))
-        ax = np.asarray(_vec2(self.axis, f"{self.name}.axis"))
+        object.__setattr__(self, "offset", vec2(self.offset, f"{self.name}.offset"))
+        ax = np.asarray(vec2(self.axis, f"{self.name}.axis"))
         norm = float(np.hypot(*ax))
         if norm == 0.0:
             raise ValueError(f"`axis` of joint `{self.name}` must be non-zero, got {self.axis!r}")

@@ -35,10 +35,10 @@ def export_structures(scene, result, out_dir) -> list[Path]:
     except OSError as exc:
         raise output_error(exc, out, "cannot make the run folder") from exc
     written = []
-    specs = {s["name"]: s for s in scene.subsystems}
+    specs = {s.name: s for s in scene.subsystems}
     t = result.t
     for name in names:
-        structure = specs[name]["model"].assemble()
+        structure = specs[name].model.assemble()
         nodes = structure.nodes()
         U = np.column_stack([result.series[f"q/{name}/{d}"] for d in structure.dof_names])
         W = structure.nodal_displacement(U)                      # (T, N)

@@ -1,8 +1,13 @@
-"""From a validated scene to a coupled system and a scheme."""
+"""From a validated scene to a coupled system and a scheme.
+
+The builder reads the typed specs of a :class:`~cosim.scene.specs.Scene`
+(:mod:`cosim.scene.specs`) and nothing of the file; it imports neither the
+loader nor the specs' module (the scene's :meth:`~cosim.scene.specs.Scene.build`
+calls it, and resolves the scheme through :func:`~cosim.scene.specs.resolve_scheme`).
+"""
 from __future__ import annotations
 
 import math
-import warnings
 
 import numpy as np
 
@@ -13,7 +18,7 @@ from multibody import Body, Joint, TreeModel
 from cosim.sides.multibody import MultibodySubsystem
 from cosim.core.ode import get_integrator
 from cosim.core.preflight import stiffest_normal
-from cosim.scene.load import Scene, SceneError
+from cosim.scene.checks import SceneError
 from cosim.core.schemes import get_scheme
 from cosim.core.subsystem import RigidReference
 from cosim.core.system import ContactLink, CoupledSystem
@@ -24,30 +29,30 @@ __all__ = ["build_system"]
 _RK4_LIMIT = 2.0 * math.sqrt(2.0)
 
 
-def _multibody(spec, scene: Scene, default_step):
+def _multibody(spec, scene, default_step):
+    """A :class:`MultibodySubsystem` of a ``MultibodySpec``."""
     try:
-        bodies = [Body(b["name"], b["mass"], b["inertia"], b["com"], b["points"])
-                  for b in spec["bodies"]]
-        joints = [Joint(j["name"], j["kind"], j["parent"], j["offset"], j["axis"], j["angle"])
-                  for j in spec["joints"]]
+        bodies = [Body(b.name, b.mass, b.inertia, b.com, b.points) for b in spec.bodies]
+        joints = [Joint(j.name, j.kind, j.parent, j.offset, j.axis, j.angle)
+                  for j in spec.joints]
         model = TreeModel(bodies, joints)
-        cls = get_integrator(spec["integrator"])
-        if spec["integrator"] == "rk4":
-            integ = cls(max_step=spec["max_step"] or default_step, **spec["integrator_options"])
+        cls = get_integrator(spec.integrator)
+        if spec.integrator == "rk4":
+            integ = cls(max_step=spec.max_step or default_step, **spec.integrator_options)
         else:
-            step = {"max_step": spec["max_step"]} if spec["max_step"] else {}
-            integ = cls(**step, **spec["integrator_options"])
+            step = {"max_step": spec.max_step} if spec.max_step else {}
+            integ = cls(**step, **spec.integrator_options)
     except ValueError as exc:
-        raise SceneError(scene.path, spec["key"], str(exc)) from None
-    q0 = [j["q0"] for j in spec["joints"]]
-    dq0 = [j["dq0"] for j in spec["joints"]]
-    effects = [e for j in spec["joints"] for e in j["effects"]]
+        raise SceneError(scene.path, spec.key, str(exc)) from None
+    q0 = [j.q0 for j in spec.joints]
+    dq0 = [j.dq0 for j in spec.joints]
+    effects = [e for j in spec.joints for e in j.effects]
     _check_mass_matrix(model, q0, spec, scene)
-    return MultibodySubsystem(spec["name"], model, q0, dq0, spec["ports"], scene.gravity, integ,
+    return MultibodySubsystem(spec.name, model, q0, dq0, spec.ports, scene.gravity, integ,
                               multibody.JointEffects(model.n_dof, effects) if effects else None)
 
 
-def _check_mass_matrix(model, q0, spec, scene: Scene) -> None:
+def _check_mass_matrix(model, q0, spec, scene) -> None:
     """Refuse a tree whose mass matrix at its initial pose is singular (or
     not finite): some joint would move no mass, and no integrator can step it."""
     M = model.mass_matrix(np.asarray(q0, float))
@@ -59,7 +64,7 @@ def _check_mass_matrix(model, q0, spec, scene: Scene) -> None:
             ok = False
     if not ok:
         scale = float(np.max(np.abs(np.diag(M)))) if np.all(np.isfinite(M)) else math.inf
-        raise SceneError(scene.path, f"{spec['key']}.bodies",
+        raise SceneError(scene.path, f"{spec.key}.bodies",
                          f"must give a mass matrix that is regular at the initial joint "
                          f"coordinates, got a singular one (largest diagonal entry {scale:.3g}): "
                          f"some joint moves no mass (a massless body at a branch's end, or "
@@ -67,26 +72,26 @@ def _check_mass_matrix(model, q0, spec, scene: Scene) -> None:
                          f"or change the joints' axes")
 
 
-def _structure(spec, scene: Scene):
+def _structure(spec, scene, macro_step):
     """Assemble a structure, keep its modes, set its initial state."""
     import fem
 
     from cosim.sides.fem import StructureSubsystem
     try:
-        structure = spec["model"].assemble()
-        basis = fem.modes(structure, **{k: v for k, v in spec["modes"].items() if v})
+        structure = spec.model.assemble()
+        basis = fem.modes(structure, **{k: v for k, v in spec.modes.items() if v})
     except ValueError as exc:
-        raise SceneError(scene.path, spec["key"], str(exc)) from None
+        raise SceneError(scene.path, spec.key, str(exc)) from None
     except ImportError as exc:        # scikit-fem is an optional extra
-        raise SceneError(scene.path, f"{spec['key']}.type",
-                         f"`{spec['type']}` needs {exc.name or 'a missing package'}, which is "
+        raise SceneError(scene.path, f"{spec.key}.type",
+                         f"`{spec.type}` needs {exc.name or 'a missing package'}, which is "
                          f"not installed: pip install \"cosim[fem]\"") from None
     n = structure.n_dof
     u0 = None
-    if spec["static_equilibrium"]:
-        loads = spec.get("static_loads") or {}
+    if spec.static_equilibrium:
+        loads = spec.static_loads
         if scene.gravity is None and not loads:
-            raise SceneError(scene.path, f"{spec['key']}.static_equilibrium",
+            raise SceneError(scene.path, f"{spec.key}.static_equilibrium",
                              "needs gravity (`effects.gravity`) or `static_loads` to have a "
                              "meaning")
         f = (structure.gravity_load(np.asarray(scene.gravity)) if scene.gravity is not None
@@ -94,19 +99,19 @@ def _structure(spec, scene: Scene):
         # what the connections closed at the start carry: the structure starts
         # at rest under them, so a grasp at t = 0 does not set it ringing
         for port, force in loads.items():
-            f = f + structure.point_load(spec["ports"][port], force)
+            f = f + structure.point_load(spec.ports[port], force)
         u0 = structure.static_displacement(f)
-    v0 = np.full(n, spec["initial_velocity"]) if spec["initial_velocity"] else None
+    v0 = np.full(n, spec.initial_velocity) if spec.initial_velocity else None
     try:
-        sub = StructureSubsystem(spec["name"], structure, basis, spec["ports"], u0, v0,
-                                 scene.gravity, spec["contact_step"], spec["integrator"],
-                                 spec["integrator_options"])
+        sub = StructureSubsystem(spec.name, structure, basis, spec.ports, u0, v0,
+                                 scene.gravity, spec.contact_step, spec.integrator,
+                                 spec.integrator_options)
     except (TypeError, ValueError) as exc:
-        raise SceneError(scene.path, f"{spec['key']}.integrator", str(exc)) from None
-    H = scene.scheme_options.get("macro_step")
+        raise SceneError(scene.path, f"{spec.key}.integrator", str(exc)) from None
+    H = macro_step
     if H is not None and H > sub.max_stable_step():
-        raise SceneError(scene.path, f"{spec['key']}.integrator.method",
-                         f"`{spec['integrator']}` is stable only for steps below "
+        raise SceneError(scene.path, f"{spec.key}.integrator.method",
+                         f"`{spec.integrator}` is stable only for steps below "
                          f"{sub.max_stable_step():.3g} s (highest kept mode "
                          f"{basis.frequencies_hz[-1]:.4g} Hz), the macro step is {H:.3g} s; "
                          f"keep fewer modes (`modes.cutoff_hz`), shorten the step or use "
@@ -114,8 +119,16 @@ def _structure(spec, scene: Scene):
     return sub
 
 
-def build_system(scene: Scene, scheme: str | None = None):
+def build_system(scene, scheme: str | None = None):
     """Build the subsystems, contacts and the coupling scheme of ``scene``.
+
+    Parameters
+    ----------
+    scene : Scene
+        A validated scene (:class:`cosim.scene.specs.Scene`).
+    scheme : str, optional
+        Another scheme than the scene's; the scene resolves it
+        (:meth:`~cosim.scene.specs.Scene.scheme_spec`).
 
     Raises
     ------
@@ -123,62 +136,48 @@ def build_system(scene: Scene, scheme: str | None = None):
         If a model cannot be built, or an embedded contact is too stiff for
         the integrator step of the side that carries it.
     """
-    name = scheme or scene.scheme
+    spec = scene.scheme_spec(scheme)
+    name, opts = spec.name, spec.options
     if scene.export:
         import importlib.util
         if importlib.util.find_spec("meshio") is None:
             raise SceneError(scene.path, "output.export",
                              'needs meshio, which is not installed: pip install "cosim[fem]", '
                              'or drop `output.export`')
-    try:
-        cls = get_scheme(name)
-    except ValueError as exc:
-        raise SceneError(scene.path, "scheme.name", str(exc)) from None
-    opts = scene.scheme_options if name == scene.scheme else {}
-    if name != scene.scheme:
-        dropped = sorted(set(scene.scheme_options) - set(cls.options))
-        opts = {k: v for k, v in scene.scheme_options.items() if k in cls.options}
-        opts.update(scene.scheme_tables.get(name, {}))
-        if dropped:
-            warnings.warn(f"{scene.path}: scheme `{name}` ignores the options {dropped}",
-                          stacklevel=2)
-        if "macro_step" in cls.options and "macro_step" not in opts:
-            raise SceneError(scene.path, "scheme.macro_step",
-                             f"is required by scheme `{name}` [s]")
-    default_step = min(opts.get("macro_step") or 1e-4, 1e-4)
+    cls = get_scheme(name)
     subs = []
-    for spec in scene.subsystems:
-        if spec["type"] == "rigid":
-            subs.append(RigidReference(spec["name"], spec["points"]))
-        elif spec["type"] == "multibody":
-            subs.append(_multibody(spec, scene, default_step))
-        elif spec["type"] == "fmu":          # a Functional Mock-up Unit: cosim.scene.fmu
-            from cosim.scene.fmu import build_fmu
-            subs.append(build_fmu(spec, scene, name, opts))
+    for side in scene.subsystems:
+        if side.type == "rigid":
+            subs.append(RigidReference(side.name, side.points))
+        elif side.type == "multibody":
+            subs.append(_multibody(side, scene, spec.default_step))
+        elif side.type == "fmu":            # a Functional Mock-up Unit: cosim.scene.fmu
+            from cosim.scene.fmu_build import build_fmu
+            subs.append(build_fmu(side, scene, name, opts))
         else:
-            subs.append(_structure(spec, scene))
+            subs.append(_structure(side, scene, spec.macro_step))
     names = [s.name for s in subs]
     links = []
     for c in scene.contacts:
-        sa, sb = names.index(c["a"][0]), names.index(c["b"][0])
-        contact = PointContact(c["name"], c["law"], c["normal"], c["offset"])
+        sa, sb = names.index(c.a[0]), names.index(c.b[0])
+        contact = PointContact(c.name, c.law, c.normal, c.offset)
         # the monolithic ODE evaluates every penalty law itself; a rigid law
         # stays with its moving side, which resolves the impact
-        placement = ("coupler" if name == "monolithic" and not c["law"].rigid
-                     else c["placement"])
-        pa, pb = subs[sa].port_index(c["a"][1]), subs[sb].port_index(c["b"][1])
+        placement = ("coupler" if name == "monolithic" and not c.law.rigid
+                     else c.placement)
+        pa, pb = subs[sa].port_index(c.a[1]), subs[sb].port_index(c.b[1])
         host = None
         if placement == "embedded" and not (subs[sa].rigid or subs[sb].rigid):
-            if c["host"] is not None:
-                host = names.index(c["host"])
+            if c.host is not None:
+                host = names.index(c.host)
             else:   # the lighter side: it resolves the spring, the heavier one lags least
                 mob_a = subs[sa].port_mobility(pa, contact.normal)
                 mob_b = subs[sb].port_mobility(pb, contact.normal)
                 host = sa if mob_a >= mob_b else sb
-        links.append(ContactLink(contact, sa, pa, sb, pb, placement, c["follow"], host,
-                                 c.get("connection")))
-    if any(spec["type"] == "fmu" for spec in scene.subsystems):
-        from cosim.scene.fmu import settle_fmu_contacts
+        links.append(ContactLink(contact, sa, pa, sb, pb, placement, c.follow, host,
+                                 c.connection))
+    if any(side.type == "fmu" for side in scene.subsystems):
+        from cosim.scene.fmu_build import settle_fmu_contacts
         links = settle_fmu_contacts(scene, subs, links)
     system = CoupledSystem(subs, links)
     for c, ln in enumerate(links):

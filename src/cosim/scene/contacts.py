@@ -1,0 +1,178 @@
+"""Validation of a scene's ``[contacts.NAME]`` tables into typed specs: the
+two ports, the law, where the contact lives, and its grasp and friction.
+
+The keys each table accepts, and their defaults, are those of
+:mod:`cosim.scene.keys` (a law's are the fields of its dataclass).
+"""
+from __future__ import annotations
+
+import dataclasses
+
+from cosim.scene.checks import SceneError, Table, build_model, type_name
+from cosim.scene.specs import STRUCTURE_TYPES, ContactSpec
+
+__all__ = ["contact_spec", "check_conditions"]
+
+_TRIGGER_FORMS = ('"start", "touch", { time = T } or { after = "CONTACT.grasp" (or '
+                  '".release"), delay = D }')
+_RELEASE_FORMS = '{ time = T } or { after = "CONTACT.grasp" (or ".release"), delay = D }'
+
+
+def contact_spec(name: str, t: Table, subs: list) -> ContactSpec:
+    """The spec of contact ``name`` from its table (section ``contact``),
+    between points of the subsystems ``subs`` (their specs)."""
+    from couplers import CONTACT_LAWS
+
+    def port(k):
+        ref = t.string(k)
+        sname, _, pname = ref.partition(".")
+        match = [s for s in subs if s.name == sname]
+        if not match or not pname:
+            t.error(k, f"must read SUBSYSTEM.POINT with a declared subsystem "
+                       f"({[s.name for s in subs]}), got {ref!r}")
+        s = match[0]
+        pts = s.points if s.type == "rigid" else s.ports
+        if pname not in pts:
+            t.error(k, f"names no point of subsystem `{sname}`; its points are {sorted(pts)}")
+        return sname, pname
+
+    a, b = port("a"), port("b")
+    if a[0] == b[0]:
+        t.error("b", f"must be on another subsystem than `a`, got {a[0]!r} twice")
+    law_t = t.table("law", section="law.linear")
+    law_name = law_t.string("type", choices=CONTACT_LAWS)
+    law_t.use(f"law.{law_name}")
+    law_cls = CONTACT_LAWS[law_name]
+    params = {}
+    for f in dataclasses.fields(law_cls):
+        if f.name in law_t.data:
+            params[f.name] = law_t.number(f.name)
+        elif f.default is dataclasses.MISSING:
+            law_t.error(f.name, f"is required by law `{law_name}`")
+    law_t.finish()
+    law = build_model(law_t, law_cls, **params)
+    kinds = {s.name: s.type for s in subs}
+    rigid_side = kinds[a[0]] == "rigid" or kinds[b[0]] == "rigid"
+    if kinds[a[0]] == "rigid" and kinds[b[0]] == "rigid":
+        t.error("b", "a contact between two rigid subsystems has nothing to simulate")
+    placement = t.string("placement", "embedded" if rigid_side else "coupler",
+                         choices=("embedded", "coupler"))
+    if law.rigid and (placement != "embedded" or not rigid_side):
+        t.error("placement", "a `rigid` law is resolved inside its moving side's integrator: "
+                             "it needs placement `embedded` and a rigid side")
+    host = None
+    if t.has("host"):
+        host = t.string("host", choices=(a[0], b[0]))
+        if placement != "embedded" or rigid_side:
+            t.error("host", "names the side that integrates an `embedded` contact between two "
+                            "moving sides; here there is nothing to choose")
+    follow = t.boolean("follow")
+    if follow and kinds[b[0]] not in ("beam", "cable", "string", "rod"):
+        t.error("follow", f"moves side b's point along a line structure; `{b[0]}` is a "
+                          f"{kinds[b[0]]}")
+    connection = _connection(t, law)
+    if connection is not None and placement == "embedded" and (
+            kinds[a[0]] in STRUCTURE_TYPES or kinds[b[0]] in STRUCTURE_TYPES):
+        t.error("placement", "a grasp or friction against a rigid side is not evaluated inside "
+                             "a structure; set placement `coupler`")
+    if connection is not None and placement == "embedded" and not rigid_side:
+        t.error("placement", "a grasp or friction between two moving sides is exchanged by the "
+                             "scheme, not hosted by one side; set placement `coupler`")
+    spec = ContactSpec(name=name, key=t.key(), a=a, b=b,
+                       normal=t.vec2("normal", unit="1", nonzero=True), follow=follow,
+                       offset=t.number("offset", unit="m"), law=law, placement=placement,
+                       host=host, connection=connection)
+    t.finish()
+    return spec
+
+
+def _trigger(t: Table, k: str, release: bool):
+    """``close`` or ``release`` of a grasp (see :class:`couplers.Trigger`)."""
+    from couplers import Trigger
+    forms = _RELEASE_FORMS if release else _TRIGGER_FORMS
+    v = t.raw(k)
+    if isinstance(v, str):
+        if release or v not in ("start", "touch"):
+            t.error(k, f"must be {forms}, got {v!r}")
+        return Trigger(v)
+    if not isinstance(v, dict):
+        t.error(k, f"must be {forms}, got {type_name(v)} {v!r}")
+    tt = t.table(k, section="trigger")
+    if tt.has("time") == tt.has("after"):
+        tt.error("", f"must be {forms}: give one of `time` and `after`, got {v!r}")
+    if tt.has("time"):
+        trig = Trigger("time", time=tt.number("time", rule=">=0", unit="s"))
+    else:
+        event = tt.string("after")
+        cname, _, what = event.rpartition(".")
+        if not cname or what not in ("grasp", "release"):
+            tt.error("after", f"must read CONTACT.grasp or CONTACT.release, got {event!r}")
+        trig = Trigger("after", event=event, delay=tt.number("delay", rule=">=0", unit="s"))
+    tt.finish()
+    return trig
+
+
+def _connection(t: Table, law):
+    """A contact's ``grasp`` and ``friction`` tables, or None when it has neither
+    (a friction coefficient of 0 builds no friction)."""
+    if not (t.has("grasp") or t.has("friction")):
+        return None                  # couplers.connection loads for the contacts that need it
+    from couplers import Connection, Friction, Grasp
+    grasp = close = release = friction = None
+    if t.has("grasp"):
+        gt = t.table("grasp", section="grasp")
+        if law.rigid:
+            t.error("grasp", "needs a penalty law: a `rigid` law is an impulse, it cannot hold")
+        params = {k: gt.number(k, rule=">0" if k == "stiffness" else ">=0", unit=unit)
+                  for k, unit in (("stiffness", "N/m"), ("damping", "N s/m"),
+                                  ("tangential_stiffness", "N/m"),
+                                  ("tangential_damping", "N s/m"))}
+        grasp = build_model(gt, Grasp, **params)
+        if not gt.has("close"):
+            gt.error("close", f"is required: when the grasp closes, {_TRIGGER_FORMS}")
+        close = _trigger(gt, "close", release=False)
+        release = _trigger(gt, "release", release=True) if gt.has("release") else None
+        gt.used.add("release")
+        if (close.kind == "time" and release is not None and release.kind == "time"
+                and release.time <= close.time):
+            gt.error("release", f"time {release.time!r} s must come after the close time "
+                                f"{close.time!r} s")
+        gt.finish()
+    if t.has("friction"):
+        ft = t.table("friction", section="friction")
+        if law.rigid:
+            t.error("friction", "does not apply to a `rigid` law, which has its own Coulomb "
+                                "friction in impulse space (`law.friction`)")
+        mu = ft.number("coefficient", rule=">=0", unit="1")
+        if mu > 0:
+            friction = build_model(ft, Friction, coefficient=mu,
+                                   slip_velocity=ft.number("slip_velocity", rule=">0",
+                                                           unit="m/s"))
+        else:
+            ft.number("slip_velocity", None, rule=">0", unit="m/s")
+        ft.finish()
+    if grasp is None and friction is None:
+        return None
+    return Connection(grasp, friction, close, release)
+
+
+def check_conditions(contacts: list, file) -> None:
+    """Every ``after`` names an event of a contact that can have it."""
+    grasps = {c.name for c in contacts
+              if c.connection is not None and c.connection.grasp is not None}
+    for c in contacts:
+        conn = c.connection
+        if conn is None or conn.grasp is None:
+            continue
+        for which, trig in (("close", conn.close), ("release", conn.release)):
+            if trig is None or trig.kind != "after":
+                continue
+            other = trig.event.rpartition(".")[0]
+            key = f"{c.key}.grasp.{which}.after"
+            if other not in grasps:
+                raise SceneError(file, key, f"names {trig.event!r}, but no contact named "
+                                            f"`{other}` has a grasp; contacts with a grasp are "
+                                            f"{sorted(grasps)}")
+            if which == "close" and other == c.name:
+                raise SceneError(file, key, f"cannot wait for an event of its own grasp, got "
+                                            f"{trig.event!r}")
