@@ -489,6 +489,7 @@ class _SweepProgress:
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="cosim", description="Co-simulation of impacts between "
                                 "robots and vibrating structures.")
+    p.add_argument("--version", action="version", version=f"%(prog)s {sys.modules['cosim'].__version__}")
     sub = p.add_subparsers(dest="command", required=True)
     r = sub.add_parser("run", help="run a scene, print a summary, write summary.json and "
                                    "series.npz")
