@@ -59,7 +59,6 @@ numpydoc_validation_checks: set = set()
 # -- HTML ----------------------------------------------------------------------------
 html_theme = "furo"
 html_title = f"cosim {release}"
-html_static_path = ["_static"]
 
 
 # -- citations -----------------------------------------------------------------------
