@@ -76,6 +76,18 @@ def test_the_design_pages_worked_examples_run(index):
     assert proc.returncode == 0, proc.stderr[-4000:]
 
 
+def test_the_design_pages_scheme_is_refused_at_the_step_the_page_names():
+    """The page says the pre-flight check refuses its new scheme at 2e-5 s and names
+    6.33e-06 s as the largest safe step."""
+    code = _python_blocks(DOCS / "design.md")[2]
+    assert '"scheme.macro_step = 5e-6"' in code
+    proc = _run(code.replace('"scheme.macro_step = 5e-6"', '"scheme.macro_step = 2e-5"'), ROOT)
+    assert proc.returncode != 0
+    assert "UnsafeStepError" in proc.stderr and "held_jacobi" in proc.stderr, proc.stderr[-2000:]
+    assert "largest safe macro step is 6.33e-06 s" in proc.stderr, proc.stderr[-2000:]
+    assert "2e-5" in (DOCS / "design.md").read_text(encoding="utf-8")
+
+
 def test_the_design_page_draws_the_layers_the_test_enforces():
     sys.path.insert(0, str(ROOT / "tests"))
     try:
