@@ -68,6 +68,15 @@ def test_the_readme_python_example_runs(tmp_path):
     assert re.match(r"\[\[0\.01\d*, 0\.012\d*\]\]", intervals), proc.stdout
 
 
+@pytest.mark.parametrize("page", ["getting-started.md", "commands.md"])
+def test_the_guides_python_examples_run(page):
+    blocks = _python_blocks(DOCS / page)
+    assert blocks, page
+    for code in blocks:
+        proc = _run(code, ROOT)
+        assert proc.returncode == 0, f"{page}:\n{code}\n{proc.stderr[-4000:]}"
+
+
 @pytest.mark.parametrize("index", range(3), ids=["law", "structure", "scheme"])
 def test_the_design_pages_worked_examples_run(index):
     blocks = _python_blocks(DOCS / "design.md")
