@@ -10,6 +10,10 @@ asked for (``from cosim import simulate`` and ``cosim.load_scene`` work as
 before), so ``cosim --help`` or ``cosim plot`` do not pay for the schemes and
 ``cosim run`` pays only for what its scene uses.
 """
+#: the release, read by setuptools for the package metadata (pyproject.toml) and shown by
+#: ``cosim --version``
+__version__ = "0.8.0"
+
 from cosim.errors import CouplingError, SimulationError, UnsafeStepError
 
 __all__ = ["Subsystem", "RigidReference", "StepInput", "SimulationResult", "write_outputs",

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 
+from cosim import __version__
 from cosim.cli.commands import (_cmd_bench, _cmd_info, _cmd_plot, _cmd_run, _cmd_sweep,
                                 _cmd_verify)
 
@@ -21,6 +22,7 @@ def _floats(text: str) -> list[float]:
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="cosim", description="Co-simulation of impacts between "
                                 "robots and vibrating structures.")
+    p.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
     r = sub.add_parser("run", help="run a scene, print a summary, write summary.json and "
                                    "series.npz")
