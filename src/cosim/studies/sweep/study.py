@@ -60,7 +60,7 @@ def load_study(path) -> Study:
         Naming the file and the key, if a value is missing or of the wrong
         kind.
     """
-    from cosim.scene.load import _Table
+    from cosim.scene.checks import Table as _Table
 
     path = Path(path)
     top = _Table(read_toml_file(path), (), path)
