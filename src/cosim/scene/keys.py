@@ -84,7 +84,10 @@ def law_section(name: str) -> Section:
     keys = [K("type", "", REQUIRED, "one of " + ", ".join(f'"{n}"' for n in CONTACT_LAWS),
               "the contact law")]
     for f in dataclasses.fields(cls):
-        unit, meaning = LAW_PARAMETERS[f.name]
+        # a user's law may bring parameters of its own: their unit and meaning
+        # from the field's metadata (``field(metadata={"unit": ..., "doc": ...})``)
+        unit, meaning = LAW_PARAMETERS.get(f.name) or (
+            f.metadata.get("unit", ""), f.metadata.get("doc", f"a parameter of `{cls.__name__}`"))
         if f.default is not dataclasses.MISSING:
             default = f.default
         else:
