@@ -58,6 +58,31 @@ def test_the_docs_build_without_a_warning(tmp_path):
     assert "0.8.0" in (html / "changelog.html").read_text(encoding="utf-8")
 
 
+def test_a_broken_reference_to_a_public_name_fails_the_build():
+    """The build is nitpicky: of the references that do not resolve, only those
+    to the standard library, to private names and to the internal modules
+    below the public API are let through; the build above then fails on any
+    other (a misspelt public name, a method that was renamed)."""
+    import runpy
+
+    conf = runpy.run_path(str(DOCS / "conf.py"))
+    assert conf["nitpicky"] is True
+
+    def ignored(role, target):
+        return any(re.fullmatch(r, role) and re.fullmatch(t, target)
+                   for r, t in conf["nitpick_ignore_regex"])
+
+    for role, target in [("py:func", "cosim.simulate"), ("py:meth", "cosim.Scene.build"),
+                         ("py:class", "fem.Beam"), ("py:meth", "couplers.HertzLaw.stiffness"),
+                         ("py:meth", "multibody.TreeModel.mass_matrix"),
+                         ("py:func", "cosim.no_such_function"), ("py:class", "simulate")]:
+        assert not ignored(role, target), target
+    for role, target in [("py:class", "abc.ABC"), ("py:class", "fem.newmark._AlphaFamily"),
+                         ("py:func", "cosim.core.hermite.substep_peaks"),
+                         ("py:mod", "cosim.core.guard")]:
+        assert ignored(role, target), target
+
+
 def test_the_readme_python_example_runs(tmp_path):
     blocks = _python_blocks(ROOT / "README.md")
     assert len(blocks) == 1, f"the README shows one Python example, found {len(blocks)}"

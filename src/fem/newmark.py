@@ -89,7 +89,7 @@ class Newmark(_AlphaFamily):
 
     Notes
     -----
-    Second order only for ``gamma = 1/2`` (first order otherwise, :attr:`order`
+    Second order only for ``gamma = 1/2`` (first order otherwise, ``order``
     refers to the default).  Unconditionally stable for ``2 beta >= gamma >= 1/2``;
     otherwise :meth:`step` refuses steps above :meth:`max_stable_step`.
     """

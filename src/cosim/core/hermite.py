@@ -12,7 +12,7 @@ by Horner's rule.  The integrators locate a contact's switch on it
 (:func:`hermite_value`), the schemes hand a partner port's motion over a step
 as its coefficients, and the recorder and the integrators find a
 penetration's peak between two samples on it (:func:`hermite_cubic_max`,
-:func:`substep_peaks`).
+:func:`~cosim.core.hermite.substep_peaks`).
 
 The compiled step kernels (``cosim.sides._multibody_step``,
 ``cosim.sides._structure_step``) keep C twins of these formulas; their tests

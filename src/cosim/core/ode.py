@@ -86,7 +86,7 @@ class TimeStepper(ABC):
         peak : (n,) float array or None
             With ``probe``: raised in place to the largest value of each
             watched quantity over the step, located on each accepted
-            sub-step's cubic Hermite by :func:`substep_peaks`.
+            sub-step's cubic Hermite by :func:`~cosim.core.hermite.substep_peaks`.
         """
         t, y = t0, y0
         k1 = f(t, y)
@@ -149,7 +149,7 @@ class TimeStepper(ABC):
     @staticmethod
     def _watch(probe, peak, pv, t, y, h):
         """One accepted sub-step ending at ``(t, y)``, just evaluated: raise
-        ``peak`` over it (:func:`substep_peaks`); the end's values."""
+        ``peak`` over it (:func:`~cosim.core.hermite.substep_peaks`); the end's values."""
         d1, v1 = probe(t, y)
         substep_peaks(peak, pv[0], pv[1], d1, v1, h)
         return d1, v1

@@ -154,10 +154,10 @@ class SubsystemState:
 
 
 class Subsystem(ABC):
-    """Base class of subsystems, with a template :meth:`step`.
+    """Base class of subsystems, with a template :meth:`~cosim.Subsystem.step`.
 
     Subclasses set ``n_states``, ``port_names``, the state ``x`` and implement
-    :meth:`_step_impl`, :meth:`derivatives`, :meth:`outputs` and
+    :meth:`~cosim.Subsystem._step_impl`, :meth:`derivatives`, :meth:`outputs` and
     :meth:`energy`.  ``aux`` holds quadratures a subsystem integrates along
     its state (the impulse and dissipated energy of contacts embedded in it).
     ``peak`` holds, per embedded contact, its largest penetration [m] (0 if

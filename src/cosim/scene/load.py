@@ -53,7 +53,7 @@ def load_scene(path, variant: str | None = None, overrides=(), scheme: str | Non
     Returns
     -------
     Scene
-        Its :meth:`~cosim.scene.specs.Scene.build` makes the coupled system.
+        Its :meth:`~cosim.Scene.build` makes the coupled system.
 
     Raises
     ------

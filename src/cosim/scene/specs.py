@@ -1,11 +1,11 @@
 """Typed scene specs: what the loader hands the builder.
 
 :func:`cosim.scene.load.load_scene` reads and checks a scene file and returns
-a :class:`Scene` of frozen specs (:class:`MultibodySpec`,
-:class:`RigidSpec`, :class:`StructureSpec`, :class:`ContactSpec`); the
+a :class:`Scene` of frozen specs (:class:`~cosim.scene.specs.MultibodySpec`,
+:class:`~cosim.scene.specs.RigidSpec`, :class:`~cosim.scene.specs.StructureSpec`, :class:`~cosim.scene.specs.ContactSpec`); the
 builder (:mod:`cosim.scene.build`) makes subsystems, contacts and a scheme of
 them and reads nothing else.  Values are in SI, as validated; the scheme is
-resolved in one place, :func:`resolve_scheme`, into a :class:`SchemeSpec`.
+resolved in one place, :func:`~cosim.scene.specs.resolve_scheme`, into a :class:`~cosim.scene.specs.SchemeSpec`.
 
 The loader imports this module and so does :meth:`Scene.build` the builder,
 lazily; the loader and the builder never import each other.
@@ -283,7 +283,7 @@ class ContactSpec(_ByKey):
 
 @dataclass(frozen=True)
 class SchemeSpec:
-    """The coupling scheme a run uses, resolved by :func:`resolve_scheme`.
+    """The coupling scheme a run uses, resolved by :func:`~cosim.scene.specs.resolve_scheme`.
 
     Attributes
     ----------
@@ -365,7 +365,7 @@ def resolve_scheme(name: str, options: dict, tables: dict, *, file, t_end: float
 
 @dataclass(frozen=True)
 class Scene:
-    """A validated scene, ready to :meth:`build`.
+    """A validated scene, ready to :meth:`~cosim.Scene.build`.
 
     Attributes
     ----------
@@ -379,8 +379,8 @@ class Scene:
     output_every : int
         Record every n-th accepted step.
     subsystems : tuple
-        :class:`MultibodySpec`, :class:`RigidSpec` and
-        :class:`StructureSpec`, in the file's order.
+        :class:`~cosim.scene.specs.MultibodySpec`, :class:`~cosim.scene.specs.RigidSpec` and
+        :class:`~cosim.scene.specs.StructureSpec`, in the file's order.
     contacts : tuple of ContactSpec
     gravity : tuple of float or None
         [m/s^2]
@@ -417,7 +417,7 @@ class Scene:
 
     def scheme_spec(self, scheme: str | None = None) -> SchemeSpec:
         """The scheme a run uses: the scene's, or ``scheme`` with the scene's
-        options that it takes (see :func:`resolve_scheme`)."""
+        options that it takes (see :func:`~cosim.scene.specs.resolve_scheme`)."""
         return resolve_scheme(scheme or self.scheme, self.scheme_options, self.scheme_tables,
                               file=self.path, t_end=self.t_end, stacklevel=3)
 
