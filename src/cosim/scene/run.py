@@ -112,7 +112,7 @@ def _simulate(scene, scheme, progress, progress_interval, out, overwrite):
     system, sch = scene.build(scheme)
     if out is not None:
         if hasattr(sch, "preflight"):
-            sch.preflight(system)          # a refusal writes nothing
+            sch.preflight(system, scene.t_end)     # a refusal writes nothing
         write_scene(scene, out)
     if _is_monolithic(sch):
         auto = False                       # it locates every switch itself
@@ -146,6 +146,12 @@ def _simulate(scene, scheme, progress, progress_interval, out, overwrite):
         stop = exc
         status = "error"
         message = (f"stopped by {type(exc).__name__} at t = {_reached(rec):.6g} s: {exc}")
+    if status == "finished" and not _reached(rec) >= scene.t_end * (1.0 - 1e-9):
+        # a scheme that returns short of t_end has not finished, whatever it says
+        status = "error"
+        message = (f"scheme `{sch.name}` returned at t = {_reached(rec):.6g} s, short of "
+                   f"t_end = {scene.t_end:.6g} s: a bug of cosim, not of the scene")
+        log.error("%s", message)
     if status != "finished":            # the counters up to where the run stopped
         counters = sch.counters()
     if stop is not None:

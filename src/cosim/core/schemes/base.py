@@ -115,11 +115,18 @@ class CoSimulationScheme(MacroStepControl, InputExtrapolation, CouplingScheme):
                            "a table of subsystem name = number of sub-steps (>= 1)"),
     }
 
-    def preflight(self, system) -> None:
-        """Refuse a macro step that is too large for a contact's stiffness."""
+    def preflight(self, system, t_end: float = math.inf) -> None:
+        """Refuse a macro step that is too large for a contact's stiffness.
+
+        A step longer than the run (``t_end`` [s]) is judged as the one step
+        to ``t_end`` that it is."""
         if not self.explicit or self.accept_unsafe_step:
             return
-        H = self.contact_step or self.macro_step     # the step used while in contact
+        given = self.contact_step or self.macro_step     # the step used while in contact
+        H = min(given, t_end)
+        which = "contact_step" if self.contact_step else "macro_step"
+        step = (f"macro step {H:.3g} s" if H == given else
+                f"macro step {H:.3g} s (the whole run: `{which}` = {given:.3g} s is longer)")
         for c in system.coupler:
             ln = system.links[c]
             n = ln.contact.normal
@@ -131,8 +138,8 @@ class CoSimulationScheme(MacroStepControl, InputExtrapolation, CouplingScheme):
             if not (math.isfinite(k) and math.isfinite(cd)):
                 raise UnsafeStepError(
                     f"contact `{ln.contact.name}`: law `{ln.contact.law.name}` has no "
-                    f"linearised stiffness, so the pre-flight check cannot judge macro step "
-                    f"{H:.3g} s of scheme `{self.name}`; give the law a "
+                    f"linearised stiffness, so the pre-flight check cannot judge {step} of "
+                    f"scheme `{self.name}`; give the law a "
                     f"`reference_penetration`, use the `implicit` scheme, or set "
                     f"`scheme.accept_unsafe_step = true`")
             partner_first = self._partner_first(system, c)
@@ -144,7 +151,7 @@ class CoSimulationScheme(MacroStepControl, InputExtrapolation, CouplingScheme):
             gain = preflight.contact_energy_gain(m, k, cd, H, self.extrapolation_order,
                                                  partner_first)
             raise UnsafeStepError(
-                f"contact `{ln.contact.name}`: macro step {H:.3g} s is too large for scheme "
+                f"contact `{ln.contact.name}`: {step} is too large for scheme "
                 f"`{self.name}` (extrapolation order {self.extrapolation_order}): contact "
                 f"frequency omega = {math.sqrt(k / m):.4g} rad/s with reduced mass {m:.4g} kg; "
                 f"one contact would change the energy by a factor {gain:.4g} "
@@ -165,7 +172,7 @@ class CoSimulationScheme(MacroStepControl, InputExtrapolation, CouplingScheme):
         H = self.macro_step
         if H is None:
             raise ValueError(f"scheme `{self.name}` needs `macro_step` [s]")
-        self.preflight(system)
+        self.preflight(system, t_end)
         self._system = system
         self.n_iterations = self.n_windows = self.n_rejected = 0
         nc = system.n_contacts
@@ -174,17 +181,24 @@ class CoSimulationScheme(MacroStepControl, InputExtrapolation, CouplingScheme):
         d, dd = system.penetrations(outs)
         f = system.forces(d, dd)
         self._outs, self._f = outs, f
-        self._hist = self._starting_history(system, d, dd, f, H)
+        # a step longer than the run is one step to t_end: the history and the
+        # sliver test below measure it as the step it is
+        self._hist = self._starting_history(system, d, dd, f, min(H, t_end))
         impulse, diss, work = np.zeros(nc), np.zeros(nc), np.zeros(nc)
         p_prev = system.dissipation_rates(f, d, dd)[coupler]
         recorder.record(0.0, d, dd, f, impulse, diss, self._internal(system), work)
         controlled = self.contact_step is not None and len(system.exchanged) > 0
         n = max(1, math.ceil(t_end / H - 1e-9))
-        h_prev = H
+        # what is left of the run below this is round-off, not a step: relative
+        # to the shorter of the step and the run (a step longer than t_end is
+        # clipped to it; relative to the step alone, the whole run would be a
+        # sliver and no step would be taken)
+        sliver = 1e-12 * min(H, t_end)
+        h_prev = min(H, t_end)
         k, t, n_rejected = 0, 0.0, 0
         while True:
             if controlled:
-                if t_end - t <= 1e-12 * H:
+                if t_end - t <= sliver:
                     break
                 h = self._controlled_step(d, dd, f, t_end - t)
                 saved = system.get_state()
@@ -193,7 +207,7 @@ class CoSimulationScheme(MacroStepControl, InputExtrapolation, CouplingScheme):
                     break
                 t = k * H
                 h = min(H, t_end - t)
-                if h <= 1e-12 * H:
+                if h <= sliver:
                     break
             if system._followers:
                 system.update_followers(self._outs)
