@@ -170,6 +170,8 @@ def build_system(scene, scheme: str | None = None):
         if placement == "embedded" and not (subs[sa].rigid or subs[sb].rigid):
             if c.host is not None:
                 host = names.index(c.host)
+            elif c.follow:  # b's structure: it alone applies the slope force of its surface
+                host = sb
             else:   # the lighter side: it resolves the spring, the heavier one lags least
                 mob_a = subs[sa].port_mobility(pa, contact.normal)
                 mob_b = subs[sb].port_mobility(pb, contact.normal)

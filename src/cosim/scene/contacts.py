@@ -70,6 +70,14 @@ def contact_spec(name: str, t: Table, subs: list) -> ContactSpec:
     if follow and kinds[b[0]] not in ("beam", "cable", "string", "rod"):
         t.error("follow", f"moves side b's point along a line structure; `{b[0]}` is a "
                           f"{kinds[b[0]]}")
+    if follow and host == a[0]:
+        # the surface point slides along b as a moves: only b's integrator
+        # applies the force along the surface's slope that this brings
+        t.error("host", f"must be {b[0]!r}, the structure whose surface a following contact "
+                        f"(`follow = true`) follows: hosted by `{a[0]}`, point a's side, it "
+                        f"would miss the surface's slope force, got {host!r}; leave `host` "
+                        f"out (a following contact is hosted by its structure), or set "
+                        f"`follow = false`")
     connection = _connection(t, law)
     if connection is not None and placement == "embedded" and (
             kinds[a[0]] in STRUCTURE_TYPES or kinds[b[0]] in STRUCTURE_TYPES):
