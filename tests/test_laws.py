@@ -29,7 +29,7 @@ def test_rigid_law_has_no_force_and_switches_at_touch():
     d = np.array([-1e-3, 0.0, 1e-3])
     assert np.all(law.force(d, np.ones(3)) == 0) and np.all(law.potential(d) == 0)
     assert list(law.switch(d, np.zeros(3)) > 0) == [False, False, True]
-    with pytest.raises(ValueError, match=r"`restitution` must be in \[0, 1\], got 1\.5"):
+    with pytest.raises(ValueError, match=r"`restitution` must be in \(0, 1\], got 1\.5"):
         RigidLaw(1.5, 0.0)
     with pytest.raises(ValueError, match=r"`friction` must be >= 0"):
         RigidLaw(0.5, -0.1)

@@ -83,9 +83,12 @@ def test_simultaneous_frictional_impacts_are_refused_with_a_reason(tmp_path):
     assert "rigid contacts ['L', 'R'] strike at once at t = 0.1 s with friction" in res.message
 
 
-def test_zero_restitution_is_refused_not_stuck(tmp_path):
+def test_zero_restitution_is_refused_at_load_not_stuck(tmp_path):
+    """At restitution 0 the contact would stay closed after its impact, which
+    a rigid law does not model: the scene is refused before it runs."""
     p = tmp_path / "bar.toml"
     p.write_text(BAR.format(theta=0.05, mu=0.0).replace("restitution = 0.5", "restitution = 0.0"))
-    res = cosim.simulate(cosim.load_scene(p))
-    assert not res.success
-    assert "stays closed after its impact" in res.message
+    with pytest.raises(cosim.SceneError, match=r"`contacts\.L\.law\.restitution` must be in "
+                                               r"\(0, 1\], got 0\.0: the contact would stay "
+                                               r"closed after its first impact"):
+        cosim.load_scene(p)

@@ -4,7 +4,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import ClassVar
 
 import numpy as np
@@ -112,12 +112,20 @@ class RigidLaw(ContactLaw):
     Parameters
     ----------
     restitution : float
-        Poisson's kinetic coefficient, in [0, 1].
+        Poisson's kinetic coefficient, in (0, 1]; required.  No value is a
+        neutral default, and 0 is refused: the contact would stay closed
+        after its impact, and a rigid law models impacts, not a resting
+        contact (a penalty law does).
     friction : float
         Coulomb friction coefficient ``mu >= 0``.
     """
 
-    restitution: float = 0.0
+    restitution: float = field(metadata={
+        "check": "in (0, 1]: 0 would leave the contact closed, which is not modelled",
+        "required": "Poisson's coefficient sets the rebound of every impact and no value is "
+                    "a neutral default (0 would leave the contact closed after its first "
+                    "impact, which a rigid law does not model; a penalty law models a "
+                    "resting contact); give a value in (0, 1]"})
     friction: float = 0.0
     name: ClassVar[str] = "rigid"
     rigid: ClassVar[bool] = True
@@ -125,7 +133,12 @@ class RigidLaw(ContactLaw):
     def __post_init__(self):
         e = self.restitution
         if isinstance(e, bool) or not isinstance(e, (int, float)) or not 0.0 <= e <= 1.0:
-            raise ValueError(f"`restitution` must be in [0, 1], got {e!r}")
+            raise ValueError(f"`restitution` must be in (0, 1], got {e!r}")
+        if e == 0.0:
+            raise ValueError(f"`restitution` must be in (0, 1], got {e!r}: the contact would "
+                             f"stay closed after its first impact, and a rigid law does not model "
+                             f"sustained contact; give a restitution above 0, or use a "
+                             f"penalty law for a contact that comes to rest")
         object.__setattr__(self, "restitution", float(e))
         object.__setattr__(self, "friction", positive(self.friction, "friction", "", True))
 

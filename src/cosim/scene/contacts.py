@@ -48,7 +48,8 @@ def contact_spec(name: str, t: Table, subs: list) -> ContactSpec:
         if f.name in law_t.data:
             params[f.name] = law_t.number(f.name)
         elif f.default is dataclasses.MISSING:
-            law_t.error(f.name, f"is required by law `{law_name}`")
+            why = f.metadata.get("required")     # a law may say why no default would do
+            law_t.error(f.name, f"is required by law `{law_name}`" + (f": {why}" if why else ""))
     law_t.finish()
     law = build_model(law_t, law_cls, **params)
     kinds = {s.name: s.type for s in subs}

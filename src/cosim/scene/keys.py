@@ -92,8 +92,9 @@ def law_section(name: str) -> Section:
             default = f.default
         else:
             default = REQUIRED
-        keys.append(K(f.name, unit, default, "a finite number (the law checks its range)",
-                      meaning))
+        # a field may state its range (``metadata={"check": ...}``)
+        check = f.metadata.get("check", "a finite number (the law checks its range)")
+        keys.append(K(f.name, unit, default, check, meaning))
     return Section("contacts.NAME.law", f'type = "{name}"', tuple(keys))
 
 
