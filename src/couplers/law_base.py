@@ -63,3 +63,11 @@ class ContactLaw(ABC):
     def damping(self) -> float:
         """Linearised damping [N s/m] for stability estimates."""
         return 0.0
+
+    def calibration_warnings(self) -> list[dict]:
+        """Where the law does not give what its parameters ask for: one dict
+        per warning, with ``kind`` and ``message`` and the numbers it quotes
+        (a law calibrated from a restitution it cannot reach gives
+        ``requested``, ``actual`` and ``impact_speed``).  None by default.
+        A run carries them in its summary's ``warnings``."""
+        return []

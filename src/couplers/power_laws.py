@@ -271,20 +271,42 @@ class _ImpactCalibratedLaw(_PowerLaw):
         """``chi`` [s/m] from the published relation."""
         return self._chi()
 
+    def calibration_warnings(self) -> list[dict]:
+        """A warning of kind ``"restitution"`` when the restitution the law
+        gives at ``impact_speed`` (exact, :meth:`restitution_at`) differs
+        from the requested one by more than 0.05: ``requested``, ``actual``,
+        ``impact_speed`` [m/s], the ``hysteresis_damping`` [s/m] of the
+        Hunt-Crossley law that gives the requested one exactly (None for a
+        restitution of 0, which none gives), and a ``message`` that quotes
+        them."""
+        from .restitution import hunt_crossley_damping_for_restitution
+
+        e, v = self.restitution, self.impact_speed
+        actual = self.restitution_at(v)
+        if abs(actual - e) <= _RESTITUTION_WARNING:
+            return []
+        exact = hunt_crossley_damping_for_restitution(e, self.exponent) / v if e > 0 else None
+        fix = (f"law `hunt_crossley` with `hysteresis_damping` = {exact:.6g} s/m gives it "
+               f"exactly" if e > 0 else "no Hunt-Crossley damping gives 0")
+        return [{"kind": "restitution", "requested": e, "actual": actual, "impact_speed": v,
+                 "hysteresis_damping": exact,
+                 "message": f"law `{self.name}` was asked for restitution {e:g} at impact speed "
+                            f"{v:g} m/s, but its published damping gives {actual:.4f} there "
+                            f"(|difference| > {_RESTITUTION_WARNING:g}); {fix}"}]
+
     @classmethod
     def for_restitution(cls, contact_stiffness: float, exponent: float, restitution: float,
                         impact_speed: float, *, reference_penetration: float | None = None):
         """The law with the published damping for ``restitution`` at
         ``impact_speed`` [m/s].  Warns (``UserWarning``) when the restitution
         it actually produces at that speed differs from the requested one by
-        more than 0.05."""
+        more than 0.05 (:meth:`calibration_warnings`)."""
         law = cls(contact_stiffness, exponent, restitution, impact_speed,
                   reference_penetration=reference_penetration)
-        actual = law.restitution_at(law.impact_speed)
-        if abs(actual - law.restitution) > _RESTITUTION_WARNING:
+        for w in law.calibration_warnings():
             warnings.warn(
-                f"{cls.__name__}: requested restitution {law.restitution:g}, but its published "
-                f"damping gives {actual:.4f} at impact speed {law.impact_speed:g} m/s "
+                f"{cls.__name__}: requested restitution {w['requested']:g}, but its published "
+                f"damping gives {w['actual']:.4f} at impact speed {w['impact_speed']:g} m/s "
                 f"(|difference| > {_RESTITUTION_WARNING:g}); "
                 f"HuntCrossleyLaw.for_restitution reaches it exactly",
                 UserWarning, stacklevel=2)

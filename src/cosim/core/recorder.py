@@ -405,9 +405,14 @@ class Recorder:
             events += [{"contact": name, "t_on": float(a), "t_off": float(b)} for a, b in iv]
         events.sort(key=lambda e: e["t_on"])
         e_final = self.last[3] if self.last else 0.0
-        warnings = []
+        # what the contact laws say of themselves (a restitution they cannot
+        # reach), then what the guard says of the run
+        warnings = [{"kind": w["kind"], "contact": ln.contact.name,
+                     **{k: v for k, v in w.items() if k != "kind"},
+                     "message": f"contact `{ln.contact.name}`: {w['message']}"}
+                    for ln in sysm.links for w in ln.contact.law.calibration_warnings()]
         if self.guard is not None and self.last:
-            warnings = self.guard.warnings(
+            warnings += self.guard.warnings(
                 self.max_created, self.supplied,
                 {n: c["coupling_error"] for n, c in contacts.items() if "coupling_error" in c},
                 self.last[6], self.peak)
