@@ -307,9 +307,16 @@ def test_following_contact_differs_from_a_fixed_one_by_the_slope_force(tmp_path)
 
 def test_following_contact_hosted_by_the_point_is_refused():
     """Embedded in the robot, the slope force would be left out: refused, naming
-    the contact and what to do."""
-    scene = cosim.load_scene(CASES / "beam_impact.toml", overrides=['contacts.C.host="robot"'])
+    the contact and what to do (a scene is refused at load,
+    tests/test_following_host.py; a system built in Python, here)."""
+    import dataclasses
+
+    from cosim.core.system import CoupledSystem
+    system, _ = cosim.load_scene(CASES / "beam_impact.toml").build()
+    c = system.contact_names.index("C")
+    links = list(system.links)
+    links[c] = dataclasses.replace(links[c], host=links[c].sub_a)
     with pytest.raises(ValueError, match=r"contact `C`: a following contact hosted by its "
                                          r"point's side \(`robot`\) would miss the surface's "
                                          r"slope force; host it in `beam`"):
-        scene.build()
+        CoupledSystem(system.subsystems, links)
