@@ -51,8 +51,8 @@ def _print_summary(s: dict, out: Path | None) -> None:
             continue
         vals = ", ".join(f"{j} = {v['q']:.6g} ({v['dq']:.6g}/s)" for j, v in joints.items())
         print(f"  final {sub}: {vals}")
-    if s["message"]:
-        print(f"  message: {s['message']}")
+    if s["message"] and s["status"] == "finished":
+        print(f"  message: {s['message']}")      # a run that did not finish says it once, below
     if out is not None:
         print(f"  wrote {out / 'summary.json'}, {out / 'series.npz'} and {out / 'scene.toml'}")
 
@@ -87,8 +87,10 @@ def _run(args) -> int:
     for name in scene.export:
         print(f"  wrote {out / (name + '.xdmf')} (open in ParaView)")
     if res.status != "finished":
-        print(f"error: the run did not finish ({res.status}): {res.message}. Its series and "
-              f"summary up to t = {res.summary['t_end']:.6g} s are in {out}", file=sys.stderr)
+        message = res.message.rstrip()
+        print(f"error: the run did not finish ({res.status}): {message}"
+              f"{'' if message.endswith('.') else '.'} Its series and summary up to "
+              f"t = {res.summary['t_end']:.6g} s are in {out}", file=sys.stderr)
     if crash is not None:
         import traceback
         traceback.print_exception(crash, file=sys.stderr)
