@@ -362,6 +362,12 @@ class Recorder:
                 hi = mid
         return t0 + 0.5 * (lo + hi) * h
 
+    def discard(self) -> None:
+        """Close and delete the spool of a run whose series will not be
+        written (a full disk, a refused run); the recorder keeps no file open."""
+        if self._store_ is not None:
+            self._store_.close()
+
     # ----------------------------------------------------------------- result
     def finish(self, status: str, message: str, cpu_time: float, counters: dict) -> SimulationResult:
         """The run's result, its series completed up to the last sample.
@@ -372,14 +378,18 @@ class Recorder:
         last sample (a run stopped mid-step leaves its subsystems part-way).
         """
         sysm = self.system
-        if self._count and self._last_t != self._prev[0]:
-            tp, dp, _, _ = self._prev   # always keep the final sample
-            self._store(tp, self._x_prev, dp, self.system.forces(dp, self._prev[2]),
-                        self.last[3], self.last[4])
-        if self._store_ is None:        # stopped before the first sample
-            self._layout(sum(len(sub.x) for sub in sysm.subsystems),
-                         getattr(sysm, "n_rows", sysm.n_contacts))
-        self._flush()
+        try:
+            if self._count and self._last_t != self._prev[0]:
+                tp, dp, _, _ = self._prev   # always keep the final sample
+                self._store(tp, self._x_prev, dp, self.system.forces(dp, self._prev[2]),
+                            self.last[3], self.last[4])
+            if self._store_ is None:        # stopped before the first sample
+                self._layout(sum(len(sub.x) for sub in sysm.subsystems),
+                             getattr(sysm, "n_rows", sysm.n_contacts))
+            self._flush()
+        except BaseException:               # a full disk: the spool goes with the run
+            self.discard()
+            raise
         t_last = self._prev[0] if self._prev else 0.0
         intervals = [intervals_until(iv, self._open[c], t_last)
                      for c, iv in enumerate(self.intervals)]

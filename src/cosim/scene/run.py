@@ -211,8 +211,7 @@ def _lost(exc: OutputError, what: str, out) -> OutputError:
 def _discard(rec: Recorder, out) -> None:
     """Remove what a refused run wrote: the spool and ``scene.toml`` (the
     folder, if the run made it, goes with the lock in :func:`simulate`)."""
-    if rec._store_ is not None:
-        rec._store_.close()
+    rec.discard()
     if out is None:
         return
     (out / "scene.toml").unlink(missing_ok=True)
