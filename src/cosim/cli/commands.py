@@ -151,9 +151,18 @@ def _cmd_info(args) -> int:
         where = c["placement"] + (f" in {c['host']}" if "host" in c else "")
         print(f"  contact {name}: {c['law']} ({where}) between {c['between'][0]} and "
               f"{c['between'][1]}")
+        pose = c.get("pose")
+        if pose is not None:
+            where = (f"at its first touch, t = {pose['t']:.6g} s" if pose["at"] == "first touch"
+                     else f"at the initial pose ({pose['why']})")
         if c.get("frequency_hz") is not None:
             print(f"    reduced mass {c['reduced_mass']:.4g} kg, frequency {c['frequency_hz']:.4g}"
-                  f" Hz, contact time {c['contact_time_s']:.4g} s")
+                  f" Hz, contact time {c['contact_time_s']:.4g} s, {where}")
+            if "initial_pose" in c:
+                p0 = c["initial_pose"]
+                print(f"    at the initial pose: reduced mass {p0['reduced_mass']:.4g} kg, "
+                      f"frequency {p0['frequency_hz']:.4g} Hz, contact time "
+                      f"{p0['contact_time_s']:.4g} s (the stable steps below are judged there)")
             print("    largest stable macro step [s]: " + ", ".join(
                 f"{k} {_fmt(v)}" for k, v in c["max_macro_step_s"].items()))
             if "max_integrator_step_s" in c:
@@ -164,6 +173,8 @@ def _cmd_info(args) -> int:
                       f"{c['samples_per_contact']:.3g} samples per contact")
             if "sampling_note" in c:
                 print(f"    note: {c['sampling_note']}")
+        elif pose is not None:          # a nonlinear law without a linearisation
+            print(f"    reduced mass {c['reduced_mass']:.4g} kg, {where}")
     return 0
 
 
