@@ -195,3 +195,16 @@ def test_the_contact_time_of_a_spring_and_dashpot():
     assert contact_time(1.0, 1e6, 0.0) == linear_contact(1.0, 1e6)
     assert contact_time(1.3628, 1e6, 596.0) == pytest.approx(
         kelvin_voigt_clipped(1.3628, 1e6, 596.0)[0], rel=1e-14)
+
+
+def test_info_where_the_scheme_refuses_to_run_uses_the_initial_pose():
+    """C exchanged by Jacobi at a step the pre-flight check refuses: no run,
+    the initial pose, and the reason."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")     # jacobi ignores `sequence`
+        scene = load_scene(CASES / "three_mass.toml", "f1000", scheme="jacobi",
+                           overrides=['contacts.C.placement="coupler"'])
+    c = scene_info(scene)["contacts"]["C"]
+    assert c["pose"]["at"] == "initial"
+    assert c["pose"]["why"].startswith("the pre-flight check refuses the scheme's step")
+    assert c["max_macro_step_s"]["jacobi"] == pytest.approx(2.873e-6, rel=2e-3)

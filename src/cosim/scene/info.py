@@ -148,8 +148,13 @@ def first_touch(scene, budget_s: float = FIRST_TOUCH_BUDGET_S) -> tuple[dict, st
     except _Touched:
         if len(touches) < len(sought):
             why = f"not closed within {budget_s:g} s of CPU time"
-    except (SimulationError, UnsafeStepError) as exc:
-        why = f"the run stopped before it closed ({exc})"
+    except UnsafeStepError:
+        why = ("the pre-flight check refuses the scheme's step (below), so no run was made "
+               "to find where it closes")
+    except SimulationError as exc:
+        why = f"the run stopped before it closed: {exc}"
+    except Exception as exc:            # info must not fail where only the probe does
+        why = f"the run stopped before it closed: {type(exc).__name__}: {exc}"
     return touches, why
 
 
