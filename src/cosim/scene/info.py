@@ -19,7 +19,7 @@ from cosim.core import preflight
 from cosim.core.preflight import stiffest_normal
 from cosim.core.schemes import COUPLING_SCHEMES
 
-__all__ = ["scene_info", "fmu_info", "first_touch", "FIRST_TOUCH_BUDGET_S"]
+__all__ = ["scene_info", "fmu_info", "first_touch", "contact_time", "FIRST_TOUCH_BUDGET_S"]
 
 #: [s] CPU time the run that finds each contact's first touch may take
 FIRST_TOUCH_BUDGET_S = 2.0
