@@ -81,8 +81,9 @@ def assert_stopped_cli(proc, out) -> dict:
     assert both.count("run stopped at") == 1, both
     assert ".." not in both
     assert f"t_end {s['t_end']:.6g} s" in proc.stdout
+    period = "" if message.endswith(".") else "."      # one period, never two
     assert proc.stderr.rstrip("\n").endswith(
-        f"{message} Its series and summary up to t = {s['t_end']:.6g} s are in {out}")
+        f"{message}{period} Its series and summary up to t = {s['t_end']:.6g} s are in {out}")
     # a time the guard tripped at, if the message gives one, is after the stop
     if "the guard tripped at t = " in message:
         tripped = float(message.split("the guard tripped at t = ")[1].split(" s")[0])
