@@ -145,7 +145,9 @@ def test_a_nan_in_a_run_stops_it_with_time_and_contact(monkeypatch):
             "scheme.macro_step=1e-4"], scheme="jacobi")
     res = cosim.simulate(scene)
     assert res.status == "failed"
-    assert res.message.startswith("run stopped at t = 0.0051 s: the penetration rate of "
+    # the stop time is the last sample kept; the step the guard refused is named too
+    assert res.message.startswith("run stopped at t = 0.005 s (the last sample kept; the guard "
+                                  "tripped at t = 0.0051 s): the penetration rate of "
                                   "contact `wall` is nan"), res.message
     assert all(np.all(np.isfinite(a)) for a in res.series.values())
     assert res.t[-1] == pytest.approx(5e-3)

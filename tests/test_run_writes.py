@@ -333,6 +333,96 @@ def test_a_full_disk_during_the_run_stops_it_with_a_message(tmp_path):
     assert tree(tmp_path) == ["run", "run/scene.toml"]
 
 
+#: a spool on a disk that fills: the file system takes ``ROOM`` bytes, written
+#: through the spool's own buffer, then refuses the rest (a partial write, then
+#: ENOSPC), so the bytes left in the buffer fail again when it is closed
+SMALL_DISK = """
+import io, os
+from cosim.core import series
+series.CHUNK_BYTES = 1
+ROOM = int(os.environ["SPOOL_ROOM"])
+class Disk(io.FileIO):
+    def write(self, data):
+        room = ROOM - os.lseek(self.fileno(), 0, os.SEEK_CUR)
+        if room <= 0:
+            full()
+        return super().write(bytes(memoryview(data).cast("B")[:room]))
+opened = series._open_spool
+def small(path):
+    raw = opened(path).detach()
+    fd = os.dup(raw.fileno())
+    raw.close()
+    return io.BufferedRandom(Disk(fd, "r+"))
+series._open_spool = small
+"""
+
+
+@pytest.mark.parametrize("room,when", [(3000, "stopped at t = 0.0"),
+                                       (12_000, "ended (finished at t = 0.02 s)")])
+def test_a_disk_that_fills_while_spooling_leaves_no_spool_and_no_open_file(tmp_path, room,
+                                                                           when):
+    """The disk fills with the spool's buffer half written: during the run
+    (3 kB: spring_drop's chunks of 64 rows are 4 kB) or when the run ends
+    (12 kB: the spool's 12.9 kB fit but for the last chunk).  Either way:
+    exit 2 and the message, the spool closed (no ResourceWarning, which
+    ``-X dev`` shows) and removed, and the folder holds what it held before
+    and ``scene.toml``."""
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "notes.txt").write_text("mine")
+    proc = subprocess.run(
+        [sys.executable, "-X", "dev", "-c", inject(SMALL_DISK), "run", SPRING_DROP,
+         "--out", out], capture_output=True, text=True, cwd=tmp_path, timeout=300,
+        env={**os.environ, "SPOOL_ROOM": str(room), "PYTHONPATH": str(ROOT / "src")})
+    assert proc.returncode == 2, proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert "unclosed" not in proc.stderr and "ResourceWarning" not in proc.stderr
+    assert proc.stderr.startswith(f"error: cannot write {out / '.series.npz.spool'}: No space "
+                                  f"left on device; the run {when}")
+    assert proc.stderr.endswith(f"wrote no series or summary (in {out})\n")
+    assert proc.stderr.count("\n") == 1
+    assert tree(tmp_path) == ["run", "run/notes.txt", "run/scene.toml"]
+    assert (out / "notes.txt").read_text() == "mine"
+
+
+@pytest.fixture
+def full_tmpfs(tmp_path):
+    """A 40 kB tmpfs (a real file system that fills), or a skip where
+    mounting is not permitted (not root, no CAP_SYS_ADMIN, not Linux)."""
+    import shutil
+    mnt = tmp_path / "disk"
+    mnt.mkdir()
+    if sys.platform != "linux" or shutil.which("mount") is None:
+        pytest.skip("mounting a tmpfs needs Linux and mount(8)")
+    mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=40k", "tmpfs", str(mnt)],
+                             capture_output=True, text=True, timeout=30)
+    if mounted.returncode != 0:
+        pytest.skip(f"cannot mount a tmpfs here: {mounted.stderr.strip()}")
+    try:
+        yield mnt
+    finally:
+        subprocess.run(["umount", str(mnt)], capture_output=True, timeout=30)
+
+
+@pytest.mark.parametrize("chunk", ["1", "series.CHUNK_BYTES"])
+def test_a_full_tmpfs_leaves_no_spool_and_no_open_file(full_tmpfs, chunk):
+    """The same on a real file system: three_mass f100 (0.25 s) spools about
+    150 kB, which a 40 kB tmpfs cannot hold, in chunks of 64 rows (the disk
+    fills during the run) or in one chunk of 1 MB (it fills at the end)."""
+    out = full_tmpfs / "run"
+    code = f"from cosim.core import series; series.CHUNK_BYTES = {chunk}"
+    proc = subprocess.run(
+        [sys.executable, "-X", "dev", "-c", inject(code), "run", CASES / "three_mass.toml",
+         "--variant", "f100", "--out", out], capture_output=True, text=True,
+        cwd=full_tmpfs.parent, timeout=300, env={**os.environ, "PYTHONPATH": str(ROOT / "src")})
+    assert proc.returncode == 2, proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert "unclosed" not in proc.stderr and "ResourceWarning" not in proc.stderr
+    assert proc.stderr.startswith(f"error: cannot write {out / '.series.npz.spool'}: No space "
+                                  f"left on device; the run "), proc.stderr
+    assert tree(full_tmpfs) == ["run", "run/scene.toml"]
+
+
 def test_output_errors_from_python_are_oserrors_naming_the_path(tmp_path, monkeypatch):
     import errno
     (tmp_path / "FILE").write_text("")

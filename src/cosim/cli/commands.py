@@ -51,8 +51,8 @@ def _print_summary(s: dict, out: Path | None) -> None:
             continue
         vals = ", ".join(f"{j} = {v['q']:.6g} ({v['dq']:.6g}/s)" for j, v in joints.items())
         print(f"  final {sub}: {vals}")
-    if s["message"]:
-        print(f"  message: {s['message']}")
+    if s["message"] and s["status"] == "finished":
+        print(f"  message: {s['message']}")      # a run that did not finish says it once, below
     if out is not None:
         print(f"  wrote {out / 'summary.json'}, {out / 'series.npz'} and {out / 'scene.toml'}")
 
@@ -87,8 +87,10 @@ def _run(args) -> int:
     for name in scene.export:
         print(f"  wrote {out / (name + '.xdmf')} (open in ParaView)")
     if res.status != "finished":
-        print(f"error: the run did not finish ({res.status}): {res.message}. Its series and "
-              f"summary up to t = {res.summary['t_end']:.6g} s are in {out}", file=sys.stderr)
+        message = res.message.rstrip()
+        print(f"error: the run did not finish ({res.status}): {message}"
+              f"{'' if message.endswith('.') else '.'} Its series and summary up to "
+              f"t = {res.summary['t_end']:.6g} s are in {out}", file=sys.stderr)
     if crash is not None:
         import traceback
         traceback.print_exception(crash, file=sys.stderr)
@@ -149,9 +151,18 @@ def _cmd_info(args) -> int:
         where = c["placement"] + (f" in {c['host']}" if "host" in c else "")
         print(f"  contact {name}: {c['law']} ({where}) between {c['between'][0]} and "
               f"{c['between'][1]}")
+        pose = c.get("pose")
+        if pose is not None:
+            where = (f"at its first touch, t = {pose['t']:.6g} s" if pose["at"] == "first touch"
+                     else f"at the initial pose ({pose['why']})")
         if c.get("frequency_hz") is not None:
             print(f"    reduced mass {c['reduced_mass']:.4g} kg, frequency {c['frequency_hz']:.4g}"
-                  f" Hz, contact time {c['contact_time_s']:.4g} s")
+                  f" Hz, contact time {c['contact_time_s']:.4g} s, {where}")
+            if "initial_pose" in c:
+                p0 = c["initial_pose"]
+                print(f"    at the initial pose: reduced mass {p0['reduced_mass']:.4g} kg, "
+                      f"frequency {p0['frequency_hz']:.4g} Hz, contact time "
+                      f"{p0['contact_time_s']:.4g} s (the stable steps below are judged there)")
             print("    largest stable macro step [s]: " + ", ".join(
                 f"{k} {_fmt(v)}" for k, v in c["max_macro_step_s"].items()))
             if "max_integrator_step_s" in c:
@@ -162,6 +173,8 @@ def _cmd_info(args) -> int:
                       f"{c['samples_per_contact']:.3g} samples per contact")
             if "sampling_note" in c:
                 print(f"    note: {c['sampling_note']}")
+        elif pose is not None:          # a nonlinear law without a linearisation
+            print(f"    reduced mass {c['reduced_mass']:.4g} kg, {where}")
     return 0
 
 

@@ -97,11 +97,19 @@ class GuardError(SimulationError):
         The contact named responsible (None when none is).
     cause : str
         ``"non-finite"``, ``"energy growth"`` or ``"chatter"``.
+    reason : str
+        The message without its opening ``run stopped at t = ... s: ``.
+        In a run ``t`` lies after the last sample kept (the guard refuses
+        the sample it trips on, or trips at a switch inside the step before
+        it); the run's message then opens with the time of that last sample
+        (:func:`cosim.simulate`), which is the summary's ``t_end``.
     """
 
     def __init__(self, message: str, t: float, contact: str | None, cause: str):
         super().__init__(message)
         self.t, self.contact, self.cause = t, contact, cause
+        head = f"run stopped at t = {t:.6g} s: "
+        self.reason = message[len(head):] if message.startswith(head) else message
 
 
 @dataclass(frozen=True)

@@ -23,7 +23,34 @@ from cosim.core.hermite import hermite_cubic_max, hermite_point
 from cosim.core.result import SimulationResult
 from cosim.core.series import SeriesFile, SeriesStore, chunk_rows
 
-__all__ = ["Recorder", "Progress", "hermite_cubic_max"]
+__all__ = ["Recorder", "Progress", "hermite_cubic_max", "intervals_until"]
+
+
+def intervals_until(intervals, opened: float | None, t_stop: float) -> list:
+    """One contact's intervals as a summary gives them, for a run whose last
+    kept sample is at ``t_stop`` [s].
+
+    ``intervals`` are the closed ones ``[t_on, t_off]`` in time order and
+    ``opened`` the onset of one still open (or None).  A scheme reports a
+    step's switches before the sample at its end, and that sample may never
+    be kept (the guard refuses it, or Ctrl-C comes first): what began after
+    ``t_stop`` is dropped, and an interval that runs past it, or is still
+    open, ends at ``t_stop``.  Every interval returned therefore has
+    ``t_on <= t_off <= t_stop``.
+
+    Examples
+    --------
+    >>> intervals_until([[0.0, 0.2]], 0.35, 0.3)
+    [[0.0, 0.2]]
+    >>> intervals_until([[0.0, 0.2], [0.25, 0.32]], None, 0.3)
+    [[0.0, 0.2], [0.25, 0.3]]
+    >>> intervals_until([], 0.1, 0.3)
+    [[0.1, 0.3]]
+    """
+    out = [[a, min(b, t_stop)] for a, b in intervals if a <= t_stop]
+    if opened is not None and opened <= t_stop:
+        out.append([opened, t_stop])
+    return out
 
 
 class Progress(NamedTuple):
@@ -168,10 +195,6 @@ class Recorder:
         drift = energy + diss_total - internal[1] - self.e0
         if self.guard is not None:   # raises before the sample is kept
             self.guard.check(t, d, dd, f, drift, internal[1], dissipated, work, self.peak)
-        self.supplied = internal[1]
-        self.max_drift = max(self.max_drift, abs(drift))
-        if drift > self.max_created:
-            self.max_created = drift
         active = self.system.in_touch(f)
         nc = self.system.n_contacts
         switched, released = [], set()
@@ -181,7 +204,7 @@ class Recorder:
             released = {self.system.contact_names.index(e["contact"]) for e in switched
                         if e["to"] == "released"}
         prev = self._prev
-        since = self._since
+        since = self._since.copy()   # kept only with the sample (an edge may raise)
         if prev is not None:
             tp, dp, ddp, ap = prev
             h = t - tp
@@ -202,6 +225,13 @@ class Recorder:
             # inside the steps since the last sample
             np.maximum(since, self.system.take_peaks(), out=since)
             np.maximum(self.peak, since, out=self.peak)
+        self._since = since
+        # the ledger's extremes count kept samples only (an edge above may
+        # still stop the run, and this sample is then not kept)
+        self.supplied = internal[1]
+        self.max_drift = max(self.max_drift, abs(drift))
+        if drift > self.max_created:
+            self.max_created = drift
         if prev is None:
             for c in np.flatnonzero(active):
                 self.edge(int(c), t, True)
@@ -332,6 +362,12 @@ class Recorder:
                 hi = mid
         return t0 + 0.5 * (lo + hi) * h
 
+    def discard(self) -> None:
+        """Close and delete the spool of a run whose series will not be
+        written (a full disk, a refused run); the recorder keeps no file open."""
+        if self._store_ is not None:
+            self._store_.close()
+
     # ----------------------------------------------------------------- result
     def finish(self, status: str, message: str, cpu_time: float, counters: dict) -> SimulationResult:
         """The run's result, its series completed up to the last sample.
@@ -342,17 +378,22 @@ class Recorder:
         last sample (a run stopped mid-step leaves its subsystems part-way).
         """
         sysm = self.system
-        if self._count and self._last_t != self._prev[0]:
-            tp, dp, _, _ = self._prev   # always keep the final sample
-            self._store(tp, self._x_prev, dp, self.system.forces(dp, self._prev[2]),
-                        self.last[3], self.last[4])
-        if self._store_ is None:        # stopped before the first sample
-            self._layout(sum(len(sub.x) for sub in sysm.subsystems),
-                         getattr(sysm, "n_rows", sysm.n_contacts))
-        self._flush()
+        try:
+            if self._count and self._last_t != self._prev[0]:
+                tp, dp, _, _ = self._prev   # always keep the final sample
+                self._store(tp, self._x_prev, dp, self.system.forces(dp, self._prev[2]),
+                            self.last[3], self.last[4])
+            if self._store_ is None:        # stopped before the first sample
+                self._layout(sum(len(sub.x) for sub in sysm.subsystems),
+                             getattr(sysm, "n_rows", sysm.n_contacts))
+            self._flush()
+        except BaseException:               # a full disk: the spool goes with the run
+            self.discard()
+            raise
         t_last = self._prev[0] if self._prev else 0.0
-        intervals = [list(iv) + ([[self._open[c], t_last]] if self._open[c] is not None else [])
+        intervals = [intervals_until(iv, self._open[c], t_last)
                      for c, iv in enumerate(self.intervals)]
+        impacts = [i for i in self.impacts if i["time"] <= t_last]
         store = self._store_
         if self._series_path is not None:
             try:
@@ -435,7 +476,7 @@ class Recorder:
             },
             "warnings": warnings,
             "contacts": contacts,
-            "impacts": sorted(self.impacts, key=lambda i: i["time"]),
+            "impacts": sorted(impacts, key=lambda i: i["time"]),
             "switches": [{k: e[k] for k in ("time", "contact", "from", "to")}
                          for e in (sysm.connections.log if sysm.connections else [])],
             "final_state": final_state,

@@ -199,7 +199,10 @@ class SeriesStore:
         if self._fh is None:
             write_npz(path, self.arrays())
             return
-        self._fh.flush()
+        try:
+            self._fh.flush()               # a full disk may show only here
+        except OSError as exc:
+            raise output_error(exc, self.spool) from exc
         n = self.length
         biggest = max((r for _, r in self._chunks), default=0)
         buf = np.empty(biggest, dtype="<f8")
@@ -218,12 +221,23 @@ class SeriesStore:
         atomic_write(Path(path), write, "wb")
 
     def close(self) -> None:
-        """Delete the spool file."""
-        if self._fh is not None:
-            self._fh.close()
-            self._fh = None
-            if self.spool.exists():
-                self.spool.unlink()
+        """Close and delete the spool file, whatever state it is in.
+
+        On a full disk the spool's buffer cannot be flushed: closing it then
+        raises, though the file is closed all the same.  Its content is
+        discarded anyway (it is either copied into ``series.npz`` already or
+        lost with the run), so that error is not raised again here; the spool
+        is deleted in every case."""
+        if self._fh is None:
+            return
+        fh, self._fh = self._fh, None
+        try:
+            fh.close()
+        except OSError:
+            pass                           # the buffer could not be written: dropped
+        finally:
+            if os.path.lexists(self.spool):
+                os.unlink(self.spool)
 
 
 class SeriesFile(Mapping):

@@ -1,13 +1,28 @@
-"""What a run will meet, before it runs: `cosim info`."""
+"""What a run will meet, before it runs: `cosim info`.
+
+A contact's reduced mass, and with it its frequency and contact time,
+depends on the pose: a robot's arm stretched out at the start may strike
+folded.  :func:`scene_info` therefore finds where each contact first closes
+by running the scene, with its own scheme, until every contact has closed
+once, and evaluates them there; the run stops at the end time or after
+:data:`FIRST_TOUCH_BUDGET_S` of CPU time, whichever comes first, and a
+contact it did not see close is evaluated at the initial pose.  Each contact
+says which pose it used.  The largest stable steps are those the pre-flight
+and build checks judge, at the initial pose.
+"""
 from __future__ import annotations
 
 import math
+import time
 
 from cosim.core import preflight
 from cosim.core.preflight import stiffest_normal
 from cosim.core.schemes import COUPLING_SCHEMES
 
-__all__ = ["scene_info", "fmu_info"]
+__all__ = ["scene_info", "fmu_info", "first_touch", "contact_time", "FIRST_TOUCH_BUDGET_S"]
+
+#: [s] CPU time the run that finds each contact's first touch may take
+FIRST_TOUCH_BUDGET_S = 2.0
 
 #: RK4's stability limit on an undamped oscillator, omega * dt.
 RK4_LIMIT = 2.0 * math.sqrt(2.0)
@@ -52,7 +67,98 @@ def _sampling(system, c, scene, contact_time: float, name: str) -> dict:
     return out
 
 
-def _contact_info(system, c, scene) -> dict:
+def _mobility(system, c) -> float:
+    """``n^T J M^-1 J^T n`` of contact ``c``'s two ports, summed, in the
+    subsystems' present state [1/kg]."""
+    ln = system.links[c]
+    n = ln.contact.normal
+    return (system.subsystems[ln.sub_a].port_mobility(ln.port_a, n)
+            + system.subsystems[ln.sub_b].port_mobility(ln.port_b, n))
+
+
+def contact_time(mass: float, stiffness: float, damping: float) -> float:
+    """Duration [s] of one contact of a linear spring ``stiffness`` [N/m] and
+    dashpot ``damping`` [N s/m] whose force is never tensile, for a reduced
+    mass ``mass`` [kg]: ``pi / omega`` undamped, shortened by the dashpot
+    (:func:`cosim.studies.analytic.kelvin_voigt_clipped`); ``pi / omega`` for
+    a damping ratio of 1 or more, where that closed form ends."""
+    omega = math.sqrt(stiffness / mass)
+    zeta = damping / (2.0 * math.sqrt(stiffness * mass))
+    if not 0.0 < zeta < 1.0:
+        return math.pi / omega
+    return (math.pi - 2.0 * math.asin(zeta)) / (omega * math.sqrt(1.0 - zeta * zeta))
+
+
+class _Touched(Exception):
+    """Every contact sought has closed (or the budget is spent): the probe ends."""
+
+
+def first_touch(scene, budget_s: float = FIRST_TOUCH_BUDGET_S) -> tuple[dict, str | None]:
+    """Where each contact first closes in a run of ``scene`` with its scheme.
+
+    The run goes until every contact has closed once, the end time, or
+    ``budget_s`` of CPU time; it writes nothing.  A contact closed at the
+    start closes at t = 0.
+
+    Returns
+    -------
+    touches : dict
+        Contact index -> ``(t, mobility)``: the time it closed [s] and its
+        ports' mobility ``1 / reduced mass`` [1/kg] in the state the run
+        had when it reported that (at the end of the step it closed in; the
+        pose moves little within a step).
+    why_not : str or None
+        Why some contacts were not seen to close: the run ended, ran out of
+        budget, or could not run (its message).
+    """
+    from cosim.core.recorder import Recorder
+    from cosim.errors import SimulationError, UnsafeStepError
+
+    system, sch = scene.build()
+    sought = {c for c, ln in enumerate(system.links) if not ln.contact.law.rigid}
+    touches: dict = {}
+    if not sought:
+        return touches, None
+    if budget_s <= 0:
+        return touches, "no run was made to find where it closes"
+    cpu0 = time.process_time()
+
+    class Probe(Recorder):
+        def edge(self, c, t, on):
+            if on and c in sought and c not in touches:
+                touches[c] = (float(t), _mobility(system, c))
+                if len(touches) == len(sought):
+                    raise _Touched
+            super().edge(c, t, on)
+
+        def record(self, t, *args, **kw):
+            if time.process_time() - cpu0 > budget_s:
+                raise _Touched
+            super().record(t, *args, **kw)
+
+    mono = sch.name == "monolithic"
+    auto = False if mono else [c not in system.embedded for c in range(system.n_contacts)]
+    probe = Probe(system, scene.name, sch.name, scene.t_end, every=2**62, auto_edges=auto)
+    why = None
+    try:
+        if hasattr(sch, "preflight"):
+            sch.preflight(system)
+        sch.run(system, scene.t_end, probe)
+        why = f"the run to t_end = {scene.t_end:g} s did not close it"
+    except _Touched:
+        if len(touches) < len(sought):
+            why = f"not closed within {budget_s:g} s of CPU time"
+    except UnsafeStepError:
+        why = ("the pre-flight check refuses the scheme's step (below), so no run was made "
+               "to find where it closes")
+    except SimulationError as exc:
+        why = f"the run stopped before it closed: {exc}"
+    except Exception as exc:            # info must not fail where only the probe does
+        why = f"the run stopped before it closed: {type(exc).__name__}: {exc}"
+    return touches, why
+
+
+def _contact_info(system, c, scene, touch=None, why_not=None) -> dict:
     ln = system.links[c]
     law = ln.contact.law
     out = {"law": law.name, "placement": ln.placement,
@@ -61,22 +167,34 @@ def _contact_info(system, c, scene) -> dict:
         out.update(restitution=law.restitution, friction=law.friction)
         return out
     n = ln.contact.normal
-    mob = (system.subsystems[ln.sub_a].port_mobility(ln.port_a, n)
-           + system.subsystems[ln.sub_b].port_mobility(ln.port_b, n))
+    mob = _mobility(system, c)
     k, cd = stiffest_normal(ln)      # a grasp stiffer than the law sets the frequency
     conn = ln.connection
     if conn is not None:
         out.update(grasp=conn.grasp is not None,
                    friction=None if conn.friction is None else conn.friction.coefficient)
-    m = 1.0 / mob
+    m0 = 1.0 / mob                   # at the initial pose: the pre-flight check's
+    if touch is not None:
+        pose = {"at": "first touch", "t": touch[0]}
+        m = 1.0 / touch[1]
+    else:
+        pose = {"at": "initial", "t": 0.0, "why": why_not or "no run was made to find it"}
+        m = m0
+    out["pose"] = pose
     if not (math.isfinite(k) and math.isfinite(cd)):
         out.update(reduced_mass=m, frequency_hz=None, contact_time_s=None,
                    note="nonlinear law without `reference_penetration`: no linearisation")
         return out
     omega = math.sqrt(k / m)
+    t_c = contact_time(m, k, cd)
     out.update(stiffness=k, damping=cd, reduced_mass=m, frequency_hz=omega / (2 * math.pi),
-               contact_time_s=math.pi / omega)
-    out.update(_sampling(system, c, scene, math.pi / omega, ln.contact.name))
+               contact_time_s=t_c)
+    if touch is not None and touch[0] > 0:
+        out["initial_pose"] = {"reduced_mass": m0,
+                               "frequency_hz": math.sqrt(k / m0) / (2 * math.pi),
+                               "contact_time_s": contact_time(m0, k, cd)}
+    out.update(_sampling(system, c, scene, t_c, ln.contact.name))
+    m, omega = m0, math.sqrt(k / m0)  # the stable steps: as the checks judge them
     opts = scene.scheme_options
     order, gain = opts.get("extrapolation_order", 0), opts.get("max_energy_gain", 0.01)
     steps = {}
@@ -115,7 +233,7 @@ def fmu_info(sub) -> dict:
                           for v in sub.variables.values()]}
 
 
-def scene_info(scene) -> dict:
+def scene_info(scene, *, budget_s: float = FIRST_TOUCH_BUDGET_S) -> dict:
     """DOFs and natural frequencies of each subsystem, and each contact's
     frequency, contact time, largest stable macro step per scheme, and how
     often the series will sample it (``sampling_interval_s``,
@@ -123,8 +241,16 @@ def scene_info(scene) -> dict:
     :data:`SAMPLES_TO_DRAW`).
 
     Frequencies are in Hz, times in s.  The reduced mass of a contact is
-    that of its two ports at the initial state, ``1 / (n^T J M^-1 J^T n)``
-    summed over both sides."""
+    that of its two ports, ``1 / (n^T J M^-1 J^T n)`` summed over both
+    sides, in the pose where the contact first closes (:func:`first_touch`,
+    a run of at most ``budget_s`` of CPU time; 0: no run); ``pose`` says
+    which (``at``: ``"first touch"`` or ``"initial"``, ``t`` [s], and
+    ``why`` the initial pose was used), and ``initial_pose`` holds the
+    values at the start when they differ.  The contact time is that of the
+    linearised spring and dashpot (:func:`contact_time`).  The largest
+    stable steps are judged at the initial pose, as the pre-flight check
+    and the build do."""
+    touches, why_not = first_touch(scene, budget_s)
     system, _ = scene.build()
     subs = {}
     for sub in system.subsystems:
@@ -148,6 +274,6 @@ def scene_info(scene) -> dict:
         "scene": scene.name, "variant": scene.variant, "scheme": scene.scheme,
         "scheme_options": dict(scene.scheme_options), "t_end": scene.t_end,
         "subsystems": subs,
-        "contacts": {name: _contact_info(system, c, scene)
+        "contacts": {name: _contact_info(system, c, scene, touches.get(c), why_not)
                      for c, name in enumerate(system.contact_names)},
     }

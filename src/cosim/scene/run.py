@@ -6,12 +6,12 @@ import sys
 import time
 from pathlib import Path
 
-from cosim.core.guard import Guard
+from cosim.core.guard import Guard, GuardError
 from cosim.core.recorder import Recorder
 from cosim.scene.load import Scene, load_scene
 from cosim.errors import OutputError, SimulationError, UnsafeStepError
 
-__all__ = ["simulate", "run_scene", "RunInterrupted"]
+__all__ = ["simulate", "run_scene", "RunInterrupted", "stop_message"]
 
 log = logging.getLogger(__name__)
 
@@ -136,8 +136,7 @@ def _simulate(scene, scheme, progress, progress_interval, out, overwrite):
         raise _lost(exc, f"the run stopped at t = {_reached(rec):.6g} s and wrote no "
                          f"series or summary", out) from None
     except SimulationError as exc:
-        status, message = "failed", str(exc)
-        log.error("%s", exc)
+        status, message = "failed", stop_message(exc, _reached(rec))
     except KeyboardInterrupt as exc:
         stop = exc
         cause = getattr(exc, "signal_name", None) or "Ctrl-C"
@@ -154,8 +153,8 @@ def _simulate(scene, scheme, progress, progress_interval, out, overwrite):
         log.error("%s", message)
     if status != "finished":            # the counters up to where the run stopped
         counters = sch.counters()
-    if stop is not None:
-        log.error("%s", message)
+    if status != "finished":             # the result says it; a caller decides to show it
+        log.info("%s", message)
     ended = f"the run ended ({status} at t = {_reached(rec):.6g} s)"
     try:
         res = rec.finish(status, message, time.process_time() - cpu0, counters)
@@ -183,6 +182,24 @@ def _simulate(scene, scheme, progress, progress_interval, out, overwrite):
     return res
 
 
+def stop_message(exc: SimulationError, t_stop: float) -> str:
+    """The message of a run that ``exc`` stopped, its last kept sample at
+    ``t_stop`` [s].
+
+    It opens with ``run stopped at t = T s``, ``T`` being ``t_stop``: the
+    summary's ``t_end`` and the series' last time, so the three agree.  A
+    guard trips on a sample it then refuses (or at a switch inside the step
+    before it), after ``t_stop``: the message says that time too.  Another
+    error's own text follows (it names the time of its cause).
+    """
+    head = f"run stopped at t = {t_stop:.6g} s"
+    if isinstance(exc, GuardError):
+        if f"{exc.t:.6g}" != f"{t_stop:.6g}":
+            head += f" (the last sample kept; the guard tripped at t = {exc.t:.6g} s)"
+        return f"{head}: {exc.reason}"
+    return f"{head}: {exc}"
+
+
 def _is_monolithic(sch) -> bool:
     """``isinstance(sch, Monolithic)`` without importing the monolithic scheme
     for a run that does not use it (an instance means its module is loaded)."""
@@ -200,8 +217,7 @@ def _lost(exc: OutputError, what: str, out) -> OutputError:
 def _discard(rec: Recorder, out) -> None:
     """Remove what a refused run wrote: the spool and ``scene.toml`` (the
     folder, if the run made it, goes with the lock in :func:`simulate`)."""
-    if rec._store_ is not None:
-        rec._store_.close()
+    rec.discard()
     if out is None:
         return
     (out / "scene.toml").unlink(missing_ok=True)
