@@ -713,6 +713,37 @@ def test_friction_step_limits():
         assert_reproduced(claim, got)
 
 
+def test_co_simulated_friction_needs_the_shorter_step(tmp_path):
+    """"With v_s = 1e-4 m/s and H = 1e-3 s the block stops and the iteration
+    fails on the row `floor.t`; it needs H = 1e-4 s": the sliding block of
+    ``test_connections.py`` with its friction row exchanged under the
+    implicit scheme (1.4 s of CPU; the verdicts for the scene and four copies
+    moved by round-off, 7 s)."""
+    from test_connections import MASS, SLIDE, scene_text
+    claim = Claim(C, "With v_s = 1e-4 m/s and H = 1e-3 s the block stops and the iteration "
+                     "fails on the row `floor.t`; it needs H = 1e-4 s",
+                  "the sliding block, implicit, placement coupler", 1e-4)
+    assert_printed(claim)
+    fr = "friction = { coefficient = 0.3, slip_velocity = 0.0001 }"
+    path = tmp_path / "slide.toml"
+    path.write_text(scene_text(SLIDE.format(k=1e6, friction=fr), t_end=0.4, dq0=(1.0, 0.0),
+                               q0=(0.0, -MASS * 9.81 / 1e6), max_step=2e-4))
+    stop = 1.0 / (0.3 * 9.81)                   # [s] the block stops at v0 / (mu g)
+
+    def verdict(res):
+        if res.status == "finished":
+            return "finished"
+        at = float(re.search(r"at t = ([\d.]+) s", res.message).group(1))
+        return f"failed on {'floor.t' if '`floor.t`' in res.message else '?'} " \
+               f"{'after the stop' if abs(at - stop) < 0.01 else 'elsewhere'}"
+
+    for h, expected in ((1e-3, "failed on floor.t after the stop"), (claim.value, "finished")):
+        scene = _load(path, overrides=['scheme.name="implicit"', f"scheme.macro_step={h}",
+                                       'contacts.floor.placement="coupler"'])
+        seen = outcomes(scene, verdict)
+        assert seen == [expected] * len(seen), (h, seen)
+
+
 # ======================================================================
 # getting-started.md: cosim plot's files
 # ======================================================================
