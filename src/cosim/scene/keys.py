@@ -109,17 +109,43 @@ def scheme_section() -> Section:
     seen = {}
     for n in names:
         for opt, spec in COUPLING_SCHEMES[n].options.items():
-            seen.setdefault(opt, (spec, []))[1].append(n)
-    for opt, (spec, takers) in seen.items():
+            seen.setdefault(opt, []).append((n, spec))
+    for opt, specs in seen.items():
+        takers = [n for n, _ in specs]
+        spec = specs[0][1]
         unit = "s" if spec.rule.endswith(" s") else ("N" if spec.rule.endswith(" N") else "")
         rule = spec.rule[:-2] if unit else spec.rule
-        default = (Varies("required by every scheme that takes it") if opt == "macro_step"
-                   else spec.default)
+        if opt == "macro_step":
+            default = Varies("required by every scheme that takes it")
+        else:
+            default = _scheme_default(specs)
         keys.append(K(opt, unit, default, f"{rule} ({', '.join(takers)})",
                       SCHEME_OPTIONS[opt]))
     keys.append(K("SCHEME", "", None, "a table of options of the scheme named SCHEME",
                   "options that apply only when that scheme runs (`[scheme.monolithic]`)"))
     return Section("scheme", "", tuple(keys))
+
+
+def _scheme_default(specs: list) -> object:
+    """The default of a scheme option that several schemes take: their common
+    default, or, where they differ, a :class:`Varies` that gives each
+    scheme's (``(name, OptionSpec)`` pairs in registry order)."""
+    defaults = [spec.default for _, spec in specs]
+    if all(_same(d, defaults[0]) for d in defaults):
+        return defaults[0]
+    groups: list[tuple[object, list[str]]] = []
+    for n, spec in specs:
+        for d, members in groups:
+            if _same(d, spec.default):
+                members.append(n)
+                break
+        else:
+            groups.append((spec.default, [n]))
+    return Varies(", ".join(f"{_default_text(d)} ({', '.join(m)})" for d, m in groups))
+
+
+def _same(a, b) -> bool:
+    return type(a) is type(b) and repr(a) == repr(b)
 
 
 # ----------------------------------------------------------------- render

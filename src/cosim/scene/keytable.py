@@ -14,9 +14,15 @@ from dataclasses import dataclass
 from cosim.core.guard import (DEFAULT_CHATTER_SWITCHES, DEFAULT_CHATTER_WINDOW,
                               DEFAULT_COUPLING_WARNING, DEFAULT_ENERGY_FLOOR,
                               DEFAULT_ENERGY_GROWTH, DEFAULT_ENERGY_WARNING)
+from cosim.io.rundir import NAME_MAX
 
 __all__ = ["Key", "Section", "SECTIONS", "REQUIRED", "Varies", "DEFAULT_MULTIBODY_STEP",
-           "DEFAULT_CONTACT_STEP"]
+           "DEFAULT_CONTACT_STEP", "STRUCTURE_TYPES", "SUBSYSTEM_TYPES", "NAME_TEXT"]
+
+#: the ``type`` of a structure subsystem
+STRUCTURE_TYPES = ("chain", "beam", "cable", "string", "rod")
+#: every ``type`` a subsystem may have (the loader's choices, the table's text)
+SUBSYSTEM_TYPES = ("multibody", "rigid", "fmu") + STRUCTURE_TYPES
 
 #: [s] the step of a multibody side's ``rk4`` when the scene gives no
 #: ``integrator.max_step``: the macro step when it is shorter, else this.
@@ -120,7 +126,11 @@ K = Key
 _TABLE = "a table"
 _VEC = "two finite numbers"
 _UNIT_VEC = "two finite numbers, not both 0"
-_WORD = "a plain word (letters, digits, `_`, `-`)"
+#: the rule of :func:`cosim.io.rundir.name_problem`, which the loader applies to
+#: every name that becomes a folder, a file or a key (``check_name``)
+NAME_TEXT = (f"a plain name: 1 to {NAME_MAX} of `A-Z a-z 0-9 _ . + -`, not starting with "
+             f"`.`, `+` or `-`, without `..`")
+_WORD = NAME_TEXT
 
 
 def _types(*names: str) -> str:
@@ -172,8 +182,7 @@ _GUARD = (
       "simulated time over which switches are counted"),
 )
 
-_SUBSYSTEM_TYPE = K("type", "", REQUIRED,
-                    'one of "multibody", "rigid", "chain", "beam", "cable", "string", "rod"',
+_SUBSYSTEM_TYPE = K("type", "", REQUIRED, "one of " + _types(*SUBSYSTEM_TYPES),
                     "what the subsystem is")
 
 _MULTIBODY = (
@@ -429,7 +438,7 @@ SECTIONS: dict[str, Section] = {
     "effects": Section("effects", "", _EFFECTS),
     "guard": Section("guard", "", _GUARD),
     "subsystems": Section("subsystems", "", (K("NAME", "", REQUIRED,
-                                               _WORD + ", without `.`", "a subsystem"),)),
+                                               _WORD + "; no `.` at all", "a subsystem"),)),
     "subsystem": Section("subsystems.NAME", "", (_SUBSYSTEM_TYPE,)),
     "multibody": Section("subsystems.NAME", 'type = "multibody"', _MULTIBODY),
     "multibody.integrator": Section("subsystems.NAME.integrator", 'type = "multibody"',

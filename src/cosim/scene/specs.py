@@ -22,13 +22,13 @@ from typing import ClassVar
 from cosim.core.guard import GuardOptions
 from cosim.scene.checks import MAX_STEPS, SceneError
 from cosim.scene.keys import DEFAULT_CONTACT_STEP, DEFAULT_MULTIBODY_STEP
+# the subsystem types live beside the table of keys, which names them in the reference
+from cosim.scene.keytable import STRUCTURE_TYPES, SUBSYSTEM_TYPES
 
 __all__ = ["Scene", "SchemeSpec", "MultibodySpec", "BodySpec", "JointSpec", "RigidSpec",
            "FMUSpec", "StructureSpec", "ContactSpec", "resolve_scheme", "STRUCTURE_TYPES",
            "SUBSYSTEM_TYPES"]
 
-STRUCTURE_TYPES = ("chain", "beam", "cable", "string", "rod")
-SUBSYSTEM_TYPES = ("multibody", "rigid", "fmu") + STRUCTURE_TYPES
 
 
 class _ByKey:
