@@ -405,6 +405,54 @@ def test_spring_drop_closed_forms(spring_drop_runs):
     assert kv["final_state"]["body"]["x"]["dq"] / 1.0 == pytest.approx(e.value, rel=1e-6)
 
 
+# ----------------------------------------------------- explicit schemes on spring_drop
+SPRING_COUPLER = ['contacts.wall.placement="coupler"', "scheme.accept_unsafe_step=true",
+                  "guard.energy_check=false"]     # the runs measure a long step's gain
+
+
+def _drop(scheme, H, order, *extra):
+    res = simulate(load(CASES / "spring_drop.toml", None, SPRING_COUPLER + [
+        f"scheme.macro_step={H}", f"scheme.extrapolation_order={order}", *extra], scheme))
+    assert res.success, res.message
+    return res
+
+
+def test_held_force_gain_and_the_second_order_envelope():
+    """verification.md: with the force held, the rebound gain matches
+    exp(πωH/4) to 5 % (a bound: ω = 1000 rad/s, H = 1e-4 and 2.5e-5 s,
+    Jacobi and Gauss-Seidel); extrapolation of order 1 and the implicit
+    scheme stay within 0.25 (ωH)² in the rebound velocity (H = 1e-4 to
+    1.25e-5 s)."""
+    from analytic import held_force_rebound_factor
+    gain = Claim(V, "the rebound gain matches exp(πωH/4) to 5 %", "tests/test_spring_drop.py", 5.0)
+    env = Claim(V, "converge at second order, within\n0.25 (ωH)²", "tests/test_spring_drop.py", 0.25)
+    for c in (gain, env):
+        assert_printed(c)
+    for scheme in ("jacobi", "gauss_seidel"):
+        for H in (1e-4, 2.5e-5):
+            v = _drop(scheme, H, 0).summary["final_state"]["body"]["x"]["dq"]
+            theory = held_force_rebound_factor(1000.0, H) - 1.0
+            assert 100 * abs((v - 1.0) / theory - 1.0) < gain.value, (scheme, H, v, theory)
+    for scheme in ("jacobi", "gauss_seidel", "implicit"):
+        for H in (1e-4, 5e-5, 2.5e-5, 1.25e-5):
+            v = _drop(scheme, H, 1).summary["final_state"]["body"]["x"]["dq"]
+            assert abs(v - 1.0) <= env.value * (1000.0 * H) ** 2, (scheme, H, v)
+
+
+def test_the_step_controller_lands_on_the_onset():
+    """verification.md: "the step controller lands on onsets to 1e-9 s" (a
+    bound): a constant 2000 N push from 1 cm, a 5 ms first step, touch-down
+    at sqrt(2 x0 / a)."""
+    c = Claim(V, "the step controller lands on onsets to 1e-9 s", "tests/test_step_control.py",
+              math.sqrt(2 * 0.01 / 2000.0), abs=1e-9)
+    assert_printed(c)
+    res = _drop("implicit", 5e-3, 1, "scheme.contact_step=1.25e-5",
+                'subsystems.body.bodies.mass.joint.drive={type="constant", torque=-2000.0}',
+                "subsystems.body.bodies.mass.joint.dq0=0.0")
+    assert res.n_rejected >= 1
+    assert_reproduced(c, res.summary["contacts"]["wall"]["intervals"][0][0])
+
+
 # ----------------------------------------------------- the two-mass oscillator
 TWO_MASS = [  # (row prefix, cells, [(scheme, extrapolation order) per cell])
     ("| `jacobi`", ["1.08", "2.00", "3.0"], [("jacobi", 0), ("jacobi", 1), ("jacobi", 2)]),
@@ -906,6 +954,39 @@ def test_the_sampling_note():
     assert_reproduced(n, info["samples_per_contact"])
     assert "too coarse to draw it" in info["sampling_note"]
     assert "`scheme.contact_step`" in info["sampling_note"]
+
+
+GUARD_DEFAULTS = [("energy_growth", "| `energy_growth` | 0.1 |"),
+                  ("energy_floor", "| `energy_floor` | 1e-3 J |"),
+                  ("energy_warning", "| `energy_warning` | 0.01 |"),
+                  ("coupling_warning", "| `coupling_warning` | 0.01 |")]
+
+
+def test_the_guards_defaults_and_the_loaders_limits():
+    """The defaults a loaded scene's guard gets (`cosim.load_scene`), and the
+    limits the page quotes by name."""
+    from cosim.io import tomlread
+    from cosim.scene import load as loader
+    g = load(CASES / "spring_drop.toml").guard
+    for key, text in GUARD_DEFAULTS:
+        c = claim(TR, text, f"cosim.load_scene(...).guard.{key}", _NUMBER.findall(text)[0])
+        assert_printed(c)
+        assert_reproduced(c, getattr(g, key))
+    limits = [(claim(TR, "more than 20 000 elements", "cosim.scene.load.MAX_ELEMENTS", "20"),
+               loader.MAX_ELEMENTS / 1000),
+              (claim(TR, "more than 1e9 macro or integrator steps", "cosim.scene.load.MAX_STEPS"),
+               loader.MAX_STEPS),
+              (claim(TR, "estimated memory passes 4 GiB", "cosim.scene.load.MAX_MEMORY"),
+               loader.MAX_MEMORY / 2**30),
+              (claim(TR, "`must hold at most 67108864 bytes`", "cosim.io.tomlread.MAX_BYTES"),
+               tomlread.MAX_BYTES),
+              (claim(TR, "`must nest at most 32 levels", "cosim.io.tomlread.MAX_DEPTH"),
+               tomlread.MAX_DEPTH),
+              (claim(TR, "`must hold at most 10000 keys", "cosim.io.tomlread.MAX_KEYS"),
+               tomlread.MAX_KEYS)]
+    for c, value in limits:
+        assert_printed(c)
+        assert_reproduced(c, value)
 
 
 def test_the_scheduler_connect_timeout():
