@@ -954,6 +954,16 @@ def test_the_sampling_note():
     assert_reproduced(n, info["samples_per_contact"])
     assert "too coarse to draw it" in info["sampling_note"]
     assert "`scheme.contact_step`" in info["sampling_note"]
+    # commands.md: the note comes "when that is fewer than 4"
+    four = claim(CM, "with a `sampling_note` naming the key to change when that is fewer than 4",
+                 "cosim info SCENE --json")
+    assert_printed(four)
+    from cosim.scene.info import SAMPLES_TO_DRAW
+    assert_reproduced(four, SAMPLES_TO_DRAW)
+    p = subprocess.run([sys.executable, "-m", "cosim.cli", "info", str(THREE_MASS), "--variant",
+                        "f100", "--json"], capture_output=True, text=True, timeout=120)
+    for c in json.loads(p.stdout)["contacts"].values():     # A, B: 2.4, 2.9; C: 10
+        assert bool(c.get("sampling_note")) == (c["samples_per_contact"] < 4), c
 
 
 GUARD_DEFAULTS = [("energy_growth", "| `energy_growth` | 0.1 |"),
