@@ -173,8 +173,12 @@ F100_CLAIMS = [  # (claim, row, quantity)
     # schemes.md: interface error control at the scene's macro step
     (claim(SC, "takes C's peak error from 0.2 %", _cmd("coarse_1e-4")), "coarse_1e-4", "|peak|"),
     (claim(SC, "takes C's peak error from 0.2 % to 0.1 %", _cmd("tol_1e-4")), "tol_1e-4", "|peak|"),
-    (claim(SC, "exit-velocity error\nfrom 0.7 %", _cmd("coarse_1e-4")), "coarse_1e-4", "|exit|"),
-    (claim(SC, "exit-velocity error\nfrom 0.7 % to 0.2 %", _cmd("tol_1e-4")), "tol_1e-4", "|exit|"),
+    (claim(SC, "exit-velocity error from 0.7 %", _cmd("coarse_1e-4")), "coarse_1e-4", "|exit|"),
+    (claim(SC, "exit-velocity error from 0.7 % to 0.2 %", _cmd("tol_1e-4")), "tol_1e-4", "|exit|"),
+    (claim(SC, "for 983 iterations over its 536 macro steps", _cmd("implicit"), "983"),
+     "implicit", "iterations"),
+    (claim(SC, "for 983 iterations over its 536 macro steps", _cmd("implicit")),
+     "implicit", "steps"),
     # implicit hosted: "errors below 2e-5, the energy closed to 1e-6 J" are bounds (below)
 ]
 
@@ -637,6 +641,24 @@ def test_placement_sweep_ends_with_its_refused_point(tmp_path):
         msg = re.search(r"largest safe macro step is ([0-9.e+-]+) s", p.stdout)
         assert msg, p.stdout
         assert_reproduced(safe, float(msg[1]))
+
+
+def test_sweep_exit_status_when_every_point_finished_or_the_command_is_malformed(tmp_path):
+    """"The exit status is 0 when every point finished, 1 when some did not
+    ..., and 2 for a malformed command" (1: the placement sweep above)."""
+    ok = claim(SW, "The exit status is 0 when every point finished", "cosim sweep ...")
+    bad = claim(SW, "and 2 for a malformed command", "cosim sweep ... --scheduler foo")
+    for c in (ok, bad):
+        assert_printed(c)
+    base = [sys.executable, "-m", "cosim.cli", "sweep", str(THREE_MASS), "--variants", "f100",
+            "--workers", "1", "--no-plot", "--quiet"]
+    p = subprocess.run(base + ["--out", str(tmp_path / "ok")], capture_output=True, text=True,
+                       timeout=300)
+    assert_reproduced(ok, p.returncode)
+    p = subprocess.run(base + ["--scheduler", "foo", "--out", str(tmp_path / "bad")],
+                       capture_output=True, text=True, timeout=300)
+    assert_reproduced(bad, p.returncode)
+    assert not (tmp_path / "bad").exists()
 
 
 # ======================================================================
