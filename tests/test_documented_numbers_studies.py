@@ -409,6 +409,25 @@ def test_spring_drop_closed_forms(spring_drop_runs):
     assert kv["final_state"]["body"]["x"]["dq"] / 1.0 == pytest.approx(e.value, rel=1e-6)
 
 
+def test_cosim_verify_checks_at_the_printed_tolerances():
+    """"For the monolithic scheme (1e-6 relative) and the scene's default
+    scheme (1e-5), the contact time, the rebound velocity and the energy
+    ledger ... are checked": `cosim verify` prints those tolerances, and
+    every check passes (exit 0)."""
+    mono = claim(V, "For the monolithic scheme (1e-6 relative)", "cosim verify")
+    default = claim(V, "the scene's default scheme (1e-5)", "cosim verify")
+    for c in (mono, default):
+        assert_printed(c)
+    p = subprocess.run([sys.executable, "-m", "cosim.cli", "verify"], cwd=ROOT,
+                       capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0, p.stdout + p.stderr
+    lines = [ln for ln in p.stdout.splitlines() if ln.startswith("PASS")]
+    assert len(lines) == 12 and "FAIL" not in p.stdout, p.stdout
+    for ln in lines:
+        tol = float(re.search(r"tol\. ([0-9.e+-]+)\)", ln)[1])
+        assert_reproduced(mono if "/monolithic:" in ln else default, tol)
+
+
 # ----------------------------------------------------- explicit schemes on spring_drop
 SPRING_COUPLER = ['contacts.wall.placement="coupler"', "scheme.accept_unsafe_step=true",
                   "guard.energy_check=false"]     # the runs measure a long step's gain
