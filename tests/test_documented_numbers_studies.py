@@ -222,23 +222,28 @@ def test_three_mass_f100_against_the_reference(f100_rows, claim, name, quantity)
         assert_reproduced(claim, run[quantity])
 
 
+IMPLICIT_BOUNDS = (claim(SC, "errors below 2e-5", _cmd("implicit")),
+                   claim(SC, "the energy closed to 1e-6 J", _cmd("implicit")))
+
+
 def test_implicit_hosted_closes_the_energy(f100_rows):
     """schemes.md: `implicit` with C hosted: "errors below 2e-5, the energy
     closed to 1e-6 J" (bounds; measured 1.3e-5 and 8.4e-7 J)."""
-    for c in ("errors below 2e-5", "the energy closed to 1e-6 J"):
-        assert_printed(Claim(SC, c, _cmd("implicit"), 0.0))
+    errors, energy = IMPLICIT_BOUNDS
     for run in f100_rows["implicit"]:
-        assert run["max|error|"] / 100 < 2e-5, run
-        assert abs(run["coupling"]) < 1e-6, run
+        assert run["max|error|"] / 100 < errors.value, run
+        assert abs(run["coupling"]) < energy.value, run
+
+
+PREFLIGHT_9US = claim(SC, "the explicit coupler refuses any step above 9 µs",
+                      "cosim run cases/three_mass.toml --variant f100 --set "
+                      "'contacts.C.placement=\"coupler\"' --set scheme.contact_step=2e-5")
 
 
 def test_the_explicit_coupler_is_refused_above_9_us():
     """schemes.md: "the explicit coupler refuses any step above 9 µs" (the
     pre-flight check's largest safe step, 9.08e-06 s)."""
-    c = claim(SC, "the explicit coupler refuses any step above 9 µs",
-              "cosim run cases/three_mass.toml --variant f100 --set "
-              "'contacts.C.placement=\"coupler\"' --set scheme.contact_step=2e-5")
-    assert_printed(c)
+    c = PREFLIGHT_9US
     with pytest.raises(cosim.UnsafeStepError) as info:
         simulate(load(THREE_MASS, "f100", [COUPLER, S2]))
     safe = float(re.search(r"largest safe macro step is ([0-9.e+-]+) s", str(info.value))[1])
@@ -298,6 +303,10 @@ def test_contacts_of_c_with_the_monolithic_reference(paper, claim, variant):
     assert_reproduced(claim, paper[variant]["count"])
 
 
+TOUCH_25 = claim(V, "For f ≥ 4 the in-touch period, from first touch to last release, varies by "
+                   "less than 25 %", MONO.format("f4, f10, f100"))
+
+
 def test_regimes_and_in_touch_period_with_the_monolithic_reference(paper):
     """The chain-mass table's regimes, and "for f ≥ 4 the in-touch period
     ... varies by less than 25 %" (a bound; measured 4 %)."""
@@ -305,9 +314,7 @@ def test_regimes_and_in_touch_period_with_the_monolithic_reference(paper):
         assert_printed(Claim(V, text, MONO.format("msX"), 0.0))
     for v, (_, regime) in PAPER_MS.items():
         assert paper[v]["regime"] == regime, (v, paper[v])
-    c = Claim(V, "For f ≥ 4 the in-touch period, from first touch to last release, varies by "
-                 "less than 25 %", MONO.format("f4, f10, f100"), 25.0)
-    assert_printed(c)
+    c = TOUCH_25
     spans = [paper[v]["span"] for v in ("f4", "f10", "f100")]
     assert 100 * (max(spans) / min(spans) - 1) < c.value, spans
 
@@ -382,6 +389,12 @@ def spring_drop_runs():
             for v in ("undamped", "kelvin_voigt")}
 
 
+CLOSED_FORMS = (claim(V, "π√(m/k) = 3.14159 ms", "cosim verify"),
+                claim(V, "the rebound is +1 m/s", "cosim verify"),
+                claim(V, "e = 0.744079", "cosim verify"),
+                claim(V, "against 0.729 for the textbook", "exp(-zeta pi / sqrt(1 - zeta^2))"))
+
+
 def test_spring_drop_closed_forms(spring_drop_runs):
     """The closed forms to their printed digits, and the monolithic runs that
     `cosim verify` checks against them: contact time and rebound to the
@@ -390,13 +403,8 @@ def test_spring_drop_closed_forms(spring_drop_runs):
     7e-7 relative); the run's restitution is therefore held to the closed
     form at 1e-6, and the closed form to the printed digits."""
     from analytic import kelvin_voigt_clipped, linear_contact
-    tc = claim(V, "π√(m/k) = 3.14159 ms", "cosim verify")
-    v1 = claim(V, "the rebound is +1 m/s", "cosim verify")
-    e = claim(V, "e = 0.744079", "cosim verify")
+    tc, v1, e, textbook = CLOSED_FORMS
     zeta = 200.0 / (2 * math.sqrt(1e6 * 1.0))
-    textbook = claim(V, "against 0.729 for the textbook", "exp(-zeta pi / sqrt(1 - zeta^2))")
-    for c in (tc, v1, e, textbook):
-        assert_printed(c)
     assert_reproduced(tc, 1e3 * linear_contact(1.0, 1e6))
     assert_reproduced(e, kelvin_voigt_clipped(1.0, 1e6, 200.0)[1])
     assert_reproduced(textbook, math.exp(-zeta * math.pi / math.sqrt(1 - zeta ** 2)))
@@ -408,15 +416,16 @@ def test_spring_drop_closed_forms(spring_drop_runs):
     assert kv["final_state"]["body"]["x"]["dq"] / 1.0 == pytest.approx(e.value, rel=1e-6)
 
 
+VERIFY_TOLERANCES = (claim(V, "For the monolithic scheme (1e-6 relative)", "cosim verify"),
+                     claim(V, "the scene's default scheme (1e-5)", "cosim verify"))
+
+
 def test_cosim_verify_checks_at_the_printed_tolerances():
     """"For the monolithic scheme (1e-6 relative) and the scene's default
     scheme (1e-5), the contact time, the rebound velocity and the energy
     ledger ... are checked": `cosim verify` prints those tolerances, and
     every check passes (exit 0)."""
-    mono = claim(V, "For the monolithic scheme (1e-6 relative)", "cosim verify")
-    default = claim(V, "the scene's default scheme (1e-5)", "cosim verify")
-    for c in (mono, default):
-        assert_printed(c)
+    mono, default = VERIFY_TOLERANCES
     p = subprocess.run([sys.executable, "-m", "cosim.cli", "verify"], cwd=ROOT,
                        capture_output=True, text=True, timeout=300)
     assert p.returncode == 0, p.stdout + p.stderr
@@ -439,6 +448,12 @@ def _drop(scheme, H, order, *extra):
     return res
 
 
+HELD_FORCE = (claim(V, "the rebound gain matches exp(πωH/4) to 5 %", "tests/test_spring_drop.py",
+                    "5"),
+              claim(V, "converge at second order, within\n0.25 (ωH)²", "tests/test_spring_drop.py",
+                    "0.25"))
+
+
 def test_held_force_gain_and_the_second_order_envelope():
     """verification.md: with the force held, the rebound gain matches
     exp(πωH/4) to 5 % (a bound: ω = 1000 rad/s, H = 1e-4 and 2.5e-5 s,
@@ -446,10 +461,7 @@ def test_held_force_gain_and_the_second_order_envelope():
     scheme stay within 0.25 (ωH)² in the rebound velocity (H = 1e-4 to
     1.25e-5 s)."""
     from analytic import held_force_rebound_factor
-    gain = Claim(V, "the rebound gain matches exp(πωH/4) to 5 %", "tests/test_spring_drop.py", 5.0)
-    env = Claim(V, "converge at second order, within\n0.25 (ωH)²", "tests/test_spring_drop.py", 0.25)
-    for c in (gain, env):
-        assert_printed(c)
+    gain, env = HELD_FORCE
     for scheme in ("jacobi", "gauss_seidel"):
         for H in (1e-4, 2.5e-5):
             v = _drop(scheme, H, 0).summary["final_state"]["body"]["x"]["dq"]
@@ -461,13 +473,15 @@ def test_held_force_gain_and_the_second_order_envelope():
             assert abs(v - 1.0) <= env.value * (1000.0 * H) ** 2, (scheme, H, v)
 
 
+ONSET = Claim(V, "the step controller lands on onsets to 1e-9 s", "tests/test_step_control.py",
+              math.sqrt(2 * 0.01 / 2000.0), abs=1e-9)
+
+
 def test_the_step_controller_lands_on_the_onset():
     """verification.md: "the step controller lands on onsets to 1e-9 s" (a
     bound): a constant 2000 N push from 1 cm, a 5 ms first step, touch-down
     at sqrt(2 x0 / a)."""
-    c = Claim(V, "the step controller lands on onsets to 1e-9 s", "tests/test_step_control.py",
-              math.sqrt(2 * 0.01 / 2000.0), abs=1e-9)
-    assert_printed(c)
+    c = ONSET
     res = _drop("implicit", 5e-3, 1, "scheme.contact_step=1.25e-5",
                 'subsystems.body.bodies.mass.joint.drive={type="constant", torque=-2000.0}',
                 "subsystems.body.bodies.mass.joint.dq0=0.0")
@@ -633,18 +647,19 @@ def test_fig11_regimes(studies):
             == FIG11_REGIMES
 
 
+_PLACEMENT_CMD = "cosim sweep cases/three_mass.toml --variants f100 --set ... --out runs/placement"
+PLACEMENT = (claim(SW, "the sweep ends with `3 of 4 point(s) finished` and exit\nstatus 1",
+                   _PLACEMENT_CMD, "1"),
+             claim(SW, "the sweep ends with `3 of 4 point(s) finished`", _PLACEMENT_CMD, "3"),
+             claim(SW, "largest safe step, 2.87e-05 s", _PLACEMENT_CMD))
+
+
 def test_placement_sweep_ends_with_its_refused_point(tmp_path):
     """The page's second command: three points finish and the coupler point
     at 1.6e6 N/m is refused by the pre-flight check (exit status 1), for the
     scene and its moved copies (their initial state as one more `--set`)."""
     from roundoff import cli_copies
-    c = claim(SW, "the sweep ends with `3 of 4 point(s) finished` and exit\nstatus 1",
-              "cosim sweep cases/three_mass.toml --variants f100 --set ... --out runs/placement",
-              "1")
-    n = claim(SW, "the sweep ends with `3 of 4 point(s) finished`", c.command, "3")
-    safe = claim(SW, "largest safe step, 2.87e-05 s", c.command)
-    for x in (c, n, safe):
-        assert_printed(x)
+    c, n, safe = PLACEMENT
     for i, extra in enumerate(cli_copies(load(THREE_MASS, "f100"))):
         p = subprocess.run(
             [sys.executable, "-m", "cosim.cli", "sweep", str(THREE_MASS), "--variants", "f100",
@@ -661,13 +676,14 @@ def test_placement_sweep_ends_with_its_refused_point(tmp_path):
         assert_reproduced(safe, float(msg[1]))
 
 
+SWEEP_EXIT = (claim(SW, "The exit status is 0 when every point finished", "cosim sweep ..."),
+              claim(SW, "and 2 for a malformed command", "cosim sweep ... --scheduler foo"))
+
+
 def test_sweep_exit_status_when_every_point_finished_or_the_command_is_malformed(tmp_path):
     """"The exit status is 0 when every point finished, 1 when some did not
     ..., and 2 for a malformed command" (1: the placement sweep above)."""
-    ok = claim(SW, "The exit status is 0 when every point finished", "cosim sweep ...")
-    bad = claim(SW, "and 2 for a malformed command", "cosim sweep ... --scheduler foo")
-    for c in (ok, bad):
-        assert_printed(c)
+    ok, bad = SWEEP_EXIT
     base = [sys.executable, "-m", "cosim.cli", "sweep", str(THREE_MASS), "--variants", "f100",
             "--workers", "1", "--no-plot", "--quiet"]
     p = subprocess.run(base + ["--out", str(tmp_path / "ok")], capture_output=True, text=True,
@@ -705,12 +721,14 @@ def test_iqn_ils_iterations(tmp_path, claim, acceleration, reuse):
         assert_reproduced(claim, res.n_iterations)
 
 
+SIXTH = Claim(SC, "with a sixth of\nthe windows", "tests/test_step_control.py", 6.0, abs=0.5)
+
+
 def test_step_control_takes_a_sixth_of_the_windows():
     """schemes.md: on a coupler-placed spring_drop, step control (1 ms free,
     12.5 µs in contact) "reproduces uniform contact-sized steps, with a
     sixth of the windows" (measured 270 against 1600: 1/5.9)."""
-    c = Claim(SC, "with a sixth of\nthe windows", "tests/test_step_control.py", 6.0, abs=0.5)
-    assert_printed(c)
+    c = SIXTH
     base = ['contacts.wall.placement="coupler"', "scheme.accept_unsafe_step=true",
             "guard.energy_check=false"]
     fine = simulate(load(CASES / "spring_drop.toml", None, base + ["scheme.macro_step=1.25e-5"],
@@ -761,7 +779,9 @@ MATRIX = {
     ("ms0.01", "implicit", "embedded"): ("7.81e-06 s", ["B 0", "B 1.4e-06", "B 2.2e-05", "B 0.0015", "B 0.01"]),
     ("ms0.01", "implicit", "coupler"): ("7.81e-06 s", ["B 0", "B 0", "B 0.38", "S", "S"]),
 }
-MONOLITHIC_ROW = "| `{}` | `monolithic` | {} | – | B < 1e-07 (no macro step) | | | | |"
+MONOLITHIC_ROWS = {(v, p): claim(V, f"| `{v}` | `monolithic` | {p} | – | B < 1e-07 (no macro step) "
+                                    "| | | | |", "cosim verify --hard", "1e-07")
+                   for v in ("f1000", "ms0.01") for p in ("embedded", "coupler")}
 
 
 def _matrix_text(key):
@@ -810,24 +830,25 @@ def _hard_runs(keys, copies):
     return out
 
 
+#: each row of the matrix as printed; its number is the step at 1 x ref
+MATRIX_ROWS = {key: claim(V, _matrix_text(key), "cosim verify --hard", step.split()[0])
+               for key, (step, _) in MATRIX.items()}
+MATRIX_BOUND_CHECKS = (claim(V, "of a 4.51 J bound", "cosim verify --hard"),
+                       claim(V, "All 88 checks passed", "cosim verify --hard"))
+
+
 def test_hard_matrix_reference_steps_bound_and_checks():
     """The matrix's cheap numbers: its reference step per row (the printed
     step at 1 x ref), the 4.51 J bound, and the 88 checks of `cosim verify
     --hard` (the spring_drop checks and the matrix's points)."""
-    from cosim.studies.verify import CHECKS, hard_matrix, reference_step
-    for key, (step, _) in MATRIX.items():
-        c = claim(V, _matrix_text(key), "cosim verify --hard", step.split()[0])
-        assert_printed(c)
+    from cosim.studies.verify import CHECKS, hard_matrix, reference_step, run_hard_case
+    for key, c in MATRIX_ROWS.items():
         ref = reference_step(CASES, *key)
         assert_reproduced(c, float(f"{ref * (1 - 5e-3):.3g}"))
-    bound = claim(V, "of a 4.51 J bound", "cosim verify --hard")
-    assert_printed(bound)
-    from cosim.studies.verify import run_hard_case
+    bound, checks = MATRIX_BOUND_CHECKS
     r = run_hard_case(hard_matrix(CASES, factors=(1.0,), variants=("f1000",),
                                   schemes=("implicit",), placements=("embedded",))[0], CASES)
     assert_reproduced(bound, r["bound"])
-    checks = claim(V, "All 88 checks passed", "cosim verify --hard")
-    assert_printed(checks)
     n_spring = sum(len(fn(CASES)) for fn in CHECKS.values())
     assert_reproduced(checks, n_spring + len(hard_matrix(CASES)))
 
@@ -839,7 +860,6 @@ def test_hard_matrix_f1000_rows(key):
     ``test_hard_matrix_survives_round_off`` (slow) runs every row, the
     monolithic reference and ms0.01 included, for the scene and four moved
     copies."""
-    assert_printed(Claim(V, _matrix_text(key), "cosim verify --hard", 0.0))
     runs = _hard_runs({key}, 1)
     for fac, cell in zip((0.5, 1.0, 2.0, 5.0, 10.0), MATRIX[key][1]):
         _judge(cell, runs[(*key, fac)])
@@ -860,9 +880,9 @@ def test_hard_matrix_survives_round_off():
             _judge(cell, runs[(*key, fac)])
     for v in ("f1000", "ms0.01"):
         for p in ("embedded", "coupler"):
-            assert_printed(Claim(V, MONOLITHIC_ROW.format(v, p), "cosim verify --hard", 0.0))
+            bound = MONOLITHIC_ROWS[v, p].value      # a bound: round-off of the reference
             got = runs[(v, "monolithic", p, None)][0]
-            assert all(r["outcome"] == "bounded" and r["created"] < 1e-7 for r in got), got
+            assert all(r["outcome"] == "bounded" and r["created"] < bound for r in got), got
 
     def largest(v, s, p):
         ok = [f for f in (0.5, 1.0, 2.0, 5.0, 10.0)
@@ -897,12 +917,14 @@ GROWTH = [
 ]
 
 
+GROWTH_OF = claim(V, "gains 350 J on f1000 (of 45 J)", GROWTH[0][0].command, "45")
+
+
 @pytest.mark.parametrize("claim,scheme,step", GROWTH, ids=[c.id for c, _, _ in GROWTH])
 def test_growth_without_the_guard(claim, scheme, step):
     """The energy created (the summary's largest drift; nothing dissipates)
     for the scene and its moved copies; the "(of 45 J)" is the initial energy."""
-    claim_of = Claim(V, "gains 350 J on f1000 (of 45 J)", claim.command, 45.0, abs=0.5)
-    assert_printed(claim_of)
+    claim_of = GROWTH_OF
     scene = load(THREE_MASS, "f1000", [f"scheme.contact_step={step}", "guard.energy_check=false"],
                  scheme)
     for s in spread(scene, COPIES):
@@ -917,14 +939,15 @@ def test_growth_without_the_guard(claim, scheme, step):
 # ======================================================================
 # troubleshooting.md
 # ======================================================================
+_DRIFT_CMD = "cosim run cases/three_mass.toml --variant f1000 --scheme jacobi"
+DRIFTING = (claim(TR, "creates 4.0 J of 45.1 J and warns twice", _DRIFT_CMD, "4.0"),
+            claim(TR, "creates 4.0 J of 45.1 J and warns twice", _DRIFT_CMD, "45.1"))
+
+
 def test_a_drifting_run_warns_twice():
     """"creates 4.0 J of 45.1 J and warns twice", for the scene and its
     moved copies."""
-    cmd = "cosim run cases/three_mass.toml --variant f1000 --scheme jacobi"
-    created = claim(TR, "creates 4.0 J of 45.1 J and warns twice", cmd, "4.0")
-    scale = claim(TR, "creates 4.0 J of 45.1 J and warns twice", cmd, "45.1")
-    for c in (created, scale):
-        assert_printed(c)
+    created, scale = DRIFTING
     for s in spread(load(THREE_MASS, "f1000", scheme="jacobi"), COPIES):
         res = simulate(s)
         assert res.status == "finished"
@@ -947,14 +970,14 @@ _GUARD_RE = [r"run stopped at t = ([0-9.e+-]+) s", r"the energy grew by ([0-9.e+
              r"created ([0-9.e+-]+) J of it"]
 
 
+GUARD_CONTACT_TIME = claim(TR, "(1 ms steps in contact, against C's contact time of 95 µs)",
+                           "cosim info cases/three_mass.toml --variant f1000 --json")
+
+
 def test_the_guards_example_message(tmp_path):
     """The command prints the message the page shows and exits 1; its moved
     copies stop with the same numbers."""
-    for c in GUARD:
-        assert_printed(c)
-    tc = claim(TR, "(1 ms steps in contact, against C's contact time of 95 µs)",
-               "cosim info cases/three_mass.toml --variant f1000 --json")
-    assert_printed(tc)
+    tc = GUARD_CONTACT_TIME
     info = subprocess.run([sys.executable, "-m", "cosim.cli", "info", str(THREE_MASS), "--variant",
                            "f1000", "--json"], capture_output=True, text=True, timeout=120)
     assert_reproduced(tc, 1e6 * json.loads(info.stdout)["contacts"]["C"]["contact_time_s"])
@@ -974,16 +997,19 @@ def test_the_guards_example_message(tmp_path):
             assert_reproduced(c, float(re.search(pattern, res.message)[1]))
 
 
+_SAMPLING_CMD = "cosim info cases/three_mass.toml --set contacts.C.law.contact_stiffness=1e11"
+SAMPLING = (claim(TR, "C closes for 3.79e-06 s", _SAMPLING_CMD),
+            claim(TR, "between samples 3e-05 s apart", _SAMPLING_CMD),
+            claim(TR, "0.126 samples per contact", _SAMPLING_CMD),
+            claim(CM, "with a `sampling_note` naming the key to change when that is fewer than 4",
+                  "cosim info SCENE --json"))
+
+
 def test_the_sampling_note():
     """`cosim info` with C's spring at 1e11 N/m: the contact time, the
     sampling interval and the samples per contact the page quotes, and the
     note itself (exit 0)."""
-    cmd = "cosim info cases/three_mass.toml --set contacts.C.law.contact_stiffness=1e11"
-    tc = claim(TR, "C closes for 3.79e-06 s", cmd)
-    dt = claim(TR, "between samples 3e-05 s apart", cmd)
-    n = claim(TR, "0.126 samples per contact", cmd)
-    for c in (tc, dt, n):
-        assert_printed(c)
+    tc, dt, n, four = SAMPLING
     p = subprocess.run([sys.executable, "-m", "cosim.cli", "info", str(THREE_MASS), "--set",
                         "contacts.C.law.contact_stiffness=1e11", "--json"],
                        capture_output=True, text=True, timeout=120)
@@ -995,9 +1021,6 @@ def test_the_sampling_note():
     assert "too coarse to draw it" in info["sampling_note"]
     assert "`scheme.contact_step`" in info["sampling_note"]
     # commands.md: the note comes "when that is fewer than 4"
-    four = claim(CM, "with a `sampling_note` naming the key to change when that is fewer than 4",
-                 "cosim info SCENE --json")
-    assert_printed(four)
     from cosim.scene.info import SAMPLES_TO_DRAW
     assert_reproduced(four, SAMPLES_TO_DRAW)
     p = subprocess.run([sys.executable, "-m", "cosim.cli", "info", str(THREE_MASS), "--variant",
@@ -1006,10 +1029,24 @@ def test_the_sampling_note():
         assert bool(c.get("sampling_note")) == (c["samples_per_contact"] < 4), c
 
 
-GUARD_DEFAULTS = [("energy_growth", "| `energy_growth` | 0.1 |"),
-                  ("energy_floor", "| `energy_floor` | 1e-3 J |"),
-                  ("energy_warning", "| `energy_warning` | 0.01 |"),
-                  ("coupling_warning", "| `coupling_warning` | 0.01 |")]
+GUARD_DEFAULTS = [(claim(TR, f"| `{key}` | {text} |", f"cosim.load_scene(...).guard.{key}",
+                         text.split()[0]), key)
+                  for key, text in (("energy_growth", "0.1"), ("energy_floor", "1e-3 J"),
+                                    ("energy_warning", "0.01"), ("coupling_warning", "0.01"))]
+LIMITS = [
+    (claim(TR, "more than 20 000 elements", "cosim.scene.load.MAX_ELEMENTS", "20"),
+     lambda loader, tomlread: loader.MAX_ELEMENTS / 1000),
+    (claim(TR, "more than 1e9 macro or integrator steps", "cosim.scene.load.MAX_STEPS"),
+     lambda loader, tomlread: loader.MAX_STEPS),
+    (claim(TR, "estimated memory passes 4 GiB", "cosim.scene.load.MAX_MEMORY"),
+     lambda loader, tomlread: loader.MAX_MEMORY / 2**30),
+    (claim(TR, "`must hold at most 67108864 bytes`", "cosim.io.tomlread.MAX_BYTES"),
+     lambda loader, tomlread: tomlread.MAX_BYTES),
+    (claim(TR, "`must nest at most 32 levels", "cosim.io.tomlread.MAX_DEPTH"),
+     lambda loader, tomlread: tomlread.MAX_DEPTH),
+    (claim(TR, "`must hold at most 10000 keys", "cosim.io.tomlread.MAX_KEYS"),
+     lambda loader, tomlread: tomlread.MAX_KEYS),
+]
 
 
 def test_the_guards_defaults_and_the_loaders_limits():
@@ -1018,32 +1055,18 @@ def test_the_guards_defaults_and_the_loaders_limits():
     from cosim.io import tomlread
     from cosim.scene import load as loader
     g = load(CASES / "spring_drop.toml").guard
-    for key, text in GUARD_DEFAULTS:
-        c = claim(TR, text, f"cosim.load_scene(...).guard.{key}", _NUMBER.findall(text)[0])
-        assert_printed(c)
+    for c, key in GUARD_DEFAULTS:
         assert_reproduced(c, getattr(g, key))
-    limits = [(claim(TR, "more than 20 000 elements", "cosim.scene.load.MAX_ELEMENTS", "20"),
-               loader.MAX_ELEMENTS / 1000),
-              (claim(TR, "more than 1e9 macro or integrator steps", "cosim.scene.load.MAX_STEPS"),
-               loader.MAX_STEPS),
-              (claim(TR, "estimated memory passes 4 GiB", "cosim.scene.load.MAX_MEMORY"),
-               loader.MAX_MEMORY / 2**30),
-              (claim(TR, "`must hold at most 67108864 bytes`", "cosim.io.tomlread.MAX_BYTES"),
-               tomlread.MAX_BYTES),
-              (claim(TR, "`must nest at most 32 levels", "cosim.io.tomlread.MAX_DEPTH"),
-               tomlread.MAX_DEPTH),
-              (claim(TR, "`must hold at most 10000 keys", "cosim.io.tomlread.MAX_KEYS"),
-               tomlread.MAX_KEYS)]
-    for c, value in limits:
-        assert_printed(c)
-        assert_reproduced(c, value)
+    for c, value in LIMITS:
+        assert_reproduced(c, value(loader, tomlread))
+
+
+CONNECT = claim(TR, "does not answer within 10 s", "cosim sweep --scheduler tcp://...")
 
 
 def test_the_scheduler_connect_timeout():
     from cosim.studies.sweep import CONNECT_TIMEOUT_S
-    c = claim(TR, "does not answer within 10 s", "cosim sweep --scheduler tcp://...")
-    assert_printed(c)
-    assert_reproduced(c, CONNECT_TIMEOUT_S)
+    assert_reproduced(CONNECT, CONNECT_TIMEOUT_S)
 
 
 # ======================================================================
@@ -1081,23 +1104,41 @@ def test_the_summary_keys_are_the_pages(tmp_path):
     assert kinds == listed, (sorted(kinds), sorted(listed))
 
 
+LOCATED_PEAK = Claim(CM, "spring_drop at macro steps from\n0.1 ms to 5 ms gives v0 sqrt(m/k) to 1e-6",
+                     "cosim run cases/spring_drop.toml --set scheme.macro_step=H", 1e-3, rel=1e-6)
+
+
 @pytest.mark.parametrize("macro_step", [1e-4, 2e-3, 5e-3])
 def test_the_located_peak_at_any_macro_step(macro_step):
     """"spring_drop at macro steps from 0.1 ms to 5 ms gives v0 sqrt(m/k) to
     1e-6" (a bound, relative; v0 = 1 m/s, m = 1 kg, k = 1e6 N/m)."""
-    c = Claim(CM, "spring_drop at macro steps from\n0.1 ms to 5 ms gives v0 sqrt(m/k) to 1e-6",
-              f"cosim run cases/spring_drop.toml --set scheme.macro_step={macro_step}", 1e-3,
-              rel=1e-6)
-    assert_printed(c)
+    c = LOCATED_PEAK
     res = simulate(load(CASES / "spring_drop.toml", None, [f"scheme.macro_step={macro_step}"]))
     assert_reproduced(c, res.summary["contacts"]["wall"]["peak_penetration"])
 
 
 # ======================================================================
-ALL = [*[c for c, *_ in F100_CLAIMS], *[c for c, _ in PAPER_CLAIMS], *[c for c, _ in GROUND],
-       *[c for c, *_ in STRIKE_CLAIMS], *[c for c, _ in TWO_MASS_CLAIMS],
-       *[c for c, _ in FIG8_CLAIMS], *[c for c, _ in FIG11_CLAIMS], *[c for c, *_ in IQN],
-       *[c for c, _ in MULTIRATE], *[c for c, *_ in GROWTH], *GUARD]
+def _every_claim() -> list[Claim]:
+    """Every claim of this module: those in its upper-case tables (lists,
+    tuples and dicts, nested), once each."""
+    seen: dict = {}
+
+    def walk(x):
+        if isinstance(x, Claim):
+            seen.setdefault((x.page, x.printed, x.value), x)
+        elif isinstance(x, (list, tuple)):
+            for y in x:
+                walk(y)
+        elif isinstance(x, dict):
+            for y in x.values():
+                walk(y)
+    for name, value in list(globals().items()):
+        if name.isupper():
+            walk(value)
+    return list(seen.values())
+
+
+ALL = _every_claim()
 
 
 @pytest.mark.parametrize("claim", ALL, ids=[c.id for c in ALL])
