@@ -232,7 +232,7 @@ def test_global_error_converges_at_the_scheme_order(two_mass, scheme, order, sta
     the force interpolated linearly towards the first's new state, with its
     own position held (p = 0) or moved by its velocity (p >= 1): an O(H)
     and an O(H^2) force error, so it converges at 1, 2 and 2 (no order is
-    gained from the sequence; measured 1.07, 2.00, 1.97).  The implicit
+    gained from the sequence; measured 1.07, 2.00, 2.13).  The implicit
     scheme converges to the force linear over the window (trapezoidal in
     the force): order 2 whatever its predictor.
 
