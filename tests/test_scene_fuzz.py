@@ -20,7 +20,7 @@ import pytest
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
-from conftest import CASES, ROOT
+from conftest import CASES, ROOT, examples
 from cosim import cli
 from cosim.io import tomlread
 from cosim.io.rundir import NAME_MAX, inside, name_problem
@@ -29,7 +29,9 @@ from cosim.core.schemes import UnsafeStepError
 from cosim.io.tomlwrite import dumps
 
 FILES = sorted(CASES.glob("*.toml"))
-FUZZ = settings(max_examples=250, deadline=None,
+# max_examples scales with the profile (conftest.py: ci, explore); the profile
+# decides derandomize, the database and the printout
+FUZZ = settings(max_examples=examples(250), deadline=None,
                 suppress_health_check=[HealthCheck.function_scoped_fixture,
                                        HealthCheck.too_slow])
 
@@ -150,7 +152,7 @@ def test_mutated_text_is_refused_with_file_and_key(data, tmp_path):
     outcome(file)
 
 
-@settings(max_examples=100, deadline=None,
+@settings(max_examples=examples(100), deadline=None,
           suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(key=st.sampled_from(["t_end", "scheme.macro_step", "scheme.name", "contacts.C.law",
                             "contacts.C.a", "subsystems.chain.masses", "subsystems", "x.y.z",
@@ -309,7 +311,7 @@ def test_command_line_in_a_fresh_process(tmp_path):
 
 
 # ------------------------------------------------------- bytes, nesting, sizes
-SMALL = settings(max_examples=100, deadline=None,
+SMALL = settings(max_examples=examples(100), deadline=None,
                  suppress_health_check=[HealthCheck.function_scoped_fixture,
                                         HealthCheck.too_slow])
 
@@ -383,7 +385,7 @@ def test_nesting_near_the_limit(data, tmp_path):
         outcome(file)
 
 
-@settings(max_examples=60, deadline=None,
+@settings(max_examples=examples(60), deadline=None,
           suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(kind=st.sampled_from(["chain", "beam", "rod"]),
        size=st.integers(1, MAX_ELEMENTS),
