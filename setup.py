@@ -13,19 +13,22 @@ KERNELS = [
     Extension("cosim.sides._structure_step", ["src/cosim/sides/_structure_step.pyx"]),
 ]
 
-#: Every a * b + c in the kernels is rounded twice, as Python and numpy round
-#: it in the reference.  GCC contracts it into one fused multiply-add (rounded
-#: once) wherever the target has FMA -- by default on arm64, ppc64le and
-#: s390x, and on x86-64 under -march=haswell or later -- and Clang within an
-#: expression; the compiled steps would then drift from the reference by a
-#: different round-off on each architecture.  Contraction off, the kernels
-#: round as the reference on every one (tests/test_kernel.py).
+#: Every a * b + c in the kernels is rounded twice, as written and as Python and
+#: numpy round it.  GCC contracts it into one fused multiply-add (rounded once)
+#: wherever the target has FMA -- by default on arm64, ppc64le and s390x, and on
+#: x86-64 under -march=haswell or later -- and Clang within an expression; the
+#: compiled steps would then round otherwise on each architecture.  Contraction
+#: off, they give the same bits on every target: built here with -march=native
+#: they match the baseline x86-64 build bit for bit, while contracted they do
+#: not, and a result that round-off decides (the stalled step of
+#: tests/test_kernel_structure.py) changes.
 NO_CONTRACTION = "-ffp-contract=off"
 
 
 class BuildKernels(build_ext):
     """``build_ext`` that turns contraction off where the compiler takes GCC's
-    options (MSVC does not contract unless told to, and rejects the option)."""
+    options (MSVC since 2022 does not contract under its default /fp:precise,
+    and does not know the option)."""
 
     def build_extensions(self):
         if self.compiler.compiler_type in ("unix", "mingw32", "cygwin"):
