@@ -18,7 +18,8 @@ KERNELS = [
 #: wherever the target has FMA -- by default on arm64, ppc64le and s390x, and on
 #: x86-64 under -march=haswell or later -- and Clang within an expression; the
 #: compiled steps would then round otherwise on each architecture.  Contraction
-#: off, they give the same bits on every target: built here with -march=native
+#: off, they give the same bits on every target (given the same C library
+#: functions: sin, cos, pow): built here with -march=native
 #: they match the baseline x86-64 build bit for bit, while contracted they do
 #: not, and a result that round-off decides (the stalled step of
 #: tests/test_kernel_structure.py) changes.
