@@ -5,6 +5,11 @@
 a fixed date, and the numbers do not depend on the run's wall clock, on the
 size of the chunks the recorder streams, or on whether the series were
 streamed to disk or kept in memory.
+
+Every comparison here is of the same computation run twice (the same code on
+the same machine, the numbers only stored otherwise), so bit identity is the
+claim.  Two different computations of a number are compared within a bound
+in ulps instead (tests/ulps.py).
 """
 import json
 

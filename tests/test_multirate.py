@@ -44,6 +44,8 @@ def test_substeps_of_the_light_side_cut_its_error(tmp_path, scheme, sequence):
 def test_substeps_of_one_are_the_plain_scheme(tmp_path):
     a = run(tmp_path)
     b = run(tmp_path, "scheme.substeps={light = 1, heavy = 1}")
+    # one sub-step takes the plain scheme's code path (base._step_side):
+    # the same computation twice, bit for bit
     assert velocities(a) == velocities(b)
 
 

@@ -72,6 +72,7 @@ def test_published_laws_are_hunt_crossley_with_their_chi(cls, restitution):
         same = HuntCrossleyLaw(k, 1.5, law.hysteresis_damping)
         rng = np.random.default_rng(3)
         d, dd = rng.uniform(-1e-3, 1e-3, 500), rng.uniform(-5, 5, 500)
+        # the same computation twice (one array formula, the same chi): bit for bit
         assert np.array_equal(law.force(d, dd), same.force(d, dd))
         for v0 in (v_ref, 0.5 * v_ref):             # at and off the speed it is tuned for
             alpha = cls.damping_group(restitution) * v0 / v_ref

@@ -20,7 +20,7 @@ import pytest
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
-from conftest import CASES, ROOT
+from conftest import CASES, ROOT, examples
 from cosim import cli
 from cosim.io import tomlread
 from cosim.io.rundir import NAME_MAX, inside, name_problem
@@ -29,7 +29,9 @@ from cosim.core.schemes import UnsafeStepError
 from cosim.io.tomlwrite import dumps
 
 FILES = sorted(CASES.glob("*.toml"))
-FUZZ = settings(max_examples=250, deadline=None,
+# max_examples scales with the profile (conftest.py: ci, explore); the profile
+# decides derandomize, the database and the printout
+FUZZ = settings(max_examples=examples(250), deadline=None,
                 suppress_health_check=[HealthCheck.function_scoped_fixture,
                                        HealthCheck.too_slow])
 
@@ -150,7 +152,7 @@ def test_mutated_text_is_refused_with_file_and_key(data, tmp_path):
     outcome(file)
 
 
-@settings(max_examples=100, deadline=None,
+@settings(max_examples=examples(100), deadline=None,
           suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(key=st.sampled_from(["t_end", "scheme.macro_step", "scheme.name", "contacts.C.law",
                             "contacts.C.a", "subsystems.chain.masses", "subsystems", "x.y.z",
@@ -284,6 +286,49 @@ def test_broken_toml_names_the_file_and_the_line(tmp_path):
     assert "line" in str(exc.value)
 
 
+# ---------------------------------------- defects the explore profile found
+# The table and text tests draw with st.data(), which @example cannot give:
+# each defect a run under HYPOTHESIS_PROFILE=explore found is pinned here as
+# the edit of the shipped text it drew, and must now be refused at its key.
+@pytest.mark.parametrize("name,edits,key", [
+    # the ground spring at 1e-320 N/m (a number replaced in the text): the
+    # static equilibrium solved a singular stiffness, a LinAlgError traceback
+    ("three_mass.toml", [("[1.6e5, 1.6e5, 1.6e5]", "[1.6e5, 1.6e5, 1e-320]")],
+     "subsystems.chain.static_equilibrium"),
+    # 1e-12 N/m is lost beside 1.6e5 N/m (below its half ulp): singular too
+    ("three_mass.toml", [("[1.6e5, 1.6e5, 1.6e5]", "[1.6e5, 1.6e5, 1e-12]")],
+     "subsystems.chain.static_equilibrium"),
+    # the top spring that weak: an infinite displacement, then a run failed
+    # at t = 0 on a NaN penetration instead of a refusal
+    ("three_mass.toml", [("[1.6e5, 1.6e5, 1.6e5]", "[1e-320, 1.6e5, 1.6e5]")],
+     "subsystems.chain.static_equilibrium"),
+    # found beside them by reading: a free-free beam asked for a static
+    # equilibrium ended in fem's ValueError traceback
+    ("beam_impact.toml", [('left = "pinned"', 'left = "free"'),
+                          ('right = "pinned"', 'right = "free"')],
+     "subsystems.beam.static_equilibrium"),
+    # the cable's diameter 1.157920892373162e+77 m (a value put in the table):
+    # d ** 4 raised OverflowError; a rectangle's height ** 3 as well
+    ("brachiation.toml", [("diameter = 0.01", "diameter = 1.157920892373162e+77")],
+     "subsystems.cable.section"),
+    ("beam_impact.toml", [("height = 0.01", "height = 1e120")], "subsystems.beam.section"),
+], ids=["ground-spring-1e-320", "ground-spring-1e-12", "top-spring-1e-320", "free-free-beam",
+        "cable-diameter-1e77", "beam-height-1e120"])
+def test_defects_found_by_exploring_are_refused_at_their_key(name, edits, key, tmp_path):
+    text = TEXTS[name]
+    for old, new in edits:
+        assert text.count(old) == 1, old
+        text = text.replace(old, new)
+    file = tmp_path / "found.toml"
+    file.write_text(text)
+    assert outcome(file) == "refused"
+    with pytest.raises(SceneError) as exc:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            load_scene(file).build()
+    assert exc.value.key == key, str(exc.value)
+
+
 # -------------------------------------------------------------- command line
 def test_command_line_prints_the_error_and_exits_2(tmp_path, capsys):
     file = tmp_path / "bad.toml"
@@ -309,7 +354,7 @@ def test_command_line_in_a_fresh_process(tmp_path):
 
 
 # ------------------------------------------------------- bytes, nesting, sizes
-SMALL = settings(max_examples=100, deadline=None,
+SMALL = settings(max_examples=examples(100), deadline=None,
                  suppress_health_check=[HealthCheck.function_scoped_fixture,
                                         HealthCheck.too_slow])
 
@@ -383,7 +428,7 @@ def test_nesting_near_the_limit(data, tmp_path):
         outcome(file)
 
 
-@settings(max_examples=60, deadline=None,
+@settings(max_examples=examples(60), deadline=None,
           suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(kind=st.sampled_from(["chain", "beam", "rod"]),
        size=st.integers(1, MAX_ELEMENTS),

@@ -198,6 +198,10 @@ def test_one_process_a_pool_and_dask_give_the_same_table(tmp_path):
     memory = sw.sweep(THREE_MASS, workers=1, **kw)           # nothing written
     expected = table_without_timing(tmp_path / "here" / sw.TABLE)
     assert len(expected) == 5
+    # every point runs the same code (the same kernel, the same numpy) here
+    # and in the workers, which inherit this environment: the same
+    # computation, so the same table bit for bit; a difference means a point
+    # ran another code path (e.g. another cosim found first on sys.path)
     assert table_without_timing(tmp_path / "pool" / sw.TABLE) == expected
     assert table_without_timing(tmp_path / "dask" / sw.TABLE) == expected
 

@@ -240,8 +240,10 @@ class LinearStructure(ABC):
         Raises
         ------
         ValueError
-            If the structure has rigid-body modes (no static equilibrium) or
-            the load has the wrong size.
+            If the structure has rigid-body modes (no static equilibrium),
+            its stiffness matrix is singular to working precision (a spring
+            or support too weak to hold the load: the displacement is not
+            finite) or the load has the wrong size.
         """
         f = np.asarray(load, dtype=float)
         if f.shape != (self.n_dof,):
@@ -255,8 +257,19 @@ class LinearStructure(ABC):
                 self._lu = lambda b: np.linalg.solve(K, b)
             else:
                 from scipy.sparse.linalg import splu
-                self._lu = splu(self.stiffness.tocsc()).solve
-        return self._lu(f)
+                try:
+                    self._lu = splu(self.stiffness.tocsc()).solve
+                except RuntimeError:                # exactly singular
+                    self._lu = lambda b: np.full_like(b, np.nan)
+        try:
+            u = self._lu(f)
+        except np.linalg.LinAlgError:               # exactly singular
+            u = np.full_like(f, np.nan)
+        if not np.all(np.isfinite(u)):
+            raise ValueError("the stiffness matrix is singular to working precision: a spring "
+                             "or support is too weak to hold the load (no finite static "
+                             "displacement)")
+        return u
 
 
 class LineStructure(LinearStructure):

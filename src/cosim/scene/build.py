@@ -100,7 +100,11 @@ def _structure(spec, scene, macro_step):
         # at rest under them, so a grasp at t = 0 does not set it ringing
         for port, force in loads.items():
             f = f + structure.point_load(spec.ports[port], force)
-        u0 = structure.static_displacement(f)
+        try:
+            u0 = structure.static_displacement(f)
+        except ValueError as exc:         # a structure free to move, or too weakly held
+            raise SceneError(scene.path, f"{spec.key}.static_equilibrium",
+                             f"cannot be met: {exc}") from None
     v0 = np.full(n, spec.initial_velocity) if spec.initial_velocity else None
     try:
         sub = StructureSubsystem(spec.name, structure, basis, spec.ports, u0, v0,

@@ -8,6 +8,8 @@ scene declares.
 """
 from __future__ import annotations
 
+import math
+
 from cosim.scene.checks import MAX_ELEMENTS, Table, build_model, check_name, floats
 from cosim.scene.specs import (STRUCTURE_TYPES, SUBSYSTEM_TYPES, BodySpec, JointSpec,
                                MultibodySpec, RigidSpec, StructureSpec)
@@ -124,12 +126,19 @@ def _structure_spec(name: str, t: Table, kind: str) -> StructureSpec:
         if kind in ("beam", "cable"):
             kw["youngs_modulus"] = t.number("youngs_modulus", rule=">0", unit="Pa")
             sec = t.table("section", section="section")
-            if sec.has("diameter"):
-                a, i = fem.circular_section(sec.number("diameter", rule=">0", unit="m"))
-            else:
-                a, i = fem.rectangular_section(sec.number("width", rule=">0", unit="m"),
-                                               sec.number("height", rule=">0", unit="m"))
+            try:
+                if sec.has("diameter"):
+                    a, i = fem.circular_section(sec.number("diameter", rule=">0", unit="m"))
+                else:
+                    a, i = fem.rectangular_section(sec.number("width", rule=">0", unit="m"),
+                                                   sec.number("height", rule=">0", unit="m"))
+            except OverflowError:           # a power past the largest float
+                a = i = math.inf
             sec.finish()
+            if not (math.isfinite(a) and math.isfinite(i)):
+                sizes = "`diameter` is" if sec.has("diameter") else "`width` and `height` are"
+                sec.error("", f"must have a finite area and second moment: its {sizes} too "
+                              "large (past the largest float)")
             kw.update(area=a, second_moment=i)
             kw["left"] = t.string("left", choices=fem.BEAM_ENDS)
             kw["right"] = t.string("right", choices=fem.BEAM_ENDS)
