@@ -146,6 +146,33 @@ def test_guard_counts_switches_within_the_window():
         GuardOptions(chatter_switches=1)
 
 
+def test_switches_within_a_step_are_judged_without_being_noted():
+    """What an integrator asks of the switches of a step not yet accepted: the
+    same verdict as :meth:`Guard.switched` would give, and nothing noted."""
+    scene = cosim.load_scene(CASES / "spring_drop.toml")
+    system, _ = scene.build()
+    guard = Guard(system, GuardOptions(chatter_switches=4, chatter_window=1e-3))
+    guard.switched(0, 0.0300)
+    guard.switched(0, 0.0303)
+    guard.switches_ahead(0, [0.0306])                   # 3 switches: no verdict
+    with pytest.raises(GuardError, match=r"contact `wall` chatters: it switched 4 times "
+                                         r"within 0.0009 s .*since t = 0.03 s"):
+        guard.switches_ahead(0, [0.0306, 0.0309])
+    guard.switched(0, 0.0306)                           # none of those was noted
+    guard.switched(0, 0.0320)                           # 4 within 2 ms: no verdict
+
+
+def test_a_zeno_train_inside_one_step_is_stopped():
+    """The ball's whole train fits in one macro step of 1 s: the guard, told of
+    each impact as the integrator resolves it, stops it at t_inf all the same
+    (without it the step never ended)."""
+    scene = cosim.load_scene(SCENE, overrides=["scheme.macro_step=1.0"])
+    res = cosim.simulate(scene)
+    assert res.status == "failed" and "contact `floor` chatters" in res.message
+    assert T_INF - 1e-6 - PRINTED <= _stop_time(res.message) <= T_INF + PRINTED
+    assert res.t[-1] == 0.0                             # no step was accepted
+
+
 @pytest.mark.parametrize("scene", sorted(p.name for p in CASES.glob("*.toml")))
 def test_no_shipped_default_run_comes_near_the_chatter_bound(scene):
     """Every shipped scene, run as shipped, finishes, and no contact of it

@@ -353,7 +353,10 @@ class CoSimulationScheme(MacroStepControl, InputExtrapolation, CouplingScheme):
                 rigid.setdefault(s, {})[slot] = c
         for s, slots in rigid.items():
             sub = system.subsystems[s]
-            if guard is None or not hasattr(sub, "impact_watch"):
+            if not hasattr(sub, "impact_watch"):
+                continue
+            sub.impact_watch = None
+            if guard is None:
                 continue
             keep = guard.options.chatter_switches // 2 + 1    # impacts that can trip it
 
