@@ -114,15 +114,25 @@ def test_strike_variant_shows_the_papers_findings():
     """CASES.md section 4, variant strike: C's impact makes A co-impact while B
     separates; C's peak penetration is several times A's; C's exit velocity
     barely depends on A's stiffness while A's depends on it strongly."""
-    runs = {v: cosim.simulate(cosim.load_scene(CASES / "ground_multicontact_strike.toml", v))
-            for v in ("kA1e6", "kA4e6", "kA16e6")}
-    for res in runs.values():
+    scenes = {v: cosim.load_scene(CASES / "ground_multicontact_strike.toml", v)
+              for v in ("kA1e6", "kA4e6", "kA16e6")}
+    runs = {v: cosim.simulate(scene) for v, scene in scenes.items()}
+
+    def co_impact(res):
+        """One contact of C, during which A strikes again and B separates."""
         c = res.summary["contacts"]
+        if c["C"]["count"] != 1:
+            return res.status, c["C"]["count"], None, None
         (c_on, c_off), = c["C"]["intervals"]
         a_again = [iv for iv in c["A"]["intervals"] if c_on < iv[0] < c_off]
-        assert a_again, "A must strike again during C's contact"
-        assert c_on < c["B"]["intervals"][0][1] < c_off   # B separates meanwhile
+        return res.status, 1, bool(a_again), c_on < c["B"]["intervals"][0][1] < c_off
+
+    for v, res in runs.items():
+        assert co_impact(res) == ("finished", 1, True, True), v
+        c = res.summary["contacts"]
         assert c["C"]["peak_penetration"] > 3 * c["A"]["peak_penetration"]
+        # the co-impact holds for the scene's round-off copies (0.1 s a run)
+        assert_robust(scenes[v], co_impact, ("finished", 1, True, True))
     v_c = [_exit_rate(r, "C", 0) for r in runs.values()]
     v_a = [_exit_rate(r, "A", 1) for r in runs.values()]
     assert (max(v_c) - min(v_c)) / np.mean(v_c) < 0.05, v_c          # observed 2 %
