@@ -7,7 +7,6 @@ the closed-form time ``t_inf`` (a Zeno train, ``tests/analytic.py``).  Its
 verdict and stop time hold for the scene and its round-off copies
 (``tests/roundoff.py``), on any CPU."""
 import json
-import os
 import re
 import subprocess
 import sys
