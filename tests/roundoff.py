@@ -20,9 +20,9 @@ COPIES = 5
 def outcomes(scene, outcome, copies: int = COPIES, scheme=None) -> list:
     """``outcome(result)`` of the scene and of each moved copy."""
     out = []
-    for s in spread(scene, copies):
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
+    with warnings.catch_warnings():     # the copies repeat the warnings of the scene's load
+        warnings.simplefilter("ignore")
+        for s in spread(scene, copies):
             out.append(outcome(cosim.simulate(s, scheme=scheme)))
     return out
 

@@ -12,6 +12,7 @@ import pytest
 import cosim
 from analytic import hertz_contact
 from conftest import CASES, ROOT
+from roundoff import assert_robust
 
 M, K, V0 = 1.0, 1e6, 1.0
 #: spring_drop's peak: the linear law is the power law of exponent 1, v0 sqrt(m/k) = 1 mm
@@ -85,6 +86,11 @@ def test_structure_closed_form_peak_against_a_fine_run(macro_step):
     assert ref["peak_penetration"] > 0
     assert got["peak_penetration"] == pytest.approx(ref["peak_penetration"], rel=1e-6)
     assert got["count"] == ref["count"] == 2
+    # the second contact is no accident of round-off: the coarse run's copies count 2
+    coarse_scene = cosim.load_scene(CASES / "rod_impact.toml",
+                                    overrides=[f"scheme.macro_step={macro_step}"])
+    assert_robust(coarse_scene, lambda r: (r.status, r.summary["contacts"]["wall"]["count"]),
+                  ("finished", 2))
 
 
 def test_structure_rk4_peak_against_a_fine_run():

@@ -264,6 +264,20 @@ def test_resume_skips_the_points_done(tmp_path):
     assert len(other.ran) == 3 and not other.skipped
 
 
+def test_the_sweeps_train_counts_hold_under_round_off():
+    """The counts the sweep tests read off f100's train with the arm started
+    near (4 contacts of C by 0.03 s, 8 by 0.04 s) hold for the round-off
+    copies of those points (measured over 5 copies; 0.05 s a run)."""
+    import cosim
+    from roundoff import assert_robust
+
+    (key, (q0,)), = NEAR.items()
+    for t_end, count in ((0.03, 4), (0.04, 8)):
+        scene = cosim.load_scene(THREE_MASS, "f100", [f"{key}={q0}", f"t_end={t_end}"])
+        assert_robust(scene, lambda r: (r.status, r.summary["contacts"]["C"]["count"]),
+                      ("finished", count))
+
+
 def test_failing_points_are_recorded_and_the_others_complete(tmp_path):
     """A step the pre-flight check refuses, a scene value the loader refuses and
     an implicit step that does not converge: each is a row with its reason."""

@@ -42,6 +42,29 @@ def test_a_run_that_drifts_finishes_with_warnings(tmp_path):
     assert "contact `C`'s coupling error is" in p.stdout
 
 
+def test_the_drifting_runs_verdicts_hold_under_round_off():
+    """A loose run near the guard's bound: for the scene and its round-off
+    copies it finishes with the same two warnings (4.0 J created, under the
+    4.5 J stop), and with a 1 % bound it is stopped at the same step, blaming
+    C (measured over 5 copies; 0.06 s a run)."""
+    import warnings
+
+    import cosim as api
+    from roundoff import assert_robust
+
+    def scene(*overrides):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return api.load_scene(THREE_MASS, "f1000", list(overrides), scheme="jacobi")
+
+    assert_robust(scene(), lambda r: (r.status, sorted(
+        (w["kind"], w["contact"]) for w in r.summary["warnings"])),
+        ("finished", [("coupling_error", "C"), ("energy", "C")]))
+    assert_robust(scene("guard.energy_growth=0.01"), lambda r: (
+        r.status, r.message.split(":")[0], "contact `C` created" in r.message),
+        ("failed", "run stopped at t = 0.10278 s", True))
+
+
 def test_warning_levels_are_set_in_the_guard_table(tmp_path):
     out = tmp_path / "run"
     p = cosim(*DRIFTING, "--out", str(out), "--set", "guard.energy_warning=0.2",

@@ -107,7 +107,14 @@ class RigidLaw(ContactLaw):
 
     The impact is resolved by the moving side's integrator with Poisson
     restitution and Coulomb friction (``multibody.impact``).  The law itself
-    has no force, no potential, and its switch ``d`` marks touch-down.
+    has no force and no potential.  Its switch is ``d`` while the point
+    does not move away (``dd >= 0``) and ``min(d, T dd)`` with ``T`` = 1 s
+    while it does: it marks touch-down, and it is negative again as soon as
+    the impact has turned the point away, so a rebound shorter than the
+    integrator's sub-step still ends in a located touch-down (with the
+    switch ``d`` alone the point would leave and come back within one
+    sub-step unseen, and fall through).  At touch-down ``d`` crosses 0 while
+    ``dd > 0``: any positive ``T`` gives the same roots.
 
     Parameters
     ----------
@@ -143,7 +150,10 @@ class RigidLaw(ContactLaw):
         object.__setattr__(self, "friction", positive(self.friction, "friction", "", True))
 
     def evaluate(self, d, dd):
-        return 0.0, 0.0, d
+        return 0.0, 0.0, (d if dd >= 0.0 or d < dd else dd)  # switch(d, dd), floats
+
+    def switch(self, d, dd):
+        return np.where(dd >= 0.0, d, np.minimum(d, dd * 1.0))   # T = 1 s
 
     def force_active(self, d, dd):
         return 0.0 * d

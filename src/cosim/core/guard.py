@@ -45,6 +45,13 @@ time.  The defaults, 100 switches within 1 us, ask for a contact frequency
 above 50 MHz before a physical train of rebounds trips them.
 
 
+A rigid contact's impacts reach the guard as its side's integrator finds
+them (:meth:`Guard.switches_ahead`), not only when the step ends: the
+rebounds of a body coming to rest on a rigid contact with restitution
+``e < 1`` shorten geometrically and accumulate at a finite time, so the step
+that holds that time would never end.  The rule stops such a Zeno train just
+before its accumulation time, within ``chatter_window`` of it.
+
 The check costs three sums and two comparisons per step, and one comparison
 per contact switch, and nothing else unless it trips.
 
@@ -251,6 +258,28 @@ class Guard:
         """
         ring = self._switches[c]
         ring.append(t)
+        self._chatter(c, ring, t)
+
+    def switches_ahead(self, c: int, times) -> None:
+        """Raise as :meth:`switched` would if contact ``c`` switched at each
+        of ``times`` (ascending, after those noted), without noting them.
+
+        A side's integrator asks this of the switches it has located within
+        a step not yet accepted: a train of rigid impacts that accumulates
+        at a finite time (a Zeno train) never ends its step, so the guard
+        must see it as it happens.
+
+        Raises
+        ------
+        GuardError
+            When contact ``c`` would chatter.
+        """
+        ring = self._switches[c].copy()
+        for t in times:
+            ring.append(t)
+            self._chatter(c, ring, t)
+
+    def _chatter(self, c, ring, t):
         if len(ring) == ring.maxlen and t - ring[0] <= self.options.chatter_window:
             o = self.options
             name = self.system.contact_names[c]
@@ -259,10 +288,16 @@ class Guard:
                 f"{len(ring)} times within {t - ring[0]:.3g} s of simulated time (since "
                 f"t = {ring[0]:.6g} s; `guard.chatter_switches` = {o.chatter_switches} within "
                 f"`guard.chatter_window` = {o.chatter_window:g} s), so the run would not "
-                f"advance. Tighten the solver's tolerances (`scheme.monolithic.rtol`, "
-                f"`atol`) or reduce the step; if the switching is physical, raise "
-                f"`guard.chatter_switches` or lower `guard.chatter_window`.",
-                t, name, "chatter")
+                f"advance. " + (self._RIGID_ADVICE if self.system.links[c].contact.law.rigid
+                                else self._ADVICE), t, name, "chatter")
+
+    _ADVICE = ("Tighten the solver's tolerances (`scheme.monolithic.rtol`, `atol`) or reduce "
+               "the step; if the switching is physical, raise `guard.chatter_switches` or lower "
+               "`guard.chatter_window`.")
+    _RIGID_ADVICE = ("Its impacts accumulate, as the rebounds of a body coming to rest on a "
+                     "rigid contact with restitution below 1 do (a Zeno train, whose "
+                     "accumulation time no threshold passes): a rigid contact cannot hold a "
+                     "body at rest; model a lasting contact with a penalty law.")
 
     def check(self, t: float, d: np.ndarray, dd: np.ndarray, f: np.ndarray, created: float,
               supplied: float, dissipated: np.ndarray, work: np.ndarray | None = None,

@@ -33,7 +33,7 @@ cdef enum:
     LINEAR = 0          # f = k d
     KELVIN_VOIGT = 1    # f = max(k d + c dd, 0), switch min(d, d + c/k dd)
     POWER = 2           # f = k d^n (1 + chi dd), switch d or min(d, d (1 + chi dd))
-    RIGID = 3           # no force; switch d marks touch-down
+    RIGID = 3           # no force; switch d, or min(d, dd * 1 s) moving away
     # joint drives (multibody.effects) and the references a PD drive tracks
     DRIVE_CONSTANT = 0
     DRIVE_TABLE = 1
@@ -531,6 +531,8 @@ cdef class MultibodyStep:
         if kind == POWER and self.c_c[k] != 0.0:
             a = d * (1.0 + self.c_c[k] * dd)
             return d if d < a else a
+        if kind == RIGID:
+            return d if dd >= 0.0 or d < dd else dd
         return d
 
     cdef void _law(self, int k, double d, double dd, double* f, double* p, double* sw) noexcept nogil:

@@ -85,6 +85,10 @@ class MultibodySubsystem(Subsystem):
         self.switch_log: list[tuple[float, int, bool]] = []
         #: rigid impacts resolved during the last step (dicts for the summary)
         self.impact_log: list[dict] = []
+        #: ``impact_watch(t)``, told of each rigid impact as it is resolved,
+        #: within the step (a coupling scheme sets it so that the run guard
+        #: sees a train of impacts that would never end the step); None: none
+        self.impact_watch = None
         self._zero_u = np.zeros((self.n_ports, 2))
         self._t0, self._h = 0.0, 1.0
         #: ``int v_p(t) s^j dt`` over the last step, (3, n_ports) complex [m]:
@@ -335,7 +339,10 @@ class MultibodySubsystem(Subsystem):
         if j in self._connections:
             return self._connection_switch(t, j, on, y)
         if on and self._embedded[j].law.rigid:
-            return self.rigid_impact(t, y, j)
+            out = self.rigid_impact(t, y, j)
+            if out is not None and self.impact_watch is not None:
+                self.impact_watch(t)
+            return out
         return None
 
     #: a rigid contact this close to touching takes part in another's impact [m]
@@ -420,7 +427,12 @@ class MultibodySubsystem(Subsystem):
                 "slip_history": [[float(a), float(b), m] for a, b, m in res.slip_history],
                 "slip_end": res.slip_end,
             })
-            if p_i > 0 and vn_plus[i] <= 1e-9 * max(1.0, abs(vn[i])):
+            # a restitution above 0 returns e |vn| however slow the approach: a
+            # rebound, and a train of them accumulates (the run guard's chatter
+            # rule stops it); only a rebound lost to the others' impulses, or
+            # e = 0, stays closed
+            floor = abs(vn[i]) if laws[i].restitution > 0 else max(1.0, abs(vn[i]))
+            if p_i > 0 and vn_plus[i] <= 1e-9 * floor:
                 raise SimulationError(
                     f"rigid contact `{names[i]}` stays closed after its impact at t = {t:.6g} s "
                     f"(normal velocity {vn_plus[i]:.3g} m/s): sustained rigid contact is not "

@@ -15,7 +15,8 @@ from couplers.restitution import (_checked, hunt_crossley_damping_for_restitutio
 
 __all__ = ["linear_contact", "kelvin_voigt_clipped", "held_force_rebound_factor",
            "hertz_contact", "hunt_crossley_restitution", "hunt_crossley_damping_for_restitution",
-           "two_mass_oscillator", "mass_on_pinned_beam"]
+           "two_mass_oscillator", "mass_on_pinned_beam", "bounce_times", "zeno_time",
+           "chatter_stop"]
 
 
 def linear_contact(mass: float, contact_stiffness: float) -> float:
@@ -287,3 +288,66 @@ def mass_on_pinned_beam(mass: float, contact_stiffness: float, impact_speed: flo
                            method="bounded", options={"xatol": 1e-14}).fun
     y_dot = float(psi[0] @ (c * np.cos(w * t_c))) / math.sqrt(m)
     return {"duration": t_c, "peak_penetration": -float(peak), "rebound_velocity": y_dot}
+
+
+def bounce_times(drop_height: float, gravity: float, restitution: float, n: int) -> np.ndarray:
+    """The first ``n`` impact times [s] of a ball dropped from rest at
+    ``drop_height`` [m] above a rigid floor with Poisson restitution ``e``.
+
+    It strikes first at ``t1 = sqrt(2 h0 / g)`` with speed
+    ``v1 = sqrt(2 g h0)``; each impact returns ``e`` times the approach
+    speed and a flight that leaves at speed ``v`` lands after ``2 v / g``
+    with speed ``v``, so the flight after impact ``j`` lasts
+    ``2 v1 e^j / g`` and
+
+        t_k = t1 + (2 v1 / g) e (1 - e^(k-1)) / (1 - e).
+
+    References
+    ----------
+    The bouncing ball is the textbook Zeno execution of a hybrid system:
+    K. H. Johansson, M. Egerstedt, J. Lygeros and S. Sastry, "On the
+    regularization of Zeno hybrid automata", Systems & Control Letters 38
+    (1999) 141-150; B. Brogliato, *Nonsmooth Mechanics*, 3rd ed., Springer
+    (2016), on accumulations of impacts.
+    """
+    h0, g, e = float(drop_height), float(gravity), float(restitution)
+    if not (h0 > 0 and g > 0 and 0 <= e < 1):
+        raise ValueError(f"need drop_height > 0, gravity > 0 and 0 <= restitution < 1, got "
+                         f"{h0!r}, {g!r}, {e!r}")
+    t1, v1 = math.sqrt(2 * h0 / g), math.sqrt(2 * g * h0)
+    k = np.arange(1, n + 1)
+    return t1 + (2 * v1 / g) * e * (1 - e ** (k - 1.0)) / (1 - e)
+
+
+def zeno_time(drop_height: float, gravity: float, restitution: float) -> float:
+    """The time [s] at which the impacts of :func:`bounce_times` accumulate,
+
+        t_inf = t1 + 2 v1 e / (g (1 - e)),
+
+    the limit of ``t_k`` (a geometric series of flights); infinitely many
+    impacts come before it."""
+    h0, g, e = float(drop_height), float(gravity), float(restitution)
+    bounce_times(h0, g, e, 1)                    # the checks
+    v1 = math.sqrt(2 * g * h0)
+    return math.sqrt(2 * h0 / g) + 2 * v1 * e / (g * (1 - e))
+
+
+def chatter_stop(drop_height: float, gravity: float, restitution: float, switches: int,
+                 window: float) -> tuple[int, float]:
+    """The impact (its number ``k``, from 1, and its time [s]) at which the
+    run guard's chatter rule stops the train of :func:`bounce_times`.
+
+    An impact is a touch and a release at one instant, so ``switches``
+    switches are the last ``m = ceil(switches / 2)`` impacts, and the rule
+    trips at the first ``k`` whose span ``t_k - t_(k-m+1)`` is at most
+    ``window``.  The span is the sum of ``m - 1`` flights,
+    ``(2 v1 / g) e^(k-m+1) (1 - e^(m-1)) / (1 - e)``, computed so (not as a
+    difference of times, which would cancel)."""
+    h0, g, e = float(drop_height), float(gravity), float(restitution)
+    bounce_times(h0, g, e, 1)
+    m = -(-int(switches) // 2)
+    v1 = math.sqrt(2 * g * h0)
+    k = m
+    while (2 * v1 / g) * e ** (k - m + 1) * (1 - e ** (m - 1)) / (1 - e) > window:
+        k += 1
+    return k, float(bounce_times(h0, g, e, k)[-1])

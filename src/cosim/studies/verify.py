@@ -14,7 +14,7 @@ from cosim.scene.run import simulate
 from cosim.scene.load import SceneError, load_scene
 
 __all__ = ["Check", "run_checks", "CHECKS", "HardCase", "hard_matrix", "run_hard_case",
-           "hard_checks"]
+           "hard_checks", "robustness", "HARD_COPIES"]
 
 
 @dataclass(frozen=True)
@@ -164,35 +164,34 @@ def hard_matrix(cases="cases", factors=HARD_FACTORS, variants=HARD_VARIANTS,
     return out
 
 
-def run_hard_case(case: HardCase, cases="cases", t_end: float | None = None) -> dict:
-    """Run one point and judge its outcome.
+#: round-off copies of each hard case whose verdicts must agree (the scene and
+#: two copies moved by +1 and -1 ulp, :func:`cosim.studies.roundoff.spread`)
+HARD_COPIES = 3
 
-    Returns a dict with ``outcome`` (``"bounded"``, ``"refused"`` or
-    ``"stopped"``), ``ok`` (the outcome is one the issue allows, with its
-    evidence), ``detail``, ``created`` (largest energy created over the kept
-    samples [J]), ``bound`` [J] and ``cpu_s``.
 
-    - bounded: finished, every series value finite, and the energy created
-      (total + dissipated - supplied - initial) at every sample within
-      ``guard.energy_growth`` times the energy scale (the guard's, taken
-      anew from the scene and the contacts' peaks);
-    - refused: :class:`UnsafeStepError` or :class:`SceneError` before the
-      run, naming contact C and the step;
-    - stopped: status failed, a message naming a contact and the time, and
-      the series written up to there finite.
-    """
-    cases = Path(cases)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        scene = load_scene(cases / "three_mass.toml", case.variant, case.overrides(t_end),
-                           scheme=case.scheme)
+def _verdict(outcome: str, message: str) -> str:
+    """The discrete verdict of one run: its outcome and, for a stopped run,
+    the cause and the contact named (``stopped (energy growth, C)``)."""
+    if outcome != "stopped":
+        return outcome
+    cause = ("chatter" if " chatters" in message else
+             "energy growth" if "the energy grew" in message else
+             "non-finite" if "not finite" in message or " is nan" in message
+             or " is inf" in message else "failed")
+    named = re.search(r"contact `([^`]+)`", message)
+    return f"stopped ({cause}, {named.group(1) if named else 'no contact'})"
+
+
+def _run_one(case: HardCase, scene) -> dict:
+    """Run one scene of a hard case and judge its outcome (see
+    :func:`run_hard_case`)."""
     try:
         res = simulate(scene)
     except (UnsafeStepError, SceneError) as exc:
         msg = str(exc)
         ok = "contact `C`" in msg and (case.step is None or f"{case.step:.3g} s" in msg)
         return {"outcome": "refused", "ok": ok, "detail": msg, "created": math.nan,
-                "bound": math.nan, "cpu_s": 0.0}
+                "bound": math.nan, "cpu_s": 0.0, "verdict": "refused"}
     import numpy as np
     s = res.summary
     finite = all(np.all(np.isfinite(a)) for a in res.series.values())
@@ -213,17 +212,71 @@ def run_hard_case(case: HardCase, cases="cases", t_end: float | None = None) -> 
         named = re.search(r"contact `[^`]+`", msg) is not None
         timed = re.search(rf"t = {_NUM} s", msg) is not None
         out.update(outcome="stopped", ok=finite and named and timed)
+    out["verdict"] = _verdict(out["outcome"], s["message"])
     return out
 
 
-def hard_checks(cases="cases", t_end: float | None = None, matrix=None):
+def run_hard_case(case: HardCase, cases="cases", t_end: float | None = None,
+                  copies: int = HARD_COPIES) -> dict:
+    """Run one point, and its round-off copies, and judge their outcomes.
+
+    A train of impacts amplifies round-off, so a point's verdict is computed
+    for the scene and ``copies - 1`` copies whose initial state is moved by
+    a few ulps (:func:`cosim.studies.roundoff.spread`); it is ``robust`` when
+    all agree.
+
+    Returns a dict with ``outcome`` (``"bounded"``, ``"refused"`` or
+    ``"stopped"``), ``detail``, ``created`` (largest energy created over the
+    kept samples [J]), ``bound`` [J] and ``cpu_s``, all of the unmoved
+    scene; ``verdicts`` (one per copy, the scene's first: the outcome, and
+    for a stopped run its cause and contact, ``"stopped (energy growth,
+    C)"``), ``robust`` (they agree) and ``ok`` (every copy's outcome is one
+    the matrix allows, with its evidence: never NaN, never silent growth).
+
+    - bounded: finished, every series value finite, and the energy created
+      (total + dissipated - supplied - initial) at every sample within
+      ``guard.energy_growth`` times the energy scale (the guard's, taken
+      anew from the scene and the contacts' peaks);
+    - refused: :class:`UnsafeStepError` or :class:`SceneError` before the
+      run, naming contact C and the step;
+    - stopped: status failed, a message naming a contact and the time, and
+      the series written up to there finite.
+    """
+    from cosim.studies.roundoff import spread
+
+    cases = Path(cases)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        scene = load_scene(cases / "three_mass.toml", case.variant, case.overrides(t_end),
+                           scheme=case.scheme)
+        runs = [_run_one(case, s) for s in spread(scene, copies)]
+    out = dict(runs[0])
+    out["verdicts"] = [r["verdict"] for r in runs]
+    out["robust"] = len(set(out["verdicts"])) == 1
+    out["ok"] = all(r["ok"] for r in runs)
+    if not out["ok"]:
+        bad = next(r for r in runs if not r["ok"])
+        out["detail"] = f"a copy: {bad['outcome']}: {bad['detail']}"
+    return out
+
+
+def robustness(r: dict) -> str:
+    """``robust``, or ``not robust (verdicts: ...)``, of a
+    :func:`run_hard_case` result."""
+    return "robust" if r["robust"] else f"not robust (verdicts: {'; '.join(r['verdicts'])})"
+
+
+def hard_checks(cases="cases", t_end: float | None = None, matrix=None,
+                copies: int = HARD_COPIES):
     """Yield a :class:`Check` per point of the hard-case matrix; its detail
-    starts with the outcome."""
+    starts with the outcome and says whether the verdict is robust to
+    round-off (``copies`` runs each, :func:`run_hard_case`)."""
     for case in (matrix if matrix is not None else hard_matrix(cases)):
-        r = run_hard_case(case, cases, t_end)
+        r = run_hard_case(case, cases, t_end, copies)
         created = "" if math.isnan(r["created"]) else \
             f" (created {r['created']:.3g} J, bound {r['bound']:.3g} J)"
-        yield Check(case.label, r["ok"], f"{r['outcome']}{created}: {r['detail']}")
+        detail = " ".join(r["detail"].split())          # one line per check
+        yield Check(case.label, r["ok"], f"{r['outcome']}{created}, {robustness(r)}: {detail}")
 
 
 def run_checks(cases_dir="cases", hard: bool = False):

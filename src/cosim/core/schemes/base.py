@@ -174,6 +174,7 @@ class CoSimulationScheme(MacroStepControl, InputExtrapolation, CouplingScheme):
             raise ValueError(f"scheme `{self.name}` needs `macro_step` [s]")
         self.preflight(system, t_end)
         self._system = system
+        self._watch_impacts(system, recorder)
         self.n_iterations = self.n_windows = self.n_rejected = 0
         nc = system.n_contacts
         coupler = system.coupler
@@ -351,6 +352,34 @@ class CoSimulationScheme(MacroStepControl, InputExtrapolation, CouplingScheme):
             system.collect_work(s)
             impulse += hk * np.sum(cf / (j + 1), axis=0)
         return impulse
+
+    @staticmethod
+    def _watch_impacts(system, recorder) -> None:
+        """Let the run guard see each rigid impact as a side's integrator
+        resolves it: the switches of the step so far after those it noted
+        (:meth:`~cosim.core.guard.Guard.switches_ahead`; an impact is a touch
+        and a release at one instant).  A train of impacts that accumulates
+        at a finite time would otherwise never end its step."""
+        guard = getattr(recorder, "guard", None)
+        rigid = {}                       # subsystem -> {embedded slot: contact}
+        for c, (s, slot) in system.embedded.items():
+            if system.links[c].contact.law.rigid:
+                rigid.setdefault(s, {})[slot] = c
+        for s, slots in rigid.items():
+            sub = system.subsystems[s]
+            if not hasattr(sub, "impact_watch"):
+                continue
+            sub.impact_watch = None
+            if guard is None:
+                continue
+            keep = guard.options.chatter_switches // 2 + 1    # impacts that can trip it
+
+            def watch(t, sub=sub, slots=slots):
+                for slot, c in slots.items():
+                    times = [ts for ts, j, on in sub.switch_log if j == slot and on][-keep:]
+                    if times and times[-1] == t:
+                        guard.switches_ahead(c, [x for ts in times for x in (ts, ts)])
+            sub.impact_watch = watch
 
     def _moving(self, system):
         return self._topology(system).moving
