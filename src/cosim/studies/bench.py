@@ -235,6 +235,30 @@ def _copies(scene, spread: int) -> list[list[str]]:
                          f"round-off: {str(exc).split(': ', 1)[-1]}") from None
 
 
+def _runs(scene, schemes=None, steps=None, tolerances=(1e-3, 1e-4, 1e-6, 1e-8),
+          paper: bool = True) -> list[tuple]:
+    """The rows of :func:`run_bench` (its arguments of the same names):
+    (scheme, label, step, tolerance, overrides) each."""
+    if schemes is None:
+        schemes = ([scene.scheme] if scene.scheme != "monolithic" else []) + ["implicit"]
+        schemes = list(dict.fromkeys(schemes))
+    steps = list(steps or (1e-4, 5e-5, 2e-5, 1e-5))
+    varied = "contact_step" if scene.scheme_options.get("contact_step") else "macro_step"
+    long_step = scene.scheme_options.get("macro_step") or 0.0
+    runs = [("monolithic", "paper_rk45", math.nan, PAPER_RK45["rtol"], _monolithic(PAPER_RK45))
+            ] if paper else []
+    for tol in tolerances:
+        runs.append(("monolithic", "monolithic", math.nan, tol, _monolithic(
+            {"method": "DOP853", "rtol": tol, "atol": tol * 1e-3})))
+    for name in schemes:
+        for h in steps:
+            ov = [f"scheme.{varied}={h}"]
+            if varied == "contact_step" and long_step < h:
+                ov.append(f"scheme.macro_step={h}")
+            runs.append((name, name, h, math.nan, ov))
+    return runs
+
+
 def run_bench(path, variant=None, schemes=None, steps=None, contact=None, joint=None,
               overrides=(), tolerances=(1e-3, 1e-4, 1e-6, 1e-8), cache_dir=None,
               progress=None, spread: int = 3, paper: bool = True,
@@ -295,23 +319,7 @@ def run_bench(path, variant=None, schemes=None, steps=None, contact=None, joint=
     contact, joint = find_strike(scene, contact, joint)
     if ref is None:
         ref = reference(path, variant, contact, joint, overrides, cache_dir)
-    if schemes is None:
-        schemes = ([scene.scheme] if scene.scheme != "monolithic" else []) + ["implicit"]
-        schemes = list(dict.fromkeys(schemes))
-    steps = list(steps or (1e-4, 5e-5, 2e-5, 1e-5))
-    varied = "contact_step" if scene.scheme_options.get("contact_step") else "macro_step"
-    long_step = scene.scheme_options.get("macro_step") or 0.0
-    runs = [("monolithic", "paper_rk45", math.nan, PAPER_RK45["rtol"], _monolithic(PAPER_RK45))
-            ] if paper else []
-    for tol in tolerances:
-        runs.append(("monolithic", "monolithic", math.nan, tol, _monolithic(
-            {"method": "DOP853", "rtol": tol, "atol": tol * 1e-3})))
-    for name in schemes:
-        for h in steps:
-            ov = [f"scheme.{varied}={h}"]
-            if varied == "contact_step" and long_step < h:
-                ov.append(f"scheme.macro_step={h}")
-            runs.append((name, name, h, math.nan, ov))
+    runs = _runs(scene, schemes, steps, tolerances, paper)
     rows = []
     for scheme, label, step, tol, ov in runs:
         row = _row(path, variant, list(overrides) + ov, copies, scheme, label, step, tol, ref,
