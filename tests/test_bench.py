@@ -207,12 +207,14 @@ def test_a_row_whose_copy_did_not_finish_keeps_its_status_and_nan_errors(tmp_pat
                    "until then the scheme runs zero steps and says `finished`")
 def test_a_step_longer_than_the_run_is_reported_as_the_schemes_failure(tmp_path):
     """`cosim bench --steps 1e308`: the scheme cannot take one step of the
-    run; the row reports the status the scheme gives, never ``finished``,
-    and NaN errors."""
+    run; the row reports the status the scheme gives (``failed`` when the
+    run fails, ``refused`` should the scheme refuse the step before it
+    runs), never ``finished``, and NaN errors.  Remove the marker once the
+    scheme's fix is in: strict, the test then fails as XPASS until it is."""
     _, rows = run_bench(CASES / "spring_drop.toml", schemes=["gauss_seidel"], steps=[1e308],
                         tolerances=(), paper=False, spread=1, cache_dir=tmp_path, **SPRING)
     (r,) = rows
-    assert r.status not in ("finished", "refused"), r
+    assert r.status != "finished", r
     assert math.isnan(r.err_peak) and math.isnan(r.err_exit_velocity), r
 
 
