@@ -17,8 +17,8 @@ than the run's own accuracy.  Each row is therefore run on the scene and on
 the best and the worst over the copies (the band), the contact counts'
 range, and the median CPU time.  :func:`cheapest_within` judges a row by its
 worst copy.  The reference stays one run: at rtol 1e-11 two copies of it
-differ by about 1e-13 (peak) and 3e-12 (exit velocity), far below any row's
-error.
+give the same count and differ by less than 1e-11 in peak and exit velocity
+(``tests/test_work_precision_doc.py``), far below any row's error.
 """
 from __future__ import annotations
 
