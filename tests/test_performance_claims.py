@@ -111,6 +111,19 @@ def test_the_peers_cosim_row_errors(tmp_path):
     assert err["meets_1pc"] and err["err_count"] == 0
 
 
+def test_the_quick_peers_window_holds_cs_first_two_contacts():
+    """`--quick` "ends every run at 0.106 s (C's first two contacts)": C has
+    closed and opened twice by then, on the scene and its copies."""
+    claim = Claim(PAGE, "`--quick` ends every run at 0.106 s (C's first two contacts)",
+                  "python benchmarks/peers/run.py --quick", 2)
+    assert_printed(claim)
+    scene = _quiet_scene(CASES / "three_mass.toml", "f100", ["t_end=0.106"])
+    c = _robust(scene, lambda r: (r.summary["contacts"]["C"]["count"],
+                                  r.summary["contacts"]["C"]["intervals"][-1][1] < 0.106))
+    assert c == (2, True)
+    assert_reproduced(claim, c[0])
+
+
 @pytest.mark.slow
 def test_the_peers_paper_row_errors(tmp_path):
     """The peers table's paper row: the bench's `paper_rk45`, run by
