@@ -245,6 +245,21 @@ def test_run_bench_refuses_a_spread_before_it_runs(tmp_path):
     assert not list(tmp_path.iterdir())
 
 
+def test_bench_command_names_a_scene_with_nothing_to_move(tmp_path, capsys, monkeypatch):
+    """The default spread on a scene at rest at the origin: exit 2, the file
+    and what to do, nothing run."""
+    monkeypatch.chdir(tmp_path)
+    code = main(["bench", str(CASES / "spring_drop.toml"), "--contact", "wall", "--joint",
+                 "body/x", "--out", str(tmp_path / "b"),
+                 "--set", "subsystems.body.bodies.mass.joint.q0=0.0",
+                 "--set", "subsystems.body.bodies.mass.joint.dq0=0.0"])
+    assert code == 2
+    err = capsys.readouterr().err
+    assert "spring_drop.toml: `spread` = 3 needs copies moved by round-off" in err
+    assert "`--spread 1`" in err
+    assert not (tmp_path / "runs").exists()
+
+
 def test_bench_writes_through_the_checked_writer(tmp_path):
     """bench.csv, reference.json and the reference's cache go whole to their
     place as ordinary files (not mkstemp's 0600); a folder that is a file is

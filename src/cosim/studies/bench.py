@@ -232,7 +232,8 @@ def _copies(scene, spread: int) -> list[list[str]]:
         return [[]] + [perturbed_overrides(scene, k) for k in OFFSETS[:spread - 1]]
     except ValueError as exc:
         raise SceneError(scene.path, "", f"`spread` = {spread} needs copies moved by "
-                         f"round-off: {str(exc).split(': ', 1)[-1]}") from None
+                         f"round-off: {str(exc).split(': ', 1)[-1]}; `spread` = 1 (`--spread 1`) "
+                         f"runs the scene alone") from None
 
 
 def _runs(scene, schemes=None, steps=None, tolerances=(1e-3, 1e-4, 1e-6, 1e-8),
