@@ -189,34 +189,45 @@ def _machine() -> str:
 def _cmd_bench(args) -> int:
     import math
 
-    from cosim.studies.bench import cheapest_within, plot, run_bench, write_csv
+    from cosim.studies.bench import cheapest_within, plot, run_bench, write_csv, write_reference
 
     out = Path(args.out) if args.out else Path("runs") / (
         Path(args.scene).stem + (f"-{args.variant}" if args.variant else "") + "-bench")
     out.mkdir(parents=True, exist_ok=True)
+    spread = args.spread
     print(f"bench {args.scene}" + (f" --variant {args.variant}" if args.variant else "")
           + f" on {_machine()}")
-    print(f"{'scheme':<14}{'step [s]':>10}{'rtol':>9}{'CPU [s]':>9}{'peak':>10}{'count':>7}"
-          f"{'exit vel.':>11}{'energy':>10}  status")
+    print(f"each row: the scene and {spread - 1} round-off copies; errors median / worst, "
+          f"contact counts min-max, CPU median" if spread > 1 else "each row: one run")
+    print(f"{'scheme':<14}{'step [s]':>10}{'rtol':>9}{'CPU [s]':>9}{'peak':>20}{'contacts':>9}"
+          f"{'exit vel.':>20}{'energy':>20}  status")
 
     def fmt(x, spec):
         width = int(spec.split(".")[0])
         return "-".rjust(width) if isinstance(x, float) and math.isnan(x) else format(x, spec)
 
+    def band(med, worst):
+        if math.isnan(med):
+            return "-".rjust(20)
+        return (f"{med:.2e} / {worst:.2e}" if spread > 1 else f"{med:.2e}").rjust(20)
+
     def show(r):
+        counts = ("-" if math.isnan(r.count_min) else f"{r.count_min:.0f}"
+                  if r.count_min == r.count_max else f"{r.count_min:.0f}-{r.count_max:.0f}")
         print(f"{r.label:<14}{fmt(r.macro_step, '10.1e')}{fmt(r.tolerance, '9.0e')}"
-              f"{fmt(r.cpu_time_s, '9.2f')}{fmt(r.err_peak, '10.2e')}{fmt(r.err_count, '7.0f')}"
-              f"{fmt(r.err_exit_velocity, '11.2e')}{fmt(r.err_energy, '10.2e')}  {r.status}",
-              flush=True)
+              f"{fmt(r.cpu_time_s, '9.2f')}{band(r.err_peak, r.err_peak_worst)}{counts:>9}"
+              f"{band(r.err_exit_velocity, r.err_exit_velocity_worst)}"
+              f"{band(r.err_energy, r.err_energy_worst)}  {r.status}", flush=True)
 
     ref, rows = run_bench(args.scene, args.variant, args.schemes, args.steps, args.contact,
                           args.joint, args.set or (), cache_dir=Path("runs") / ".bench-cache",
-                          progress=show)
-    print(f"reference (monolithic DOP853, rtol 1e-11): {ref['count']} contacts of "
+                          progress=show, spread=spread)
+    print(f"reference (monolithic DOP853, rtol 1e-11, one run): {ref['count']} contacts of "
           f"{args.contact}, peak {ref['peak']:.6g} m, exit velocity {ref['exit_velocity']:.6g}, "
           f"CPU {ref['cpu_time_s']:.2f} s")
     best = cheapest_within(rows, 0.01)
-    print("cheapest within 1 % (exact count; peak and exit velocity within 1 %):")
+    print("cheapest within 1 % (exact count; peak and exit velocity within 1 %"
+          + (", every copy" if spread > 1 else "") + "):")
     for kind in ("cosim", "monolithic", "paper_rk45"):
         r = best[kind]
         print(f"  {kind:<11}" + ("none" if r is None else
@@ -226,7 +237,8 @@ def _cmd_bench(args) -> int:
         print(f"  co-simulation / monolithic CPU {best['ratio_monolithic']:.2f}, "
               f"/ paper_rk45 CPU {best['ratio_paper_rk45']:.2f}")
     write_csv(rows, out / "bench.csv")
-    print(f"wrote {out / 'bench.csv'}")
+    write_reference(ref, out / "reference.json")
+    print(f"wrote {out / 'bench.csv'} and {out / 'reference.json'}")
     try:
         plot(rows, out / "bench.png", title=f"{Path(args.scene).stem} {args.variant or ''}")
         print(f"wrote {out / 'bench.png'}")

@@ -19,6 +19,20 @@ def _floats(text: str) -> list[float]:
         raise argparse.ArgumentTypeError(f"expected numbers separated by commas, got {text!r}")
 
 
+def _spread(text: str) -> int:
+    from cosim.studies.roundoff import OFFSETS
+    most = len(OFFSETS) + 1
+    try:
+        k = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number of copies, got {text!r}")
+    if not 1 <= k <= most:
+        raise argparse.ArgumentTypeError(
+            f"must be from 1 to {most} (the scene and one copy per round-off offset; "
+            f"1 runs the scene alone), got {k}")
+    return k
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="cosim", description="Co-simulation of impacts between "
                                 "robots and vibrating structures.")
@@ -55,6 +69,10 @@ def build_parser() -> argparse.ArgumentParser:
     bn.add_argument("--joint", default="robot/arm",
                     help="SUBSYSTEM/JOINT whose rate at the last release is compared")
     bn.add_argument("--set", action="append", metavar="KEY=VALUE")
+    bn.add_argument("--spread", type=_spread, default=3, metavar="K",
+                    help="run each row on the scene and K-1 copies whose initial state is "
+                         "moved by a few ulps; report the median and worst error (default 3; "
+                         "1: one run)")
     bn.add_argument("--out")
     bn.set_defaults(func=_cmd_bench)
     sw = sub.add_parser("sweep", help="a parameter study: every combination of variants "

@@ -8,6 +8,17 @@ release (:mod:`cosim.studies.metrics`) and the energy error.  The seed paper's o
 method, the monolithic model under explicit RK45 with max step 1e-4 s, rtol
 1e-4 and atol 1e-6 (MATLAB's ode45 with these settings), is the row
 ``paper_rk45``.
+
+A train of impacts amplifies round-off, so a loose run's error is a
+distribution, not a number: another machine's last bits can move it by more
+than the run's own accuracy.  Each row is therefore run on the scene and on
+``spread - 1`` copies whose initial state is moved by a few ulps
+(:func:`cosim.studies.roundoff.spread`), and reports, per error, the median,
+the best and the worst over the copies (the band), the contact counts'
+range, and the median CPU time.  :func:`cheapest_within` judges a row by its
+worst copy.  The reference stays one run: at rtol 1e-11 two copies of it
+give the same count and differ by less than 1e-11 in peak and exit velocity
+(``tests/test_work_precision_doc.py``), far below any row's error.
 """
 from __future__ import annotations
 
@@ -15,21 +26,34 @@ import csv
 import hashlib
 import json
 import math
+import statistics
 import warnings
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+from cosim.core.series import atomic_write
 from cosim.errors import SimulationError, UnsafeStepError
+from cosim.io.rundir import inside, output_error
+from cosim.scene.checks import SceneError
+from cosim.studies.roundoff import OFFSETS, perturbed_overrides
 from cosim.studies.metrics import impact_metrics, relative_errors
 from cosim.studies.strike import find_strike
 from cosim.scene.run import simulate
 from cosim.scene.load import load_scene
 
-__all__ = ["BenchRow", "COLUMNS", "reference", "run_bench", "cheapest_within", "write_csv", "plot"]
+__all__ = ["BenchRow", "COLUMNS", "MAX_SPREAD", "reference", "run_bench", "within",
+           "cheapest_within", "write_csv", "read_csv", "write_reference", "plot"]
 
-#: columns of the CSV, in order
+#: columns of the CSV, in order: the first ten as before the copies (each
+#: error now the median over them), then the copies and the band
 COLUMNS = ("scheme", "label", "macro_step", "tolerance", "cpu_time_s", "err_peak", "err_count",
-           "err_exit_velocity", "err_energy", "status")
+           "err_exit_velocity", "err_energy", "status", "copies", "finished",
+           "err_peak_best", "err_peak_worst", "count_min", "count_max", "err_count_worst",
+           "err_exit_velocity_best", "err_exit_velocity_worst", "err_energy_best",
+           "err_energy_worst")
+
+#: the most copies a row can run on: the scene and one per round-off offset
+MAX_SPREAD = len(OFFSETS) + 1
 
 #: the reference: monolithic DOP853, every switch located, tight tolerances
 REFERENCE = {"method": "DOP853", "rtol": 1e-11, "atol": 1e-14}
@@ -40,9 +64,23 @@ PAPER_RK45 = {"method": "RK45", "max_step": 1e-4, "rtol": 1e-4, "atol": 1e-6}
 
 @dataclass(frozen=True)
 class BenchRow:
-    """One run of a work-precision study.  Errors are relative (peak, exit
-    velocity, energy: drift over the initial energy) or absolute (count);
-    NaN where the run did not finish."""
+    """One row of a work-precision study: a scheme at one step or tolerance,
+    run on the scene and its round-off copies.
+
+    Errors are relative (peak, exit velocity, energy: drift over the initial
+    energy) or absolute (count: contacts too many or too few).  ``err_*`` is
+    the median over the copies, ``err_*_best`` and ``err_*_worst`` the
+    smallest and largest; ``count_min`` and ``count_max`` are the contact
+    counts the copies gave, ``err_count_worst`` the largest count error.
+    ``cpu_time_s`` is the median CPU time of the copies.  With one copy
+    (``copies`` = 1) median, best and worst are that run's.
+
+    ``status`` is ``finished`` when every copy finished (``finished`` of
+    ``copies`` did), else the status of the first that did not
+    (``refused``: the scheme refused the step before running; ``failed`` or
+    another status the run gave); the errors are then NaN: a band that lost
+    a copy is no band.
+    """
 
     scheme: str
     label: str
@@ -54,6 +92,17 @@ class BenchRow:
     err_exit_velocity: float
     err_energy: float
     status: str
+    copies: int = 1
+    finished: int = 1
+    err_peak_best: float = math.nan
+    err_peak_worst: float = math.nan
+    count_min: float = math.nan
+    count_max: float = math.nan
+    err_count_worst: float = math.nan
+    err_exit_velocity_best: float = math.nan
+    err_exit_velocity_worst: float = math.nan
+    err_energy_best: float = math.nan
+    err_energy_worst: float = math.nan
 
 
 def _metrics(res, contact, joint) -> dict:
@@ -110,33 +159,111 @@ def reference(path, variant=None, contact=None, joint=None, overrides=(),
     ref = _metrics(res, contact, joint)
     ref["cpu_time_s"] = res.summary["cpu_time_s"]
     if cache is not None:
-        cache.parent.mkdir(parents=True, exist_ok=True)
-        tmp = cache.with_suffix(".tmp")
-        tmp.write_text(json.dumps(ref))
-        tmp.replace(cache)
+        try:
+            cache.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise output_error(exc, cache.parent, "cannot make the cache folder") from None
+        write_reference(ref, cache)
     return ref
 
 
-def _row(path, variant, overrides, scheme, label, step, tol, ref, contact, joint) -> BenchRow:
-    nan = math.nan
+def write_reference(ref: dict, path) -> None:
+    """The reference's metrics (as :func:`reference` returns them) as JSON,
+    written whole into ``path``'s folder under its checked name."""
+    path = Path(path)
+    _write(path.parent, path.name, lambda fh: json.dump(ref, fh, indent=1), "w")
+
+
+def _once(path, variant, overrides, scheme, ref, contact, joint) -> tuple:
+    """One run of a row's copy: (status, CPU time, metrics and errors or None)."""
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             res = simulate(load_scene(path, variant, list(overrides), scheme))
     except UnsafeStepError:
-        return BenchRow(scheme, label, step, tol, nan, nan, nan, nan, nan, "refused")
+        return "refused", math.nan, None
+    cpu = res.summary["cpu_time_s"]
     if not res.success:
-        return BenchRow(scheme, label, step, tol, res.summary["cpu_time_s"], nan, nan, nan, nan,
-                        "failed")
+        # the status the run gave (``failed``, ``error``), never ``finished``
+        status = res.status if res.status != "finished" else "failed"
+        return status, cpu, None
     m = _metrics(res, contact, joint)
     err = relative_errors(m, ref)
-    return BenchRow(scheme, label, step, tol, res.summary["cpu_time_s"], err["peak"],
-                    err["count"], err["exit_velocity"], abs(m["energy"]), "finished")
+    err["energy"] = abs(m["energy"])
+    return "finished", cpu, {"count": m["count"], **{f"err_{k}": v for k, v in err.items()}}
+
+
+def _row(path, variant, overrides, copies, scheme, label, step, tol, ref, contact,
+         joint) -> BenchRow:
+    """A row: the run on each copy (``copies``: the overrides that make each),
+    and the band of their errors."""
+    nan = math.nan
+    runs = [_once(path, variant, list(overrides) + list(c), scheme, ref, contact, joint)
+            for c in copies]
+    done = [m for status, _, m in runs if status == "finished"]
+    cpus = [cpu for _, cpu, _ in runs if not math.isnan(cpu)]
+    cpu = statistics.median(cpus) if cpus else nan
+    k = len(runs)
+    if len(done) < k:
+        status = next(status for status, _, _ in runs if status != "finished")
+        return BenchRow(scheme, label, step, tol, cpu, nan, nan, nan, nan, status, k, len(done))
+
+    def band(key):
+        v = [m[key] for m in done]
+        if any(math.isnan(x) for x in v):     # a copy that never released: no band
+            return nan, nan, nan
+        return float(statistics.median(v)), float(min(v)), float(max(v))
+    peak, ev, energy = band("err_peak"), band("err_exit_velocity"), band("err_energy")
+    dc = band("err_count")
+    counts = [float(m["count"]) for m in done]
+    return BenchRow(scheme, label, step, tol, cpu, peak[0], dc[0], ev[0], energy[0], "finished",
+                    k, len(done), peak[1], peak[2], min(counts), max(counts), dc[2], ev[1],
+                    ev[2], energy[1], energy[2])
+
+
+def _copies(scene, spread: int) -> list[list[str]]:
+    """The ``--set`` overrides of the scene (none) and its ``spread - 1``
+    round-off copies (:data:`cosim.studies.roundoff.OFFSETS` ulps)."""
+    if isinstance(spread, bool) or not isinstance(spread, int) \
+            or not 1 <= spread <= MAX_SPREAD:
+        raise ValueError(f"`spread` must be a whole number of copies from 1 to {MAX_SPREAD} "
+                         f"(the scene and one copy per round-off offset), got {spread!r}")
+    try:
+        return [[]] + [perturbed_overrides(scene, k) for k in OFFSETS[:spread - 1]]
+    except ValueError as exc:
+        raise SceneError(scene.path, "", f"`spread` = {spread} needs copies moved by "
+                         f"round-off: {str(exc).split(': ', 1)[-1]}; `spread` = 1 (`--spread 1`) "
+                         f"runs the scene alone") from None
+
+
+def _runs(scene, schemes=None, steps=None, tolerances=(1e-3, 1e-4, 1e-6, 1e-8),
+          paper: bool = True) -> list[tuple]:
+    """The rows of :func:`run_bench` (its arguments of the same names):
+    (scheme, label, step, tolerance, overrides) each."""
+    if schemes is None:
+        schemes = ([scene.scheme] if scene.scheme != "monolithic" else []) + ["implicit"]
+        schemes = list(dict.fromkeys(schemes))
+    steps = list(steps or (1e-4, 5e-5, 2e-5, 1e-5))
+    varied = "contact_step" if scene.scheme_options.get("contact_step") else "macro_step"
+    long_step = scene.scheme_options.get("macro_step") or 0.0
+    runs = [("monolithic", "paper_rk45", math.nan, PAPER_RK45["rtol"], _monolithic(PAPER_RK45))
+            ] if paper else []
+    for tol in tolerances:
+        runs.append(("monolithic", "monolithic", math.nan, tol, _monolithic(
+            {"method": "DOP853", "rtol": tol, "atol": tol * 1e-3})))
+    for name in schemes:
+        for h in steps:
+            ov = [f"scheme.{varied}={h}"]
+            if varied == "contact_step" and long_step < h:
+                ov.append(f"scheme.macro_step={h}")
+            runs.append((name, name, h, math.nan, ov))
+    return runs
 
 
 def run_bench(path, variant=None, schemes=None, steps=None, contact=None, joint=None,
               overrides=(), tolerances=(1e-3, 1e-4, 1e-6, 1e-8), cache_dir=None,
-              progress=None) -> tuple[dict, list[BenchRow]]:
+              progress=None, spread: int = 3, paper: bool = True,
+              ref: dict | None = None) -> tuple[dict, list[BenchRow]]:
     """A work-precision study of a scene.
 
     Parameters
@@ -165,6 +292,14 @@ def run_bench(path, variant=None, schemes=None, steps=None, contact=None, joint=
         Where the reference is cached.
     progress : callable, optional
         Called with each finished :class:`BenchRow`.
+    spread : int
+        Copies each row runs on: the scene and ``spread - 1`` copies moved
+        by round-off (1 to :data:`MAX_SPREAD`; 1 is a single run).
+    paper : bool
+        Whether to run the ``paper_rk45`` row.
+    ref : dict, optional
+        The reference's metrics (as :func:`reference` returns them), when
+        known; otherwise it is run (or read from ``cache_dir``).
 
     Returns
     -------
@@ -173,33 +308,23 @@ def run_bench(path, variant=None, schemes=None, steps=None, contact=None, joint=
 
     Raises
     ------
+    ValueError
+        If ``spread`` is not a whole number from 1 to :data:`MAX_SPREAD`.
     SceneError
         If the scene has no such ``contact`` or ``joint``, or leaves one out
-        and more than one (or no) choice.
+        and more than one (or no) choice; if ``spread`` > 1 and the scene
+        gives no nonzero initial state to move by round-off.
     """
     scene = load_scene(path, variant, list(overrides))
+    copies = _copies(scene, spread)
     contact, joint = find_strike(scene, contact, joint)
-    ref = reference(path, variant, contact, joint, overrides, cache_dir)
-    if schemes is None:
-        schemes = ([scene.scheme] if scene.scheme != "monolithic" else []) + ["implicit"]
-        schemes = list(dict.fromkeys(schemes))
-    steps = list(steps or (1e-4, 5e-5, 2e-5, 1e-5))
-    varied = "contact_step" if scene.scheme_options.get("contact_step") else "macro_step"
-    long_step = scene.scheme_options.get("macro_step") or 0.0
-    runs = [("monolithic", "paper_rk45", math.nan, PAPER_RK45["rtol"], _monolithic(PAPER_RK45))]
-    for tol in tolerances:
-        runs.append(("monolithic", "monolithic", math.nan, tol, _monolithic(
-            {"method": "DOP853", "rtol": tol, "atol": tol * 1e-3})))
-    for name in schemes:
-        for h in steps:
-            ov = [f"scheme.{varied}={h}"]
-            if varied == "contact_step" and long_step < h:
-                ov.append(f"scheme.macro_step={h}")
-            runs.append((name, name, h, math.nan, ov))
+    if ref is None:
+        ref = reference(path, variant, contact, joint, overrides, cache_dir)
+    runs = _runs(scene, schemes, steps, tolerances, paper)
     rows = []
     for scheme, label, step, tol, ov in runs:
-        row = _row(path, variant, list(overrides) + ov, scheme, label, step, tol, ref, contact,
-                   joint)
+        row = _row(path, variant, list(overrides) + ov, copies, scheme, label, step, tol, ref,
+                   contact, joint)
         rows.append(row)
         if progress is not None:
             progress(row)
@@ -207,16 +332,18 @@ def run_bench(path, variant=None, schemes=None, steps=None, contact=None, joint=
 
 
 def within(row: BenchRow, accuracy: float) -> bool:
-    """The row finished with the exact count and its peak and exit-velocity
-    errors at most ``accuracy`` (relative)."""
-    return (row.status == "finished" and row.err_count == 0
-            and row.err_peak <= accuracy and row.err_exit_velocity <= accuracy)
+    """Every copy of the row finished with the exact count and its peak and
+    exit-velocity errors at most ``accuracy`` (relative): the worst copy
+    decides."""
+    return (row.status == "finished" and row.err_count_worst == 0
+            and row.err_peak_worst <= accuracy and row.err_exit_velocity_worst <= accuracy)
 
 
 def cheapest_within(rows, accuracy: float = 0.01) -> dict:
-    """The cheapest row of each kind that meets ``accuracy``: ``cosim`` (any
-    co-simulation scheme), ``monolithic`` and ``paper_rk45`` (None where no
-    row meets it), and the CPU ratios of the first to the other two."""
+    """The cheapest row of each kind whose worst copy meets ``accuracy``
+    (:func:`within`): ``cosim`` (any co-simulation scheme), ``monolithic``
+    and ``paper_rk45`` (None where no row meets it), and the CPU ratios
+    (median CPU) of the first to the other two."""
     kinds = {"cosim": lambda r: r.scheme != "monolithic",
              "monolithic": lambda r: r.label == "monolithic",
              "paper_rk45": lambda r: r.label == "paper_rk45"}
@@ -232,40 +359,83 @@ def cheapest_within(rows, accuracy: float = 0.01) -> dict:
     return best
 
 
+def _write(folder, name: str, write, mode: str) -> Path:
+    """``folder/name``, its name checked by :func:`cosim.io.rundir.inside`,
+    written whole by :func:`cosim.core.series.atomic_write` (an
+    :class:`OSError` becomes an :class:`~cosim.errors.OutputError` naming
+    the file)."""
+    path = inside(folder, name)
+    atomic_write(path, write, mode)
+    return path
+
+
 def write_csv(rows, path) -> None:
-    """The rows as CSV with :data:`COLUMNS`, written atomically."""
+    """The rows as CSV with :data:`COLUMNS`, written whole into ``path``'s
+    folder under its checked name (:func:`cosim.io.rundir.inside`).
+
+    Raises
+    ------
+    OutputError
+        If the name is no plain file name or the file cannot be written.
+    """
     path = Path(path)
-    tmp = path.with_suffix(".tmp")
-    with tmp.open("w", newline="") as fh:
+
+    def write(fh):
         w = csv.DictWriter(fh, fieldnames=COLUMNS)
         w.writeheader()
         for r in rows:
             w.writerow(asdict(r))
-    tmp.replace(path)
+    _write(path.parent, path.name, write, "w")
+
+
+def read_csv(path) -> list[BenchRow]:
+    """The rows of a CSV that :func:`write_csv` wrote (a published run's)."""
+    types = {f: t for f, t in BenchRow.__annotations__.items()}
+    rows = []
+    with open(path, newline="") as fh:
+        for rec in csv.DictReader(fh):
+            rows.append(BenchRow(**{k: (v if types[k] == "str" else
+                                        int(v) if types[k] == "int" else float(v))
+                                    for k, v in rec.items()}))
+    return rows
 
 
 def plot(rows, path, title="") -> None:
     """Log-log work-precision plot: the larger of the peak and exit-velocity
-    errors against CPU time, one line per scheme, the paper's method and
-    the monolithic tolerances as points; runs that miscount the contacts are
-    hollow.  Needs matplotlib (``pip install "cosim[plot]"``)."""
+    errors against CPU time, one line per scheme through the medians over
+    the round-off copies, with a bar from the best copy to the worst; the
+    paper's method and the monolithic tolerances as points; runs whose
+    worst copy miscounts the contacts are hollow.  Written whole into
+    ``path``'s folder under its checked name (:func:`cosim.io.rundir.inside`).
+    Needs matplotlib (``pip install "cosim[plot]"``)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    path = Path(path)
     fig, ax = plt.subplots(figsize=(6.4, 4.6))
     groups: dict[str, list[BenchRow]] = {}
     for r in rows:
         if r.status == "finished":
             groups.setdefault(r.label, []).append(r)
     floor = 1e-8
+    spread = max((r.copies for r in rows), default=1)
     for label, rs in groups.items():
         x = [r.cpu_time_s for r in rs]
         y = [max(r.err_peak, r.err_exit_velocity, floor) for r in rs]
+        lo = [max(_best(r.err_peak_best, r.err_peak), _best(r.err_exit_velocity_best,
+                                                            r.err_exit_velocity), floor)
+              for r in rs]
+        hi = [max(_best(r.err_peak_worst, r.err_peak), _best(r.err_exit_velocity_worst,
+                                                             r.err_exit_velocity), floor)
+              for r in rs]
         marker = {"paper_rk45": "*", "monolithic": "s"}.get(label, "o")
         line, = ax.plot(x, y, marker=marker, ls="-" if len(rs) > 1 else "none", label=label)
+        ax.errorbar(x, y, yerr=[[max(yi - li, 0.0) for yi, li in zip(y, lo)],
+                                [max(hi_ - yi, 0.0) for yi, hi_ in zip(y, hi)]],
+                    fmt="none", ecolor=line.get_color(), elinewidth=1.0, capsize=3)
         for r, xi, yi in zip(rs, x, y):
-            if r.err_count:
+            if _best(r.err_count_worst, r.err_count):
                 ax.plot([xi], [yi], marker=marker, mfc="white", mec=line.get_color(), ls="none")
             if label not in ("paper_rk45", "monolithic"):
                 ax.annotate(f"{r.macro_step:.0e}", (xi, yi), fontsize=7,
@@ -273,10 +443,21 @@ def plot(rows, path, title="") -> None:
     ax.axhline(0.01, color="grey", lw=0.8, ls="--")
     ax.set_xscale("log")
     ax.set_yscale("log")
-    ax.set_xlabel("CPU time of the run [s]")
+    ax.set_xlabel("CPU time of the run [s]" + (", median" if spread > 1 else ""))
     ax.set_ylabel("max(peak, exit velocity) relative error")
+    if spread > 1:
+        ax.text(0.99, 0.01, f"median of {spread} round-off copies; bars: best to worst; "
+                f"hollow: a copy miscounts", transform=ax.transAxes, ha="right", va="bottom",
+                fontsize=7, color="dimgrey")
     ax.set_title(title or "work-precision")
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    try:
+        _write(path.parent, path.name, lambda fh: fig.savefig(fh, dpi=110, format="png"), "wb")
+    finally:
+        plt.close(fig)
+
+
+def _best(x: float, fallback: float) -> float:
+    """``x``, or ``fallback`` where a row has no band (NaN)."""
+    return fallback if math.isnan(x) else x
