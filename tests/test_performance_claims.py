@@ -375,7 +375,7 @@ def test_cs_peak_on_the_beam_at_256_elements_with_and_without_reduction(size_sca
 def test_the_full_beam_at_1024_elements_solves_its_contact_basis_147_times(size_scaling):
     """`beam_full` at 1024 elements: the contact basis solved 147 times, once
     per step in contact.  Long: the full beam's runs grow as elements^1.6 or
-    faster (this one ran past 13 minutes of CPU on a loaded 2-core machine
+    faster (this one ran past 25 minutes of CPU on a 2-core machine
     and was not seen to finish there)."""
     import cosim.sides.fem_closed_form as fcf
     ss = size_scaling
