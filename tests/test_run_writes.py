@@ -373,7 +373,7 @@ def test_a_disk_that_fills_while_spooling_leaves_no_spool_and_no_open_file(tmp_p
     proc = subprocess.run(
         [sys.executable, "-X", "dev", "-c", inject(SMALL_DISK), "run", SPRING_DROP,
          "--out", out], capture_output=True, text=True, cwd=tmp_path, timeout=300,
-        env={**os.environ, "SPOOL_ROOM": str(room), "PYTHONPATH": str(ROOT / "src")})
+        env={**os.environ, "SPOOL_ROOM": str(room)})
     assert proc.returncode == 2, proc.stderr
     assert "Traceback" not in proc.stderr
     assert "unclosed" not in proc.stderr and "ResourceWarning" not in proc.stderr
@@ -414,7 +414,7 @@ def test_a_full_tmpfs_leaves_no_spool_and_no_open_file(full_tmpfs, chunk):
     proc = subprocess.run(
         [sys.executable, "-X", "dev", "-c", inject(code), "run", CASES / "three_mass.toml",
          "--variant", "f100", "--out", out], capture_output=True, text=True,
-        cwd=full_tmpfs.parent, timeout=300, env={**os.environ, "PYTHONPATH": str(ROOT / "src")})
+        cwd=full_tmpfs.parent, timeout=300)
     assert proc.returncode == 2, proc.stderr
     assert "Traceback" not in proc.stderr
     assert "unclosed" not in proc.stderr and "ResourceWarning" not in proc.stderr
