@@ -184,9 +184,10 @@ def test_a_guard_error_says_the_stop_and_the_trip_time():
     time follows when it is later."""
     from cosim.core.guard import GuardError
     from cosim.scene.run import stop_message
-    exc = GuardError("run stopped at t = 0.1028 s: the energy grew by 7.5 J", 0.1028, "C",
+    exc = GuardError("the energy grew by 7.5 J", 0.1028, "C",
                      "energy growth")
     assert exc.reason == "the energy grew by 7.5 J"
+    assert str(exc) == "run stopped at t = 0.1028 s: the energy grew by 7.5 J"
     assert stop_message(exc, 0.1027000000000001) == (
         "run stopped at t = 0.1027 s (the last sample kept; the guard tripped at "
         "t = 0.1028 s): the energy grew by 7.5 J")

@@ -105,18 +105,16 @@ class GuardError(SimulationError):
     cause : str
         ``"non-finite"``, ``"energy growth"`` or ``"chatter"``.
     reason : str
-        The message without its opening ``run stopped at t = ... s: ``.
-        In a run ``t`` lies after the last sample kept (the guard refuses
+        What tripped the guard; the message is ``run stopped at t = T s:
+        REASON``.  In a run ``t`` lies after the last sample kept (the guard refuses
         the sample it trips on, or trips at a switch inside the step before
         it); the run's message then opens with the time of that last sample
         (:func:`cosim.simulate`), which is the summary's ``t_end``.
     """
 
-    def __init__(self, message: str, t: float, contact: str | None, cause: str):
-        super().__init__(message)
-        self.t, self.contact, self.cause = t, contact, cause
-        head = f"run stopped at t = {t:.6g} s: "
-        self.reason = message[len(head):] if message.startswith(head) else message
+    def __init__(self, reason: str, t: float, contact: str | None, cause: str):
+        super().__init__(f"run stopped at t = {t:.6g} s: {reason}")
+        self.t, self.contact, self.cause, self.reason = t, contact, cause, reason
 
 
 @dataclass(frozen=True)
@@ -284,7 +282,7 @@ class Guard:
             o = self.options
             name = self.system.contact_names[c]
             raise GuardError(
-                f"run stopped at t = {t:.6g} s: contact `{name}` chatters: it switched "
+                f"contact `{name}` chatters: it switched "
                 f"{len(ring)} times within {t - ring[0]:.3g} s of simulated time (since "
                 f"t = {ring[0]:.6g} s; `guard.chatter_switches` = {o.chatter_switches} within "
                 f"`guard.chatter_window` = {o.chatter_window:g} s), so the run would not "
@@ -397,7 +395,7 @@ class Guard:
     def _start(self, t, d, dd, f):
         cause = nonfinite_cause(self.system, d, dd, f)
         if cause is not None:
-            raise GuardError(f"run stopped at t = {t:.6g} s: {cause[0]} at the start",
+            raise GuardError(f"{cause[0]} at the start",
                              t, cause[1], "non-finite")
         self.scale = energy_scale(self.system, d)
         self._stored0 = self.system.contact_potentials(d)
@@ -407,10 +405,10 @@ class Guard:
         system = self.system
         cause = nonfinite_cause(system, d, dd, f)
         if cause is not None:
-            raise GuardError(f"run stopped at t = {t:.6g} s: {cause[0]}", t, cause[1],
+            raise GuardError(cause[0], t, cause[1],
                              "non-finite")
         if not math.isfinite(created):
-            raise GuardError(f"run stopped at t = {t:.6g} s: the energy ledger is not finite "
+            raise GuardError(f"the energy ledger is not finite "
                              f"({created!r} J created)", t, None, "non-finite")
         scale = self.scale
         if system.n_contacts:
@@ -422,7 +420,7 @@ class Guard:
         bound = self._bound(scale, supplied)
         if created <= bound:
             return                      # more energy is in play than at the start
-        text = (f"run stopped at t = {t:.6g} s: the energy grew by {created:.4g} J over the "
+        text = (f"the energy grew by {created:.4g} J over the "
                 f"initial energy plus the energy supplied (bound {bound:.4g} J: "
                 f"`guard.energy_growth` = {self.growth:g} of the energy scale "
                 f"{scale + abs(supplied):.4g} J)")

@@ -427,12 +427,11 @@ class MultibodySubsystem(Subsystem):
                 "slip_history": [[float(a), float(b), m] for a, b, m in res.slip_history],
                 "slip_end": res.slip_end,
             })
-            # a restitution above 0 returns e |vn| however slow the approach: a
-            # rebound, and a train of them accumulates (the run guard's chatter
-            # rule stops it); only a rebound lost to the others' impulses, or
-            # e = 0, stays closed
-            floor = abs(vn[i]) if laws[i].restitution > 0 else max(1.0, abs(vn[i]))
-            if p_i > 0 and vn_plus[i] <= 1e-9 * floor:
+            # a rigid law's restitution is above 0 (refused at load otherwise), so
+            # a rebound of e |vn| follows however slow the approach, and a train
+            # of them accumulates (the run guard's chatter rule stops it); only a
+            # rebound lost to the others' impulses stays closed
+            if p_i > 0 and vn_plus[i] <= 1e-9 * abs(vn[i]):
                 raise SimulationError(
                     f"rigid contact `{names[i]}` stays closed after its impact at t = {t:.6g} s "
                     f"(normal velocity {vn_plus[i]:.3g} m/s): sustained rigid contact is not "

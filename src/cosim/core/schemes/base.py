@@ -281,8 +281,7 @@ class CoSimulationScheme(MacroStepControl, InputExtrapolation, CouplingScheme):
                 recorder.impacts += getattr(system.subsystems[s], "impact_log", [])
             if not (np.isfinite(d).all() and np.isfinite(dd).all()):
                 cause = nonfinite_cause(system, d, dd, f)
-                raise GuardError(f"run stopped at t = {t + h:.6g} s: "
-                                 f"{cause[0] if cause else 'non-finite state'}", t + h,
+                raise GuardError(cause[0] if cause else "non-finite state", t + h,
                                  cause[1] if cause else None, "non-finite")
             recorder.record(t + h, d, dd, f, impulse, diss, self._internal(system),
                             work + system.embedded_work())
