@@ -21,8 +21,22 @@ import math
 
 import numpy as np
 
-__all__ = ["step_map", "contact_energy_gain", "is_safe", "largest_safe_step",
+__all__ = ["contact_time", "step_map", "contact_energy_gain", "is_safe", "largest_safe_step",
            "partner_first", "stiffest_normal"]
+
+
+def contact_time(mass: float, stiffness: float, damping: float) -> float:
+    """Duration [s] of one contact of a linear spring ``stiffness`` [N/m] and
+    dashpot ``damping`` [N s/m] whose force is never tensile, for a reduced
+    mass ``mass`` [kg]: ``pi / omega`` undamped, shortened by the dashpot
+    (the closed form of :func:`cosim.studies.analytic.kelvin_voigt_clipped`,
+    which uses this); ``pi / omega`` for a damping ratio of 1 or more, where
+    that closed form ends.  ``cosim info`` quotes it at a contact's pose."""
+    omega = math.sqrt(stiffness / mass)
+    zeta = damping / (2.0 * math.sqrt(stiffness * mass))
+    if not 0.0 < zeta < 1.0:
+        return math.pi / omega
+    return (math.pi - 2.0 * math.asin(zeta)) / (omega * math.sqrt(1.0 - zeta * zeta))
 
 
 def partner_first(system, c, scheme: str, order: int) -> bool:

@@ -16,7 +16,7 @@ import math
 import time
 
 from cosim.core import preflight
-from cosim.core.preflight import stiffest_normal
+from cosim.core.preflight import contact_time, stiffest_normal
 from cosim.core.schemes import COUPLING_SCHEMES
 
 __all__ = ["scene_info", "fmu_info", "first_touch", "contact_time", "FIRST_TOUCH_BUDGET_S"]
@@ -74,19 +74,6 @@ def _mobility(system, c) -> float:
     n = ln.contact.normal
     return (system.subsystems[ln.sub_a].port_mobility(ln.port_a, n)
             + system.subsystems[ln.sub_b].port_mobility(ln.port_b, n))
-
-
-def contact_time(mass: float, stiffness: float, damping: float) -> float:
-    """Duration [s] of one contact of a linear spring ``stiffness`` [N/m] and
-    dashpot ``damping`` [N s/m] whose force is never tensile, for a reduced
-    mass ``mass`` [kg]: ``pi / omega`` undamped, shortened by the dashpot
-    (:func:`cosim.studies.analytic.kelvin_voigt_clipped`); ``pi / omega`` for
-    a damping ratio of 1 or more, where that closed form ends."""
-    omega = math.sqrt(stiffness / mass)
-    zeta = damping / (2.0 * math.sqrt(stiffness * mass))
-    if not 0.0 < zeta < 1.0:
-        return math.pi / omega
-    return (math.pi - 2.0 * math.asin(zeta)) / (omega * math.sqrt(1.0 - zeta * zeta))
 
 
 class _Touched(Exception):

@@ -10,6 +10,7 @@ import math
 import numpy as np
 from scipy.special import beta as _beta
 
+from cosim.core.preflight import contact_time
 from couplers.restitution import (_checked, hunt_crossley_damping_for_restitution,
                                   hunt_crossley_restitution)
 
@@ -55,8 +56,7 @@ def kelvin_voigt_clipped(mass: float, contact_stiffness: float, contact_damping:
     zeta = contact_damping / (2.0 * math.sqrt(contact_stiffness * mass))
     if not 0.0 <= zeta < 1.0:
         raise ValueError(f"`zeta` must be in [0, 1) for this closed form, got {zeta!r}")
-    omega_d = omega * math.sqrt(1.0 - zeta * zeta)
-    t_c = (math.pi - 2.0 * math.asin(zeta)) / omega_d
+    t_c = contact_time(mass, contact_stiffness, contact_damping)
     return t_c, math.exp(-zeta * omega * t_c)
 
 
