@@ -148,20 +148,18 @@ def test_the_peers_paper_row_errors(tmp_path):
 
 # --- compiled kernels: what limits the targets ------------------------------------------------
 
-def test_ground_multicontact_takes_2000_macro_steps():
-    claim = Claim(PAGE, "ground_multicontact takes 2000 macro steps of 0.1 ms",
-                  "cosim run cases/ground_multicontact.toml", 2000)
+@pytest.mark.parametrize("scene, printed, counter, value", [
+    ("ground_multicontact", "ground_multicontact takes 2000 macro steps of 0.1 ms",
+     "macro_steps", 2000),
+    ("brachiation", "brachiation's implicit scheme iterates 2551 times", "iterations", 2551),
+])
+def test_the_schemes_counters(scene, printed, counter, value):
+    """A shipped scene's macro steps or implicit iterations, for the scene
+    and its round-off copies."""
+    claim = Claim(PAGE, printed, f"cosim run cases/{scene}.toml", value)
     assert_printed(claim)
-    assert_reproduced(claim, _robust(_quiet_scene(CASES / "ground_multicontact.toml"),
-                                     lambda r: r.summary["macro_steps"]))
-
-
-def test_brachiation_iterates_2551_times():
-    claim = Claim(PAGE, "brachiation's implicit scheme iterates 2551 times",
-                  "cosim run cases/brachiation.toml", 2551)
-    assert_printed(claim)
-    assert_reproduced(claim, _robust(_quiet_scene(CASES / "brachiation.toml"),
-                                     lambda r: r.summary["iterations"]))
+    assert_reproduced(claim, _robust(_quiet_scene(CASES / f"{scene}.toml"),
+                                     lambda r: r.summary[counter]))
 
 
 def _modes(scene, name: str) -> int:
