@@ -148,12 +148,13 @@ def test_animation_poses_the_recorded_state(tmp_path):
     """The drawn robot and chain sit where the series put them."""
     from cosim import plot
     from cosim.plot import animation
+    from cosim.plot.scene_geometry import scene_geometry
 
     out = tmp_path / "tm"
     assert cli.main(["run", str(CASES / "three_mass.toml"), "--variant", "f100",
                      "--set", "t_end=0.02", "--out", str(out), "--quiet"]) == 0
     run = plot.load_run(out)
-    system, _ = load_scene(out / "scene.toml").build()
+    system = scene_geometry(run.scene, out / "scene.toml")
     idx = animation._frames(len(run.t), 7)
     assert idx[0] == 0 and idx[-1] == len(run.t) - 1 and len(idx) == 7
     robots, structures, fixed, contacts = animation._geometry(run, system, idx, 1.0)

@@ -267,6 +267,10 @@ def _cmd_plot(args) -> int:
         return 2
     if run.incomplete:
         print(f"incomplete run: {run.incomplete}")
+    if run.not_finite:
+        from cosim.errors import shown
+        print(f"note: {len(run.not_finite)} series hold values that are not finite, left out "
+              f"of the lines drawn: {shown(', '.join(run.not_finite))}")
     for path in paths:
         print(f"wrote {path}")
     return 0

@@ -33,6 +33,28 @@ def _spread(text: str) -> int:
     return k
 
 
+def _frames(text: str) -> int:
+    try:
+        k = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number of frames, got {text!r}")
+    if k < 2:
+        raise argparse.ArgumentTypeError(f"must be at least 2 (the first and the last "
+                                         f"sample), got {k}")
+    return k
+
+
+def _magnify(text: str) -> float:
+    import math
+    try:
+        x = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}")
+    if not (math.isfinite(x) and x > 0):
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text!r}")
+    return x
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="cosim", description="Co-simulation of impacts between "
                                 "robots and vibrating structures.")
@@ -114,10 +136,11 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--animate", action="store_true",
                     help="also write an animation of the robot and the structure (GIF with "
                          "Pillow, else MP4 with ffmpeg); needs the run's scene.toml")
-    pl.add_argument("--frames", type=int, default=200,
-                    help="most frames in the animation (default 200)")
-    pl.add_argument("--magnify", type=float, default=1.0,
-                    help="scale of the structures' deflection in the animation (default 1)")
+    pl.add_argument("--frames", type=_frames, default=200,
+                    help="most frames in the animation, at least 2 (default 200)")
+    pl.add_argument("--magnify", type=_magnify, default=1.0,
+                    help="scale of the structures' deflection in the animation, a finite "
+                         "number > 0 (default 1)")
     pl.add_argument("--out", help="output directory (default RUN_DIR)")
     pl.set_defaults(func=_cmd_plot)
     v = sub.add_parser("verify", help="run the verification cases; exit 1 if any fails")

@@ -23,7 +23,7 @@ from cosim.core.schemes import get_scheme
 from cosim.core.subsystem import RigidReference
 from cosim.core.system import ContactLink, CoupledSystem
 
-__all__ = ["build_system"]
+__all__ = ["build_system", "build_side"]
 
 #: RK4's stability limit on an undamped oscillator is omega*dt = 2*sqrt(2).
 _RK4_LIMIT = 2.0 * math.sqrt(2.0)
@@ -123,6 +123,33 @@ def _structure(spec, scene, macro_step):
     return sub
 
 
+def build_side(side, scene, default_step: float, macro_step: float | None = None):
+    """The subsystem of a rigid, multibody or structure spec ``side`` of
+    ``scene``: none of them runs code the scene names (an FMU side, which
+    does, is built by :func:`cosim.scene.fmu_build.build_fmu` only).
+
+    Parameters
+    ----------
+    default_step : float
+        The fixed step of an ``rk4`` tree that gives no ``max_step`` [s].
+    macro_step : float, optional
+        The scheme's macro step [s], against which a structure's integrator
+        is checked (not checked when None).
+
+    Raises
+    ------
+    SceneError
+        If a model cannot be built.
+    """
+    if side.type == "rigid":
+        return RigidReference(side.name, side.points)
+    if side.type == "multibody":
+        return _multibody(side, scene, default_step)
+    if side.type == "fmu":
+        raise ValueError(f"subsystem `{side.name}` is an FMU: build_fmu builds it")
+    return _structure(side, scene, macro_step)
+
+
 def build_system(scene, scheme: str | None = None):
     """Build the subsystems, contacts and the coupling scheme of ``scene``.
 
@@ -151,15 +178,11 @@ def build_system(scene, scheme: str | None = None):
     cls = get_scheme(name)
     subs = []
     for side in scene.subsystems:
-        if side.type == "rigid":
-            subs.append(RigidReference(side.name, side.points))
-        elif side.type == "multibody":
-            subs.append(_multibody(side, scene, spec.default_step))
-        elif side.type == "fmu":            # a Functional Mock-up Unit: cosim.scene.fmu
+        if side.type == "fmu":            # a Functional Mock-up Unit: cosim.scene.fmu
             from cosim.scene.fmu_build import build_fmu
             subs.append(build_fmu(side, scene, name, opts))
         else:
-            subs.append(_structure(side, scene, spec.macro_step))
+            subs.append(build_side(side, scene, spec.default_step, spec.macro_step))
     names = [s.name for s in subs]
     links = []
     for c in scene.contacts:
