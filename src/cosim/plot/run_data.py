@@ -236,8 +236,8 @@ def _check_series(series: dict, file: Path) -> tuple[dict, tuple]:
     t = series["t"] = series["t"].astype(float)
     bad = np.flatnonzero(~np.isfinite(t))
     if bad.size:
-        raise PlotError(f"{file}: array `t` must hold finite times [s], got {t[bad[0]]!r} "
-                        f"at sample {bad[0]} ({bad.size} such samples)")
+        raise PlotError(f"{file}: array `t` must hold finite times [s], got "
+                        f"{float(t[bad[0]])!r} at sample {bad[0]} ({bad.size} such sample(s))")
     not_finite = []
     for k, v in series.items():
         if v.dtype.kind == "f" and not np.all(np.isfinite(v)):
