@@ -9,8 +9,6 @@ from __future__ import annotations
 
 import importlib.util
 import io
-import json
-import os
 import shutil
 import subprocess
 import sys
