@@ -78,6 +78,45 @@ def _worker_main(conn) -> None:
             return
 
 
+class _Feed:
+    """The points still to run, drawn from their source only as they are
+    needed: ``{key: scene}`` or an iterator of ``(key, scene)`` pairs, which
+    a sweep makes one point at a time (a grid of a million points is never
+    loaded whole).  Offers what a queue of points needs: truth (any left?),
+    :meth:`more_than`, :meth:`popleft`, :meth:`appendleft`."""
+
+    def __init__(self, jobs):
+        from collections import deque
+        self._source = iter(jobs.items() if hasattr(jobs, "items") else jobs)
+        self._ahead = deque()
+
+    def _fill(self, n: int) -> int:
+        while len(self._ahead) < n:
+            try:
+                self._ahead.append(next(self._source))
+            except StopIteration:
+                break
+        return len(self._ahead)
+
+    def __bool__(self) -> bool:
+        return self._fill(1) > 0
+
+    def more_than(self, n: int) -> bool:
+        """Whether more than ``n`` points are left."""
+        return self._fill(n + 1) > n
+
+    def popleft(self):
+        self._fill(1)
+        return self._ahead.popleft()
+
+    def appendleft(self, item) -> None:
+        self._ahead.appendleft(item)
+
+    def __iter__(self):
+        while self:
+            yield self.popleft()
+
+
 class _Worker:
     """One process of :class:`_ProcessPool` and the point it holds."""
 
@@ -120,13 +159,12 @@ class _ProcessPool:
 
     def run(self, jobs: dict):
         import time
-        from collections import deque
         from multiprocessing.connection import wait
 
-        todo = deque(jobs.items())
+        todo = _Feed(jobs)
         while todo or any(w.key is not None for w in self.workers):
             idle = sum(w.key is None for w in self.workers)
-            while todo and len(self.workers) < self.n and idle < len(todo):
+            while len(self.workers) < self.n and todo.more_than(idle):
                 self.workers.append(_Worker(self.ctx))      # started only for work left
                 idle += 1
             for w in self.workers:
@@ -270,7 +308,9 @@ class _Runner:
             self._cluster.close()
 
     def run(self, jobs):
-        """Run ``{key: scene}``; yield ``(key, outcome)`` as each completes."""
+        """Run ``{key: scene}``, or the ``(key, scene)`` pairs of an iterator
+        (drawn only as workers free up); yield ``(key, outcome)`` as each
+        completes."""
         if self.scheduler == "local" and self._client is None:
             from distributed import Client
             self._cluster = _private_cluster(max(self.workers, 1))
@@ -280,7 +320,7 @@ class _Runner:
         elif self._pool is not None:
             yield from self._pool.run(jobs)
         else:
-            for key, scene in jobs.items():
+            for key, scene in _Feed(jobs):
                 yield key, _simulate(scene)
 
     def _run_dask(self, jobs):
@@ -290,7 +330,6 @@ class _Runner:
         a point that kills workers again and again ends in ``KilledWorker``
         for that point alone."""
         import time
-        from collections import deque
 
         from distributed import wait
 
@@ -299,7 +338,7 @@ class _Runner:
             slots = max(sum(client.nthreads().values()), 1)
         except Exception:                          # noqa: BLE001 - not told: one by one
             slots = 1
-        todo = deque(jobs.items())
+        todo = _Feed(jobs)
         live: dict = {}
 
         def submit():
