@@ -274,6 +274,7 @@ def _cmd_plot(args) -> int:
 
 def _cmd_sweep(args) -> int:
     from cosim.studies import sweep as sw
+    from cosim.studies.sweep.driver import _check_options
 
     if args.study:
         path = Path(args.study)
@@ -307,22 +308,40 @@ def _cmd_sweep(args) -> int:
     else:
         print("error: give a SCENE or --study", file=sys.stderr)
         return 2
+    try:
+        n = len(sw.grid_points(variants or None, grid))
+        workers = args.workers if args.workers is not None else sw.default_workers()
+        _check_options(workers, timeout, ("--workers", "--timeout"))
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    if n > sw.LARGE_GRID and not args.yes:
+        print(f"error: the sweep has {n} points, more than {sw.LARGE_GRID}: each runs and gets "
+              f"a folder of its own; check --set and --variants, or pass --yes to run them "
+              f"all", file=sys.stderr)
+        return 2
     contact, joint = sw.strike_names(scene, variants, contact, joint)
     out = Path(args.out) if args.out else default_out
-    workers = args.workers or sw.default_workers()
     where = (f"Dask scheduler {args.scheduler}" if args.scheduler
              else f"{workers} process(es)" if workers > 1 else "this process")
-    n = len(sw.grid_points(variants or None, grid))
-    if args.timeout is not None and not (args.timeout > 0 and math.isfinite(args.timeout)):
-        print(f"error: `--timeout` must be > 0 s, got {args.timeout!r}", file=sys.stderr)
-        return 2
-    print(f"sweep {scene}: {n} point(s) on {where}, into {out}")
+    print(f"sweep {scene}: {n} point(s) on {where}, into {out}", flush=True)
+    with sw.sweep_folder(out) as folder:        # held from the first point to the figure
+        return _sweep_into(folder, args, study, scene, variants, grid, contact, joint,
+                           workers, timeout, n)
+
+
+def _sweep_into(folder, args, study, scene, variants, grid, contact, joint, workers, timeout,
+                n) -> int:
+    """`cosim sweep` once its folder is held: run, list, draw."""
+    from cosim.studies import sweep as sw
+
+    out = folder.path
     bar = _SweepProgress(args.quiet, n)
     stopped = None
     try:
         with _stop_signals_interrupt() as got:
             rows = sw.sweep(scene, variants=variants or None, grid=grid, scheme=args.scheme,
-                            workers=workers, scheduler=args.scheduler, out=out,
+                            workers=workers, scheduler=args.scheduler, out=folder,
                             retry_failed=args.retry_failed, contact=contact, joint=joint,
                             progress=bar, timeout=timeout)
     except (ImportError, sw.SweepError) as exc:
@@ -332,7 +351,8 @@ def _cmd_sweep(args) -> int:
         rows, stopped = exc.rows, got[0] if got else exc.signal_name
     finally:
         bar.close()
-    for r in rows:
+    listed = rows if len(rows) <= _LISTED else [r for r in rows if r["status"] != "finished"]
+    for r in listed[:_LISTED]:
         count = r.get(f"contacts.{contact}.count")
         line = f"  {r['point']:<40} {r['status']:<9}"
         if count is not None:
@@ -342,18 +362,24 @@ def _cmd_sweep(args) -> int:
         if r["status"] != "finished" and r["message"]:
             line += f"  ({r['message']})"
         print(line)
-    skipped = bar.skipped
+    if len(listed) < len(rows) or len(listed) > _LISTED:
+        print(f"  ... {len(rows) - min(len(listed), _LISTED)} more point(s) in "
+              f"{out / sw.TABLE}")
     print(f"{sum(r['status'] == 'finished' for r in rows)} of {len(rows)} point(s) finished"
-          + (f", {skipped} done before (not run again)" if skipped else ""))
+          + (f", {bar.skipped} done before (not run again)" if bar.skipped else "")
+          + (f", {bar.rerun} run again (their inputs changed or their folders were damaged)"
+             if bar.rerun else ""))
     print(f"wrote {out / sw.TABLE}")
     if stopped is not None:
+        never = n - len(rows)
         print(f"error: the sweep was stopped ({stopped}); the points that had not ended are "
-              f"`interrupted` in {out / sw.TABLE}; sweep again to run them",
-              file=sys.stderr)
+              f"`interrupted` in {out / sw.TABLE}"
+              + (f" ({never} never started are left out)" if never else "")
+              + "; sweep again to run them", file=sys.stderr)
         return 128 + int(getattr(signal, stopped))
     if not args.no_plot:
         try:
-            png = sw.plot_sweep(rows, out / sw.PLOT, contact=contact,
+            png = sw.plot_sweep(rows, folder.path_of(sw.PLOT), contact=contact,
                                 x=study.x if study else None,
                                 x_scale=study.x_scale if study else 1.0,
                                 x_label=study.x_label if study else None,
@@ -363,6 +389,10 @@ def _cmd_sweep(args) -> int:
             print('no plot: matplotlib is not installed (pip install "cosim[plot]")',
                   file=sys.stderr)
     return 0 if all(r["status"] == "finished" for r in rows) else 1
+
+
+#: most points `cosim sweep` lists one per line (beyond it, those that did not finish)
+_LISTED = 200
 
 
 class _StopSignal(KeyboardInterrupt):
@@ -404,7 +434,7 @@ class _SweepProgress:
     else one line per point on stderr; nothing when quiet."""
 
     def __init__(self, quiet: bool, total: int):
-        self.quiet, self.skipped, self._bar = quiet, 0, None
+        self.quiet, self.skipped, self.rerun, self._bar = quiet, 0, 0, None
         if not quiet and _on_terminal():
             try:
                 from tqdm import tqdm
@@ -414,17 +444,20 @@ class _SweepProgress:
 
     def __call__(self, ev) -> None:
         self.skipped += ev.skipped
+        self.rerun += bool(ev.note)
         if self.quiet:
             return
         note = "done before" if ev.skipped else ev.status
         if self._bar is not None:
             self._bar.set_postfix_str(f"{ev.point.name}: {note}", refresh=False)
             self._bar.update(1)
+            if ev.note:
+                self._bar.write(f"{ev.point.name}: {ev.note}")
             if ev.status != "finished":
                 self._bar.write(f"{ev.point.name}: {ev.status}: {ev.message}")
         else:
-            print(f"[{ev.done}/{ev.total}] {ev.point.name}: {note}", file=sys.stderr,
-                  flush=True)
+            print(f"[{ev.done}/{ev.total}] {ev.point.name}: {note}"
+                  + (f" ({ev.note})" if ev.note else ""), file=sys.stderr, flush=True)
 
     def close(self) -> None:
         if self._bar is not None:

@@ -103,6 +103,8 @@ def build_parser() -> argparse.ArgumentParser:
                                       "multibody on a structure)")
     sw.add_argument("--joint", help="SUBSYSTEM/JOINT of the striker (default: the joint of the "
                                     "body that carries the contact's point)")
+    sw.add_argument("--yes", action="store_true",
+                    help="run a grid of more than 10000 points (refused without it)")
     sw.add_argument("--no-plot", action="store_true", help="write the table only")
     sw.add_argument("--quiet", action="store_true", help="no progress")
     sw.set_defaults(func=_cmd_sweep)

@@ -13,6 +13,7 @@ import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+from cosim.errors import shown
 from cosim.scene.load import SceneError, parse_override
 
 __all__ = ["Point", "Grid", "split_values", "parse_grid_option", "point_name", "grid_points",
@@ -143,18 +144,21 @@ def point_name(variant: str | None, params) -> str:
 
 def _repeated(values):
     """The first value of ``values`` that repeats one before it (None when
-    none does): the same text in a point's name (``1`` and ``"1"``), or the
-    same number (``1`` and ``1.0``)."""
-    texts, numbers = set(), set()
+    none does): the same value (``1`` and ``1.0`` too), or the same plain
+    text in a point's name (``1`` and ``"1"``, which would share a folder)."""
+    seen, names = set(), set()
     for v in values:
+        if isinstance(v, (int, float)) and not isinstance(v, bool) and v == v:
+            same = ("number", v)
+        else:
+            same = ("value", json.dumps(v, sort_keys=True, default=repr))
         text = _text(v)
-        number = (v if isinstance(v, (int, float)) and not isinstance(v, bool) and v == v
-                  else None)
-        if text in texts or (number is not None and number in numbers):
+        plain = text if _SAFE.sub("_", text) == text and not text.startswith(".") else None
+        if same in seen or (plain is not None and plain in names):
             return v
-        texts.add(text)
-        if number is not None:
-            numbers.add(number)
+        seen.add(same)
+        if plain is not None:
+            names.add(plain)
     return None
 
 
@@ -187,17 +191,21 @@ class Grid(Sequence):
         seen = set()
         for v in variants:
             if v in seen:
-                raise ValueError(f"`variants` repeats a name: {v!r}; give each variant once")
+                raise ValueError(f"`variants` repeats a name: {shown(repr(v), 80)}; give each "
+                                 f"variant once")
             seen.add(v)
         values = {}
         for k, vals in dict(grid or {}).items():
-            if isinstance(vals, (str, bytes, dict)) or not hasattr(vals, "__len__") or not len(vals):
-                raise ValueError(f"grid key `{k}` needs a list of values, got {vals!r}")
+            if (isinstance(vals, (str, bytes, dict)) or not hasattr(vals, "__len__")
+                    or not len(vals)):
+                raise ValueError(f"grid key `{shown(k, 80)}` needs a list of values, got "
+                                 f"{shown(vals, 80)}")
             values[k] = tuple(vals)
             dup = _repeated(values[k])
             if dup is not None:
-                raise ValueError(f"grid key `{k}` repeats the value {_text(dup)}: give each "
-                                 f"value once (each point runs once, into a folder of its own)")
+                raise ValueError(f"grid key `{shown(k, 80)}` repeats the value "
+                                 f"{shown(_text(dup), 80)}: give each value once (each point "
+                                 f"runs once, into a folder of its own)")
         self.variants = tuple(variants)
         self.keys = tuple(values)
         self.values = tuple(values.values())
