@@ -1,6 +1,8 @@
-"""The sweep itself: the points are loaded and validated on this process,
-handed to a backend (:mod:`cosim.studies.sweep.backends`), and each result is
-written to the point's run directory and made a record of the table.
+"""The sweep itself: the points are made from the grid, loaded, validated
+and checked against their folders on this process one at a time, as the
+backend (:mod:`cosim.studies.sweep.backends`) has a worker free for them, and
+each result is written to the point's run directory, through the checked
+writer of the sweep's folder, and made a record of the table.
 """
 from __future__ import annotations
 
@@ -67,7 +69,9 @@ class SweepInterrupted(KeyboardInterrupt):
     """A sweep stopped by Ctrl-C (or by SIGTERM/SIGHUP, which ``cosim sweep``
     turns into this).  ``rows`` holds every point's record in grid order: the
     points that ended before the stop with their status, the others with
-    status ``interrupted``; the table was written."""
+    status ``interrupted`` (in a grid of more than
+    :data:`~cosim.studies.sweep.grid.LARGE_GRID` points, only those begun:
+    the points never started are left out); the table was written."""
 
     def __init__(self, rows: list, signal_name: str = "SIGINT"):
         super().__init__(signal_name)
@@ -99,13 +103,19 @@ def sweep(scene, *, variants=None, grid=None, scheme: str | None = None, workers
         Run on a Dask distributed cluster: its scheduler's address
         (``tcp://host:8786``), ``"local"``, or a ``Client``.  Its workers need
         cosim installed, not the scene file nor ``out``.
-    out : path-like, optional
+    out : path-like or OutputFolder, optional
         The sweep's directory: one run directory per point (named by
-        :func:`point_name`) and the table ``sweep.csv``.  A point whose
-        directory holds a complete run of the same scene file, variant,
-        overrides and scheme that ended ``finished``, ``failed`` or
-        ``refused`` is not run again.  Without ``out`` nothing is written and
-        nothing is skipped.
+        :func:`point_name`) and the table ``sweep.csv``, all written through
+        the checked writer (:class:`cosim.io.rundir.OutputFolder`).  The
+        sweep holds the folder's lock while it runs (an ``OutputFolder``
+        given is held by its caller).  A point whose directory holds a
+        complete run of the same inputs (:mod:`~cosim.studies.sweep.resume`:
+        the scene file and the files it names by content, cosim's version,
+        variant, overrides and scheme) that ended ``finished``, ``failed`` or
+        ``refused`` is not run again; one whose inputs changed or whose
+        directory is damaged runs again (its event's ``note`` says why), and
+        one whose directory is a link is recorded ``error`` and not run.
+        Without ``out`` nothing is written and nothing is skipped.
     retry_failed : bool
         Run the points that failed or were refused before again.
     contact, joint : str, optional
@@ -143,7 +153,14 @@ def sweep(scene, *, variants=None, grid=None, scheme: str | None = None, workers
         If the scene file cannot be read, or ``contact`` or ``joint`` is given
         and a variant's scene has no such contact or joint (nothing written).
     ValueError
-        If the grid is malformed.
+        If the grid is malformed (a repeated variant or value, more than
+        :data:`~cosim.studies.sweep.grid.MAX_POINTS` points), ``workers`` is
+        not a whole number >= 1, or ``timeout`` is not a number of seconds
+        > 0 and at most :data:`MAX_TIMEOUT_S`.
+    cosim.errors.OutputBusyError
+        If another sweep or run holds ``out`` (nothing run).
+    cosim.errors.OutputError
+        If ``out`` is a link, a file or a filesystem root.
     SweepError
         If ``scheduler`` is malformed or cannot be reached (nothing written).
     SweepInterrupted
@@ -156,8 +173,9 @@ def sweep(scene, *, variants=None, grid=None, scheme: str | None = None, workers
     The order of the records, and the table, is grid order, whatever order
     the points finish in, so the same sweep on one process, a pool and a
     cluster gives the same table (``cpu_time_s`` aside).  Points are loaded
-    and validated on the calling process; a point whose overrides do not make
-    a valid scene is recorded ``refused`` without being sent anywhere.
+    and validated on the calling process, one at a time as workers free up
+    (the grid is never built whole); a point whose overrides do not make a
+    valid scene is recorded ``refused`` without being sent anywhere.
 
     Examples
     --------
