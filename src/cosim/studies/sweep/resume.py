@@ -21,6 +21,7 @@ import hashlib
 import json
 import os
 import stat
+import sys
 import zipfile
 from pathlib import Path
 
@@ -94,11 +95,16 @@ def point_key(point: Point, scene_path: Path, scheme, scene_hash: str, inputs=()
     file (name and content), the other ``inputs`` (label, SHA-256), cosim's
     version, the variant, the overrides and the scheme.  A point done with
     another key is run again."""
-    from cosim import __version__
     return {"scene": scene_path.name, "scene_sha256": scene_hash,
-            "inputs": [[label, digest] for label, digest in inputs], "cosim": __version__,
+            "inputs": [[label, digest] for label, digest in inputs], "cosim": _version(),
             "variant": point.variant, "set": [[k, v] for k, v in point.params],
             "scheme": scheme}
+
+
+def _version() -> str:
+    """cosim's version, read from the top package as data: it is imported
+    before any of its subpackages, and this layer may not import it."""
+    return sys.modules["cosim"].__version__
 
 
 def _key_change(done: dict, key: dict) -> str | None:
