@@ -130,6 +130,8 @@ def _cmd_info(args) -> int:
         return 0
     print(f"scene {info['scene']}  variant {info['variant']}  scheme {info['scheme']}  "
           f"t_end {info['t_end']:g} s")
+    work = info["work"]
+    print(f"  work: {work['bound']} {work['steps']:.3g} integrator steps ({work['how']})")
     for name, s in info["subsystems"].items():
         line = f"  subsystem {name}: {s['type']}, {s['dofs']} DOF"
         if "modes_kept" in s:

@@ -14,6 +14,8 @@ import re
 
 from cosim.io.rundir import name_problem
 from cosim.scene import keys as _keys
+#: most integrator steps a run may take unless ``guard.max_steps`` raises it
+from cosim.scene.keytable import MAX_STEPS
 
 __all__ = ["SceneError", "Table", "check_name", "type_name", "build_model", "floats",
            "record_keys", "MAX_ELEMENTS", "MAX_STEPS"]
@@ -21,8 +23,6 @@ __all__ = ["SceneError", "Table", "check_name", "type_name", "build_model", "flo
 #: most elements (or masses) a structure may have: a mesh beyond it is refused
 #: when the scene is read, before anything is assembled
 MAX_ELEMENTS = 20_000
-#: most steps a run may ask for (end time over a macro or integrator step)
-MAX_STEPS = 10**9
 #: rule name -> (text, check)
 _RULES = {">0": ("> 0", lambda v: v > 0), ">=0": (">= 0", lambda v: v >= 0)}
 _MISSING = object()

@@ -236,7 +236,9 @@ def scene_info(scene, *, budget_s: float = FIRST_TOUCH_BUDGET_S) -> dict:
     values at the start when they differ.  The contact time is that of the
     linearised spring and dashpot (:func:`contact_time`).  The largest
     stable steps are judged at the initial pose, as the pre-flight check
-    and the build do."""
+    and the build do.  ``work`` is the count of the run's integrator steps
+    made before it starts (:func:`cosim.scene.work.estimate_work`:
+    ``steps``, ``bound``, ``how`` and the ``key`` that makes most of it)."""
     touches, why_not = first_touch(scene, budget_s)
     system, _ = scene.build()
     subs = {}
@@ -261,6 +263,7 @@ def scene_info(scene, *, budget_s: float = FIRST_TOUCH_BUDGET_S) -> dict:
         "scene": scene.name, "variant": scene.variant, "scheme": scene.scheme,
         "scheme_options": dict(scene.scheme_options), "t_end": scene.t_end,
         "subsystems": subs,
+        "work": scene.work(system=system).as_dict(),
         "contacts": {name: _contact_info(system, c, scene, touches.get(c), why_not)
                      for c, name in enumerate(system.contact_names)},
     }

@@ -17,7 +17,8 @@ from cosim.core.guard import (DEFAULT_CHATTER_SWITCHES, DEFAULT_CHATTER_WINDOW,
 from cosim.io.rundir import NAME_MAX
 
 __all__ = ["Key", "Section", "SECTIONS", "REQUIRED", "Varies", "DEFAULT_MULTIBODY_STEP",
-           "DEFAULT_CONTACT_STEP", "STRUCTURE_TYPES", "SUBSYSTEM_TYPES", "NAME_TEXT"]
+           "DEFAULT_CONTACT_STEP", "STRUCTURE_TYPES", "SUBSYSTEM_TYPES", "NAME_TEXT",
+           "MAX_STEPS"]
 
 #: the ``type`` of a structure subsystem
 STRUCTURE_TYPES = ("chain", "beam", "cable", "string", "rod")
@@ -35,6 +36,9 @@ SUBSYSTEM_TYPES = ("multibody", "rigid", "fmu") + STRUCTURE_TYPES
 DEFAULT_MULTIBODY_STEP = 1e-4
 #: [s] default RK4 step of a structure while a contact it hosts is closed
 DEFAULT_CONTACT_STEP = 1e-6
+#: most integrator steps a run may take unless the scene's ``guard.max_steps``
+#: raises it (counted before the run, :mod:`cosim.scene.work`)
+MAX_STEPS = 10**9
 
 
 class _Required:
@@ -180,6 +184,9 @@ _GUARD = (
       "switches of one contact within the chatter window that stop a run"),
     K("chatter_window", "s", DEFAULT_CHATTER_WINDOW, ">= 0",
       "simulated time over which switches are counted"),
+    K("max_steps", "", MAX_STEPS, "> 0",
+      "most integrator steps (all sides, every iteration) a run may take, counted before it "
+      "starts; a run counted above is refused"),
 )
 
 _SUBSYSTEM_TYPE = K("type", "", REQUIRED, "one of " + _types(*SUBSYSTEM_TYPES),

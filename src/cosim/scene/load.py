@@ -72,7 +72,6 @@ def _validate(data: dict, file, variant) -> Scene:
     top.string("description")
     t_end = top.number("t_end", rule=">0", unit="s")
     scheme_name, given, tables = _scheme_table(top.table("scheme", section="top"))
-    spec = resolve_scheme(scheme_name, given, tables, file=file, t_end=t_end, stacklevel=3)
 
     out = top.table("output", section="output")
     every = out.integer("every", low=1)
@@ -100,6 +99,7 @@ def _validate(data: dict, file, variant) -> Scene:
                          coupling_warning=gd.number("coupling_warning", rule=">0"),
                          chatter_switches=gd.integer("chatter_switches", low=2, high=10 ** 9),
                          chatter_window=gd.number("chatter_window", rule=">=0", unit="s"))
+    max_steps = gd.number("max_steps", rule=">0")
     gd.finish()
 
     subs = []
@@ -110,11 +110,6 @@ def _validate(data: dict, file, variant) -> Scene:
                                                  f"name holds no `.`, which separates it from "
                                                  f"the point in SUBSYSTEM.POINT")
         subs.append(subsystem_spec(sname, st))
-        step = getattr(subs[-1], "max_step", None)
-        if step is not None and t_end / step > MAX_STEPS:
-            raise SceneError(file, f"subsystems.{sname}.integrator.max_step",
-                             f"is {step!r} s: {t_end!r} s would take {t_end / step:.3g} "
-                             f"steps, more than {MAX_STEPS:.0e}")
     if not subs:
         top.error("subsystems", "must declare at least one subsystem")
     _check_memory(subs, file)
@@ -129,11 +124,14 @@ def _validate(data: dict, file, variant) -> Scene:
         contacts.append(contact_spec(cname, ct, subs))
     check_conditions(contacts, file)
     top.finish()
+    # the work a run will do (macro steps, iterations, each side's steps), bounded
+    spec = resolve_scheme(scheme_name, given, tables, file=file, t_end=t_end, stacklevel=3,
+                          subsystems=subs, contacts=contacts, max_steps=max_steps)
     return Scene(name=name, path=str(file), variant=variant, t_end=t_end, scheme=spec.name,
                  scheme_options=spec.options, output_every=every, subsystems=tuple(subs),
                  contacts=tuple(contacts), gravity=gravity, data=data,
                  export=tuple(export), export_every=export_every, scheme_tables=tables,
-                 guard=guard)
+                 guard=guard, max_steps=max_steps)
 
 
 def _scheme_table(sch: Table) -> tuple[str, dict, dict]:
