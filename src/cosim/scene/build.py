@@ -81,7 +81,12 @@ def _structure(spec, scene, macro_step):
         structure = spec.model.assemble()
         basis = fem.modes(structure, **{k: v for k, v in spec.modes.items() if v})
     except ValueError as exc:
-        raise SceneError(scene.path, spec.key, str(exc)) from None
+        msg = str(exc)
+        for arg, key in (("cutoff_hz", "cutoff_hz"), ("n_modes", "count")):
+            if msg.startswith(f"`{arg}` "):     # the modes table's key, not the function's
+                raise SceneError(scene.path, f"{spec.key}.modes.{key}",
+                                 msg[len(arg) + 3:]) from None
+        raise SceneError(scene.path, spec.key, msg) from None
     except ImportError as exc:        # scikit-fem is an optional extra
         raise SceneError(scene.path, f"{spec.key}.type",
                          f"`{spec.type}` needs {exc.name or 'a missing package'}, which is "

@@ -267,9 +267,19 @@ def model_error(t: Table, exc: Exception) -> SceneError:
 
 
 def floats(t: Table, k: str) -> tuple:
-    """A non-empty array of numbers (``bool`` refused) as a tuple of floats."""
+    """A non-empty array of finite numbers (``bool`` refused) as a tuple of
+    floats; a value that is not names its index (``times[3]``)."""
     v = t.raw(k)
     if not isinstance(v, list) or not v or any(
             isinstance(x, bool) or not isinstance(x, (int, float)) for x in v):
         t.error(k, f"must be a non-empty array of numbers, got {v!r}")
-    return tuple(float(x) for x in v)
+    out = []
+    for i, x in enumerate(v):
+        try:
+            x = float(x)
+        except OverflowError:           # an integer beyond a double
+            x = math.inf
+        if not math.isfinite(x):
+            t.error(f"{k}[{i}]", f"must be finite, got {v[i]!r}")
+        out.append(x)
+    return tuple(out)
