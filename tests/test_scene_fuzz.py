@@ -337,7 +337,7 @@ def test_command_line_prints_the_error_and_exits_2(tmp_path, capsys):
                                                      "masses = [0.15, nan, 0.15]"))
     assert cli.main(["run", str(file), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
-    assert err == f"error: {file}: `subsystems.chain.masses[1]` must be > 0 kg, got nan\n"
+    assert err == f"error: {file}: `subsystems.chain.masses[1]` must be finite, got nan\n"
     assert "Traceback" not in err and not (tmp_path / "o").exists()
     assert cli.main(["info", str(file)]) == 2
 

@@ -17,7 +17,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from cosim.core.guard import GuardOptions
-from cosim.scene.checks import MAX_ELEMENTS, MAX_STEPS, SceneError, Table, check_name
+from cosim.scene.checks import (MAX_ELEMENTS, MAX_STEPS, SceneError, Table, check_name,
+                                 echo)
 from cosim.scene.contacts import check_conditions, contact_spec
 from cosim.scene.read import parse_override, read_scene, read_toml_file
 from cosim.scene.specs import STRUCTURE_TYPES, SUBSYSTEM_TYPES, Scene, resolve_scheme
@@ -77,7 +78,7 @@ def _validate(data: dict, file, variant) -> Scene:
     every = out.integer("every", low=1)
     export = out.raw("export")
     if not isinstance(export, list) or not all(isinstance(x, str) for x in export):
-        out.error("export", f"must be a list of structure names, got {export!r}")
+        out.error("export", f"must be a list of structure names, got {echo(export)}")
     export_every = out.integer("export_every", low=1)
     out.finish()
 
@@ -106,7 +107,7 @@ def _validate(data: dict, file, variant) -> Scene:
     for sname, st in top.tables("subsystems", section="subsystems", entries="subsystem"):
         check_name(file, "subsystems", sname, "names a subsystem that")
         if "." in sname:
-            raise SceneError(file, "subsystems", f"names a subsystem {sname!r}: a subsystem's "
+            raise SceneError(file, "subsystems", f"names a subsystem {echo(sname)}: a subsystem's "
                                                  f"name holds no `.`, which separates it from "
                                                  f"the point in SUBSYSTEM.POINT")
         subs.append(subsystem_spec(sname, st))
@@ -116,8 +117,9 @@ def _validate(data: dict, file, variant) -> Scene:
     structures = [s.name for s in subs if s.type in STRUCTURE_TYPES]
     for name_ in export:
         if name_ not in structures:
-            raise SceneError(file, "output.export", f"names {name_!r}, which is not a structure "
-                                                    f"of this scene; structures are {structures}")
+            raise SceneError(file, "output.export", f"names {echo(name_)}, which is not a "
+                                                    f"structure of this scene; structures are "
+                                                    f"{structures}")
     contacts = []
     for cname, ct in top.tables("contacts", section="contacts", entries="contact"):
         check_name(file, "contacts", cname, "names a contact that")
@@ -184,9 +186,9 @@ def _scheme_option(sch: Table, k, opt):
     elif opt.kind is str:
         v = sch.string(k)
     elif opt.kind is list and not isinstance(v, list):
-        sch.error(k, f"must be an array, got {v!r}")
+        sch.error(k, f"must be an array, got {echo(v)}")
     if not opt.check(v):
-        sch.error(k, f"must be {opt.rule}, got {v!r}")
+        sch.error(k, f"must be {opt.rule}, got {echo(v)}")
     return v
 
 
