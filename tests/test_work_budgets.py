@@ -252,3 +252,17 @@ def test_the_stability_reach_of_each_explicit_method(method):
 
     found = max(reach(-1.0), reach(1j))
     assert EXPLICIT_STABILITY[method] == pytest.approx(found, abs=0.01)
+
+
+@pytest.mark.parametrize("override,key", [
+    ("t_end=1e308", "scheme.macro_step"),                 # t_end / H overflows to inf
+    ("scheme.macro_step=5e-324", "scheme.macro_step"),    # a subnormal step
+    ("scheme.contact_step=5e-324", "scheme.contact_step"),
+    ("subsystems.chain.integrator.contact_step=5e-324", "subsystems.chain.integrator.contact_step"),
+])
+def test_a_count_past_the_doubles_is_refused_not_a_traceback(tmp_path, override, key):
+    with pytest.raises(SceneError) as exc:
+        load(THREE_MASS, override)
+    assert exc.value.key == key and "at most inf integrator steps" in str(exc.value)
+    code, _, err, _ = cosim("info", THREE_MASS, "--set", override, cwd=tmp_path)
+    assert code == 2 and err.startswith("error: ") and "Traceback" not in err, err

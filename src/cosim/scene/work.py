@@ -70,7 +70,10 @@ class WorkEstimate:
 
 
 def _count(x: float) -> float:
-    """``ceil(x)`` that does not make a step of round-off (``1 + 1e-16`` is 1)."""
+    """``ceil(x)`` that does not make a step of round-off (``1 + 1e-16`` is 1);
+    a count past the doubles (a step of 5e-324 s) is ``inf``."""
+    if not math.isfinite(x):
+        return math.inf
     return float(max(1, math.ceil(x * (1.0 - 1e-12))))
 
 
