@@ -254,15 +254,19 @@ def test_the_stability_reach_of_each_explicit_method(method):
     assert EXPLICIT_STABILITY[method] == pytest.approx(found, abs=0.01)
 
 
-@pytest.mark.parametrize("override,key", [
-    ("t_end=1e308", "scheme.macro_step"),                 # t_end / H overflows to inf
-    ("scheme.macro_step=5e-324", "scheme.macro_step"),    # a subnormal step
-    ("scheme.contact_step=5e-324", "scheme.contact_step"),
-    ("subsystems.chain.integrator.contact_step=5e-324", "subsystems.chain.integrator.contact_step"),
+@pytest.mark.parametrize("case,override,key", [
+    (THREE_MASS, "t_end=1e308", "scheme.macro_step"),                 # t_end / H is inf
+    (THREE_MASS, "scheme.macro_step=5e-324", "scheme.macro_step"),    # a subnormal step
+    (THREE_MASS, "scheme.contact_step=5e-324", "scheme.contact_step"),
+    (THREE_MASS, "subsystems.chain.integrator.contact_step=5e-324",
+     "subsystems.chain.integrator.contact_step"),
+    # rk4's step in free flight, shorter than its max_step
+    (SPRING_DROP, "subsystems.body.integrator.free_step=5e-324",
+     "subsystems.body.integrator.free_step"),
 ])
-def test_a_count_past_the_doubles_is_refused_not_a_traceback(tmp_path, override, key):
+def test_a_count_past_the_doubles_is_refused_not_a_traceback(tmp_path, case, override, key):
     with pytest.raises(SceneError) as exc:
-        load(THREE_MASS, override)
+        load(case, override)
     assert exc.value.key == key and "at most inf integrator steps" in str(exc.value)
-    code, _, err, _ = cosim("info", THREE_MASS, "--set", override, cwd=tmp_path)
+    code, _, err, _ = cosim("info", case, "--set", override, cwd=tmp_path)
     assert code == 2 and err.startswith("error: ") and "Traceback" not in err, err

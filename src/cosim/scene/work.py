@@ -91,6 +91,9 @@ def _side_steps(side, h: float, substeps: int, closed: bool, hosts: bool,
         key = f"{side.key}.integrator.max_step"
         if step is None:                 # an adaptive method without a bound: one at least
             return float(substeps), key, None
+        free = side.integrator_options.get("free_step")    # rk4's step in free flight
+        if free is not None and free < step:
+            step, key = free, f"{side.key}.integrator.free_step"
         return substeps * _count(hk / step), key, step
     if kind in ("chain", "beam", "cable", "string", "rod") and closed and hosts:
         return (substeps * _count(hk / side.contact_step), f"{side.key}.integrator.contact_step",
