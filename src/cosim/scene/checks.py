@@ -34,9 +34,9 @@ _RECORDERS: list[set] = []
 class SceneError(ValueError):
     """A scene file that cannot be used, with the file and key path.
 
-    The key path is shown escaped and capped (:func:`cosim.errors.shown`):
-    a key is the file's text too.  A value the message echoes goes through
-    :func:`echo`."""
+    The key path is shown escaped and capped (``cosim.errors.shown``): a
+    key is the file's text too.  A value the message echoes goes through
+    ``cosim.scene.checks.echo``."""
 
     def __init__(self, file, key: str, message: str):
         self.file, self.key = str(file), key
