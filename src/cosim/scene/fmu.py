@@ -46,7 +46,8 @@ def fmu_spec(name: str, t):
     SceneError
         Naming the file and the key path.
     """
-    from cosim.sides.fmu import FMUPort, read_fmu_variables
+    from cosim.sides.fmu import FMUPort
+    from cosim.sides.fmu_description import read_fmu_variables
     rel = t.string("path")
     path = Path(rel)
     if not path.is_absolute():
@@ -110,7 +111,7 @@ def fmu_spec(name: str, t):
     energy = t.string("energy")
     if energy is not None:
         check(t, "energy", energy, ("output",), "outputs")
-    from cosim.sides.fmu import can_get_set_state
+    from cosim.sides.fmu_description import can_get_set_state
     from cosim.scene.specs import FMUSpec
     return FMUSpec(name=name, key=t.key(), path=str(path), ports=ports, parameters=params,
                    coordinates=coords, energy=energy, fmi_version=str(md.fmiVersion),
