@@ -421,10 +421,12 @@ class Scene:
         return resolve_scheme(scheme or self.scheme, self.scheme_options, self.scheme_tables,
                               file=self.path, t_end=self.t_end, stacklevel=3)
 
-    def build(self, scheme: str | None = None):
-        """Make the coupled system and the scheme (optionally another one).
+    def build(self, scheme: str | None = None, *, run_fmu: bool = True):
+        """Make the coupled system and the scheme (optionally another one);
+        ``run_fmu=False`` builds FMU sides from their model descriptions
+        alone, running nothing of them.
 
         See :func:`cosim.scene.build.build_system`.
         """
         from cosim.scene.build import build_system
-        return build_system(self, scheme)
+        return build_system(self, scheme, run_fmu=run_fmu)
