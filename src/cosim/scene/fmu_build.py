@@ -6,6 +6,7 @@ it, and the contacts kept out of it.
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 __all__ = ["build_fmu", "settle_fmu_contacts", "needs_rollback"]
 
@@ -81,7 +82,7 @@ def build_fmu(spec, scene, scheme: str, opts: dict, *, run: bool = True):
             sub.close()
             raise SceneError(scene.path, f"{key}.ports.{pname}.port_mass",
                              f"names output `{shown(port.mass, limit=80)}` of FMU "
-                             f"{shown(sub.path.name, limit=80)}, which reports "
+                             f"{shown(Path(spec['path']).name, limit=80)}, which reports "
                              f"{shown(value, limit=40)} kg after its initialisation: a port "
                              f"mass {problem}")
     return sub

@@ -101,7 +101,8 @@ def first_touch(scene, budget_s: float = FIRST_TOUCH_BUDGET_S) -> tuple[dict, st
 
     The run goes until every contact has closed once, the end time, or
     ``budget_s`` of CPU time; it writes nothing.  A contact closed at the
-    start closes at t = 0.
+    start closes at t = 0.  It runs every side, an FMU's code included
+    (:func:`scene_info` calls it for a scene with an FMU only when asked).
 
     Returns
     -------

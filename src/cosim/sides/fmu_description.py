@@ -7,6 +7,15 @@ only: nothing loads the FMU's binary, so a description can be inspected
 (``cosim info``, the scene loader's checks) before any of the FMU's code is
 trusted to run.
 
+:func:`read_fmu_variables` refuses what would make the FMU unsafe or
+ambiguous to load: an FMI 1.0 description, a ``modelIdentifier`` that is
+not a C identifier (it names the shared library, which must then lie in the
+FMU's own ``binaries/PLATFORM`` folder), a variable name declared twice.
+:class:`DescribedFMU` is an FMU side made from the description alone, for
+``cosim info``: it tells what the description tells and cannot step.
+:func:`port_mass_problem` is the rule a port mass keeps, declared or
+reported by the FMU.
+
 FMPy parses the file; it is imported only when an FMU is read, and without
 it :func:`fmpy_module` raises an ``ImportError`` that names the ``fmi``
 extra.
