@@ -195,6 +195,35 @@ def test_info_evaluates_a_declared_port_mass_without_the_fmu(arm):
                                                                      "variable": None}}
 
 
+def _mass_start(start):
+    """An edit giving the arm's `mass_y` output the start value ``start``."""
+    def edit(text):
+        head, _, rest = text.partition('name="mass_y"')
+        line, _, tail = rest.partition("</ScalarVariable>")
+        line = line.replace('initial="calculated"><Real/>',
+                            f'initial="exact"><Real start="{start}"/>')
+        return head + 'name="mass_y"' + line + "</ScalarVariable>" + tail
+    return edit
+
+
+def test_info_takes_a_port_mass_from_its_start_value(arm, tmp_path):
+    """A port mass named by an output with a start value: info uses the start
+    value without running the FMU; an unfit one leaves the contact
+    not evaluated, saying why."""
+    from cosim.scene.info import scene_info
+    good = _variant(arm, tmp_path / "start.fmu", _mass_start("0.17"))
+    info = scene_info(_scene(good))
+    assert info["subsystems"]["arm"]["fmu"]["port_mass"]["tip"] == {"kg": 0.17,
+                                                                    "variable": "mass_y"}
+    c = info["contacts"]["C"]
+    assert "not_evaluated" not in c and c["reduced_mass"] < 0.17
+    bad = _variant(arm, tmp_path / "zero.fmu", _mass_start("0.0"))
+    c = scene_info(_scene(bad))["contacts"]["C"]
+    assert c["not_evaluated"].endswith(
+        "(its model description gives it the start value 0.0, which must be finite and > 0 "
+        "kg, got 0.0); `cosim info --run-fmu` runs the FMU to evaluate them")
+
+
 # ------------------------------------------------------- output injection
 def test_info_escapes_what_the_description_says(arm, tmp_path):
     """Line breaks, carriage returns and bidirectional overrides in a model
