@@ -54,7 +54,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from cosim import __version__
-from cosim.errors import SimulationError, UnsafeStepError, shown
+from cosim.errors import OutputError, SimulationError, UnsafeStepError, shown
 from cosim.io.rundir import OutputFolder, check_name
 from cosim.scene.checks import SceneError
 from cosim.scene.inputs import input_digests
@@ -189,12 +189,17 @@ def cache_entry(key: dict, ref: dict) -> dict:
     return {"key": key, "reference": ref, "checksum": _checksum(key, ref)}
 
 
+def _show(v, limit: int) -> str:
+    """A value read from a cache entry, for a message (text quoted)."""
+    return shown(repr(v) if isinstance(v, str) else v, limit)
+
+
 def _field_problem(name: str, v, kind: str) -> str | None:
     if isinstance(v, bool) or not isinstance(v, (int, float)):
-        return f"`reference.{name}` is {type(v).__name__} {shown(v, 40)}, not a number"
+        return f"`reference.{name}` is {type(v).__name__} {_show(v, 40)}, not a number"
     if kind == "count":
         if not isinstance(v, int) or v < 0:
-            return f"`reference.{name}` is {shown(v, 40)}, not a count (a whole number >= 0)"
+            return f"`reference.{name}` is {_show(v, 40)}, not a count (a whole number >= 0)"
     elif math.isinf(v) or (kind == "finite" and math.isnan(v)):
         return f"`reference.{name}` is {v}, not a finite number"
     return None
@@ -206,7 +211,7 @@ def entry_problem(entry, key: dict) -> str | None:
     ``reference`` and ``checksum``; the reference's fields of their types,
     finite where they must be), its key, and its checksum."""
     if not isinstance(entry, dict):
-        return f"holds {type(entry).__name__} {shown(entry, 60)}, not a cache entry (a table)"
+        return f"holds {type(entry).__name__} {_show(entry, 60)}, not a cache entry (a table)"
     if set(entry) != {"key", "reference", "checksum"}:
         return (f"holds the keys {shown(sorted(map(str, entry)), 80)}, not `key`, `reference` "
                 f"and `checksum`")
@@ -215,7 +220,7 @@ def entry_problem(entry, key: dict) -> str | None:
         if not isinstance(stored, dict):
             return f"holds a `key` of {type(stored).__name__}, not a table"
         if stored.get("cosim") != key["cosim"]:
-            return (f"was written by cosim {shown(stored.get('cosim'), 40)}, not by this "
+            return (f"was written by cosim {_show(stored.get('cosim'), 40)}, not by this "
                     f"version ({key['cosim']})")
         files = stored.get("files")
         changed = [k for k in key["files"] if not isinstance(files, dict)
@@ -304,6 +309,9 @@ def reference(path, variant=None, contact=None, joint=None, overrides=(),
     with contextlib.ExitStack() as stack:
         folder = name = key = None
         if cache_dir is not None:
+            if os.path.islink(cache_dir):      # said plainly; the folder's own check holds
+                raise OutputError(f"cannot use the reference cache {cache_dir}: it is a "
+                                  f"symbolic link (cosim never writes through one); remove it")
             folder = stack.enter_context(OutputFolder(cache_dir, lock=False))
             key = cache_key(scene, variant, contact, joint)
             name = _entry_name(scene, variant, key)
