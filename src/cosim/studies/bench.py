@@ -333,6 +333,7 @@ def reference(path, variant=None, contact=None, joint=None, overrides=(),
 
 
 def _run_reference(path, variant, overrides, contact, joint) -> dict:
+    """Run the reference (:data:`REFERENCE`) and return its metrics."""
     ov = list(overrides) + _monolithic(REFERENCE)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
