@@ -201,13 +201,32 @@ def _machine() -> str:
 
 
 def _cmd_bench(args) -> int:
+    from cosim.io.rundir import OutputFolder
+
+    out = Path(args.out) if args.out else Path("runs") / (
+        Path(args.scene).stem + (f"-{args.variant}" if args.variant else "") + "-bench")
+    # the folder is opened (a link or a file at its place refused) and locked
+    # before anything runs, and held until the last file is written
+    folder = OutputFolder(out).open()
+    wrote = False
+    try:
+        wrote = _bench(args, folder)
+    finally:
+        folder.close()
+        if folder.created and not wrote:      # made for a bench that wrote nothing
+            with contextlib.suppress(OSError):
+                out.rmdir()
+    return 0
+
+
+def _bench(args, folder) -> bool:
+    """The bench of :func:`_cmd_bench` into the open, locked ``folder``;
+    whether it wrote its files."""
     import math
 
     from cosim.studies.bench import cheapest_within, plot, run_bench, write_csv, write_reference
 
-    out = Path(args.out) if args.out else Path("runs") / (
-        Path(args.scene).stem + (f"-{args.variant}" if args.variant else "") + "-bench")
-    out.mkdir(parents=True, exist_ok=True)
+    out = folder.path
     spread = args.spread
     print(f"bench {args.scene}" + (f" --variant {args.variant}" if args.variant else "")
           + f" on {_machine()}")
@@ -250,16 +269,17 @@ def _cmd_bench(args) -> int:
     if best["cosim"] is not None:
         print(f"  co-simulation / monolithic CPU {best['ratio_monolithic']:.2f}, "
               f"/ paper_rk45 CPU {best['ratio_paper_rk45']:.2f}")
-    write_csv(rows, out / "bench.csv")
-    write_reference(ref, out / "reference.json")
+    write_csv(rows, "bench.csv", folder)
+    write_reference(ref, "reference.json", folder)
     print(f"wrote {out / 'bench.csv'} and {out / 'reference.json'}")
     try:
-        plot(rows, out / "bench.png", title=f"{Path(args.scene).stem} {args.variant or ''}")
+        plot(rows, "bench.png", title=f"{Path(args.scene).stem} {args.variant or ''}",
+             folder=folder)
         print(f"wrote {out / 'bench.png'}")
     except ImportError:
         print('no plot: matplotlib is not installed (pip install "cosim[plot]")',
               file=sys.stderr)
-    return 0
+    return True
 
 
 def _cmd_plot(args) -> int:
