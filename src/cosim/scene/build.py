@@ -128,7 +128,7 @@ def _structure(spec, scene, macro_step):
     return sub
 
 
-def build_system(scene, scheme: str | None = None):
+def build_system(scene, scheme: str | None = None, *, run_fmu: bool = True):
     """Build the subsystems, contacts and the coupling scheme of ``scene``.
 
     Parameters
@@ -138,6 +138,11 @@ def build_system(scene, scheme: str | None = None):
     scheme : str, optional
         Another scheme than the scene's; the scene resolves it
         (:meth:`~cosim.scene.specs.Scene.scheme_spec`).
+    run_fmu : bool
+        Whether FMU sides are instantiated (their code runs); if not, each
+        is built from its model description alone
+        (:class:`~cosim.sides.fmu_description.DescribedFMU`), which
+        describes but cannot step.
 
     Raises
     ------
@@ -162,7 +167,7 @@ def build_system(scene, scheme: str | None = None):
             subs.append(_multibody(side, scene, spec.default_step))
         elif side.type == "fmu":            # a Functional Mock-up Unit: cosim.scene.fmu
             from cosim.scene.fmu_build import build_fmu
-            subs.append(build_fmu(side, scene, name, opts))
+            subs.append(build_fmu(side, scene, name, opts, run=run_fmu))
         else:
             subs.append(_structure(side, scene, spec.macro_step))
     names = [s.name for s in subs]

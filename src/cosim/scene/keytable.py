@@ -281,8 +281,9 @@ _REFERENCE = {
 
 _FMU = (
     _SUBSYSTEM_TYPE,
-    K("path", "", REQUIRED, "an existing co-simulation .fmu (FMI 2.0 or 3.0), relative to the "
-      "scene file", "the Functional Mock-up Unit (cosim.sides.fmu)"),
+    K("path", "", REQUIRED, "an existing co-simulation .fmu file (FMI 2.0 or 3.0), relative to "
+      "the scene file, whose `modelIdentifier` is a C identifier and whose variable names are "
+      "unique", "the Functional Mock-up Unit (cosim.sides.fmu)"),
     K("ports", "", REQUIRED, "a table of at least one port", "the FMU's contact ports"),
     K("parameters", "", {}, _TABLE, "start values of the FMU's parameters, set before it is "
       "initialised"),
@@ -292,15 +293,20 @@ _FMU = (
 )
 _FMU_PORTS = (K("PORT", "", REQUIRED, _TABLE, "a port: the variables of a point of the FMU"),)
 _FMU_PORT = (
-    K("position", "m", REQUIRED, "two output variables", "the point's x and y"),
-    K("velocity", "m/s", REQUIRED, "two output variables", "the point's velocity"),
-    K("force", "N", REQUIRED, "two input variables", "the contact force the FMU receives"),
-    K("port_mass", "kg", REQUIRED, "> 0, or the name of an output variable",
+    K("position", "m", REQUIRED, "two different output variables", "the point's x and y"),
+    K("velocity", "m/s", REQUIRED, "two different output variables, not the position's",
+      "the point's velocity"),
+    K("force", "N", REQUIRED, "two different input variables that no other key sets",
+      "the contact force the FMU receives"),
+    K("port_mass", "kg", REQUIRED, "> 0 with a finite inverse, or the name of an output "
+      "variable whose value after initialisation is",
       "the mass the contact sees at the port (pre-flight check, host choice)"),
 )
-_FMU_PARAMETERS = (K("NAME", "", REQUIRED, "a finite number; a parameter of the FMU",
+_FMU_PARAMETERS = (K("NAME", "", REQUIRED, "a finite number; a parameter of the FMU that no "
+                     "other key sets",
                      "its start value"),)
-_FMU_COORDINATES = (K("NAME", "", REQUIRED, "two output variables",
+_FMU_COORDINATES = (K("NAME", "", REQUIRED, "two different output variables; NAME "
+                      + NAME_TEXT,
                       "[position, velocity] of a coordinate"),)
 
 _RIGID = (

@@ -444,8 +444,10 @@ class Scene:
             spec = self.scheme_spec(scheme)
         return estimate_work(spec, self.t_end, self.subsystems, self.contacts, system)
 
-    def build(self, scheme: str | None = None):
-        """Make the coupled system and the scheme (optionally another one).
+    def build(self, scheme: str | None = None, *, run_fmu: bool = True):
+        """Make the coupled system and the scheme (optionally another one);
+        ``run_fmu=False`` builds FMU sides from their model descriptions
+        alone, running nothing of them.
 
         See :func:`cosim.scene.build.build_system`.  The work of the run is
         counted again with the system (:meth:`work`): the monolithic
@@ -461,6 +463,6 @@ class Scene:
         """
         from cosim.scene.build import build_system
         from cosim.scene.work import check_work
-        system, sch = build_system(self, scheme)
+        system, sch = build_system(self, scheme, run_fmu=run_fmu)
         check_work(self.path, self.work(scheme, system), self.max_steps)
         return system, sch
