@@ -31,6 +31,7 @@ def main(argv=None):
     parser.add_argument("--out", type=Path, default=Path("runs/examples/read_run"))
     parser.add_argument("--run", type=Path, help="read this run folder instead of making one")
     args = parser.parse_args(argv)
+    args.out.mkdir(parents=True, exist_ok=True)
     run = args.run
     if run is None:
         import cosim
@@ -52,12 +53,11 @@ def main(argv=None):
           f"energy drift {summary['energy']['max_abs_drift']:.3g} J")
     outside = int(np.count_nonzero((force > 0) & ~closed))
     print(f"samples with force on C outside its intervals: {outside}")
-    from cosim.io.rundir import atomic_write   # writes its own outputs as cosim does
-    atomic_write(args.out / "read_run.json", lambda fh: fh.write(json.dumps(
+    (args.out / "read_run.json").write_text(json.dumps(
         {"samples": len(t), "forced_outside": outside,
          "forced_inside": int(np.count_nonzero((force > 0) & closed)),
          "energy_initial": summary["energy"]["initial"],
-         "energy_first_sample": float(series["energy/total"][0])}, indent=1)), "w")
+         "energy_first_sample": float(series["energy/total"][0])}, indent=1))
 
     fig = Figure(figsize=(8, 5), dpi=100, layout="constrained")
     ax_f, ax_q, ax_e = fig.subplots(3, 1, sharex=True)
@@ -75,8 +75,7 @@ def main(argv=None):
             ax.axvspan(t_on * 1e3, t_off * 1e3, color="C3", alpha=0.15, lw=0)
     if intervals:
         ax_f.set_xlim(1e3 * intervals[0][0] - 5.0, 1e3 * min(t[-1], intervals[-1][1] + 0.03))
-    atomic_write(args.out / "read_run.png",
-                 lambda fh: fig.savefig(fh, format="png"), "wb")
+    fig.savefig(args.out / "read_run.png")
     print(f"wrote {args.out / 'read_run.png'}")
 
 
