@@ -110,9 +110,9 @@ def http_listener(request, tmp_path):
 
 
 def replying_listener(replies):
-    """A port whose ``k``-th connection gets ``replies[k]`` (bytes, or None
-    to say nothing and hold the connection until the end) once it has
-    received anything; the last reply is repeated."""
+    """A port whose ``k``-th connection gets ``replies[k]`` (bytes; None to
+    say nothing and hold the connection until the end; "reset" to reset it)
+    once it has received anything; the last reply is repeated."""
     held = []
 
     class Handler(socketserver.BaseRequestHandler):
@@ -129,6 +129,11 @@ def replying_listener(replies):
             if replies[k] is None:
                 held.append(self.request)
                 time.sleep(LIMIT)
+                return
+            if replies[k] == "reset":              # close with a RST
+                self.request.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER,
+                                        struct.pack("ii", 1, 0))
+                self.request.close()               # now, before the server's FIN
                 return
             self.request.sendall(replies[k])
 
@@ -185,6 +190,8 @@ def _frame(*frames: bytes, size=None) -> bytes:
 
 @pytest.mark.parametrize("reply,essence", [
     (b"", "is not a Dask scheduler: it closed the connection without a greeting"),
+    ("reset", "is not a Dask scheduler: it reset the connection when greeted (a TLS server "
+              "does: is it a tls:// address?)"),
     (b"HTTP/1.1 400 Bad Request\r\n\r\n",
      "is not a Dask scheduler: it answered like an HTTP server (b'HTTP/1.1 400 Bad Request')"),
     (b"SSH-2.0-OpenSSH_9.6\r\n", "is not a Dask scheduler: its first bytes b'SSH-2.0-"),
@@ -337,3 +344,29 @@ def test_ctrl_c_removes_the_scratch_space(tmp_path):
     assert proc.returncode == 130, stderr
     assert leftovers(proc.pid) == []
     assert list(tmp.iterdir()) == []
+
+
+def test_a_tls_scheduler_is_probed_with_the_configured_certificate(tmp_path):
+    """Over tls://, the probe's TLS handshake uses Dask's configured
+    certificate: without one it says what is missing, with the cluster's it
+    reads the greeting."""
+    pytest.importorskip("cryptography")
+    import dask
+    from distributed import LocalCluster
+    from distributed.security import Security
+
+    security = Security.temporary()
+    with LocalCluster(n_workers=0, processes=False, protocol="tls://", host="127.0.0.1",
+                      security=security, dashboard_address=None) as cluster:
+        address = cluster.scheduler_address
+        with pytest.raises(SweepError, match=r"a tls:// scheduler needs the cluster's "
+                                             r"certificates in Dask's distributed\.comm\.tls"):
+            backends._probe_scheduler(address, 10.0)
+        files = {}
+        for key, pem in (("ca-file", security.tls_ca_file),
+                         ("client.cert", security.tls_client_cert),
+                         ("client.key", security.tls_client_key)):
+            files[f"distributed.comm.tls.{key}"] = str(tmp_path / key)
+            (tmp_path / key).write_text(pem)
+        with dask.config.set(files):
+            backends._probe_scheduler(address, 10.0)

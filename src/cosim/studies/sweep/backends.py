@@ -5,7 +5,8 @@ past the time limit is recorded alone), or a Dask cluster (an address, a
 :class:`~cosim.scene.load.Scene` and sends back its
 :class:`~cosim.core.result.SimulationResult`, so it needs cosim but neither
 the scene file nor the output directory.  Dask is imported only when a
-scheduler is asked for.
+scheduler is asked for; an address is first checked to be a Dask scheduler
+with bounded reads of its own (:func:`_probe_scheduler`).
 """
 from __future__ import annotations
 
@@ -329,6 +330,10 @@ def _probe_scheduler(address: str, timeout: float = CONNECT_TIMEOUT_S) -> None:
     except socket.timeout:
         raise SweepError(f"{where}: no answer within {timeout:g} s (a Dask scheduler "
                          f"greets a client at once)") from None
+    except ConnectionResetError:
+        raise SweepError(f"{where} is not a Dask scheduler: it reset the connection when "
+                         f"greeted" + (" (a TLS server does: is it a tls:// address?)"
+                                       if scheme == "tcp" else "")) from None
     except OSError as exc:
         raise SweepError(f"{where} cannot be reached: {exc}") from None
     finally:
@@ -416,11 +421,18 @@ def _connect_client(address: str, timeout: float):
 
     thread = threading.Thread(target=start, name="cosim-dask-connect", daemon=True)
     thread.start()
-    thread.join(timeout)
-    with lock:
-        if "client" in box:
-            return box["client"]
-        box["abandoned"] = True
+    interrupted = True
+    try:
+        thread.join(timeout)
+        interrupted = False
+    finally:                                    # given up, or Ctrl-C: no client is kept
+        with lock:
+            client = box.pop("client", None)
+            box["abandoned"] = True
+        if interrupted and client is not None:
+            client.close()
+    if client is not None:
+        return client
     where = f"`--scheduler` {address!r}"
     exc = box.get("error")
     if exc is None:
