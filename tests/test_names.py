@@ -171,7 +171,7 @@ def test_the_summary_prints_names_of_a_finished_run_plainly(tmp_path):
 def test_inside_is_the_last_check_before_a_write(tmp_path):
     assert inside(tmp_path, "summary.json") == tmp_path / "summary.json"
     for bad in ["", ".", "..", "../x", "a/b", "/etc/passwd", "x\x00", "x\ny"]:
-        with pytest.raises(OutputError, match="a run writes only plain file names inside"):
+        with pytest.raises(OutputError, match="writes only plain file names inside"):
             inside(tmp_path, bad)
 
 

@@ -1,6 +1,6 @@
 """Errors of a run (the scene loader's SceneError lives in cosim.scene.checks)."""
 
-__all__ = ["SimulationError", "CouplingError", "UnsafeStepError", "OutputExistsError",
+__all__ = ["SimulationError", "CouplingError", "UnsafeStepError", "OutputExistsError", "shown",
            "OutputError", "OutputBusyError", "SignalStop"]
 
 
@@ -48,3 +48,42 @@ class SignalStop(KeyboardInterrupt):
         self.signum = int(signum)
         self.signal_name = signal.Signals(signum).name
         super().__init__(self.signal_name)
+
+
+#: longest text of an input's value that a message echoes [characters]
+SHOWN_LIMIT = 200
+
+#: control characters (ANSI escapes, carriage returns, line breaks, bidirectional
+#: overrides) and how a message shows them: escaped, never raw
+_ESCAPES = {c: f"\\x{c:02x}" for c in (*range(32), *range(127, 160))}
+_ESCAPES.update({9: "\\t", 10: "\\n", 13: "\\r"})
+_ESCAPES.update({c: f"\\u{c:04x}" for c in (0x2028, 0x2029, 0x200E, 0x200F,
+                                            *range(0x202A, 0x202F), *range(0x2066, 0x206A))})
+
+
+def shown(value, limit: int = SHOWN_LIMIT) -> str:
+    """``value`` (text or anything else read from an input file) made safe to
+    put in a message: control characters escaped (a line break shows as
+    ``\\n``, so an input cannot start a line of its own or drive the
+    terminal), and at most ``limit`` characters of it, the rest summarised by
+    its length.
+
+    Strings are shown as they are, not quoted; any other value by its
+    ``repr``, which a huge container never builds in full.
+    """
+    if isinstance(value, str):
+        text = value
+    else:
+        import reprlib
+        r = reprlib.Repr()
+        r.maxstring = r.maxother = max(limit, 16)
+        r.maxlist = r.maxtuple = r.maxdict = r.maxset = 16
+        r.maxlevel = 4
+        text = r.repr(value)
+    n = len(text)
+    text = text[:limit].translate(_ESCAPES)
+    if len(text) > limit:
+        text = text[:limit]
+    if n > limit:
+        text += f"... ({n} characters)"
+    return text

@@ -16,16 +16,15 @@ that compute the same numbers write the same file.
 from __future__ import annotations
 
 import os
-import tempfile
 import zipfile
 from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
 
-from cosim.io.rundir import output_error
+from cosim.io.rundir import OutputFolder, atomic_write, output_error
 
-__all__ = ["SeriesStore", "SeriesFile", "write_npz"]
+__all__ = ["SeriesStore", "SeriesFile", "write_npz", "atomic_write"]
 
 #: date stamped on every member of ``series.npz`` (zip cannot go earlier)
 _ZIP_DATE = (1980, 1, 1, 0, 0, 0)
@@ -77,59 +76,13 @@ def write_npz(path, arrays: Mapping) -> None:
     atomic_write(Path(path), write, "wb")
 
 
-def atomic_write(path: Path, writer, mode: str) -> None:
-    """Call ``writer(fh)`` on a temporary file beside ``path``, then move it
-    into place: ``path`` holds either its old content or the whole new one.
-
-    The temporary file is made by :func:`tempfile.mkstemp` (a new name,
-    created exclusively: no link planted beside ``path`` is followed), and
-    the move replaces whatever entry ``path`` was (a link included) without
-    writing through it.
-
-    Raises
-    ------
-    cosim.errors.OutputError
-        An :class:`OSError` naming ``path`` and the reason (a full disk, a
-        read-only folder); nothing is left behind then.
-    """
-    fd = tmp = None
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-        with os.fdopen(fd, mode) as fh:
-            writer(fh)
-            fh.flush()
-            os.fsync(fh.fileno())
-            os.fchmod(fh.fileno(), 0o666 & ~_umask())   # an ordinary file, not mkstemp's 0600
-        os.replace(tmp, path)
-    except BaseException as exc:
-        if tmp is not None and os.path.lexists(tmp):
-            os.unlink(tmp)
-        if isinstance(exc, OSError):
-            raise output_error(exc, path) from exc
-        raise
-
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
-
-
 def _open_spool(path: Path):
-    """The spool, opened anew: a stale spool (a run killed outright) or
-    anything planted at its name is removed first, never followed, and the
-    file is created exclusively."""
-    flags = (os.O_RDWR | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0)
-             | getattr(os, "O_CLOEXEC", 0))
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        if os.path.lexists(path):
-            os.unlink(path)                   # a link goes, its target is untouched
-        fd = os.open(path, flags, 0o600)
-    except OSError as exc:
-        raise output_error(exc, path, "cannot create") from exc
-    return os.fdopen(fd, "w+b")
+    """The spool, opened anew through the checked writer
+    (:meth:`cosim.io.rundir.OutputFolder.create`): a stale spool (a run
+    killed outright) or anything planted at its name is removed first, never
+    followed, and the file is created exclusively."""
+    with OutputFolder(path.parent, lock=False) as folder:
+        return folder.create(path.name)
 
 
 class SeriesStore:

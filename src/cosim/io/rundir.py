@@ -12,19 +12,30 @@ While a run goes, it holds an exclusive lock (``flock``) on ``.run.lock`` in
 its folder; a second run into the same folder is refused
 (:class:`~cosim.errors.OutputBusyError`) and leaves the folder alone.  The
 lock dies with its process, so a run killed outright leaves no stale lock.
+
+Every file cosim writes -- a run's series and summary, figures, animations,
+sweep tables and point folders, bench tables and caches, exports -- goes
+through one writer, :class:`OutputFolder`: the folder is opened once by a
+file descriptor that refuses a symbolic link at its place, every name is
+checked (:func:`check_name`), a file is written under a new temporary name
+created exclusively in the folder and renamed over its name (a link planted
+there is replaced, never followed), and subfolders are made and opened the
+same way.  Whatever stops the writing, the name holds its old content or the
+whole new one.
 """
 from __future__ import annotations
 
 import errno
 import os
 import re
+import secrets
 import stat
 from pathlib import Path
 
 from cosim.errors import OutputBusyError, OutputError
 
 __all__ = ["NAME_RULE", "NAME_MAX", "LOCK_NAME", "name_problem", "inside", "RunLock",
-           "output_error"]
+           "output_error", "check_name", "OutputFolder", "atomic_write"]
 
 #: longest name a scene may give [characters]
 NAME_MAX = 64
@@ -62,14 +73,31 @@ def inside(folder, name: str) -> Path:
         control character.
     """
     folder = Path(folder)
-    bad = (not name or name in (".", "..") or "/" in name or "\0" in name
-           or (os.altsep is not None and os.altsep in name) or os.sep in name
-           or any(ord(ch) < 32 or ord(ch) == 127 for ch in name))
+    check_name(name, folder)
     path = folder / name
-    if bad or os.path.realpath(path.parent) != os.path.realpath(folder):
+    if os.path.realpath(path.parent) != os.path.realpath(folder):
         raise OutputError(f"refusing to write {name!r}: a run writes only plain file names "
                           f"inside its folder {folder}")
     return path
+
+
+def check_name(name, folder="its folder") -> str:
+    """``name``, after checking it is one plain file name: not empty, not
+    ``.`` or ``..``, no separator, no control character.
+
+    Raises
+    ------
+    OutputError
+        Naming ``name`` and ``folder``.
+    """
+    bad = (not isinstance(name, str) or not name or name in (".", "..") or "/" in name
+           or "\0" in name or (os.altsep is not None and os.altsep in name) or os.sep in name
+           or any(ord(ch) < 32 or ord(ch) == 127 for ch in name))
+    if bad:
+        from cosim.errors import shown
+        raise OutputError(f"refusing to write {shown(repr(name))}: cosim writes only plain file "
+                          f"names inside {folder}")
+    return name
 
 
 def output_error(exc: OSError, path, what: str = "cannot write") -> OutputError:
@@ -109,13 +137,13 @@ class RunLock:
             If another process holds the lock.
         """
         if os.path.lexists(self.folder) and not self.folder.is_dir():
-            raise OutputError(f"cannot make the run folder {self.folder}: it exists and is "
+            raise OutputError(f"cannot make the output folder {self.folder}: it exists and is "
                               f"not a folder")
         try:
             self.created = not self.folder.exists()
             self.folder.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
-            raise output_error(exc, self.folder, "cannot make the run folder") from None
+            raise output_error(exc, self.folder, "cannot make the output folder") from None
         try:
             return self._lock()
         except BaseException:
@@ -196,6 +224,301 @@ class RunLock:
 
     def __exit__(self, *exc):
         self.release()
+
+
+#: flags of every file descriptor the writer opens: never through a link, not inherited
+_NOFOLLOW = getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
+#: opening a folder (``O_DIRECTORY`` where the system has it)
+_DIR_FLAGS = os.O_RDONLY | getattr(os, "O_DIRECTORY", 0) | _NOFOLLOW
+
+
+def _is_root(path: Path) -> bool:
+    real = os.path.realpath(path)
+    return os.path.dirname(real) == real
+
+
+class OutputFolder:
+    """A folder cosim writes into, and the one way it writes there.
+
+    Parameters
+    ----------
+    path : path-like
+        The folder; made with its parents when missing.  A symbolic link,
+        a file or a filesystem root at its place is refused.
+    lock : bool
+        Hold the folder's run lock (:class:`RunLock`) while open, so that no
+        other cosim process writes there meanwhile.
+
+    Use it as a context manager (or :meth:`open` / :meth:`close`)::
+
+        with OutputFolder(out) as folder:
+            folder.write("table.csv", lambda fh: fh.write(text), "w")
+            point = folder.folder("k=1")      # a subfolder, never through a link
+
+    Attributes
+    ----------
+    path : Path
+    created : bool
+        Whether :meth:`open` made the folder (a caller may remove it again
+        when it wrote nothing there).
+    """
+
+    def __init__(self, path, *, lock: bool = True):
+        self.path = Path(path)
+        self.lock = lock
+        self.created = False
+        self._fd = None
+        self._lock = None
+
+    # ------------------------------------------------------------ opening
+    def open(self) -> "OutputFolder":
+        """Make (when missing) and open the folder, and take its lock.
+
+        Raises
+        ------
+        OutputError
+            If the folder is a link, a file, a filesystem root, or cannot be
+            made or opened.
+        OutputBusyError
+            If another process holds its lock.
+        """
+        path = self.path
+        if os.path.islink(path):
+            raise OutputError(f"cannot write into {path}: it is a symbolic link (cosim never "
+                              f"writes through one); name the folder itself")
+        if os.path.lexists(path) and not path.is_dir():
+            raise OutputError(f"cannot make the output folder {path}: it exists and is not a "
+                              f"folder")
+        if _is_root(path):
+            raise OutputError(f"refusing to write into {path}: it is a filesystem root; "
+                              f"name a folder of its own")
+        try:
+            self.created = not os.path.lexists(path)
+            path.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise output_error(exc, path, "cannot make the output folder") from None
+        try:
+            fd = os.open(path, _DIR_FLAGS)
+        except OSError as exc:
+            raise self._open_error(exc, path) from None
+        return self._adopt(fd)
+
+    def _adopt(self, fd: int) -> "OutputFolder":
+        if not stat.S_ISDIR(os.fstat(fd).st_mode):
+            os.close(fd)
+            raise OutputError(f"cannot write into {self.path}: it is not a folder")
+        self._fd = fd
+        if self.lock:
+            try:
+                self._lock = RunLock(self.path)
+                self._lock._lock()
+            except BaseException:
+                self._lock = None
+                self.close()
+                if self.created:        # a folder made just now holds nothing but the lock
+                    try:
+                        os.unlink(self.path / LOCK_NAME)
+                        self.path.rmdir()
+                    except OSError:
+                        pass
+                raise
+        return self
+
+    @staticmethod
+    def _open_error(exc: OSError, path) -> OutputError:
+        if exc.errno in (errno.ELOOP, errno.ENOTDIR):
+            return OutputError(f"cannot write into {path}: it is a symbolic link or not a "
+                               f"folder (cosim never writes through a link); remove it")
+        return output_error(exc, path, "cannot open the folder")
+
+    def close(self) -> None:
+        """Let the lock go and close the folder (no-op when not open)."""
+        if self._lock is not None:
+            self._lock.release()
+            self._lock = None
+        if self._fd is not None:
+            os.close(self._fd)
+            self._fd = None
+
+    def __enter__(self) -> "OutputFolder":
+        return self if self._fd is not None else self.open()
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    @property
+    def fd(self) -> int:
+        if self._fd is None:
+            raise RuntimeError(f"{self.path} is not open: use `with OutputFolder(...)`")
+        return self._fd
+
+    # ------------------------------------------------------------- names
+    def path_of(self, name: str) -> Path:
+        """The path of the checked name ``name`` in the folder (to read it,
+        or to name it in a message)."""
+        return self.path / check_name(name, self.path)
+
+    def exists(self, name: str) -> bool:
+        """Whether an entry (a link included) has the name ``name``."""
+        try:
+            os.stat(check_name(name, self.path), dir_fd=self.fd, follow_symlinks=False)
+        except FileNotFoundError:
+            return False
+        return True
+
+    def remove(self, name: str) -> None:
+        """Remove the file ``name`` (a link itself, never its target; no-op
+        when missing)."""
+        try:
+            os.unlink(check_name(name, self.path), dir_fd=self.fd)
+        except FileNotFoundError:
+            pass
+        except OSError as exc:
+            raise output_error(exc, self.path / name, "cannot remove") from None
+
+    # ----------------------------------------------------------- writing
+    def _temp_name(self, name: str) -> str:
+        return f".{name}.{secrets.token_hex(6)}.tmp"
+
+    def write(self, name: str, writer, mode: str = "wb") -> Path:
+        """Write the file ``name`` whole: ``writer(fh)`` fills a new
+        temporary file in the folder (created exclusively, never through a
+        link), which is flushed to disk and renamed over ``name``.
+
+        ``name`` keeps its old content, or none, when ``writer`` fails or
+        the process is stopped; no temporary file is left.
+
+        Raises
+        ------
+        OutputError
+            An :class:`OSError` (a full disk, a read-only folder, a folder
+            at ``name``) naming the file and the reason.
+        """
+        check_name(name, self.path)
+        tmp = self._temp_name(name)
+        created = False
+        try:
+            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | _NOFOLLOW, 0o666,
+                         dir_fd=self.fd)
+            created = True
+            with os.fdopen(fd, mode) as fh:
+                writer(fh)
+                fh.flush()
+                os.fsync(fh.fileno())
+            os.replace(tmp, name, src_dir_fd=self.fd, dst_dir_fd=self.fd)
+            created = False
+        except BaseException as exc:
+            if created:
+                try:
+                    os.unlink(tmp, dir_fd=self.fd)
+                except OSError:
+                    pass
+            if isinstance(exc, OSError) and not isinstance(exc, OutputError):
+                raise output_error(exc, self.path / name) from exc
+            raise
+        return self.path / name
+
+    def write_by_path(self, name: str, writer) -> Path:
+        """Write the file ``name`` whole with a ``writer(path)`` that can only
+        write to a path (an animation encoder, meshio): it writes into a new
+        private temporary folder inside this one, whose file is then renamed
+        over ``name``; the same guarantees as :meth:`write`."""
+        check_name(name, self.path)
+        tmpdir = self._temp_name(name)
+        try:
+            os.mkdir(tmpdir, 0o700, dir_fd=self.fd)
+        except OSError as exc:
+            raise output_error(exc, self.path / name) from exc
+        try:
+            writer(self.path / tmpdir / name)
+            inner = os.open(tmpdir, _DIR_FLAGS, dir_fd=self.fd)
+            try:
+                st = os.stat(name, dir_fd=inner, follow_symlinks=False)
+                if not stat.S_ISREG(st.st_mode):
+                    raise OutputError(f"cannot write {self.path / name}: its writer made no "
+                                      f"plain file")
+                os.replace(name, name, src_dir_fd=inner, dst_dir_fd=self.fd)
+            finally:
+                os.close(inner)
+        except OSError as exc:
+            if isinstance(exc, OutputError):
+                raise
+            raise output_error(exc, self.path / name) from exc
+        finally:
+            _remove_tree(self.fd, tmpdir)
+        return self.path / name
+
+    def create(self, name: str):
+        """A new file ``name`` opened for reading and writing in binary (a
+        spool): whatever had the name (a link, a stale file) is removed
+        first, never followed, and the file is created exclusively."""
+        check_name(name, self.path)
+        self.remove(name)
+        try:
+            fd = os.open(name, os.O_RDWR | os.O_CREAT | os.O_EXCL | _NOFOLLOW, 0o600,
+                         dir_fd=self.fd)
+        except OSError as exc:
+            raise output_error(exc, self.path / name, "cannot create") from None
+        return os.fdopen(fd, "w+b")
+
+    def folder(self, name: str, *, lock: bool = False) -> "OutputFolder":
+        """The subfolder ``name``, made when missing and opened without
+        following a link (a link or a file at its place is refused); open,
+        holding its own lock when ``lock``.  Close it (or use it as a
+        context manager) when done."""
+        check_name(name, self.path)
+        sub = OutputFolder(self.path / name, lock=lock)
+        try:
+            os.mkdir(name, 0o777, dir_fd=self.fd)
+            sub.created = True
+        except FileExistsError:
+            pass
+        except OSError as exc:
+            raise output_error(exc, sub.path, "cannot make the folder") from None
+        try:
+            fd = os.open(name, _DIR_FLAGS, dir_fd=self.fd)
+        except OSError as exc:
+            raise self._open_error(exc, sub.path) from None
+        return sub._adopt(fd)
+
+
+def _remove_tree(dir_fd: int, name: str) -> None:
+    """Remove the folder ``name`` of the folder ``dir_fd`` and what it holds
+    (files and folders only; links are removed, never followed)."""
+    try:
+        fd = os.open(name, _DIR_FLAGS, dir_fd=dir_fd)
+    except FileNotFoundError:
+        return
+    except OSError:
+        try:
+            os.unlink(name, dir_fd=dir_fd)
+        except OSError:
+            pass
+        return
+    try:
+        for entry in os.listdir(fd):
+            st = os.stat(entry, dir_fd=fd, follow_symlinks=False)
+            if stat.S_ISDIR(st.st_mode):
+                _remove_tree(fd, entry)
+            else:
+                os.unlink(entry, dir_fd=fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+    try:
+        os.rmdir(name, dir_fd=dir_fd)
+    except OSError:
+        pass
+
+
+def atomic_write(path, writer, mode: str) -> Path:
+    """Write the file ``path`` whole through :meth:`OutputFolder.write` on its
+    folder (opened without following a link, not locked: for a caller that
+    holds the folder's lock already, or writes where no run does)."""
+    path = Path(path)
+    with OutputFolder(path.parent, lock=False) as folder:
+        return folder.write(path.name, writer, mode)
 
 
 def _read_owner(fd: int) -> str:

@@ -88,28 +88,31 @@ def simulate(scene: Scene, *, scheme: str | None = None, progress=None,
         to that point, ``status`` ``error``, is complete (and written to
         ``out``); it is the exception's ``partial_result``.
     """
-    from cosim.io.rundir import RunLock
+    from cosim.io.rundir import OutputFolder
 
-    lock = None
+    folder = None
     if out is not None:
         out = Path(out)
-        lock = RunLock(out).acquire()      # refuses a folder another run is writing
+        # refuses a link, a root, or a folder another run is writing
+        folder = OutputFolder(out).open()
     try:
         return _simulate(scene, scheme, progress, progress_interval, out, overwrite)
     finally:
-        if lock is not None:
-            lock.release()
-            if lock.created and out.is_dir() and not any(out.iterdir()):
+        if folder is not None:
+            folder.close()
+            if folder.created and out.is_dir() and not any(out.iterdir()):
                 out.rmdir()                # a refused run leaves no folder it made
 
 
 def _simulate(scene, scheme, progress, progress_interval, out, overwrite):
     from cosim.core.result import check_output_dir, write_scene, write_summary
     from cosim.io.rundir import inside
+    from cosim.scene.work import warn_work
 
     if out is not None:
         check_output_dir(out, overwrite, scene.export)
     system, sch = scene.build(scheme)
+    warn_work(scene.path, scene.work(scheme, system))      # a long run says so first
     if out is not None:
         if hasattr(sch, "preflight"):
             sch.preflight(system, scene.t_end)     # a refusal writes nothing

@@ -19,30 +19,54 @@ range, and the median CPU time.  :func:`cheapest_within` judges a row by its
 worst copy.  The reference stays one run: at rtol 1e-11 two copies of it
 give the same count and differ by less than 1e-11 in peak and exit velocity
 (``tests/test_work_precision_doc.py``), far below any row's error.
+
+The reference cache (``cache_dir``; ``runs/.bench-cache`` for ``cosim
+bench``) holds one JSON entry per reference, opened as an
+:class:`~cosim.io.rundir.OutputFolder` (a link at its place is refused).  An
+entry is used only when the key it stores equals this run's
+(:func:`cache_key`: cosim's version, the SHA-256 of the scene file and of
+every file it names, FMUs included (:mod:`cosim.scene.inputs`), the scene's
+table after variant and overrides, the reference's settings, the contact
+and the joint), its reference has the fields and types a reference has, and
+its checksum matches its content.  Any other entry (not JSON, a list, cut
+short, for other inputs, a number edited by hand) is never trusted: a
+warning names the file, the reference is run again and the entry replaced.
+
+Trust model: the cache is a convenience, not a signature.  Its checksum
+catches damage and a number edited by hand; whoever can write the cache
+folder can also write an entry whose checksum matches, and such an entry is
+used as it is.  The folder is the user's own (as are the scene files), so
+an entry forged that way is the user's own doing.
 """
 from __future__ import annotations
 
+import contextlib
 import csv
+import errno
 import hashlib
 import json
 import math
+import os
+import stat
 import statistics
 import warnings
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from cosim.core.series import atomic_write
-from cosim.errors import SimulationError, UnsafeStepError
-from cosim.io.rundir import inside, output_error
+from cosim import __version__
+from cosim.errors import OutputError, SimulationError, UnsafeStepError, shown
+from cosim.io.rundir import OutputFolder, check_name
 from cosim.scene.checks import SceneError
+from cosim.scene.inputs import input_digests
 from cosim.studies.roundoff import OFFSETS, perturbed_overrides
 from cosim.studies.metrics import impact_metrics, relative_errors
 from cosim.studies.strike import find_strike
 from cosim.scene.run import simulate
 from cosim.scene.load import load_scene
 
-__all__ = ["BenchRow", "COLUMNS", "MAX_SPREAD", "reference", "run_bench", "within",
-           "cheapest_within", "write_csv", "read_csv", "write_reference", "plot"]
+__all__ = ["BenchRow", "COLUMNS", "MAX_SPREAD", "CACHE_FORMAT", "reference", "run_bench",
+           "within", "cheapest_within", "write_csv", "read_csv", "write_reference", "plot",
+           "cache_key", "cache_entry", "entry_problem"]
 
 #: columns of the CSV, in order: the first ten as before the copies (each
 #: error now the median over them), then the copies and the band
@@ -118,18 +142,153 @@ def _monolithic(options: dict) -> list[str]:
     return [f"scheme.monolithic.{k}={json.dumps(v)}" for k, v in options.items()]
 
 
-def _key(scene, contact, joint) -> str:
-    blob = json.dumps({"data": scene.data, "reference": REFERENCE, "contact": contact,
-                       "joint": joint}, sort_keys=True, default=str)
-    return hashlib.sha256(blob.encode()).hexdigest()[:16]
+#: the layout of a reference cache entry (part of its key)
+CACHE_FORMAT = 1
+#: the largest cache entry read [bytes]; an entry holds well under 2 KiB
+CACHE_MAX_BYTES = 1 << 16
+#: the reference's fields and what each holds: a count, a finite number, or
+#: a finite number or NaN (no exit velocity: the contact never released; no
+#: energy error: the initial energy is zero)
+_FIELDS = {"count": "count", "peak": "finite", "exit_velocity": "nan", "energy": "nan",
+           "cpu_time_s": "finite"}
+
+
+def cache_key(scene, variant, contact: str, joint: str) -> dict:
+    """What the reference of ``scene`` (loaded with ``variant``, the
+    overrides and the monolithic scheme) depends on: the cache's format,
+    cosim's version, the SHA-256 of every input file
+    (:func:`cosim.scene.inputs.input_digests`), of the scene's table after
+    variant and overrides, the reference's settings, the contact and the
+    joint.
+
+    Raises
+    ------
+    SceneError
+        If an input file cannot be read any more.
+    """
+    table = json.dumps(scene.data, sort_keys=True, default=str)
+    return {"format": CACHE_FORMAT, "cosim": __version__, "files": input_digests(scene),
+            "table": hashlib.sha256(table.encode()).hexdigest(), "variant": variant,
+            "reference": dict(REFERENCE), "contact": contact, "joint": joint}
+
+
+def _entry_name(scene, variant, key: dict) -> str:
+    digest = hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()
+    return f"{scene.name}-{variant or 'default'}-{digest[:16]}.json"
+
+
+def _checksum(key: dict, ref: dict) -> str:
+    blob = json.dumps({"key": key, "reference": ref}, sort_keys=True)
+    return hashlib.sha256(blob.encode()).hexdigest()
+
+
+def cache_entry(key: dict, ref: dict) -> dict:
+    """The cache entry of the reference ``ref`` computed for ``key``: both,
+    and the SHA-256 of both (``checksum``)."""
+    ref = {k: ref[k] for k in _FIELDS}
+    return {"key": key, "reference": ref, "checksum": _checksum(key, ref)}
+
+
+def _show(v, limit: int) -> str:
+    """A value read from a cache entry, for a message (text quoted)."""
+    return shown(repr(v) if isinstance(v, str) else v, limit)
+
+
+def _field_problem(name: str, v, kind: str) -> str | None:
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        return f"`reference.{name}` is {type(v).__name__} {_show(v, 40)}, not a number"
+    if kind == "count":
+        if not isinstance(v, int) or v < 0:
+            return f"`reference.{name}` is {_show(v, 40)}, not a count (a whole number >= 0)"
+    elif math.isinf(v) or (kind == "finite" and math.isnan(v)):
+        return f"`reference.{name}` is {v}, not a finite number"
+    return None
+
+
+def entry_problem(entry, key: dict) -> str | None:
+    """What makes the cache entry ``entry`` (parsed JSON) unfit to use for
+    ``key``, or ``None`` when it is fit: its shape (a table of ``key``,
+    ``reference`` and ``checksum``; the reference's fields of their types,
+    finite where they must be), its key, and its checksum."""
+    if not isinstance(entry, dict):
+        return f"holds {type(entry).__name__} {_show(entry, 60)}, not a cache entry (a table)"
+    if set(entry) != {"key", "reference", "checksum"}:
+        return (f"holds the keys {shown(sorted(map(str, entry)), 80)}, not `key`, `reference` "
+                f"and `checksum`")
+    stored, ref = entry["key"], entry["reference"]
+    if stored != key:
+        if not isinstance(stored, dict):
+            return f"holds a `key` of {type(stored).__name__}, not a table"
+        if stored.get("cosim") != key["cosim"]:
+            return (f"was written by cosim {_show(stored.get('cosim'), 40)}, not by this "
+                    f"version ({key['cosim']})")
+        files = stored.get("files")
+        changed = [k for k in key["files"] if not isinstance(files, dict)
+                   or files.get(k) != key["files"][k]]
+        if changed:
+            return (f"was written for other content of {', '.join(changed)} (its SHA-256 "
+                    f"differs)")
+        other = sorted(k for k in set(key) | set(stored) if stored.get(k) != key.get(k))
+        return f"was written for other inputs (its key differs in {shown(other, 80)})"
+    if not isinstance(ref, dict):
+        return f"holds a `reference` of {type(ref).__name__}, not a table"
+    if set(ref) != set(_FIELDS):
+        return (f"holds a `reference` of the fields {shown(sorted(map(str, ref)), 80)}, not "
+                f"{sorted(_FIELDS)}")
+    for name, kind in _FIELDS.items():
+        problem = _field_problem(name, ref[name], kind)
+        if problem is not None:
+            return problem
+    if entry["checksum"] != _checksum(key, ref):
+        return "does not match its checksum (damaged, or a number edited)"
+    return None
+
+
+def _read_entry(folder: OutputFolder, name: str):
+    """The parsed cache entry ``name`` of ``folder``, ``None`` when there is
+    none, or the text of why it cannot be read (a string).  The entry is
+    opened without following a link and read only up to
+    :data:`CACHE_MAX_BYTES`."""
+    flags = (os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_NONBLOCK", 0)
+             | getattr(os, "O_CLOEXEC", 0))
+    try:
+        fd = os.open(name, flags, dir_fd=folder.fd)
+    except FileNotFoundError:
+        return None
+    except OSError as exc:
+        return "is a symbolic link" if exc.errno == errno.ELOOP else \
+            f"cannot be read ({exc.strerror})"
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            return "is not a plain file"
+        data = b""
+        while len(data) <= CACHE_MAX_BYTES:
+            chunk = os.read(fd, CACHE_MAX_BYTES + 1 - len(data))
+            if not chunk:
+                break
+            data += chunk
+    except OSError as exc:
+        return f"cannot be read ({exc.strerror})"
+    finally:
+        os.close(fd)
+    if len(data) > CACHE_MAX_BYTES:
+        return f"holds more than {CACHE_MAX_BYTES} bytes"
+    try:
+        return {"entry": json.loads(data.decode("utf-8"))}
+    except (ValueError, RecursionError) as exc:
+        return f"is not JSON ({shown(str(exc), 80)})"
 
 
 def reference(path, variant=None, contact=None, joint=None, overrides=(),
               cache_dir=None) -> dict:
     """Impact metrics of the fine monolithic reference, from the cache when
-    the same scene (after variant and overrides) was benched before.
+    the same inputs (the scene file and every file it names, cosim's
+    version, variant and overrides) were benched before.
 
-    ``contact`` and ``joint`` are those of :func:`run_bench`.
+    ``contact`` and ``joint`` are those of :func:`run_bench`.  A cache entry
+    is used only when it is fit (:func:`entry_problem`); an unfit one is
+    named in a warning, run again and replaced (see the module's trust
+    model).
 
     Returns a dict with ``count``, ``peak``, ``exit_velocity``, ``energy``
     and the reference's ``cpu_time_s``.
@@ -139,17 +298,42 @@ def reference(path, variant=None, contact=None, joint=None, overrides=(),
     SceneError
         If the scene has no such ``contact`` or ``joint``, or leaves one out
         and more than one (or no) choice (see :func:`find_strike`).
+    OutputError
+        If the cache folder is a link or a file, or cannot be made or
+        written.
     """
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         scene = load_scene(path, variant, list(overrides), "monolithic")
     contact, joint = find_strike(scene, contact, joint)
-    cache = None
-    if cache_dir is not None:
-        cache = Path(cache_dir) / f"{scene.name}-{variant or 'default'}-" \
-                                  f"{_key(scene, contact, joint)}.json"
-        if cache.exists():
-            return json.loads(cache.read_text())
+    with contextlib.ExitStack() as stack:
+        folder = name = key = None
+        if cache_dir is not None:
+            if os.path.islink(cache_dir):      # said plainly; the folder's own check holds
+                raise OutputError(f"cannot use the reference cache {cache_dir}: it is a "
+                                  f"symbolic link (cosim never writes through one); remove it")
+            folder = stack.enter_context(OutputFolder(cache_dir, lock=False))
+            key = cache_key(scene, variant, contact, joint)
+            name = _entry_name(scene, variant, key)
+            got = _read_entry(folder, name)
+            problem = got if isinstance(got, str) else (
+                None if got is None else entry_problem(got["entry"], key))
+            if got is not None and problem is None:
+                stored = got["entry"]["reference"]
+                return {k: stored[k] if kind == "count" else float(stored[k])
+                        for k, kind in _FIELDS.items()}
+            if problem is not None:
+                warnings.warn(f"the bench cache entry {folder.path_of(name)} {problem}: not "
+                              f"used; the reference is run again and the entry replaced",
+                              stacklevel=2)
+        ref = _run_reference(path, variant, overrides, contact, joint)
+        if folder is not None:
+            folder.write(name, lambda fh: json.dump(cache_entry(key, ref), fh, indent=1), "w")
+    return ref
+
+
+def _run_reference(path, variant, overrides, contact, joint) -> dict:
+    """Run the reference (:data:`REFERENCE`) and return its metrics."""
     ov = list(overrides) + _monolithic(REFERENCE)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -158,20 +342,14 @@ def reference(path, variant=None, contact=None, joint=None, overrides=(),
         raise SimulationError(f"the reference run failed: {res.message}")
     ref = _metrics(res, contact, joint)
     ref["cpu_time_s"] = res.summary["cpu_time_s"]
-    if cache is not None:
-        try:
-            cache.parent.mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            raise output_error(exc, cache.parent, "cannot make the cache folder") from None
-        write_reference(ref, cache)
     return ref
 
 
-def write_reference(ref: dict, path) -> None:
+def write_reference(ref: dict, path, folder: OutputFolder | None = None) -> Path:
     """The reference's metrics (as :func:`reference` returns them) as JSON,
-    written whole into ``path``'s folder under its checked name."""
-    path = Path(path)
-    _write(path.parent, path.name, lambda fh: json.dump(ref, fh, indent=1), "w")
+    written whole through the checked writer (see :func:`write_csv` for
+    ``path`` and ``folder``)."""
+    return _write(path, folder, lambda fh: json.dump(ref, fh, indent=1), "w")
 
 
 def _once(path, variant, overrides, scheme, ref, contact, joint) -> tuple:
@@ -359,33 +537,44 @@ def cheapest_within(rows, accuracy: float = 0.01) -> dict:
     return best
 
 
-def _write(folder, name: str, write, mode: str) -> Path:
-    """``folder/name``, its name checked by :func:`cosim.io.rundir.inside`,
-    written whole by :func:`cosim.core.series.atomic_write` (an
-    :class:`OSError` becomes an :class:`~cosim.errors.OutputError` naming
-    the file)."""
-    path = inside(folder, name)
-    atomic_write(path, write, mode)
-    return path
+def _write(path, folder: OutputFolder | None, write, mode: str) -> Path:
+    """Write ``path`` whole through :meth:`cosim.io.rundir.OutputFolder.write`:
+    as the name ``path`` in ``folder`` (open, its lock held by the caller),
+    or, without ``folder``, into ``path``'s folder, opened and locked for
+    the write."""
+    if folder is not None:
+        return folder.write(check_name(str(path), folder.path), write, mode)
+    path = Path(path)
+    with OutputFolder(path.parent) as own:
+        return own.write(path.name, write, mode)
 
 
-def write_csv(rows, path) -> None:
-    """The rows as CSV with :data:`COLUMNS`, written whole into ``path``'s
-    folder under its checked name (:func:`cosim.io.rundir.inside`).
+def write_csv(rows, path, folder: OutputFolder | None = None) -> Path:
+    """The rows as CSV with :data:`COLUMNS`, written whole through the
+    checked writer (:class:`cosim.io.rundir.OutputFolder`): a link planted
+    at the name is replaced, never followed.
+
+    Parameters
+    ----------
+    rows : sequence of BenchRow
+    path : path-like or str
+        The file; with ``folder``, its plain name in that folder.
+    folder : OutputFolder, optional
+        The open output folder whose lock the caller holds; without it,
+        ``path``'s folder is opened and locked for the write.
 
     Raises
     ------
     OutputError
-        If the name is no plain file name or the file cannot be written.
+        If the name is no plain file name, the folder is a link or a file,
+        another cosim process holds its lock, or the file cannot be written.
     """
-    path = Path(path)
-
     def write(fh):
         w = csv.DictWriter(fh, fieldnames=COLUMNS)
         w.writeheader()
         for r in rows:
             w.writerow(asdict(r))
-    _write(path.parent, path.name, write, "w")
+    return _write(path, folder, write, "w")
 
 
 def read_csv(path) -> list[BenchRow]:
@@ -400,19 +589,18 @@ def read_csv(path) -> list[BenchRow]:
     return rows
 
 
-def plot(rows, path, title="") -> None:
+def plot(rows, path, title="", folder: OutputFolder | None = None) -> Path:
     """Log-log work-precision plot: the larger of the peak and exit-velocity
     errors against CPU time, one line per scheme through the medians over
     the round-off copies, with a bar from the best copy to the worst; the
     paper's method and the monolithic tolerances as points; runs whose
-    worst copy miscounts the contacts are hollow.  Written whole into
-    ``path``'s folder under its checked name (:func:`cosim.io.rundir.inside`).
+    worst copy miscounts the contacts are hollow.  Written whole through the
+    checked writer (see :func:`write_csv` for ``path`` and ``folder``).
     Needs matplotlib (``pip install "cosim[plot]"``)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    path = Path(path)
     fig, ax = plt.subplots(figsize=(6.4, 4.6))
     groups: dict[str, list[BenchRow]] = {}
     for r in rows:
@@ -453,7 +641,7 @@ def plot(rows, path, title="") -> None:
     ax.legend(fontsize=8)
     fig.tight_layout()
     try:
-        _write(path.parent, path.name, lambda fh: fig.savefig(fh, dpi=110, format="png"), "wb")
+        return _write(path, folder, lambda fh: fig.savefig(fh, dpi=110, format="png"), "wb")
     finally:
         plt.close(fig)
 
