@@ -370,3 +370,15 @@ def test_a_tls_scheduler_is_probed_with_the_configured_certificate(tmp_path):
             (tmp_path / key).write_text(pem)
         with dask.config.set(files):
             backends._probe_scheduler(address, 10.0)
+
+
+def test_an_echoed_address_is_escaped_and_capped():
+    """The address is echoed in every message: its control characters are
+    escaped and a long one is cut, so it can neither fake a line of output
+    nor flood the terminal."""
+    address = "tcp://x\nerror: all clear" + "a" * 100_000
+    with pytest.raises(SweepError) as exc:
+        backends._probe_scheduler(address, 10.0)
+    text = str(exc.value)
+    assert "\n" not in text and "x\\nerror: all clear" in text
+    assert len(text) < 1000, len(text)

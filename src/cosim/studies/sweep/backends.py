@@ -19,7 +19,7 @@ import threading
 import time
 import warnings
 
-from cosim.errors import UnsafeStepError
+from cosim.errors import UnsafeStepError, shown
 from cosim.scene.load import SceneError
 
 __all__ = ["SweepError", "CONNECT_TIMEOUT_S", "default_workers"]
@@ -228,8 +228,8 @@ def _scheduler_endpoint(address: str) -> tuple[str, str, int]:
             raise ValueError("a host and a port from 1 to 65535 are needed")
     except (ValueError, TypeError) as exc:
         raise SweepError(f"`--scheduler` must be `local` or a Dask scheduler's address "
-                         f"(tcp://HOST:PORT or tls://HOST:PORT), got {address!r}: "
-                         f"{exc}") from None
+                         f"(tcp://HOST:PORT or tls://HOST:PORT), got '{shown(address)}': "
+                         f"{shown(str(exc))}") from None
     return scheme, host, port
 
 
@@ -286,7 +286,7 @@ def _probe_scheduler(address: str, timeout: float = CONNECT_TIMEOUT_S) -> None:
     """
     scheme, host, port = _scheduler_endpoint(address)
     deadline = time.monotonic() + timeout
-    where = f"`--scheduler` {address!r}"
+    where = f"`--scheduler` '{shown(address)}'"
 
     def left() -> float:
         remaining = deadline - time.monotonic()
@@ -305,7 +305,7 @@ def _probe_scheduler(address: str, timeout: float = CONNECT_TIMEOUT_S) -> None:
         return bytes(data)
 
     try:
-        sock = socket.create_connection((host, port), timeout=left())
+        sock = _connect(host, port, left)
     except socket.timeout:
         raise SweepError(f"{where} cannot be reached: no connection within "
                          f"{timeout:g} s") from None
@@ -341,6 +341,41 @@ def _probe_scheduler(address: str, timeout: float = CONNECT_TIMEOUT_S) -> None:
     problem = _greeting_problem(body, size)
     if problem:
         raise SweepError(f"{where} is not a Dask scheduler: {problem}")
+
+
+def _connect(host: str, port: int, left):
+    """A TCP socket connected to ``host:port`` within the time ``left()``
+    gives, the name lookup included (the resolver's own time limits can add
+    up to far more): ``socket.timeout`` past it."""
+    box: dict = {}
+
+    def lookup():
+        try:
+            box["found"] = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)
+        except OSError as exc:
+            box["error"] = exc
+
+    thread = threading.Thread(target=lookup, name="cosim-dask-lookup", daemon=True)
+    thread.start()
+    thread.join(left())
+    if thread.is_alive():
+        raise socket.timeout
+    if "error" in box:
+        raise box["error"]
+    error: OSError = OSError(f"no address found for {shown(host)}")
+    for family, kind, proto, _, sockaddr in box["found"]:
+        sock = socket.socket(family, kind, proto)
+        try:
+            sock.settimeout(left())
+            sock.connect(sockaddr)
+            return sock
+        except socket.timeout:
+            sock.close()
+            raise
+        except OSError as exc:
+            sock.close()
+            error = exc
+    raise error
 
 
 def _peek(sock) -> bytes:
@@ -433,14 +468,14 @@ def _connect_client(address: str, timeout: float):
             client.close()
     if client is not None:
         return client
-    where = f"`--scheduler` {address!r}"
+    where = f"`--scheduler` '{shown(address)}'"
     exc = box.get("error")
     if exc is None:
         raise SweepError(f"{where}: the Dask client did not start within {timeout:g} s")
     if isinstance(exc, OSError):
-        raise SweepError(f"{where} cannot be reached: {exc}")
+        raise SweepError(f"{where} cannot be reached: {shown(str(exc))}")
     raise SweepError(f"{where}: the Dask client could not start: "
-                     f"{type(exc).__name__}: {exc}")
+                     f"{type(exc).__name__}: {shown(str(exc))}")
 
 
 def _local_security():
