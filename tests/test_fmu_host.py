@@ -340,3 +340,17 @@ def test_the_unpack_limit_variable_is_checked(monkeypatch):
     with pytest.raises(ValueError, match=r"COSIM_FMU_UNPACK_LIMIT must be a positive size in "
                                          r"bytes \(e.g. 2147483648 or 2G\), got 'lots'"):
         fmu_unpack.unpack_limit()
+
+
+def test_a_sweep_removes_the_folder_of_a_worker_it_kills_on_timeout(hostile, tmp_path):
+    """The one point hangs; the sweep kills its worker at the time limit (no
+    exit handler runs there) and removes the FMU folder the worker left."""
+    tmp = tmp_path / "tmp"
+    done = subprocess.run(_cosim("sweep", str(FMU_SCENE), "--set",
+                                 f"subsystems.arm.path={hostile('hang')}", "--set",
+                                 f"t_end={T_END}", "--timeout", "8", "--out",
+                                 str(tmp_path / "sweep")),
+                          capture_output=True, text=True, env=_env(tmp), timeout=120)
+    assert done.returncode == 1, done.stderr
+    assert "timeout" in done.stdout and "ran past the time limit of 8 s" in done.stdout
+    assert not list(tmp.glob("cosim-fmu-*"))
