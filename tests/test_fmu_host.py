@@ -334,6 +334,8 @@ def test_stale_folders_of_dead_processes_go_on_the_next_load(hostile, tmp_path):
 
 def test_the_unpack_limit_variable_is_checked(monkeypatch):
     from cosim.sides import fmu_unpack
+    monkeypatch.delenv(fmu_unpack.UNPACK_LIMIT_ENV, raising=False)
+    assert fmu_unpack.unpack_limit() == 1 << 30             # docs/fmu.md: 1 GiB
     monkeypatch.setenv(fmu_unpack.UNPACK_LIMIT_ENV, "2G")
     assert fmu_unpack.unpack_limit() == 2 << 30
     monkeypatch.setenv(fmu_unpack.UNPACK_LIMIT_ENV, "lots")
@@ -354,3 +356,22 @@ def test_a_sweep_removes_the_folder_of_a_worker_it_kills_on_timeout(hostile, tmp
     assert done.returncode == 1, done.stderr
     assert "timeout" in done.stdout and "ran past the time limit of 8 s" in done.stdout
     assert not list(tmp.glob("cosim-fmu-*"))
+    # the killed worker's FMU host (hung in doStep, deaf to SIGTERM) ends on its own
+    deadline = time.monotonic() + 10
+    while _processes_with(f"TMPDIR={tmp}") and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert not _processes_with(f"TMPDIR={tmp}")
+
+
+def _processes_with(entry: str) -> list[int]:
+    """The live processes whose environment holds ``entry``."""
+    found = []
+    for env in Path("/proc").glob("[0-9]*/environ"):
+        try:
+            if entry.encode() in env.read_bytes().split(b"\0"):
+                state = (env.parent / "stat").read_text().rsplit(")", 1)[1].split()[0]
+                if state != "Z":
+                    found.append(int(env.parent.name))
+        except OSError:
+            continue
+    return found
