@@ -16,7 +16,7 @@ class FMUError(SimulationError):
     """An FMU failed during a run: an FMI call returned an error, or the
     process that hosts the FMU crashed (a segfault, an abort).  The run ends
     ``failed`` with its data up to the last communication point, and its
-    summary's ``fmu_failure`` holds :meth:`details`.
+    summary's ``fmu_failure`` holds what its ``details()`` returns.
 
     Attributes
     ----------

@@ -60,7 +60,7 @@ def simulate(scene: Scene, *, scheme: str | None = None, progress=None,
     SimulationResult
         ``status`` is ``finished``, or ``failed`` when the run could not go
         on (:class:`SimulationError`: the series end where it stopped and
-        ``message`` says why; for an FMU's failure, :class:`FMUError`, the
+        ``message`` says why; for an FMU's failure, :class:`~cosim.FMUError`, the
         summary's ``fmu_failure`` names the subsystem, the FMU, the FMI
         function, how it failed and the time).  ``cpu_time_s`` counts the
         CPU time of the FMUs' host processes too.
