@@ -57,6 +57,12 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("--variant")
     i.add_argument("--set", action="append", metavar="KEY=VALUE")
     i.add_argument("--json", action="store_true", help="print JSON")
+    i.add_argument("--run-fmu", action="store_true",
+                   help="load and run the scene's FMUs (their native code, as `cosim run` "
+                        "does) to evaluate what only they tell: a port mass they report "
+                        "when they run, and where each contact first closes. Without it "
+                        "an FMU is read from its modelDescription.xml alone and none of "
+                        "its code runs")
     i.set_defaults(func=_cmd_info)
     bn = sub.add_parser("bench", help="work-precision: error against CPU time over schemes "
                                       "and steps, against a cached monolithic reference")

@@ -110,10 +110,12 @@ def simulate(scene: Scene, *, scheme: str | None = None, progress=None,
 def _simulate(scene, scheme, progress, progress_interval, out, overwrite):
     from cosim.core.result import check_output_dir, write_scene, write_summary
     from cosim.io.rundir import inside
+    from cosim.scene.work import warn_work
 
     if out is not None:
         check_output_dir(out, overwrite, scene.export)
     system, sch = scene.build(scheme)
+    warn_work(scene.path, scene.work(scheme, system))      # a long run says so first
     if out is not None:
         if hasattr(sch, "preflight"):
             sch.preflight(system, scene.t_end)     # a refusal writes nothing
