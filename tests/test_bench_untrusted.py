@@ -16,6 +16,7 @@ from pathlib import Path
 import pytest
 
 import cosim.studies.bench as bench
+import cosim.studies.bench_cache as bench_cache
 from cosim.cli import main
 from cosim.errors import OutputError
 from cosim.scene.load import load_scene
@@ -86,7 +87,7 @@ def _forge(path, **changes):
     someone who knows the format would."""
     entry = json.loads(path.read_text())
     entry["reference"].update(changes)
-    entry["checksum"] = bench._checksum(entry["key"], entry["reference"])
+    entry["checksum"] = bench_cache._checksum(entry["key"], entry["reference"])
     path.write_text(json.dumps(entry))
 
 
@@ -297,7 +298,7 @@ def test_an_entry_of_the_wrong_shape_is_run_again_even_with_its_checksum(case, c
             del data["reference"][k]
         else:
             data["reference"][k] = v
-    data["checksum"] = bench._checksum(data["key"], data["reference"])
+    data["checksum"] = bench_cache._checksum(data["key"], data["reference"])
     entry.write_text(json.dumps(data))
     with pytest.warns(UserWarning, match=rf"{entry.name} {message}"):
         ref = _reference(cache)
@@ -311,7 +312,7 @@ def test_an_entry_of_another_cosim_version_is_not_used(cache, runs, fresh, monke
     a warning and run again."""
     old = _entry(cache)
     _forge(old, peak=0.5)
-    monkeypatch.setattr(bench, "__version__", "0.0.1")
+    monkeypatch.setattr(bench_cache, "__version__", "0.0.1")
     _same(_reference(cache), fresh)
     assert len(runs) == 1
     (new,) = set(cache.glob("*.json")) - {old}
@@ -394,7 +395,7 @@ def test_the_key_holds_the_content_of_every_fmu_the_scene_names(tmp_path, two_fm
     scene, after = key()
     assert after["table"] == before["table"] and after["files"]["scene"] == \
         before["files"]["scene"]
-    assert bench._entry_name(scene, None, after) != bench._entry_name(scene, None, before)
+    assert bench.entry_name(scene, None, after) != bench.entry_name(scene, None, before)
     ref = {"count": 1, "peak": 1e-3, "exit_velocity": 1.0, "energy": 0.0, "cpu_time_s": 0.1}
     assert bench.entry_problem(bench.cache_entry(before, ref), after) == \
         "was written for other content of subsystems.arm.path (its SHA-256 differs)"

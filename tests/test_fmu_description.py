@@ -405,3 +405,23 @@ def test_a_path_naming_a_directory_says_so(tmp_path):
                                          r"\(relative to the scene file\), got '.*arm2.fmu': "
                                          r".*arm2.fmu is a directory"):
         _scene(tmp_path / "arm2.fmu")
+
+
+def test_a_huge_model_description_is_refused_before_it_is_parsed(tmp_path, monkeypatch):
+    """A small FMU may hold a huge, highly compressed modelDescription.xml
+    that FMPy would parse whole: its declared size is checked first."""
+    pytest.importorskip("fmpy", reason="FMPy is not installed (the `fmi` extra)")
+    from cosim.sides import fmu_description
+    monkeypatch.setattr(fmu_description, "DESCRIPTION_MAX_BYTES", 1 << 16)
+    parsed = []
+    monkeypatch.setattr(fmu_description.fmpy_module(), "read_model_description",
+                        lambda *a, **k: parsed.append(a))
+    fmu = tmp_path / "bomb.fmu"
+    with zipfile.ZipFile(fmu, "w", zipfile.ZIP_DEFLATED) as z:
+        z.writestr("modelDescription.xml", '<?xml version="1.0"?>\n<fmiModelDescription '
+                   'fmiVersion="2.0">' + " " * (1 << 17) + "</fmiModelDescription>")
+    assert fmu.stat().st_size < 4096
+    with pytest.raises(SceneError, match=r"holds a modelDescription.xml of 131\d+ bytes, more "
+                                         r"than the 65536 bytes cosim reads"):
+        _scene(fmu)
+    assert parsed == []

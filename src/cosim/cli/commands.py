@@ -226,7 +226,8 @@ def _bench(args, folder) -> bool:
     whether it wrote its files."""
     import math
 
-    from cosim.studies.bench import cheapest_within, plot, run_bench, write_csv, write_reference
+    from cosim.studies.bench import cheapest_within, run_bench, write_csv, write_reference
+    from cosim.studies.bench_plot import plot
 
     out = folder.path
     spread = args.spread

@@ -95,6 +95,7 @@ def read_fmu_variables(path) -> tuple[object, dict[str, FMUVariable]]:
         ``binaries/PLATFORM`` folder); or it declares a variable name twice.
     """
     fmpy = fmpy_module()
+    _check_description_size(path)
     version = _fmi_version(path)
     if version is not None and version.startswith("1."):
         raise ValueError(f"is an FMI {shown(version, limit=20)} FMU; cosim supports "
@@ -123,6 +124,25 @@ def read_fmu_variables(path) -> tuple[object, dict[str, FMUVariable]]:
         out[v.name] = FMUVariable(v.name, int(v.valueReference), v.causality, v.variability,
                                   v.type, v.start, getattr(v, "unit", None), v.description)
     return md, out
+
+
+#: the largest ``modelDescription.xml`` read [bytes]: FMPy parses it whole in memory
+DESCRIPTION_MAX_BYTES = 64 << 20
+
+
+def _check_description_size(path) -> None:
+    """Refuse a model description larger than :data:`DESCRIPTION_MAX_BYTES`
+    (by the size the zip declares, before anything is unpacked: a small FMU
+    may hold a huge, highly compressed member)."""
+    import zipfile
+    try:
+        with zipfile.ZipFile(path) as z:
+            size = z.getinfo("modelDescription.xml").file_size
+    except (OSError, KeyError, zipfile.BadZipFile, ValueError):
+        return                          # FMPy says what is wrong with the file
+    if size > DESCRIPTION_MAX_BYTES:
+        raise ValueError(f"holds a modelDescription.xml of {size} bytes, more than the "
+                         f"{DESCRIPTION_MAX_BYTES} bytes cosim reads")
 
 
 def _fmi_version(path) -> str | None:

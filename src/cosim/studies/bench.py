@@ -42,30 +42,28 @@ from __future__ import annotations
 
 import contextlib
 import csv
-import errno
-import hashlib
 import json
 import math
 import os
-import stat
 import statistics
 import warnings
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from cosim import __version__
-from cosim.errors import OutputError, SimulationError, UnsafeStepError, shown
+from cosim.errors import OutputError, SimulationError, UnsafeStepError
 from cosim.io.rundir import OutputFolder, check_name
 from cosim.scene.checks import SceneError
-from cosim.scene.inputs import input_digests
+from cosim.studies.bench_cache import (CACHE_FORMAT, CACHE_MAX_BYTES, REFERENCE, _FIELDS,
+                                        cache_entry, cache_key, entry_name, entry_problem,
+                                        read_entry)
 from cosim.studies.roundoff import OFFSETS, perturbed_overrides
 from cosim.studies.metrics import impact_metrics, relative_errors
 from cosim.studies.strike import find_strike
 from cosim.scene.run import simulate
 from cosim.scene.load import load_scene
 
-__all__ = ["BenchRow", "COLUMNS", "MAX_SPREAD", "CACHE_FORMAT", "reference", "run_bench",
-           "within", "cheapest_within", "write_csv", "read_csv", "write_reference", "plot",
+__all__ = ["BenchRow", "COLUMNS", "MAX_SPREAD", "CACHE_FORMAT", "CACHE_MAX_BYTES", "REFERENCE",
+           "reference", "run_bench", "within", "cheapest_within", "write_csv", "read_csv", "write_reference",
            "cache_key", "cache_entry", "entry_problem"]
 
 #: columns of the CSV, in order: the first ten as before the copies (each
@@ -79,8 +77,6 @@ COLUMNS = ("scheme", "label", "macro_step", "tolerance", "cpu_time_s", "err_peak
 #: the most copies a row can run on: the scene and one per round-off offset
 MAX_SPREAD = len(OFFSETS) + 1
 
-#: the reference: monolithic DOP853, every switch located, tight tolerances
-REFERENCE = {"method": "DOP853", "rtol": 1e-11, "atol": 1e-14}
 
 #: the seed paper's method (Lipinski: MATLAB ode45)
 PAPER_RK45 = {"method": "RK45", "max_step": 1e-4, "rtol": 1e-4, "atol": 1e-6}
@@ -142,143 +138,6 @@ def _monolithic(options: dict) -> list[str]:
     return [f"scheme.monolithic.{k}={json.dumps(v)}" for k, v in options.items()]
 
 
-#: the layout of a reference cache entry (part of its key)
-CACHE_FORMAT = 1
-#: the largest cache entry read [bytes]; an entry holds well under 2 KiB
-CACHE_MAX_BYTES = 1 << 16
-#: the reference's fields and what each holds: a count, a finite number, or
-#: a finite number or NaN (no exit velocity: the contact never released; no
-#: energy error: the initial energy is zero)
-_FIELDS = {"count": "count", "peak": "finite", "exit_velocity": "nan", "energy": "nan",
-           "cpu_time_s": "finite"}
-
-
-def cache_key(scene, variant, contact: str, joint: str) -> dict:
-    """What the reference of ``scene`` (loaded with ``variant``, the
-    overrides and the monolithic scheme) depends on: the cache's format,
-    cosim's version, the SHA-256 of every input file
-    (:func:`cosim.scene.inputs.input_digests`), of the scene's table after
-    variant and overrides, the reference's settings, the contact and the
-    joint.
-
-    Raises
-    ------
-    SceneError
-        If an input file cannot be read any more.
-    """
-    table = json.dumps(scene.data, sort_keys=True, default=str)
-    return {"format": CACHE_FORMAT, "cosim": __version__, "files": input_digests(scene),
-            "table": hashlib.sha256(table.encode()).hexdigest(), "variant": variant,
-            "reference": dict(REFERENCE), "contact": contact, "joint": joint}
-
-
-def _entry_name(scene, variant, key: dict) -> str:
-    digest = hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()
-    return f"{scene.name}-{variant or 'default'}-{digest[:16]}.json"
-
-
-def _checksum(key: dict, ref: dict) -> str:
-    blob = json.dumps({"key": key, "reference": ref}, sort_keys=True)
-    return hashlib.sha256(blob.encode()).hexdigest()
-
-
-def cache_entry(key: dict, ref: dict) -> dict:
-    """The cache entry of the reference ``ref`` computed for ``key``: both,
-    and the SHA-256 of both (``checksum``)."""
-    ref = {k: ref[k] for k in _FIELDS}
-    return {"key": key, "reference": ref, "checksum": _checksum(key, ref)}
-
-
-def _show(v, limit: int) -> str:
-    """A value read from a cache entry, for a message (text quoted)."""
-    return shown(repr(v) if isinstance(v, str) else v, limit)
-
-
-def _field_problem(name: str, v, kind: str) -> str | None:
-    if isinstance(v, bool) or not isinstance(v, (int, float)):
-        return f"`reference.{name}` is {type(v).__name__} {_show(v, 40)}, not a number"
-    if kind == "count":
-        if not isinstance(v, int) or v < 0:
-            return f"`reference.{name}` is {_show(v, 40)}, not a count (a whole number >= 0)"
-    elif math.isinf(v) or (kind == "finite" and math.isnan(v)):
-        return f"`reference.{name}` is {v}, not a finite number"
-    return None
-
-
-def entry_problem(entry, key: dict) -> str | None:
-    """What makes the cache entry ``entry`` (parsed JSON) unfit to use for
-    ``key``, or ``None`` when it is fit: its shape (a table of ``key``,
-    ``reference`` and ``checksum``; the reference's fields of their types,
-    finite where they must be), its key, and its checksum."""
-    if not isinstance(entry, dict):
-        return f"holds {type(entry).__name__} {_show(entry, 60)}, not a cache entry (a table)"
-    if set(entry) != {"key", "reference", "checksum"}:
-        return (f"holds the keys {shown(sorted(map(str, entry)), 80)}, not `key`, `reference` "
-                f"and `checksum`")
-    stored, ref = entry["key"], entry["reference"]
-    if stored != key:
-        if not isinstance(stored, dict):
-            return f"holds a `key` of {type(stored).__name__}, not a table"
-        if stored.get("cosim") != key["cosim"]:
-            return (f"was written by cosim {_show(stored.get('cosim'), 40)}, not by this "
-                    f"version ({key['cosim']})")
-        files = stored.get("files")
-        changed = [k for k in key["files"] if not isinstance(files, dict)
-                   or files.get(k) != key["files"][k]]
-        if changed:
-            return (f"was written for other content of {', '.join(changed)} (its SHA-256 "
-                    f"differs)")
-        other = sorted(k for k in set(key) | set(stored) if stored.get(k) != key.get(k))
-        return f"was written for other inputs (its key differs in {shown(other, 80)})"
-    if not isinstance(ref, dict):
-        return f"holds a `reference` of {type(ref).__name__}, not a table"
-    if set(ref) != set(_FIELDS):
-        return (f"holds a `reference` of the fields {shown(sorted(map(str, ref)), 80)}, not "
-                f"{sorted(_FIELDS)}")
-    for name, kind in _FIELDS.items():
-        problem = _field_problem(name, ref[name], kind)
-        if problem is not None:
-            return problem
-    if entry["checksum"] != _checksum(key, ref):
-        return "does not match its checksum (damaged, or a number edited)"
-    return None
-
-
-def _read_entry(folder: OutputFolder, name: str):
-    """The parsed cache entry ``name`` of ``folder``, ``None`` when there is
-    none, or the text of why it cannot be read (a string).  The entry is
-    opened without following a link and read only up to
-    :data:`CACHE_MAX_BYTES`."""
-    flags = (os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_NONBLOCK", 0)
-             | getattr(os, "O_CLOEXEC", 0))
-    try:
-        fd = os.open(name, flags, dir_fd=folder.fd)
-    except FileNotFoundError:
-        return None
-    except OSError as exc:
-        return "is a symbolic link" if exc.errno == errno.ELOOP else \
-            f"cannot be read ({exc.strerror})"
-    try:
-        if not stat.S_ISREG(os.fstat(fd).st_mode):
-            return "is not a plain file"
-        data = b""
-        while len(data) <= CACHE_MAX_BYTES:
-            chunk = os.read(fd, CACHE_MAX_BYTES + 1 - len(data))
-            if not chunk:
-                break
-            data += chunk
-    except OSError as exc:
-        return f"cannot be read ({exc.strerror})"
-    finally:
-        os.close(fd)
-    if len(data) > CACHE_MAX_BYTES:
-        return f"holds more than {CACHE_MAX_BYTES} bytes"
-    try:
-        return {"entry": json.loads(data.decode("utf-8"))}
-    except (ValueError, RecursionError) as exc:
-        return f"is not JSON ({shown(str(exc), 80)})"
-
-
 def reference(path, variant=None, contact=None, joint=None, overrides=(),
               cache_dir=None) -> dict:
     """Impact metrics of the fine monolithic reference, from the cache when
@@ -314,8 +173,8 @@ def reference(path, variant=None, contact=None, joint=None, overrides=(),
                                   f"symbolic link (cosim never writes through one); remove it")
             folder = stack.enter_context(OutputFolder(cache_dir, lock=False))
             key = cache_key(scene, variant, contact, joint)
-            name = _entry_name(scene, variant, key)
-            got = _read_entry(folder, name)
+            name = entry_name(scene, variant, key)
+            got = read_entry(folder, name)
             problem = got if isinstance(got, str) else (
                 None if got is None else entry_problem(got["entry"], key))
             if got is not None and problem is None:
@@ -587,65 +446,3 @@ def read_csv(path) -> list[BenchRow]:
                                         int(v) if types[k] == "int" else float(v))
                                     for k, v in rec.items()}))
     return rows
-
-
-def plot(rows, path, title="", folder: OutputFolder | None = None) -> Path:
-    """Log-log work-precision plot: the larger of the peak and exit-velocity
-    errors against CPU time, one line per scheme through the medians over
-    the round-off copies, with a bar from the best copy to the worst; the
-    paper's method and the monolithic tolerances as points; runs whose
-    worst copy miscounts the contacts are hollow.  Written whole through the
-    checked writer (see :func:`write_csv` for ``path`` and ``folder``).
-    Needs matplotlib (``pip install "cosim[plot]"``)."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(6.4, 4.6))
-    groups: dict[str, list[BenchRow]] = {}
-    for r in rows:
-        if r.status == "finished":
-            groups.setdefault(r.label, []).append(r)
-    floor = 1e-8
-    spread = max((r.copies for r in rows), default=1)
-    for label, rs in groups.items():
-        x = [r.cpu_time_s for r in rs]
-        y = [max(r.err_peak, r.err_exit_velocity, floor) for r in rs]
-        lo = [max(_best(r.err_peak_best, r.err_peak), _best(r.err_exit_velocity_best,
-                                                            r.err_exit_velocity), floor)
-              for r in rs]
-        hi = [max(_best(r.err_peak_worst, r.err_peak), _best(r.err_exit_velocity_worst,
-                                                             r.err_exit_velocity), floor)
-              for r in rs]
-        marker = {"paper_rk45": "*", "monolithic": "s"}.get(label, "o")
-        line, = ax.plot(x, y, marker=marker, ls="-" if len(rs) > 1 else "none", label=label)
-        ax.errorbar(x, y, yerr=[[max(yi - li, 0.0) for yi, li in zip(y, lo)],
-                                [max(hi_ - yi, 0.0) for yi, hi_ in zip(y, hi)]],
-                    fmt="none", ecolor=line.get_color(), elinewidth=1.0, capsize=3)
-        for r, xi, yi in zip(rs, x, y):
-            if _best(r.err_count_worst, r.err_count):
-                ax.plot([xi], [yi], marker=marker, mfc="white", mec=line.get_color(), ls="none")
-            if label not in ("paper_rk45", "monolithic"):
-                ax.annotate(f"{r.macro_step:.0e}", (xi, yi), fontsize=7,
-                            textcoords="offset points", xytext=(3, 3))
-    ax.axhline(0.01, color="grey", lw=0.8, ls="--")
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    ax.set_xlabel("CPU time of the run [s]" + (", median" if spread > 1 else ""))
-    ax.set_ylabel("max(peak, exit velocity) relative error")
-    if spread > 1:
-        ax.text(0.99, 0.01, f"median of {spread} round-off copies; bars: best to worst; "
-                f"hollow: a copy miscounts", transform=ax.transAxes, ha="right", va="bottom",
-                fontsize=7, color="dimgrey")
-    ax.set_title(title or "work-precision")
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    try:
-        return _write(path, folder, lambda fh: fig.savefig(fh, dpi=110, format="png"), "wb")
-    finally:
-        plt.close(fig)
-
-
-def _best(x: float, fallback: float) -> float:
-    """``x``, or ``fallback`` where a row has no band (NaN)."""
-    return fallback if math.isnan(x) else x

@@ -21,6 +21,7 @@ import warnings
 
 from cosim.errors import UnsafeStepError, shown
 from cosim.scene.load import SceneError
+from cosim.sides.fmu_unpack import remove_stale_unpacked
 
 __all__ = ["SweepError", "CONNECT_TIMEOUT_S", "default_workers"]
 
@@ -198,6 +199,7 @@ class _ProcessPool:
         w.key = None
         w.stop()
         self.workers.remove(w)
+        remove_stale_unpacked()         # the FMU folders a killed worker could not remove
 
     def close(self, wait: float = 5.0) -> None:
         workers, self.workers = self.workers, []
