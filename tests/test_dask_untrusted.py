@@ -228,13 +228,19 @@ def test_an_address_the_sweep_cannot_reach_is_malformed(address):
         backends._probe_scheduler(address, 10.0)
 
 
-def test_a_dask_scheduler_passes_the_probe():
+def scratch(tmp_path) -> dict:
+    """A test's own cluster keeps its scratch space in the test's folder."""
+    return {"local_directory": str(tmp_path),
+            "scheduler_kwargs": {"local_directory": str(tmp_path)}}
+
+
+def test_a_dask_scheduler_passes_the_probe(tmp_path):
     """A real scheduler greets the probe as the sweep's client expects (the
     sweeps on one in ``test_sweep.py`` run through it too)."""
     from distributed import LocalCluster
 
     with LocalCluster(n_workers=0, processes=False, protocol="tcp://", host="127.0.0.1",
-                      dashboard_address=None) as cluster:
+                      dashboard_address=None, **scratch(tmp_path)) as cluster:
         backends._probe_scheduler(cluster.scheduler_address, 10.0)
 
 
@@ -357,7 +363,8 @@ def test_a_tls_scheduler_is_probed_with_the_configured_certificate(tmp_path):
 
     security = Security.temporary()
     with LocalCluster(n_workers=0, processes=False, protocol="tls://", host="127.0.0.1",
-                      security=security, dashboard_address=None) as cluster:
+                      security=security, dashboard_address=None,
+                      **scratch(tmp_path / "scratch")) as cluster:
         address = cluster.scheduler_address
         with pytest.raises(SweepError, match=r"a tls:// scheduler needs the cluster's "
                                              r"certificates in Dask's distributed\.comm\.tls"):
