@@ -192,7 +192,7 @@ def _check_summary(summary: dict, status: str) -> None:
     """Refuse a ``summary.json`` other than a run of ``status`` writes, in
     what the table and the figure read of it."""
     if summary.get("status") != status:
-        raise _Damaged(f"its summary.json says another status than its point.json")
+        raise _Damaged("its summary.json says another status than its point.json")
     if not isinstance(summary.get("message", ""), (str, type(None))):
         raise _Damaged("its summary.json has a `message` that is not text")
     contacts = summary.get("contacts", {})
@@ -205,7 +205,7 @@ def _check_summary(summary: dict, status: str) -> None:
               and all(isinstance(iv, list) and len(iv) == 2 and all(map(_number, iv))
                       for iv in c["intervals"]))
         if not ok:
-            raise _Damaged(f"its summary.json has a contact that is not what a run writes")
+            raise _Damaged("its summary.json has a contact that is not what a run writes")
 
 
 def _members(folder_fd: int, wanted) -> dict:
