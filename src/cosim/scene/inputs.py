@@ -3,7 +3,7 @@
 A result computed from a scene depends on more than the scene's table: an
 FMU side runs the binary in the ``.fmu`` file its ``path`` names, which can
 be replaced while the scene file stays as it was.  Whatever keeps a result
-for reuse (the bench's reference cache, :mod:`cosim.studies.bench`) keys it
+for reuse (the bench's reference cache, a sweep's points) keys it
 on :func:`input_digests`: the SHA-256 of the scene file and of every file it
 names, so that a changed byte in any of them is a new key.
 
@@ -12,13 +12,16 @@ subsystems; no other key of a scene names a file.
 """
 from __future__ import annotations
 
+import errno
 import hashlib
+import os
+import stat
 from pathlib import Path
 
 from cosim.scene.checks import SceneError
 from cosim.scene.specs import FMUSpec
 
-__all__ = ["input_files", "input_digests", "file_digest"]
+__all__ = ["input_files", "input_digests", "file_digest", "FileDigests"]
 
 #: bytes read at a time while hashing
 _CHUNK = 1 << 20
@@ -34,13 +37,36 @@ def input_files(scene) -> dict[str, Path]:
     return files
 
 
+class FileDigests:
+    """The SHA-256 of files' content, as hex digits: each file read once
+    while its device, inode, size and modification time stay the same (a
+    sweep hashes the FMU of each of its points once).  A FIFO or device is
+    refused, never read."""
+
+    def __init__(self):
+        self._known: dict = {}
+
+    def __call__(self, path) -> str:
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0)
+                     | getattr(os, "O_CLOEXEC", 0))
+        try:
+            st = os.fstat(fd)
+            if not stat.S_ISREG(st.st_mode):
+                raise OSError(errno.EINVAL, "not a regular file", str(path))
+            ident = (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns)
+            if ident not in self._known:
+                h = hashlib.sha256()
+                while chunk := os.read(fd, _CHUNK):
+                    h.update(chunk)
+                self._known[ident] = h.hexdigest()
+            return self._known[ident]
+        finally:
+            os.close(fd)
+
+
 def file_digest(path) -> str:
     """The SHA-256 of a file's content, as hex digits (read in chunks)."""
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        while chunk := fh.read(_CHUNK):
-            h.update(chunk)
-    return h.hexdigest()
+    return FileDigests()(path)
 
 
 def input_digests(scene) -> dict[str, str]:

@@ -24,7 +24,8 @@ from cosim.scene.load import SceneError, load_scene, read_toml_file
 from cosim.studies.strike import find_strike
 from cosim.studies.sweep.backends import _Runner
 from cosim.studies.sweep.grid import LARGE_GRID, Point, grid_points
-from cosim.studies.sweep.resume import (InputHashes, PointFolderError, _load_done, input_files,
+from cosim.scene.inputs import FileDigests, input_files
+from cosim.studies.sweep.resume import (PointFolderError, _load_done,
                                         open_point, point_key)
 from cosim.studies.sweep.table import TABLE, _record, table_writer
 
@@ -187,7 +188,7 @@ def sweep(scene, *, variants=None, grid=None, scheme: str | None = None, workers
     _check_options(workers, timeout)
     scene_path = Path(scene)
     table = read_toml_file(scene_path)      # a regular file within the limits, or refused
-    hashes = InputHashes()
+    hashes = FileDigests()
     try:
         scene_hash = hashes(scene_path)
     except OSError as exc:
@@ -310,7 +311,9 @@ def _sweep(points, folder, scene_path, scene_hash, hashes, strikes, *, scheme, w
                 seen_warnings.add(str(w.message))
                 warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
         try:
-            inputs = [(label, hashes(path)) for label, path in input_files(sc)]
+            base = scene_path.resolve().parent
+            inputs = [(f"{label} = {os.path.relpath(path, base)}", hashes(path))
+                      for label, path in input_files(sc).items() if label != "scene"]
         except OSError as exc:
             message = f"{shown(str(exc.filename or 'an input file'))} cannot be read: " \
                       f"{exc.strerror or exc}"

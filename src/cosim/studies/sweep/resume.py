@@ -17,11 +17,9 @@ against the bytes it occupies before it is read.
 from __future__ import annotations
 
 import errno
-import hashlib
 import json
 import os
 import stat
-import sys
 import zipfile
 from pathlib import Path
 
@@ -51,45 +49,6 @@ class _Damaged(ValueError):
 
 
 # ------------------------------------------------------------- the key
-class InputHashes:
-    """SHA-256 of the files a sweep's points read, each file read once per
-    sweep (while its device, inode, size and modification time stay the
-    same)."""
-
-    def __init__(self):
-        self._known: dict = {}
-
-    def __call__(self, path) -> str:
-        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0)
-                     | getattr(os, "O_CLOEXEC", 0))
-        try:
-            st = os.fstat(fd)
-            if not stat.S_ISREG(st.st_mode):
-                raise OSError(errno.EINVAL, "not a regular file", str(path))
-            ident = (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns)
-            if ident not in self._known:
-                h = hashlib.sha256()
-                while chunk := os.read(fd, 1 << 20):
-                    h.update(chunk)
-                self._known[ident] = h.hexdigest()
-            return self._known[ident]
-        finally:
-            os.close(fd)
-
-
-def input_files(scene) -> list[tuple[str, Path]]:
-    """The files other than the scene file that a loaded scene reads when
-    it runs: each FMU's ``path``, labelled by its path from the scene file's
-    folder."""
-    base = Path(scene.path).resolve().parent
-    out = []
-    for sub in scene.subsystems:
-        if getattr(sub, "type", None) == "fmu":
-            path = Path(sub.path)
-            out.append((f"subsystems.{sub.name}.path = {os.path.relpath(path, base)}", path))
-    return out
-
-
 def point_key(point: Point, scene_path: Path, scheme, scene_hash: str, inputs=()) -> dict:
     """What ``point.json`` records of a point besides its outcome: the scene
     file (name and content), the other ``inputs`` (label, SHA-256), cosim's
@@ -102,9 +61,8 @@ def point_key(point: Point, scene_path: Path, scheme, scene_hash: str, inputs=()
 
 
 def _version() -> str:
-    """cosim's version, read from the top package as data: it is imported
-    before any of its subpackages, and this layer may not import it."""
-    return sys.modules["cosim"].__version__
+    from cosim import __version__
+    return __version__
 
 
 def _key_change(done: dict, key: dict) -> str | None:
