@@ -289,14 +289,14 @@ def read_csv(path) -> list[Point]:
 
 
 def write_csv(points, path) -> Path:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with path.open("w", newline="") as fh:
+    from cosim.io.rundir import atomic_write
+
+    def write(fh):
         w = csv.DictWriter(fh, fieldnames=COLUMNS)
         w.writeheader()
         for p in points:
             w.writerow(asdict(p))
-    return path
+    return atomic_write(Path(path), write, "w")
 
 
 SLOPE_METRICS = ("cpu_per_sim_s", "cpu_per_step_s", "structure_cpu_per_step_s", "cpu_build_s")
@@ -351,9 +351,8 @@ def plot(points, path) -> Path:
     axes[0].set_ylim(top=20.0 * top)          # room for the legends above the data
     axes[0].set_title("beam_impact: C's two contacts")
     axes[1].set_title("three_mass f100: C's contact train")
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
+    from cosim.io.rundir import atomic_write
+    path = atomic_write(Path(path), lambda fh: fig.savefig(fh, dpi=110, format="png"), "wb")
     plt.close(fig)
     return path
 

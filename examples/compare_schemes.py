@@ -18,6 +18,7 @@ from pathlib import Path
 from matplotlib.figure import Figure
 
 import cosim
+from cosim.io.rundir import atomic_write
 
 SCENE = Path(__file__).resolve().parents[1] / "cases" / "three_mass.toml"
 SCHEMES = ["monolithic", "jacobi", "gauss_seidel", "implicit"]
@@ -29,7 +30,6 @@ def main(argv=None):
                         help="end time [s] (C strikes at 0.103 s)")
     parser.add_argument("--out", type=Path, default=Path("runs/examples/compare_schemes"))
     args = parser.parse_args(argv)
-    args.out.mkdir(parents=True, exist_ok=True)
 
     rows = {}
     for name in SCHEMES:
@@ -47,7 +47,7 @@ def main(argv=None):
         r["peak_error"] = r["peak_force"] / ref["peak_force"] - 1.0
         print(f"{name:<14}{len(r['intervals']):>9}{r['peak_force']:>16.1f}"
               f"{r['peak_error']:>+9.2%}{r['cpu_time_s']:>9.2f}")
-    (args.out / "compare_schemes.json").write_text(json.dumps(rows, indent=1))
+    atomic_write(args.out / "compare_schemes.json", lambda fh: json.dump(rows, fh, indent=1), "w")
 
     fig = Figure(figsize=(8, 5), dpi=100, layout="constrained")
     ax_t, ax_p = fig.subplots(1, 2, width_ratios=[2.2, 1])
@@ -66,7 +66,8 @@ def main(argv=None):
     ax_p.axvline(0.0, color="k", lw=0.8)
     ax_p.set_xlabel("peak force vs monolithic [%]")
     ax_p.set_title("peak force of C")
-    fig.savefig(args.out / "compare_schemes.png")
+    atomic_write(args.out / "compare_schemes.png",
+                 lambda fh: fig.savefig(fh, format="png"), "wb")
     print(f"wrote {args.out / 'compare_schemes.png'}")
 
 

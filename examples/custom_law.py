@@ -24,6 +24,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 import cosim
+from cosim.io.rundir import atomic_write
 from cosim.studies.analytic import hertz_contact
 from couplers import CONTACT_LAWS, ContactLaw
 
@@ -73,7 +74,6 @@ def main(argv=None):
     parser.add_argument("--t-end", type=float, default=0.02, help="end time [s] (touch at 10 ms)")
     parser.add_argument("--out", type=Path, default=Path("runs/examples/custom_law"))
     args = parser.parse_args(argv)
-    args.out.mkdir(parents=True, exist_ok=True)
 
     rubber = dict(youngs_modulus=1e7, poisson_ratio=0.49, radius=0.05)
     k = SphereOnFlat(**rubber).hertz_constant
@@ -90,7 +90,7 @@ def main(argv=None):
     for name, r in report.items():
         print(f"{name:>15}: {r['count']} contact of {r['in_touch_time'] * 1e3:.5f} ms, "
               f"peak penetration {r['peak_penetration'] * 1e3:.5f} mm")
-    (args.out / "custom_law.json").write_text(json.dumps(report, indent=1))
+    atomic_write(args.out / "custom_law.json", lambda fh: json.dump(report, fh, indent=1), "w")
 
     fig = Figure(figsize=(8, 5), dpi=100, layout="constrained")
     ax_t, ax_d = fig.subplots(1, 2)
@@ -105,7 +105,8 @@ def main(argv=None):
     ax_t.set_ylim(top=1.35 * ax_t.get_ylim()[1])         # room for the legend
     ax_t.legend(loc="upper right", fontsize="small")
     ax_d.legend(loc="upper left", fontsize="small")
-    fig.savefig(args.out / "custom_law.png")
+    atomic_write(args.out / "custom_law.png",
+                 lambda fh: fig.savefig(fh, format="png"), "wb")
     print(f"wrote {args.out / 'custom_law.png'}")
 
 

@@ -21,6 +21,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 import cosim
+from cosim.io.rundir import atomic_write
 import fem
 
 SCENE = Path(__file__).resolve().parents[1] / "cases" / "beam_impact.toml"
@@ -32,7 +33,6 @@ def main(argv=None):
                         help="end time [s] (C strikes at 0.103 s)")
     parser.add_argument("--out", type=Path, default=Path("runs/examples/robot_on_beam"))
     args = parser.parse_args(argv)
-    args.out.mkdir(parents=True, exist_ok=True)
 
     scene = cosim.load_scene(SCENE, overrides=[f"t_end={args.t_end}"])
     result = cosim.simulate(scene)
@@ -56,7 +56,7 @@ def main(argv=None):
     print(f"sag at rest {w[0] * 1e3:.4f} mm, closed form {sag * 1e3:.4f} mm")
     summary = {"sag": float(w[0]), "sag_closed_form": sag, "intervals": intervals,
                "peak_force": float(force.max()), "lowest_deflection": float(w.min())}
-    (args.out / "robot_on_beam.json").write_text(json.dumps(summary, indent=1))
+    atomic_write(args.out / "robot_on_beam.json", lambda fh: json.dump(summary, fh, indent=1), "w")
 
     fig = Figure(figsize=(8, 5), dpi=100, layout="constrained")
     ax_f, ax_w = fig.subplots(2, 1, sharex=True)
@@ -71,7 +71,8 @@ def main(argv=None):
     ax_w.set_xlabel("time [ms]")
     ax_w.legend(loc="lower left")
     ax_f.set_xlim(max(0.0, (intervals[0][0] - 0.005) * 1e3) if intervals else 0.0, t[-1] * 1e3)
-    fig.savefig(args.out / "robot_on_beam.png")
+    atomic_write(args.out / "robot_on_beam.png",
+                 lambda fh: fig.savefig(fh, format="png"), "wb")
     print(f"wrote {args.out / 'robot_on_beam.png'}")
 
 

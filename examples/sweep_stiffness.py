@@ -20,6 +20,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 import cosim
+from cosim.io.rundir import atomic_write
 
 SCENE = Path(__file__).resolve().parents[1] / "cases" / "spring_drop.toml"
 MASS, SPEED = 1.0, 1.0                     # [kg], [m/s]: the scene's body and its approach
@@ -30,7 +31,6 @@ def main(argv=None):
     parser.add_argument("--t-end", type=float, default=0.02, help="end time [s] (touch at 10 ms)")
     parser.add_argument("--out", type=Path, default=Path("runs/examples/sweep_stiffness"))
     args = parser.parse_args(argv)
-    args.out.mkdir(parents=True, exist_ok=True)
 
     stiffness = np.geomspace(1e5, 1e8, 7)                           # [N/m]
     peak_force, contact_time = np.full(7, np.nan), np.full(7, np.nan)
@@ -45,10 +45,10 @@ def main(argv=None):
     for row in zip(stiffness, peak_force, exact_force, contact_time * 1e3, exact_time * 1e3):
         print("k = {:8.3g} N/m   peak {:9.2f} N (exact {:9.2f})   contact {:7.4f} ms "
               "(exact {:7.4f})".format(*row))
-    (args.out / "sweep_stiffness.json").write_text(json.dumps(
+    atomic_write(args.out / "sweep_stiffness.json", lambda fh: fh.write(json.dumps(
         {"stiffness": stiffness.tolist(), "peak_force": peak_force.tolist(),
          "contact_time": contact_time.tolist(), "exact_force": exact_force.tolist(),
-         "exact_time": exact_time.tolist()}, indent=1))
+         "exact_time": exact_time.tolist()}, indent=1)), "w")
 
     fig = Figure(figsize=(8, 5), dpi=100, layout="constrained")
     ax_f, ax_t = fig.subplots(1, 2)
@@ -61,7 +61,8 @@ def main(argv=None):
     for ax in (ax_f, ax_t):
         ax.set_xlabel("contact stiffness k [N/m]")
         ax.legend()
-    fig.savefig(args.out / "sweep_stiffness.png")
+    atomic_write(args.out / "sweep_stiffness.png",
+                 lambda fh: fig.savefig(fh, format="png"), "wb")
     print(f"wrote {args.out / 'sweep_stiffness.png'}")
 
 

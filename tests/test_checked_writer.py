@@ -131,3 +131,22 @@ def test_shown_escapes_control_characters_and_caps_the_length():
     long = shown("x" * 120_000)
     assert len(long) < 250 and long.endswith("(120000 characters)")
     assert "\n" not in shown({"k": "v\n" * 1000}) and len(shown(list(range(10**5)))) < 250
+
+
+def test_the_trust_section_states_the_limits_the_code_holds():
+    """docs/troubleshooting.md's "Files from elsewhere" quotes the limits
+    that cosim applies to untrusted inputs: each stands in the code."""
+    from cosim.sides.fmu_description import DESCRIPTION_MAX_BYTES
+    from cosim.sides.fmu_unpack import DEFAULT_UNPACK_LIMIT, UNPACK_LIMIT_ENV
+    from cosim.studies.sweep.backends import CONNECT_TIMEOUT_S
+    from cosim.studies.sweep.grid import LARGE_GRID
+    root = Path(__file__).resolve().parents[1]
+    text = " ".join((root / "docs" / "troubleshooting.md").read_text().split())
+    start = text.index("## Files from elsewhere")
+    section = text[start:text.index("## The run guard", start)]
+    for printed in (f"at most {DESCRIPTION_MAX_BYTES >> 20} MiB",
+                    f"more than the {DESCRIPTION_MAX_BYTES} bytes cosim reads",
+                    f"within {CONNECT_TIMEOUT_S:g} s",
+                    f"at most {DEFAULT_UNPACK_LIMIT >> 30} GiB (`{UNPACK_LIMIT_ENV}` raises it)",
+                    f"more than {LARGE_GRID} points asks for `--yes`"):
+        assert printed in section, printed

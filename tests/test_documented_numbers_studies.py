@@ -1046,8 +1046,18 @@ GUARD_DEFAULTS = [(claim(TR, f"| `{key}` | {text} |", f"cosim.load_scene(...).gu
 LIMITS = [
     (claim(TR, "more than 20 000 elements", "cosim.scene.load.MAX_ELEMENTS", "20"),
      lambda loader, tomlread: loader.MAX_ELEMENTS / 1000),
-    (claim(TR, "more than 1e9 macro or integrator steps", "cosim.scene.load.MAX_STEPS"),
+    (claim(TR, "more than 1e9 integrator steps before it starts", "cosim.scene.load.MAX_STEPS"),
      lambda loader, tomlread: loader.MAX_STEPS),
+    (claim(TR, "| `max_steps` | 1e9 |", "cosim.scene.load.MAX_STEPS"),
+     lambda loader, tomlread: loader.MAX_STEPS),
+    (claim(TR, "A count above 1e8 runs", "cosim.scene.work.WARN_STEPS"),
+     lambda loader, tomlread: _work().WARN_STEPS),
+    (claim(TR, "`interface_tolerance` below 2.22e-16",
+           "cosim.core.schemes.base.MIN_RELATIVE_TOLERANCE", "2.22e-16"),
+     lambda loader, tomlread: _schemes_base().MIN_RELATIVE_TOLERANCE),
+    *[(claim(TR, "(2.51, 3.31, 6.39)", "cosim.core.preflight.EXPLICIT_STABILITY", text),
+       lambda loader, tomlread, m=method: _preflight().EXPLICIT_STABILITY[m])
+      for method, text in (("RK23", "2.51"), ("RK45", "3.31"), ("DOP853", "6.39"))],
     (claim(TR, "estimated memory passes 4 GiB", "cosim.scene.load.MAX_MEMORY"),
      lambda loader, tomlread: loader.MAX_MEMORY / 2**30),
     (claim(TR, "`must hold at most 67108864 bytes`", "cosim.io.tomlread.MAX_BYTES"),
@@ -1057,6 +1067,21 @@ LIMITS = [
     (claim(TR, "`must hold at most 10000 keys", "cosim.io.tomlread.MAX_KEYS"),
      lambda loader, tomlread: tomlread.MAX_KEYS),
 ]
+
+
+def _work():
+    from cosim.scene import work
+    return work
+
+
+def _schemes_base():
+    from cosim.core.schemes import base
+    return base
+
+
+def _preflight():
+    from cosim.core import preflight
+    return preflight
 
 
 def test_the_guards_defaults_and_the_loaders_limits():

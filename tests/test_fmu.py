@@ -264,8 +264,11 @@ def test_preflight_uses_the_declared_port_mass(fmus, tmp_path, port_mass):
 
 
 def test_info_lists_the_fmu_variables(fmus):
+    """With the FMU run (`run_fmu`, `cosim info --run-fmu`): its variables,
+    and its port mass where the contact first touches
+    (tests/test_fmu_description.py: what info tells without running it)."""
     from cosim.scene.info import scene_info
-    info = scene_info(_scene(fmus[3, False]))
+    info = scene_info(_scene(fmus[3, False]), run_fmu=True)
     arm = info["subsystems"]["arm"]
     assert arm["dofs"] == 2 and arm["coordinates"] == ["q1", "q2"]
     assert arm["fmu"]["fmi_version"] == "3.0" and arm["fmu"]["can_get_set_state"] is False

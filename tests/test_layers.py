@@ -22,6 +22,8 @@ SRC = Path(__file__).resolve().parents[1] / "src"
 LAYERS = {
     "multibody": 0, "fem": 0, "couplers": 0,
     "cosim.errors": 1,
+    # the release string, assigned in the package's __init__ before it imports anything
+    "cosim.__version__": 1,
     "cosim.io": 2,
     "cosim.core": 3,
     "cosim.sides": 4,

@@ -39,7 +39,7 @@ CONSTRUCTED = [
         "output.every=1", "output.export_every=1", "output.export=[]",
         "guard.energy_growth=0.1", "guard.energy_check=true", "guard.energy_floor=0.001",
         "guard.energy_warning=0.01", "guard.coupling_warning=0.01",
-        "guard.chatter_switches=100", "guard.chatter_window=1e-6",
+        "guard.chatter_switches=100", "guard.chatter_window=1e-6", "guard.max_steps=1e9",
         f"{M}.joint.angle=0.0", f"{M}.joint.spring={{stiffness=0.0, rest=0.0}}",
         f"{M}.joint.damper={{damping=0.0}}",
         f'{M}.joint.drive={{type="constant", torque=0.0}}',

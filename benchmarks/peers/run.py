@@ -61,6 +61,8 @@ from pathlib import Path
 
 import numpy as np
 
+from cosim.io.rundir import OutputFolder
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
 SCENE = ROOT / "cases" / "three_mass.toml"
@@ -376,17 +378,19 @@ def main(argv=None) -> int:
             for r in spreads:
                 print(json.dumps(r))
     out = Path(a.out)
-    out.mkdir(parents=True, exist_ok=True)
-    with (out / "peers.csv").open("w", newline="") as fh:
+
+    def write_rows(fh):
         w = csv.DictWriter(fh, fieldnames=COLUMNS)
         w.writeheader()
         for r in rows:
             w.writerow({k: r.get(k) for k in COLUMNS})
     md = markdown(rows, mach, ref, t_show, spreads)
-    (out / "peers.md").write_text(md)
-    (out / "peers.json").write_text(json.dumps({"machine": mach, "reference": ref,
-                                                "t_end": t_show, "rows": rows,
-                                                "exudyn_spread": spreads}, indent=1))
+    report = {"machine": mach, "reference": ref, "t_end": t_show, "rows": rows,
+              "exudyn_spread": spreads}
+    with OutputFolder(out) as folder:       # the checked writer every cosim output uses
+        folder.write("peers.csv", write_rows, "w")
+        folder.write("peers.md", lambda fh: fh.write(md), "w")
+        folder.write("peers.json", lambda fh: json.dump(report, fh, indent=1), "w")
     print()
     print(md, end="")
     print(f"wrote {out / 'peers.csv'}, {out / 'peers.md'} and {out / 'peers.json'}")

@@ -140,7 +140,7 @@ def _description(version: int, state: bool) -> str:
 
 
 def build_fmu(out_dir, fmi_version: int = 2, state: bool = True, compiler: str | None = None,
-              name: str | None = None) -> Path:
+              name: str | None = None, extra_sources=()) -> Path:
     """Compile ``arm2.c`` and zip it into ``OUT_DIR/NAME.fmu``.
 
     Parameters
@@ -154,6 +154,9 @@ def build_fmu(out_dir, fmi_version: int = 2, state: bool = True, compiler: str |
         The C compiler; :func:`find_compiler` by default.
     name : str, optional
         File name without ``.fmu``; ``arm2_fmi{2,3}[_nostate]`` by default.
+    extra_sources : sequence of path, optional
+        More C files compiled into the FMU's library (the tests add one whose
+        constructor leaves a mark when the library is loaded).
 
     Raises
     ------
@@ -179,7 +182,7 @@ def build_fmu(out_dir, fmi_version: int = 2, state: bool = True, compiler: str |
         flags = [f"-I{headers()}"] + (["-DFMI3"] if fmi_version == 3 else []) \
             + ([] if state else ["-DNO_STATE"])
         cmd = [cc, "-shared", "-fPIC", "-O2", *flags, str(SOURCE), str(tmp / "stubs.c"),
-               "-o", str(library), "-lm"]
+               *map(str, extra_sources), "-o", str(library), "-lm"]
         done = subprocess.run(cmd, capture_output=True, text=True)
         if done.returncode != 0:
             raise RuntimeError(f"`{' '.join(cmd)}` failed:\n{done.stderr}")

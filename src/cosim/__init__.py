@@ -14,11 +14,12 @@ before), so ``cosim --help`` or ``cosim plot`` do not pay for the schemes and
 #: ``cosim --version``
 __version__ = "0.9.0"
 
-from cosim.errors import CouplingError, SimulationError, UnsafeStepError
+from cosim.errors import CouplingError, FMUError, SimulationError, UnsafeStepError
 
 __all__ = ["Subsystem", "RigidReference", "StepInput", "SimulationResult", "write_outputs",
            "simulate", "run_scene", "Scene", "SceneError", "load_scene", "COUPLING_SCHEMES",
-           "CouplingError", "SimulationError", "UnsafeStepError", "INTEGRATORS", "RK4", "TimeStepper"]
+           "CouplingError", "FMUError", "SimulationError", "UnsafeStepError", "INTEGRATORS", "RK4",
+           "TimeStepper"]
 
 #: public name -> the submodule that defines it, imported on first use
 _LAZY = {**dict.fromkeys(("INTEGRATORS", "RK4", "TimeStepper"), "core.ode"),

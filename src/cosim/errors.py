@@ -1,7 +1,7 @@
 """Errors of a run (the scene loader's SceneError lives in cosim.scene.checks)."""
 
-__all__ = ["SimulationError", "CouplingError", "UnsafeStepError", "OutputExistsError", "shown",
-           "OutputError", "OutputBusyError", "SignalStop"]
+__all__ = ["SimulationError", "CouplingError", "FMUError", "UnsafeStepError", "OutputExistsError",
+           "shown", "OutputError", "OutputBusyError", "SignalStop"]
 
 
 class SimulationError(RuntimeError):
@@ -10,6 +10,40 @@ class SimulationError(RuntimeError):
 
 class CouplingError(SimulationError):
     """The coupling failed during a run (an implicit step did not converge)."""
+
+
+class FMUError(SimulationError):
+    """An FMU failed during a run: an FMI call returned an error, or the
+    process that hosts the FMU crashed (a segfault, an abort).  The run ends
+    ``failed`` with its data up to the last communication point, and its
+    summary's ``fmu_failure`` holds what its ``details()`` returns.
+
+    Attributes
+    ----------
+    fmu : str
+        The FMU file's name.
+    subsystem : str
+    function : str or None
+        The FMI function that failed or was running (``fmi2DoStep``), None
+        when not known.
+    status : str
+        What happened: the FMI status returned (``fmi2Error``) or how the
+        host process ended (``its host process was killed by signal SIGSEGV``).
+    t : float
+        Simulation time of the call [s] (the communication point a step
+        started from).
+    """
+
+    def __init__(self, message: str, *, fmu: str, subsystem: str, function: str | None,
+                 status: str, t: float):
+        super().__init__(message)
+        self.fmu, self.subsystem, self.function = fmu, subsystem, function
+        self.status, self.t = status, float(t)
+
+    def details(self) -> dict:
+        """What ``summary.json`` records of the failure."""
+        return {"subsystem": self.subsystem, "fmu": self.fmu, "function": self.function,
+                "status": self.status, "time": self.t}
 
 
 class UnsafeStepError(ValueError):

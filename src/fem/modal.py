@@ -166,7 +166,8 @@ def modes(structure, n_modes: int | None = None, cutoff_hz: float | None = None)
     Raises
     ------
     ValueError
-        On ``n_modes < 1`` or ``cutoff_hz <= 0``.
+        On ``n_modes < 1`` or ``cutoff_hz <= 0``, or a ``cutoff_hz`` at or
+        below the lowest natural frequency (no mode would be kept).
 
     Notes
     -----
@@ -214,6 +215,10 @@ def modes(structure, n_modes: int | None = None, cutoff_hz: float | None = None)
     phi = phi[:, :want]
     if cutoff_hz is not None:
         below = omega / (2.0 * np.pi) < cutoff_hz
+        if not below.any():
+            raise ValueError(f"`cutoff_hz` keeps no mode: it is {cutoff_hz:.6g} Hz, and the "
+                             f"lowest natural frequency is {omega[0] / (2.0 * np.pi):.6g} Hz; "
+                             f"give a cutoff above it")
         omega, phi = omega[below], phi[:, below]
     if phi.size:
         big = np.argmax(np.abs(phi), axis=0)

@@ -2,7 +2,8 @@
 
 :func:`main` is the console script (``cosim = "cosim.cli:main"``) and runs
 under ``python -m cosim.cli`` too.  The parser is in :mod:`cosim.cli.parser`,
-the sub-commands in :mod:`cosim.cli.commands`, the progress line and the
+the sub-commands in :mod:`cosim.cli.commands` (``sweep`` in
+:mod:`cosim.cli.sweep_command`), the progress line and the
 escaping of control characters in :mod:`cosim.cli.terminal`, the stop on
 SIGTERM and SIGHUP in :mod:`cosim.cli.signals`.
 """

@@ -79,6 +79,12 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("--variant")
     i.add_argument("--set", action="append", metavar="KEY=VALUE")
     i.add_argument("--json", action="store_true", help="print JSON")
+    i.add_argument("--run-fmu", action="store_true",
+                   help="load and run the scene's FMUs (their native code, as `cosim run` "
+                        "does) to evaluate what only they tell: a port mass they report "
+                        "when they run, and where each contact first closes. Without it "
+                        "an FMU is read from its modelDescription.xml alone and none of "
+                        "its code runs")
     i.set_defaults(func=_cmd_info)
     bn = sub.add_parser("bench", help="work-precision: error against CPU time over schemes "
                                       "and steps, against a cached monolithic reference")
@@ -125,6 +131,8 @@ def build_parser() -> argparse.ArgumentParser:
                                       "multibody on a structure)")
     sw.add_argument("--joint", help="SUBSYSTEM/JOINT of the striker (default: the joint of the "
                                     "body that carries the contact's point)")
+    sw.add_argument("--yes", action="store_true",
+                    help="run a grid of more than 10000 points (refused without it)")
     sw.add_argument("--no-plot", action="store_true", help="write the table only")
     sw.add_argument("--quiet", action="store_true", help="no progress")
     sw.set_defaults(func=_cmd_sweep)

@@ -24,7 +24,7 @@ import numpy as np
 
 from cosim.io.rundir import OutputFolder, atomic_write, output_error
 
-__all__ = ["SeriesStore", "SeriesFile", "write_npz", "atomic_write"]
+__all__ = ["SeriesStore", "SeriesFile", "write_npz", "npz_writer", "atomic_write"]
 
 #: date stamped on every member of ``series.npz`` (zip cannot go earlier)
 _ZIP_DATE = (1980, 1, 1, 0, 0, 0)
@@ -67,13 +67,20 @@ def write_npz(path, arrays: Mapping) -> None:
     The file is written next to ``path`` and moved into place, so a reader
     never sees half of it.
     """
+    atomic_write(Path(path), npz_writer(arrays), "wb")
+
+
+def npz_writer(arrays: Mapping):
+    """The writer of :func:`write_npz`, for a caller that holds the folder
+    (:meth:`cosim.io.rundir.OutputFolder.write`): ``writer(fh)`` writes
+    ``arrays`` as that ``.npz`` into the binary file ``fh``."""
     def write(fh):
         with zipfile.ZipFile(fh, "w", zipfile.ZIP_STORED, allowZip64=True) as zf:
             for name, value in arrays.items():
                 a = np.asanyarray(value)
                 with _open_member(zf, name, a.nbytes) as out:
                     np.lib.format.write_array(out, a, version=(1, 0), allow_pickle=False)
-    atomic_write(Path(path), write, "wb")
+    return write
 
 
 def _open_spool(path: Path):

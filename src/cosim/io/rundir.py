@@ -376,6 +376,48 @@ class OutputFolder:
         except OSError as exc:
             raise output_error(exc, self.path / name, "cannot remove") from None
 
+    def read(self, name: str, max_bytes: int) -> bytes | None:
+        """The bytes of the plain file ``name`` (``None`` when there is none),
+        opened without following a link and read only up to ``max_bytes``:
+        for the small files cosim reads back from a folder it writes (a
+        cache entry, a point's record).
+
+        Raises
+        ------
+        OutputError
+            If ``name`` is a link, not a plain file, larger than
+            ``max_bytes``, or cannot be read; the message says which.
+        """
+        flags = os.O_RDONLY | _NOFOLLOW | getattr(os, "O_NONBLOCK", 0)
+        path = self.path_of(name)
+        try:
+            fd = os.open(name, flags, dir_fd=self.fd)
+        except FileNotFoundError:
+            return None
+        except OSError as exc:
+            if exc.errno == errno.ELOOP:
+                raise OutputError(f"{path} is a symbolic link") from None
+            raise output_error(exc, path, "cannot read") from None
+        try:
+            if not stat.S_ISREG(os.fstat(fd).st_mode):
+                raise OutputError(f"{path} is not a plain file")
+            chunks, size = [], 0
+            while size <= max_bytes:
+                chunk = os.read(fd, max_bytes + 1 - size)
+                if not chunk:
+                    break
+                chunks.append(chunk)
+                size += len(chunk)
+        except OSError as exc:
+            if isinstance(exc, OutputError):
+                raise
+            raise output_error(exc, path, "cannot read") from None
+        finally:
+            os.close(fd)
+        if size > max_bytes:
+            raise OutputError(f"{path} holds more than {max_bytes} bytes")
+        return b"".join(chunks)
+
     # ----------------------------------------------------------- writing
     def _temp_name(self, name: str) -> str:
         return f".{name}.{secrets.token_hex(6)}.tmp"

@@ -81,7 +81,12 @@ def _structure(spec, scene, macro_step):
         structure = spec.model.assemble()
         basis = fem.modes(structure, **{k: v for k, v in spec.modes.items() if v})
     except ValueError as exc:
-        raise SceneError(scene.path, spec.key, str(exc)) from None
+        msg = str(exc)
+        for arg, key in (("cutoff_hz", "cutoff_hz"), ("n_modes", "count")):
+            if msg.startswith(f"`{arg}` "):     # the modes table's key, not the function's
+                raise SceneError(scene.path, f"{spec.key}.modes.{key}",
+                                 msg[len(arg) + 3:]) from None
+        raise SceneError(scene.path, spec.key, msg) from None
     except ImportError as exc:        # scikit-fem is an optional extra
         raise SceneError(scene.path, f"{spec.key}.type",
                          f"`{spec.type}` needs {exc.name or 'a missing package'}, which is "
@@ -150,7 +155,7 @@ def build_side(side, scene, default_step: float, macro_step: float | None = None
     return _structure(side, scene, macro_step)
 
 
-def build_system(scene, scheme: str | None = None):
+def build_system(scene, scheme: str | None = None, *, run_fmu: bool = True):
     """Build the subsystems, contacts and the coupling scheme of ``scene``.
 
     Parameters
@@ -160,6 +165,11 @@ def build_system(scene, scheme: str | None = None):
     scheme : str, optional
         Another scheme than the scene's; the scene resolves it
         (:meth:`~cosim.scene.specs.Scene.scheme_spec`).
+    run_fmu : bool
+        Whether FMU sides are instantiated (their code runs); if not, each
+        is built from its model description alone
+        (:class:`~cosim.sides.fmu_description.DescribedFMU`), which
+        describes but cannot step.
 
     Raises
     ------
@@ -180,7 +190,7 @@ def build_system(scene, scheme: str | None = None):
     for side in scene.subsystems:
         if side.type == "fmu":            # a Functional Mock-up Unit: cosim.scene.fmu
             from cosim.scene.fmu_build import build_fmu
-            subs.append(build_fmu(side, scene, name, opts))
+            subs.append(build_fmu(side, scene, name, opts, run=run_fmu))
         else:
             subs.append(build_side(side, scene, spec.default_step, spec.macro_step))
     names = [s.name for s in subs]

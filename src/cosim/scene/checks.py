@@ -12,17 +12,18 @@ import contextlib
 import math
 import re
 
+from cosim.errors import shown
 from cosim.io.rundir import name_problem
 from cosim.scene import keys as _keys
+#: most integrator steps a run may take unless ``guard.max_steps`` raises it
+from cosim.scene.keytable import MAX_STEPS
 
 __all__ = ["SceneError", "Table", "check_name", "type_name", "build_model", "floats",
-           "record_keys", "MAX_ELEMENTS", "MAX_STEPS"]
+           "record_keys", "echo", "MAX_ELEMENTS", "MAX_STEPS"]
 
 #: most elements (or masses) a structure may have: a mesh beyond it is refused
 #: when the scene is read, before anything is assembled
 MAX_ELEMENTS = 20_000
-#: most steps a run may ask for (end time over a macro or integrator step)
-MAX_STEPS = 10**9
 #: rule name -> (text, check)
 _RULES = {">0": ("> 0", lambda v: v > 0), ">=0": (">= 0", lambda v: v >= 0)}
 _MISSING = object()
@@ -31,12 +32,25 @@ _RECORDERS: list[set] = []
 
 
 class SceneError(ValueError):
-    """A scene file that cannot be used, with the file and key path."""
+    """A scene file that cannot be used, with the file and key path.
+
+    The key path is shown escaped and capped (``cosim.errors.shown``): a
+    key is the file's text too.  A value the message echoes goes through
+    ``cosim.scene.checks.echo``."""
 
     def __init__(self, file, key: str, message: str):
         self.file, self.key = str(file), key
-        where = f"`{key}` " if key else ""
+        where = f"`{shown(key)}` " if key else ""
         super().__init__(f"{self.file}: {where}{message}")
+
+
+def echo(value) -> str:
+    """A value read from a scene as an error shows it: its ``repr`` (a string
+    quoted), control characters escaped and at most
+    :data:`cosim.errors.SHOWN_LIMIT` characters (:func:`cosim.errors.shown`),
+    so that a 100 KB string or a line break in the file cannot flood or
+    forge the message.  Every scene error that echoes a value does so here."""
+    return shown(repr(value) if isinstance(value, str) else value)
 
 
 def check_name(file, key: str, name, what: str) -> None:
@@ -146,15 +160,15 @@ class Table:
             return v
         if isinstance(v, bool) or not isinstance(v, (int, float)):
             self.error(k, f"must be a number{' [' + unit + ']' if unit else ''}, "
-                          f"got {type_name(v)} {v!r}")
+                          f"got {type_name(v)} {echo(v)}")
         try:
             v = float(v)
         except OverflowError:
             v = math.inf
         if not math.isfinite(v):
-            self.error(k, f"must be finite, got {v!r}")
+            self.error(k, f"must be finite, got {echo(v)}")
         if rule is not None and not _RULES[rule][1](v):
-            self.error(k, f"must be {_RULES[rule][0]}{' ' + unit if unit else ''}, got {v!r}")
+            self.error(k, f"must be {_RULES[rule][0]}{' ' + unit if unit else ''}, got {echo(v)}")
         return v
 
     def integer(self, k, default=_MISSING, *, low: int | None = None,
@@ -163,11 +177,11 @@ class Table:
         if not given:
             return v
         if isinstance(v, bool) or not isinstance(v, int):
-            self.error(k, f"must be an integer, got {type_name(v)} {v!r}")
+            self.error(k, f"must be an integer, got {type_name(v)} {echo(v)}")
         if low is not None and v < low:
-            self.error(k, f"must be >= {low}, got {v!r}")
+            self.error(k, f"must be >= {low}, got {echo(v)}")
         if high is not None and v > high:
-            self.error(k, f"must be <= {high}, got {v!r}")
+            self.error(k, f"must be <= {high}, got {echo(v)}")
         return v
 
     def string(self, k, default=_MISSING, *, choices=None):
@@ -175,15 +189,15 @@ class Table:
         if not given:
             return v
         if not isinstance(v, str):
-            self.error(k, f"must be a string, got {type_name(v)} {v!r}")
+            self.error(k, f"must be a string, got {type_name(v)} {echo(v)}")
         if choices is not None and v not in choices:
-            self.error(k, f"must be one of {sorted(choices)}, got {v!r}")
+            self.error(k, f"must be one of {sorted(choices)}, got {echo(v)}")
         return v
 
     def boolean(self, k, default=_MISSING):
         v, _ = self._present(k, default)
         if not isinstance(v, bool):
-            self.error(k, f"must be true or false, got {type_name(v)} {v!r}")
+            self.error(k, f"must be true or false, got {type_name(v)} {echo(v)}")
         return v
 
     def vec2(self, k, default=_MISSING, *, unit="m", nonzero=False):
@@ -192,15 +206,15 @@ class Table:
             return v
         if (not isinstance(v, list) or len(v) != 2
                 or any(isinstance(x, bool) or not isinstance(x, (int, float)) for x in v)):
-            self.error(k, f"must be an array of two numbers [{unit}], got {v!r}")
+            self.error(k, f"must be an array of two numbers [{unit}], got {echo(v)}")
         try:
             v = [float(x) for x in v]
         except OverflowError:
             v = [math.inf]
         if not all(math.isfinite(x) for x in v):
-            self.error(k, f"must be finite, got {self.data[k]!r}")
+            self.error(k, f"must be finite, got {echo(self.data[k])}")
         if nonzero and v[0] == 0 and v[1] == 0:
-            self.error(k, f"must be a non-zero vector, got {v!r}")
+            self.error(k, f"must be a non-zero vector, got {echo(v)}")
         return (float(v[0]), float(v[1]))
 
     def table(self, k, default=_MISSING, *, section: str | None = None) -> "Table":
@@ -213,7 +227,7 @@ class Table:
         else:
             v, _ = self._present(k, default)
         if not isinstance(v, dict):
-            self.error(k, f"must be a table, got {type_name(v)} {v!r}")
+            self.error(k, f"must be a table, got {type_name(v)} {echo(v)}")
         return Table(v, self.path + (k,), self.file, section)
 
     def tables(self, k, default=_MISSING, *, section: str | None = None,
@@ -267,9 +281,19 @@ def model_error(t: Table, exc: Exception) -> SceneError:
 
 
 def floats(t: Table, k: str) -> tuple:
-    """A non-empty array of numbers (``bool`` refused) as a tuple of floats."""
+    """A non-empty array of finite numbers (``bool`` refused) as a tuple of
+    floats; a value that is not names its index (``times[3]``)."""
     v = t.raw(k)
     if not isinstance(v, list) or not v or any(
             isinstance(x, bool) or not isinstance(x, (int, float)) for x in v):
-        t.error(k, f"must be a non-empty array of numbers, got {v!r}")
-    return tuple(float(x) for x in v)
+        t.error(k, f"must be a non-empty array of numbers, got {echo(v)}")
+    out = []
+    for i, x in enumerate(v):
+        try:
+            x = float(x)
+        except OverflowError:           # an integer beyond a double
+            x = math.inf
+        if not math.isfinite(x):
+            t.error(f"{k}[{i}]", f"must be finite, got {echo(v[i])}")
+        out.append(x)
+    return tuple(out)

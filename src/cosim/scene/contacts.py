@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from cosim.scene.checks import SceneError, Table, build_model, type_name
+from cosim.scene.checks import SceneError, Table, build_model, echo, type_name
 from cosim.scene.specs import STRUCTURE_TYPES, ContactSpec
 
 __all__ = ["contact_spec", "check_conditions"]
@@ -29,7 +29,7 @@ def contact_spec(name: str, t: Table, subs: list) -> ContactSpec:
         match = [s for s in subs if s.name == sname]
         if not match or not pname:
             t.error(k, f"must read SUBSYSTEM.POINT with a declared subsystem "
-                       f"({[s.name for s in subs]}), got {ref!r}")
+                       f"({[s.name for s in subs]}), got {echo(ref)}")
         s = match[0]
         pts = s.points if s.type == "rigid" else s.ports
         if pname not in pts:
@@ -38,7 +38,7 @@ def contact_spec(name: str, t: Table, subs: list) -> ContactSpec:
 
     a, b = port("a"), port("b")
     if a[0] == b[0]:
-        t.error("b", f"must be on another subsystem than `a`, got {a[0]!r} twice")
+        t.error("b", f"must be on another subsystem than `a`, got {echo(a[0])} twice")
     law_t = t.table("law", section="law.linear")
     law_name = law_t.string("type", choices=CONTACT_LAWS)
     law_t.use(f"law.{law_name}")
@@ -74,9 +74,9 @@ def contact_spec(name: str, t: Table, subs: list) -> ContactSpec:
     if follow and host == a[0]:
         # the surface point slides along b as a moves: only b's integrator
         # applies the force along the surface's slope that this brings
-        t.error("host", f"must be {b[0]!r}, the structure whose surface a following contact "
+        t.error("host", f"must be {echo(b[0])}, the structure whose surface a following contact "
                         f"(`follow = true`) follows: hosted by `{a[0]}`, point a's side, it "
-                        f"would miss the surface's slope force, got {host!r}; leave `host` "
+                        f"would miss the surface's slope force, got {echo(host)}; leave `host` "
                         f"out (a following contact is hosted by its structure), or set "
                         f"`follow = false`")
     connection = _connection(t, law)
@@ -102,20 +102,20 @@ def _trigger(t: Table, k: str, release: bool):
     v = t.raw(k)
     if isinstance(v, str):
         if release or v not in ("start", "touch"):
-            t.error(k, f"must be {forms}, got {v!r}")
+            t.error(k, f"must be {forms}, got {echo(v)}")
         return Trigger(v)
     if not isinstance(v, dict):
-        t.error(k, f"must be {forms}, got {type_name(v)} {v!r}")
+        t.error(k, f"must be {forms}, got {type_name(v)} {echo(v)}")
     tt = t.table(k, section="trigger")
     if tt.has("time") == tt.has("after"):
-        tt.error("", f"must be {forms}: give one of `time` and `after`, got {v!r}")
+        tt.error("", f"must be {forms}: give one of `time` and `after`, got {echo(v)}")
     if tt.has("time"):
         trig = Trigger("time", time=tt.number("time", rule=">=0", unit="s"))
     else:
         event = tt.string("after")
         cname, _, what = event.rpartition(".")
         if not cname or what not in ("grasp", "release"):
-            tt.error("after", f"must read CONTACT.grasp or CONTACT.release, got {event!r}")
+            tt.error("after", f"must read CONTACT.grasp or CONTACT.release, got {echo(event)}")
         trig = Trigger("after", event=event, delay=tt.number("delay", rule=">=0", unit="s"))
     tt.finish()
     return trig
@@ -144,8 +144,8 @@ def _connection(t: Table, law):
         gt.used.add("release")
         if (close.kind == "time" and release is not None and release.kind == "time"
                 and release.time <= close.time):
-            gt.error("release", f"time {release.time!r} s must come after the close time "
-                                f"{close.time!r} s")
+            gt.error("release", f"time {echo(release.time)} s must come after the close time "
+                                f"{echo(close.time)} s")
         gt.finish()
     if t.has("friction"):
         ft = t.table("friction", section="friction")
@@ -179,9 +179,9 @@ def check_conditions(contacts: list, file) -> None:
             other = trig.event.rpartition(".")[0]
             key = f"{c.key}.grasp.{which}.after"
             if other not in grasps:
-                raise SceneError(file, key, f"names {trig.event!r}, but no contact named "
+                raise SceneError(file, key, f"names {echo(trig.event)}, but no contact named "
                                             f"`{other}` has a grasp; contacts with a grasp are "
                                             f"{sorted(grasps)}")
             if which == "close" and other == c.name:
                 raise SceneError(file, key, f"cannot wait for an event of its own grasp, got "
-                                            f"{trig.event!r}")
+                                            f"{echo(trig.event)}")

@@ -6,6 +6,7 @@ it, and the contacts kept out of it.
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 __all__ = ["build_fmu", "settle_fmu_contacts", "needs_rollback"]
 
@@ -21,9 +22,16 @@ def needs_rollback(scheme: str, opts: dict) -> str | None:
     return None
 
 
-def build_fmu(spec, scene, scheme: str, opts: dict):
+def build_fmu(spec, scene, scheme: str, opts: dict, *, run: bool = True):
     """The :class:`~cosim.sides.fmu.FMUSubsystem` of a validated spec, after
-    checking that scheme ``scheme`` (options ``opts``) can drive it.
+    checking that scheme ``scheme`` (options ``opts``) can drive it; with
+    ``run=False`` the :class:`~cosim.sides.fmu_description.DescribedFMU`
+    that stands in for it, made from its model description alone, so that
+    nothing of the FMU runs.
+
+    A port mass the FMU reports (``port_mass`` naming a variable) is read
+    once the FMU is initialised and held to the rule of a declared one
+    (:func:`~cosim.sides.fmu_description.port_mass_problem`).
 
     Raises
     ------
@@ -31,10 +39,13 @@ def build_fmu(spec, scene, scheme: str, opts: dict):
         For the monolithic scheme (an FMU has no model-exchange face), for a
         scheme that rolls back an FMU that cannot get and set its state, for
         an FMU without an ``energy`` variable while the run guard checks
-        energy, or when the FMU cannot be instantiated.
+        energy, when the FMU cannot be instantiated, or when it reports an
+        unfit port mass.
     """
+    from cosim.errors import shown
     from cosim.scene.checks import SceneError
     from cosim.sides.fmu import FMUSubsystem
+    from cosim.sides.fmu_description import DescribedFMU, port_mass_problem
     key = spec["key"]
     if scheme == "monolithic":
         raise SceneError(scene.path, "scheme.name",
@@ -54,11 +65,27 @@ def build_fmu(spec, scene, scheme: str, opts: dict):
                          "is required while the run guard checks energy: name the FMU's "
                          "output variable of its mechanical energy [J], or set "
                          "`guard.energy_check = false`")
+    if not run:
+        return DescribedFMU(spec["name"], spec["path"], spec["ports"], spec["coordinates"],
+                            spec["energy"])
     try:
-        return FMUSubsystem(spec["name"], spec["path"], spec["ports"], spec["parameters"],
-                            spec["coordinates"], spec["energy"])
+        sub = FMUSubsystem(spec["name"], spec["path"], spec["ports"], spec["parameters"],
+                           spec["coordinates"], spec["energy"])
     except (RuntimeError, KeyError) as exc:
         raise SceneError(scene.path, f"{key}.path", str(exc)) from None
+    for k, (pname, port) in enumerate(spec["ports"].items()):
+        if not isinstance(port.mass, str):
+            continue
+        value = sub.port_mass(k)
+        problem = port_mass_problem(value)
+        if problem is not None:
+            sub.close()
+            raise SceneError(scene.path, f"{key}.ports.{pname}.port_mass",
+                             f"names output `{shown(port.mass, limit=80)}` of FMU "
+                             f"{shown(Path(spec['path']).name, limit=80)}, which reports "
+                             f"{shown(value, limit=40)} kg after its initialisation: a port "
+                             f"mass {problem}")
+    return sub
 
 
 def settle_fmu_contacts(scene, subs: list, links: list) -> list:
@@ -75,10 +102,12 @@ def settle_fmu_contacts(scene, subs: list, links: list) -> list:
     """
     from cosim.scene.checks import SceneError
     from cosim.sides.fmu import FMUSubsystem
+    from cosim.sides.fmu_description import DescribedFMU
     out = []
     specs = {c["name"]: c for c in scene.contacts}
     for ln in links:
-        fmu = [s for s in (ln.sub_a, ln.sub_b) if isinstance(subs[s], FMUSubsystem)]
+        fmu = [s for s in (ln.sub_a, ln.sub_b)
+               if isinstance(subs[s], (FMUSubsystem, DescribedFMU))]
         if not fmu or ln.placement != "embedded":
             out.append(ln)
             continue

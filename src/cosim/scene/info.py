@@ -9,6 +9,14 @@ once, and evaluates them there; the run stops at the end time or after
 contact it did not see close is evaluated at the initial pose.  Each contact
 says which pose it used.  The largest stable steps are those the pre-flight
 and build checks judge, at the initial pose.
+
+An FMU's code runs only when asked (``run_fmu``, ``cosim info --run-fmu``):
+by default an FMU side is read from its model description alone
+(:class:`~cosim.sides.fmu_description.DescribedFMU`), no run looks for the
+first touch, and what only the FMU could tell (a port mass it reports when
+it runs, and with it a contact's frequency, contact time and stable steps)
+is listed under ``not_evaluated`` with the reason.  Every text taken from
+a model description is escaped and capped (:func:`cosim.errors.shown`).
 """
 from __future__ import annotations
 
@@ -18,6 +26,7 @@ import time
 from cosim.core import preflight
 from cosim.core.preflight import contact_time, stiffest_normal
 from cosim.core.schemes import COUPLING_SCHEMES
+from cosim.errors import shown
 
 __all__ = ["scene_info", "fmu_info", "first_touch", "contact_time", "FIRST_TOUCH_BUDGET_S"]
 
@@ -29,6 +38,13 @@ RK4_LIMIT = 2.0 * math.sqrt(2.0)
 
 #: fewest samples in a contact's duration that draw it as a shape
 SAMPLES_TO_DRAW = 4
+
+#: longest text of a model description that info shows [characters]
+FMU_TEXT_LIMIT = 200
+
+#: why a scene with an FMU is not run to find where its contacts first close
+NOT_RUN = ("finding where it closes would run the FMU's code; `cosim info --run-fmu` "
+           "runs it")
 
 
 def _sampling(system, c, scene, contact_time: float, name: str) -> dict:
@@ -85,7 +101,8 @@ def first_touch(scene, budget_s: float = FIRST_TOUCH_BUDGET_S) -> tuple[dict, st
 
     The run goes until every contact has closed once, the end time, or
     ``budget_s`` of CPU time; it writes nothing.  A contact closed at the
-    start closes at t = 0.
+    start closes at t = 0.  It runs every side, an FMU's code included
+    (:func:`scene_info` calls it for a scene with an FMU only when asked).
 
     Returns
     -------
@@ -160,6 +177,24 @@ def _contact_info(system, c, scene, touch=None, why_not=None) -> dict:
     if conn is not None:
         out.update(grasp=conn.grasp is not None,
                    friction=None if conn.friction is None else conn.friction.coefficient)
+    unknown = _unknown_mass(system, c)
+    if unknown is not None:          # an FMU reports it only when it runs
+        if c in system.hosted:
+            out["host"] = system.names[system.embedded[c][0]]
+        out.update(stiffness=k, damping=cd, pose={"at": "initial", "t": 0.0, "why": why_not},
+                   not_evaluated=f"reduced mass, frequency, contact time and stable steps: "
+                                 f"{unknown}; `cosim info --run-fmu` runs the FMU to "
+                                 f"evaluate them")
+        return out
+    if not (math.isfinite(mob) and mob > 0 and (touch is None or (
+            math.isfinite(touch[1]) and touch[1] > 0))):
+        out.update(stiffness=k, damping=cd,
+                   not_evaluated=f"reduced mass, frequency, contact time and stable steps: "
+                                 f"the ports' mobility is {mob!r} 1/kg at the start"
+                                 + ("" if touch is None else
+                                    f" and {touch[1]!r} 1/kg at the first touch")
+                                 + ", which gives no finite reduced mass")
+        return out
     m0 = 1.0 / mob                   # at the initial pose: the pre-flight check's
     if touch is not None:
         pose = {"at": "first touch", "t": touch[0]}
@@ -205,22 +240,49 @@ def _contact_info(system, c, scene, touch=None, why_not=None) -> dict:
     return out
 
 
+def _unknown_mass(system, c) -> str | None:
+    """Why contact ``c``'s reduced mass is unknown without running an FMU
+    (a side built from its model description alone), or None."""
+    ln = system.links[c]
+    for s, port in ((ln.sub_a, ln.port_a), (ln.sub_b, ln.port_b)):
+        why = getattr(system.subsystems[s], "unknown_port_mass", lambda p: None)(port)
+        if why is not None:
+            return why
+    return None
+
+
 def fmu_info(sub) -> dict:
-    """What ``cosim info`` tells of an FMU side (:class:`cosim.sides.fmu.FMUSubsystem`):
-    its file, FMI version, whether it can get and set its state (rollback)
-    and interpolate its inputs, and every variable of its model
-    description (name, causality, variability, type, start, unit,
-    description).  ``dofs`` of an FMU counts its named ``coordinates``."""
-    return {"file": sub.path.name, "fmi_version": sub.model_description.fmiVersion,
-            "can_get_set_state": sub.can_get_set_state,
-            "interpolates_inputs": sub.interpolates_inputs,
-            "variables": [{"name": v.name, "causality": v.causality,
-                           "variability": v.variability, "type": v.type,
-                           "start": v.start, "unit": v.unit, "description": v.description}
+    """What ``cosim info`` tells of an FMU side (an
+    :class:`~cosim.sides.fmu.FMUSubsystem`, or a
+    :class:`~cosim.sides.fmu_description.DescribedFMU`): its file, model
+    name, description and generation tool, FMI version, whether it can get
+    and set its state (rollback) and interpolate its inputs, its ports'
+    masses as far as known, and every variable of its model description
+    (name, causality, variability, type, start, unit, description).  Every
+    text from the description is escaped and capped at
+    :data:`FMU_TEXT_LIMIT` characters (:func:`cosim.errors.shown`).
+    ``dofs`` of an FMU counts its named ``coordinates``."""
+    def text(v):
+        return None if v is None else shown(v, limit=FMU_TEXT_LIMIT)
+
+    md = sub.model_description
+    masses = {}
+    for k, (pname, port) in enumerate(sub.ports.items()):
+        m = sub.port_mass(k)
+        masses[pname] = {"kg": m, "variable": None if not isinstance(port.mass, str)
+                         else text(port.mass)}
+    return {"file": text(sub.path.name), "model_name": text(md.modelName),
+            "description": text(md.description), "generation_tool": text(md.generationTool),
+            "fmi_version": text(md.fmiVersion), "can_get_set_state": sub.can_get_set_state,
+            "interpolates_inputs": sub.interpolates_inputs, "port_mass": masses,
+            "variables": [{"name": text(v.name), "causality": text(v.causality),
+                           "variability": text(v.variability), "type": text(v.type),
+                           "start": text(v.start), "unit": text(v.unit),
+                           "description": text(v.description)}
                           for v in sub.variables.values()]}
 
 
-def scene_info(scene, *, budget_s: float = FIRST_TOUCH_BUDGET_S) -> dict:
+def scene_info(scene, *, budget_s: float = FIRST_TOUCH_BUDGET_S, run_fmu: bool = False) -> dict:
     """DOFs and natural frequencies of each subsystem, and each contact's
     frequency, contact time, largest stable macro step per scheme, and how
     often the series will sample it (``sampling_interval_s``,
@@ -236,9 +298,19 @@ def scene_info(scene, *, budget_s: float = FIRST_TOUCH_BUDGET_S) -> dict:
     values at the start when they differ.  The contact time is that of the
     linearised spring and dashpot (:func:`contact_time`).  The largest
     stable steps are judged at the initial pose, as the pre-flight check
-    and the build do."""
-    touches, why_not = first_touch(scene, budget_s)
-    system, _ = scene.build()
+    and the build do.  ``work`` is the count of the run's integrator steps
+    made before it starts (:func:`cosim.scene.work.estimate_work`:
+    ``steps``, ``bound``, ``how`` and the ``key`` that makes most of it).
+
+    A scene with an FMU side is built from its model descriptions alone and
+    not run, unless ``run_fmu``: ``fmu_code_run`` says which, and a
+    contact's ``not_evaluated`` what the FMU's code would have told."""
+    has_fmu = any(side.type == "fmu" for side in scene.subsystems)
+    if has_fmu and not run_fmu:
+        touches, why_not = {}, NOT_RUN
+    else:
+        touches, why_not = first_touch(scene, budget_s)
+    system, _ = scene.build(run_fmu=run_fmu)
     subs = {}
     for sub in system.subsystems:
         entry = {"type": "rigid" if sub.rigid else type(sub).__name__, "dofs": sub.n_states // 2,
@@ -246,7 +318,8 @@ def scene_info(scene, *, budget_s: float = FIRST_TOUCH_BUDGET_S) -> dict:
         coords = sub.coordinates()
         if coords:
             entry["coordinates"] = list(coords)
-        if hasattr(sub, "model_description"):    # an FMU: cosim.sides.fmu
+        if hasattr(sub, "model_description"):    # an FMU: cosim.sides.fmu(_description)
+            entry["type"] = "FMUSubsystem"       # as the run builds it
             entry["dofs"] = len(coords)
             entry["fmu"] = fmu_info(sub)
         freqs = getattr(sub, "natural_frequencies_hz", None)
@@ -260,7 +333,9 @@ def scene_info(scene, *, budget_s: float = FIRST_TOUCH_BUDGET_S) -> dict:
     return {
         "scene": scene.name, "variant": scene.variant, "scheme": scene.scheme,
         "scheme_options": dict(scene.scheme_options), "t_end": scene.t_end,
+        "fmu_code_run": bool(has_fmu and run_fmu),
         "subsystems": subs,
+        "work": scene.work(system=system).as_dict(),
         "contacts": {name: _contact_info(system, c, scene, touches.get(c), why_not)
                      for c, name in enumerate(system.contact_names)},
     }

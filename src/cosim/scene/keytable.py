@@ -17,7 +17,8 @@ from cosim.core.guard import (DEFAULT_CHATTER_SWITCHES, DEFAULT_CHATTER_WINDOW,
 from cosim.io.rundir import NAME_MAX
 
 __all__ = ["Key", "Section", "SECTIONS", "REQUIRED", "Varies", "DEFAULT_MULTIBODY_STEP",
-           "DEFAULT_CONTACT_STEP", "STRUCTURE_TYPES", "SUBSYSTEM_TYPES", "NAME_TEXT"]
+           "DEFAULT_CONTACT_STEP", "STRUCTURE_TYPES", "SUBSYSTEM_TYPES", "NAME_TEXT",
+           "MAX_STEPS"]
 
 #: the ``type`` of a structure subsystem
 STRUCTURE_TYPES = ("chain", "beam", "cable", "string", "rod")
@@ -35,6 +36,9 @@ SUBSYSTEM_TYPES = ("multibody", "rigid", "fmu") + STRUCTURE_TYPES
 DEFAULT_MULTIBODY_STEP = 1e-4
 #: [s] default RK4 step of a structure while a contact it hosts is closed
 DEFAULT_CONTACT_STEP = 1e-6
+#: most integrator steps a run may take unless the scene's ``guard.max_steps``
+#: raises it (counted before the run, :mod:`cosim.scene.work`)
+MAX_STEPS = 10**9
 
 
 class _Required:
@@ -180,6 +184,9 @@ _GUARD = (
       "switches of one contact within the chatter window that stop a run"),
     K("chatter_window", "s", DEFAULT_CHATTER_WINDOW, ">= 0",
       "simulated time over which switches are counted"),
+    K("max_steps", "", MAX_STEPS, "> 0",
+      "most integrator steps (all sides, every iteration) a run may take, counted before it "
+      "starts; a run counted above is refused"),
 )
 
 _SUBSYSTEM_TYPE = K("type", "", REQUIRED, "one of " + _types(*SUBSYSTEM_TYPES),
@@ -274,8 +281,9 @@ _REFERENCE = {
 
 _FMU = (
     _SUBSYSTEM_TYPE,
-    K("path", "", REQUIRED, "an existing co-simulation .fmu (FMI 2.0 or 3.0), relative to the "
-      "scene file", "the Functional Mock-up Unit (cosim.sides.fmu)"),
+    K("path", "", REQUIRED, "an existing co-simulation .fmu file (FMI 2.0 or 3.0), relative to "
+      "the scene file, whose `modelIdentifier` is a C identifier and whose variable names are "
+      "unique", "the Functional Mock-up Unit (cosim.sides.fmu)"),
     K("ports", "", REQUIRED, "a table of at least one port", "the FMU's contact ports"),
     K("parameters", "", {}, _TABLE, "start values of the FMU's parameters, set before it is "
       "initialised"),
@@ -285,15 +293,20 @@ _FMU = (
 )
 _FMU_PORTS = (K("PORT", "", REQUIRED, _TABLE, "a port: the variables of a point of the FMU"),)
 _FMU_PORT = (
-    K("position", "m", REQUIRED, "two output variables", "the point's x and y"),
-    K("velocity", "m/s", REQUIRED, "two output variables", "the point's velocity"),
-    K("force", "N", REQUIRED, "two input variables", "the contact force the FMU receives"),
-    K("port_mass", "kg", REQUIRED, "> 0, or the name of an output variable",
+    K("position", "m", REQUIRED, "two different output variables", "the point's x and y"),
+    K("velocity", "m/s", REQUIRED, "two different output variables, not the position's",
+      "the point's velocity"),
+    K("force", "N", REQUIRED, "two different input variables that no other key sets",
+      "the contact force the FMU receives"),
+    K("port_mass", "kg", REQUIRED, "> 0 with a finite inverse, or the name of an output "
+      "variable whose value after initialisation is",
       "the mass the contact sees at the port (pre-flight check, host choice)"),
 )
-_FMU_PARAMETERS = (K("NAME", "", REQUIRED, "a finite number; a parameter of the FMU",
+_FMU_PARAMETERS = (K("NAME", "", REQUIRED, "a finite number; a parameter of the FMU that no "
+                     "other key sets",
                      "its start value"),)
-_FMU_COORDINATES = (K("NAME", "", REQUIRED, "two output variables",
+_FMU_COORDINATES = (K("NAME", "", REQUIRED, "two different output variables; NAME "
+                      + NAME_TEXT,
                       "[position, velocity] of a coordinate"),)
 
 _RIGID = (

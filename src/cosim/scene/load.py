@@ -17,7 +17,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from cosim.core.guard import GuardOptions
-from cosim.scene.checks import MAX_ELEMENTS, MAX_STEPS, SceneError, Table, check_name
+from cosim.scene.checks import (MAX_ELEMENTS, MAX_STEPS, SceneError, Table, check_name,
+                                 echo)
 from cosim.scene.contacts import check_conditions, contact_spec
 from cosim.scene.read import parse_override, read_scene, read_toml_file
 from cosim.scene.specs import STRUCTURE_TYPES, SUBSYSTEM_TYPES, Scene, resolve_scheme
@@ -72,13 +73,12 @@ def _validate(data: dict, file, variant) -> Scene:
     top.string("description")
     t_end = top.number("t_end", rule=">0", unit="s")
     scheme_name, given, tables = _scheme_table(top.table("scheme", section="top"))
-    spec = resolve_scheme(scheme_name, given, tables, file=file, t_end=t_end, stacklevel=3)
 
     out = top.table("output", section="output")
     every = out.integer("every", low=1)
     export = out.raw("export")
     if not isinstance(export, list) or not all(isinstance(x, str) for x in export):
-        out.error("export", f"must be a list of structure names, got {export!r}")
+        out.error("export", f"must be a list of structure names, got {echo(export)}")
     export_every = out.integer("export_every", low=1)
     out.finish()
 
@@ -100,40 +100,40 @@ def _validate(data: dict, file, variant) -> Scene:
                          coupling_warning=gd.number("coupling_warning", rule=">0"),
                          chatter_switches=gd.integer("chatter_switches", low=2, high=10 ** 9),
                          chatter_window=gd.number("chatter_window", rule=">=0", unit="s"))
+    max_steps = gd.number("max_steps", rule=">0")
     gd.finish()
 
     subs = []
     for sname, st in top.tables("subsystems", section="subsystems", entries="subsystem"):
         check_name(file, "subsystems", sname, "names a subsystem that")
         if "." in sname:
-            raise SceneError(file, "subsystems", f"names a subsystem {sname!r}: a subsystem's "
+            raise SceneError(file, "subsystems", f"names a subsystem {echo(sname)}: a subsystem's "
                                                  f"name holds no `.`, which separates it from "
                                                  f"the point in SUBSYSTEM.POINT")
         subs.append(subsystem_spec(sname, st))
-        step = getattr(subs[-1], "max_step", None)
-        if step is not None and t_end / step > MAX_STEPS:
-            raise SceneError(file, f"subsystems.{sname}.integrator.max_step",
-                             f"is {step!r} s: {t_end!r} s would take {t_end / step:.3g} "
-                             f"steps, more than {MAX_STEPS:.0e}")
     if not subs:
         top.error("subsystems", "must declare at least one subsystem")
     _check_memory(subs, file)
     structures = [s.name for s in subs if s.type in STRUCTURE_TYPES]
     for name_ in export:
         if name_ not in structures:
-            raise SceneError(file, "output.export", f"names {name_!r}, which is not a structure "
-                                                    f"of this scene; structures are {structures}")
+            raise SceneError(file, "output.export", f"names {echo(name_)}, which is not a "
+                                                    f"structure of this scene; structures are "
+                                                    f"{structures}")
     contacts = []
     for cname, ct in top.tables("contacts", section="contacts", entries="contact"):
         check_name(file, "contacts", cname, "names a contact that")
         contacts.append(contact_spec(cname, ct, subs))
     check_conditions(contacts, file)
     top.finish()
+    # the work a run will do (macro steps, iterations, each side's steps), bounded
+    spec = resolve_scheme(scheme_name, given, tables, file=file, t_end=t_end, stacklevel=3,
+                          subsystems=subs, contacts=contacts, max_steps=max_steps)
     return Scene(name=name, path=str(file), variant=variant, t_end=t_end, scheme=spec.name,
                  scheme_options=spec.options, output_every=every, subsystems=tuple(subs),
                  contacts=tuple(contacts), gravity=gravity, data=data,
                  export=tuple(export), export_every=export_every, scheme_tables=tables,
-                 guard=guard)
+                 guard=guard, max_steps=max_steps)
 
 
 def _scheme_table(sch: Table) -> tuple[str, dict, dict]:
@@ -186,9 +186,9 @@ def _scheme_option(sch: Table, k, opt):
     elif opt.kind is str:
         v = sch.string(k)
     elif opt.kind is list and not isinstance(v, list):
-        sch.error(k, f"must be an array, got {v!r}")
+        sch.error(k, f"must be an array, got {echo(v)}")
     if not opt.check(v):
-        sch.error(k, f"must be {opt.rule}, got {v!r}")
+        sch.error(k, f"must be {opt.rule}, got {echo(v)}")
     return v
 
 

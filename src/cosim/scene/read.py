@@ -10,7 +10,7 @@ import tomllib
 from pathlib import Path
 
 from cosim.io import tomlread
-from cosim.scene.checks import SceneError, check_name, type_name
+from cosim.scene.checks import SceneError, check_name, echo, type_name
 
 __all__ = ["read_toml_file", "parse_override", "merge", "apply_override", "read_scene"]
 
@@ -51,7 +51,7 @@ def merge(base: dict, over: dict) -> dict:
 def parse_override(text: str, file="--set") -> tuple[list[str], object]:
     """Parse ``a.b.c=value``; the value is read as a TOML value, else a string."""
     if "=" not in text:
-        raise SceneError(file, "", f"override {text!r} must read key.path=value")
+        raise SceneError(file, "", f"override {echo(text)} must read key.path=value")
     key, value = text.split("=", 1)
     if key.count(".") >= tomlread.MAX_DEPTH:
         raise SceneError(file, "", f"a --set key must have at most {tomlread.MAX_DEPTH} "
@@ -59,7 +59,7 @@ def parse_override(text: str, file="--set") -> tuple[list[str], object]:
                                    f"{key.count('.') + 1}")
     path = [p.strip() for p in key.strip().split(".")]
     if not all(path):
-        raise SceneError(file, key, f"override {text!r} has an empty key")
+        raise SceneError(file, key, f"override {echo(text)} has an empty key")
     try:
         parsed = tomlread.loads(f"v = {value.strip()}")["v"]
     except tomlread.TomlLimitError as exc:
@@ -108,13 +108,14 @@ def read_scene(path, variant: str | None = None, overrides=(), scheme: str | Non
     if default_variant is not None and not isinstance(default_variant, str):
         raise SceneError(file, "default_variant",
                          f"must be a string, got {type_name(default_variant)} "
-                         f"{default_variant!r}")
+                         f"{echo(default_variant)}")
     chosen = variant if variant is not None else default_variant
     if chosen is not None:
         if chosen not in variants:
             key = "default_variant" if variant is None else "variants"
             raise SceneError(file, key,
-                             f"names no variant {chosen!r}; variants are {sorted(variants)}")
+                             f"names no variant {echo(chosen)}; variants are "
+                             f"{echo(sorted(variants))}")
         merge(data, variants[chosen])
     for ov in overrides:
         p, v = parse_override(ov, file) if isinstance(ov, str) else ov
@@ -122,7 +123,7 @@ def read_scene(path, variant: str | None = None, overrides=(), scheme: str | Non
     if scheme is not None:
         sch = data.setdefault("scheme", {})
         if not isinstance(sch, dict):
-            raise SceneError(file, "scheme", f"must be a table, got {type_name(sch)} {sch!r}")
+            raise SceneError(file, "scheme", f"must be a table, got {type_name(sch)} {echo(sch)}")
         sch["name"] = scheme
     try:
         tomlread.check_depth(data)          # an override may reach deeper than the file

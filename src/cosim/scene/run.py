@@ -9,7 +9,7 @@ from pathlib import Path
 from cosim.core.guard import Guard, GuardError
 from cosim.core.recorder import Recorder
 from cosim.scene.load import Scene, load_scene
-from cosim.errors import OutputError, SimulationError, UnsafeStepError
+from cosim.errors import FMUError, OutputError, SimulationError, UnsafeStepError
 
 __all__ = ["simulate", "run_scene", "RunInterrupted", "stop_message"]
 
@@ -60,7 +60,10 @@ def simulate(scene: Scene, *, scheme: str | None = None, progress=None,
     SimulationResult
         ``status`` is ``finished``, or ``failed`` when the run could not go
         on (:class:`SimulationError`: the series end where it stopped and
-        ``message`` says why).
+        ``message`` says why; for an FMU's failure, :class:`~cosim.FMUError`, the
+        summary's ``fmu_failure`` names the subsystem, the FMU, the FMI
+        function, how it failed and the time).  ``cpu_time_s`` counts the
+        CPU time of the FMUs' host processes too.
 
     Raises
     ------
@@ -107,10 +110,12 @@ def simulate(scene: Scene, *, scheme: str | None = None, progress=None,
 def _simulate(scene, scheme, progress, progress_interval, out, overwrite):
     from cosim.core.result import check_output_dir, write_scene, write_summary
     from cosim.io.rundir import inside
+    from cosim.scene.work import warn_work
 
     if out is not None:
         check_output_dir(out, overwrite, scene.export)
     system, sch = scene.build(scheme)
+    warn_work(scene.path, scene.work(scheme, system))      # a long run says so first
     if out is not None:
         if hasattr(sch, "preflight"):
             sch.preflight(system, scene.t_end)     # a refusal writes nothing
@@ -123,10 +128,10 @@ def _simulate(scene, scheme, progress, progress_interval, out, overwrite):
                    auto_edges=auto, progress=progress, progress_interval=progress_interval,
                    series_path=None if out is None else inside(out, "series.npz"),
                    guard=Guard(system, scene.guard))
-    cpu0 = time.process_time()
+    cpu0 = time.process_time() - _host_cpu(system)
     status, message = "finished", ""
     counters = {}
-    stop = None
+    stop = failure = None
     try:
         counters = sch.run(system, scene.t_end, rec)
     except UnsafeStepError:                # refused before the first step
@@ -138,6 +143,7 @@ def _simulate(scene, scheme, progress, progress_interval, out, overwrite):
                          f"series or summary", out) from None
     except SimulationError as exc:
         status, message = "failed", stop_message(exc, _reached(rec))
+        failure = exc.details() if isinstance(exc, FMUError) else None
     except KeyboardInterrupt as exc:
         stop = exc
         cause = getattr(exc, "signal_name", None) or "Ctrl-C"
@@ -158,9 +164,12 @@ def _simulate(scene, scheme, progress, progress_interval, out, overwrite):
         log.info("%s", message)
     ended = f"the run ended ({status} at t = {_reached(rec):.6g} s)"
     try:
-        res = rec.finish(status, message, time.process_time() - cpu0, counters)
+        res = rec.finish(status, message, time.process_time() + _host_cpu(system) - cpu0,
+                         counters)
     except OutputError as exc:
         raise _lost(exc, f"{ended} but wrote no series or summary", out) from None
+    if failure is not None:
+        res.summary["fmu_failure"] = failure     # which FMU call failed, and when
     if out is not None:
         try:
             write_summary(res.summary, inside(out, "summary.json"))
@@ -222,6 +231,11 @@ def _discard(rec: Recorder, out) -> None:
     if out is None:
         return
     (out / "scene.toml").unlink(missing_ok=True)
+
+
+def _host_cpu(system) -> float:
+    """CPU time [s] that the subsystems' own processes (an FMU's host) have spent."""
+    return sum(getattr(sub, "host_cpu_time", 0.0) for sub in system.subsystems)
 
 
 def _reached(rec: Recorder) -> float:

@@ -308,13 +308,15 @@ class SchemeSpec:
 
 
 def resolve_scheme(name: str, options: dict, tables: dict, *, file, t_end: float,
-                   stacklevel: int = 2) -> SchemeSpec:
+                   stacklevel: int = 2, subsystems=(), contacts=(),
+                   max_steps: float = MAX_STEPS) -> SchemeSpec:
     """Choose the scheme ``name`` and the options it runs with.
 
     The one place that drops the options the scheme ignores (with one
     warning naming them), merges the ``[scheme.NAME]`` table of that scheme,
-    requires a macro step of the schemes that take one and bounds the number
-    of macro steps.
+    requires a macro step of the schemes that take one and bounds the work
+    of a run (:func:`cosim.scene.work.estimate_work`: macro steps, their
+    iterations and the steps of each side in them).
 
     Parameters
     ----------
@@ -331,6 +333,10 @@ def resolve_scheme(name: str, options: dict, tables: dict, *, file, t_end: float
         End time [s].
     stacklevel : int
         Of the warning, counted from the caller of this function.
+    subsystems, contacts : sequence of specs
+        The scene's, whose steps the work counts.
+    max_steps : float
+        Most integrator steps a run may take (the scene's ``guard.max_steps``).
 
     Returns
     -------
@@ -340,8 +346,10 @@ def resolve_scheme(name: str, options: dict, tables: dict, *, file, t_end: float
     ------
     SceneError
         If the scheme is unknown, needs a macro step that is missing, or the
-        macro step would make more than :data:`~cosim.scene.checks.MAX_STEPS`.
+        run would take more than ``max_steps`` steps
+        (:func:`cosim.scene.work.check_work`).
     """
+    from cosim.scene.work import check_work, estimate_work
     from cosim.core.schemes import get_scheme
     try:
         cls = get_scheme(name)
@@ -356,11 +364,9 @@ def resolve_scheme(name: str, options: dict, tables: dict, *, file, t_end: float
     if "macro_step" in cls.options and "macro_step" not in opts:
         raise SceneError(file, "scheme.macro_step", f"is required by scheme `{name}` [s]")
     H = opts.get("macro_step")
-    if H is not None and t_end / H > MAX_STEPS:
-        raise SceneError(file, "scheme.macro_step",
-                         f"is {H!r} s: {t_end!r} s would take {t_end / H:.3g} macro steps, "
-                         f"more than {MAX_STEPS:.0e}")
-    return SchemeSpec(name, opts, min(H or DEFAULT_MULTIBODY_STEP, DEFAULT_MULTIBODY_STEP))
+    spec = SchemeSpec(name, opts, min(H or DEFAULT_MULTIBODY_STEP, DEFAULT_MULTIBODY_STEP))
+    check_work(file, estimate_work(spec, t_end, subsystems, contacts), max_steps)
+    return spec
 
 
 @dataclass(frozen=True)
@@ -397,6 +403,9 @@ class Scene:
         The run guard's settings (``[guard]``: ``energy_growth``,
         ``energy_check``, ``energy_floor``, ``chatter_switches``,
         ``chatter_window``), see :mod:`cosim.core.guard`.
+    max_steps : float
+        Most integrator steps a run may take (``guard.max_steps``), see
+        :mod:`cosim.scene.work`.
     """
 
     name: str
@@ -414,17 +423,46 @@ class Scene:
     export_every: int = 1
     scheme_tables: dict = field(default_factory=dict)
     guard: GuardOptions = GuardOptions()
+    max_steps: float = MAX_STEPS
 
     def scheme_spec(self, scheme: str | None = None) -> SchemeSpec:
         """The scheme a run uses: the scene's, or ``scheme`` with the scene's
         options that it takes (see :func:`~cosim.scene.specs.resolve_scheme`)."""
         return resolve_scheme(scheme or self.scheme, self.scheme_options, self.scheme_tables,
-                              file=self.path, t_end=self.t_end, stacklevel=3)
+                              file=self.path, t_end=self.t_end, stacklevel=3,
+                              subsystems=self.subsystems, contacts=self.contacts,
+                              max_steps=self.max_steps)
 
-    def build(self, scheme: str | None = None):
-        """Make the coupled system and the scheme (optionally another one).
+    def work(self, scheme: str | None = None, system=None):
+        """The work a run of ``scheme`` (the scene's by default) will do,
+        counted before it starts (:func:`cosim.scene.work.estimate_work`;
+        ``system``, the built one, lets the monolithic scheme's count see
+        the stiffest mode)."""
+        from cosim.scene.work import estimate_work
+        with warnings.catch_warnings():     # the options it ignores: said when it was read
+            warnings.simplefilter("ignore")
+            spec = self.scheme_spec(scheme)
+        return estimate_work(spec, self.t_end, self.subsystems, self.contacts, system)
 
-        See :func:`cosim.scene.build.build_system`.
+    def build(self, scheme: str | None = None, *, run_fmu: bool = True):
+        """Make the coupled system and the scheme (optionally another one);
+        ``run_fmu=False`` builds FMU sides from their model descriptions
+        alone, running nothing of them.
+
+        See :func:`cosim.scene.build.build_system`.  The work of the run is
+        counted again with the system (:meth:`work`): the monolithic
+        solver's steps depend on its stiffest mode, known only now (a
+        co-simulation's count was checked when its scheme was resolved,
+        before anything was assembled).
+
+        Raises
+        ------
+        SceneError
+            As :func:`~cosim.scene.build.build_system`, and if the run would
+            take more steps than ``guard.max_steps``.
         """
         from cosim.scene.build import build_system
-        return build_system(self, scheme)
+        from cosim.scene.work import check_work
+        system, sch = build_system(self, scheme, run_fmu=run_fmu)
+        check_work(self.path, self.work(scheme, system), self.max_steps)
+        return system, sch

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 
-from cosim.scene.checks import MAX_ELEMENTS, Table, build_model, check_name, floats
+from cosim.scene.checks import MAX_ELEMENTS, Table, build_model, check_name, echo, floats
 from cosim.scene.specs import (STRUCTURE_TYPES, SUBSYSTEM_TYPES, BodySpec, JointSpec,
                                MultibodySpec, RigidSpec, StructureSpec)
 
@@ -63,7 +63,7 @@ def _multibody_spec(name: str, t: Table) -> MultibodySpec:
         jname = jt.string("name")
         check_name(t.file, jt.key("name"), jname, "")
         if jname in [j.name for j in joints]:
-            jt.error("name", f"repeats joint {jname!r}; joint names must be unique in "
+            jt.error("name", f"repeats joint {echo(jname)}; joint names must be unique in "
                              f"subsystem `{name}`")
         parent = jt.string("parent")
         if parent != "ground" and parent not in names:
@@ -170,9 +170,9 @@ def _structure_spec(name: str, t: Table, kind: str) -> StructureSpec:
         v = pts.number(p, unit="m" if kind != "chain" else "")
         if kind == "chain":
             if not (v == int(v) and 0 <= v < size):
-                pts.error(p, f"must be a mass index 0..{size - 1}, got {v!r}")
+                pts.error(p, f"must be a mass index 0..{size - 1}, got {echo(v)}")
         elif not 0.0 <= v <= size:
-            pts.error(p, f"must be a material coordinate in [0, {size:g}] m, got {v!r}")
+            pts.error(p, f"must be a material coordinate in [0, {size:g}] m, got {echo(v)}")
         ports[p] = v
     pts.finish()
     if not ports:

@@ -15,11 +15,16 @@ Rollback (the implicit scheme, macro-step control) goes through the FMU's
 own state: ``fmi2GetFMUstate``/``fmi3GetFMUState`` and their setters, which
 an FMU offers when its model description says ``canGetAndSetFMUstate``
 (FMI 2.0) or ``canGetAndSetFMUState`` (FMI 3.0).
+
+The FMU's native code never runs in this process: the FMU is unpacked
+(bounded, once per process, :mod:`cosim.sides.fmu_unpack`) and loaded by a
+host process of its own (:mod:`cosim.sides.fmu_host`), which each macro step
+reaches in one round trip.  An FMI call that fails, or a host that crashes,
+raises :class:`cosim.errors.FMUError` (the run ends ``failed`` with its data
+so far); a host that hangs is ended on Ctrl-C or SIGTERM.
 """
 from __future__ import annotations
 
-import shutil
-import tempfile
 import weakref
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,87 +32,15 @@ from pathlib import Path
 import numpy as np
 
 from cosim.core.subsystem import StepInput, Subsystem, SubsystemState, hermite_coefficients
+from cosim.sides.fmu_description import (FMI_EXTRA, FMUVariable, can_get_set_state,
+                                         fmpy_module, read_fmu_variables)
+from cosim.sides.fmu_unpack import remove_stale_unpacked
 
 __all__ = ["FMUSubsystem", "FMUPort", "FMUVariable", "fmpy_module", "read_fmu_variables",
-           "FMI_EXTRA"]
-
-#: how a user installs what an FMU needs
-FMI_EXTRA = 'pip install "cosim[fmi]"'
+           "can_get_set_state", "FMI_EXTRA", "remove_stale_unpacked"]
 
 #: int_0^1 s^j ds (j = 0, 1, 2): the mean of a polynomial input over a step
 _MEAN = np.array([1.0, 1.0 / 2.0, 1.0 / 3.0, 1.0 / 4.0])
-
-
-def fmpy_module():
-    """FMPy, imported on first use.
-
-    Raises
-    ------
-    ImportError
-        Naming the ``fmi`` extra, when FMPy is not installed.
-    """
-    try:
-        import fmpy
-    except ImportError:
-        raise ImportError(f"an `fmu` subsystem needs FMPy, which is not installed: "
-                          f"{FMI_EXTRA}", name="fmpy") from None
-    return fmpy
-
-
-@dataclass(frozen=True)
-class FMUVariable:
-    """One scalar variable of an FMU's model description."""
-
-    name: str
-    value_reference: int
-    #: ``parameter``, ``input``, ``output``, ``local``, ``independent``, ...
-    causality: str
-    variability: str
-    #: ``Real`` (FMI 2.0) or ``Float64`` (FMI 3.0), ...
-    type: str
-    start: object = None
-    unit: str | None = None
-    description: str | None = None
-
-    @property
-    def real(self) -> bool:
-        """Whether the variable holds a 64-bit real."""
-        return self.type in ("Real", "Float64")
-
-
-def read_fmu_variables(path) -> tuple[object, dict[str, FMUVariable]]:
-    """The model description of the FMU at ``path`` and its variables by name.
-
-    Raises
-    ------
-    ImportError
-        If FMPy is not installed.
-    ValueError
-        If the file is not an FMU FMPy can read, or not a co-simulation FMU
-        of FMI 2.0 or 3.0.
-    """
-    fmpy = fmpy_module()
-    try:
-        md = fmpy.read_model_description(str(path), validate=False)
-    except Exception as exc:            # FMPy raises bare Exception on a broken file
-        raise ValueError(f"is not an FMU that FMPy can read ({exc})") from None
-    if md.fmiVersion not in ("2.0", "3.0") and not str(md.fmiVersion).startswith("3."):
-        raise ValueError(f"must be an FMI 2.0 or 3.0 FMU, got FMI {md.fmiVersion}")
-    if md.coSimulation is None:
-        raise ValueError("must be a co-simulation FMU (its model description has no "
-                         "`CoSimulation` element; model exchange FMUs are not supported)")
-    out = {}
-    for v in md.modelVariables:
-        out[v.name] = FMUVariable(v.name, int(v.valueReference), v.causality, v.variability,
-                                  v.type, v.start, getattr(v, "unit", None), v.description)
-    return md, out
-
-
-def can_get_set_state(md) -> bool:
-    """Whether the FMU says it can get and set its state."""
-    cs = md.coSimulation
-    return bool(getattr(cs, "canGetAndSetFMUstate", False)
-                or getattr(cs, "canGetAndSetFMUState", False))
 
 
 @dataclass(frozen=True)
@@ -175,7 +108,7 @@ class FMUSubsystem(Subsystem):
     def __init__(self, name: str, path, ports: dict, parameters: dict | None = None,
                  coordinates: dict | None = None, energy: str | None = None):
         super().__init__(name, ports.keys())
-        fmpy = fmpy_module()
+        fmpy_module()                   # without FMPy: an ImportError naming the extra
         self.path = Path(path)
         self.model_description, self.variables = read_fmu_variables(self.path)
         md = self.model_description
@@ -197,38 +130,13 @@ class FMUSubsystem(Subsystem):
         self._out_vr = [vr(n) for n in names]
         self._mass_vr = {k: vr(p.mass) for k, p in enumerate(self.ports.values())
                          if isinstance(p.mass, str)}
-        self._unzipped = tempfile.mkdtemp(prefix="cosim-fmu-")
-        try:
-            fmpy.extract(str(self.path), self._unzipped)
-            if self.fmi_version == 3:
-                from fmpy.fmi3 import FMU3Slave as cls
-            else:
-                from fmpy.fmi2 import FMU2Slave as cls
-            token = md.instantiationToken if self.fmi_version == 3 else md.guid
-            self._fmu = cls(guid=token, unzipDirectory=self._unzipped,
-                            modelIdentifier=md.coSimulation.modelIdentifier,
-                            instanceName=name)
-            self._fmu.instantiate()
-            if self.fmi_version == 2:
-                self._fmu.setupExperiment(startTime=0.0)
-            self._set_parameters()
-            if self.fmi_version == 3:
-                self._fmu.enterInitializationMode(startTime=0.0)
-            else:
-                self._fmu.enterInitializationMode()
-            self._fmu.exitInitializationMode()
-        except Exception as exc:
-            shutil.rmtree(self._unzipped, ignore_errors=True)
-            raise RuntimeError(f"subsystem `{name}`: FMU {self.path.name} could not be "
-                               f"instantiated and initialised: {exc}") from exc
-        self._alive = True
-        self._closer = weakref.finalize(self, _close, self._fmu, self._unzipped, self.fmi_version)
+        self._host = _start_host(self, md)
+        self._closer = weakref.finalize(self, self._host.close)
         nq = len(self.coordinate_names)
         np_ = self.n_ports
         self._slices = (slice(0, nq), slice(nq, 2 * nq), slice(2 * nq, 2 * nq + 2 * np_),
                         slice(2 * nq + 2 * np_, 2 * nq + 4 * np_))
-        self.x = np.zeros(len(self._out_vr))
-        self._read()
+        self.x = np.frombuffer(self._host.outputs0, float).copy()
         self.port_moments = np.zeros((3, self.n_ports), complex)
 
     # ---------------------------------------------------------------- FMI
@@ -239,51 +147,23 @@ class FMUSubsystem(Subsystem):
             raise KeyError(f"FMU {self.path.name} of subsystem `{self.name}` has no variable "
                            f"`{name}`") from None
 
-    def _get(self, vrs) -> list:
-        return (self._fmu.getFloat64(vrs) if self.fmi_version == 3
-                else self._fmu.getReal(vrs))
-
-    def _set(self, vrs, values) -> None:
-        values = [float(v) for v in values]
-        if self.fmi_version == 3:
-            self._fmu.setFloat64(vrs, values)
-        else:
-            self._fmu.setReal(vrs, values)
-
-    def _set_parameters(self) -> None:
-        if self.parameters:
-            self._set([self._vr(k) for k in self.parameters], self.parameters.values())
-
-    def _read(self) -> None:
-        if self._out_vr:
-            self.x[:] = self._get(self._out_vr)
-
     def close(self) -> None:
-        """Terminate the FMU and free its instance (also done when the
-        subsystem is garbage-collected)."""
-        self._alive = False
+        """Terminate the FMU, free its instance and end its host process
+        (also done when the subsystem is garbage-collected)."""
         self._closer()
+
+    @property
+    def host_cpu_time(self) -> float:
+        """CPU time the FMU's host process has spent so far [s] (a run adds
+        it to its own, as of the host's last answer)."""
+        return self._host.cpu_time
 
     # ------------------------------------------------------------ protocol
     def _step_impl(self, t, h, inputs):
         u0, du, ddu = self._forces(t, h, inputs)
-        if self._force_vr:
-            self._set(self._force_vr, u0.ravel())
-            if self.interpolates_inputs:
-                n = len(self._force_vr)
-                self._fmu.setRealInputDerivatives(self._force_vr, [1] * n, list(du.ravel()))
-                self._fmu.setRealInputDerivatives(self._force_vr, [2] * n, list(ddu.ravel()))
         pos0, vel0 = self.outputs(t, self.x)
-        if self.fmi_version == 3:
-            _, terminate, early, last = self._fmu.doStep(currentCommunicationPoint=t,
-                                                         communicationStepSize=h)
-            if terminate or early:
-                raise RuntimeError(f"subsystem `{self.name}`: FMU {self.path.name} stopped "
-                                   f"inside the step from t = {t:.6g} s (reached "
-                                   f"{last:.6g} s, terminate = {terminate})")
-        else:
-            self._fmu.doStep(currentCommunicationPoint=t, communicationStepSize=h)
-        self._read()
+        self.x[:] = np.frombuffer(self._host.step(t, h, np.ascontiguousarray(u0, float),
+                                                  du, ddu), float)
         pos1, vel1 = self.outputs(t + h, self.x)
         self.port_moments = _velocity_moments(pos0, vel0, pos1, vel1, h)
 
@@ -328,7 +208,7 @@ class FMUSubsystem(Subsystem):
         number, or the value of the FMU's variable now."""
         m = list(self.ports.values())[port].mass
         if isinstance(m, str):
-            m = float(self._get([self._mass_vr[port]])[0])
+            m = float(np.frombuffer(self._host.get([self._mass_vr[port]], self.t), float)[0])
         return float(m)
 
     def port_mobility(self, port, direction):
@@ -353,28 +233,16 @@ class FMUSubsystem(Subsystem):
                 f"subsystem `{self.name}`: FMU {self.path.name} cannot get and set its state "
                 f"(`{flag}` is false), so it cannot be rolled back; use the `jacobi` or "
                 f"`gauss_seidel` scheme without `contact_step`")
-        handle = (self._fmu.getFMUState() if self.fmi_version == 3
-                  else self._fmu.getFMUstate())
+        handle = self._host.get_state(self.t)
         st = FMUState(self.t, self.x.copy(), self.aux.copy(), self.n_steps, self.status,
                       self.peak.copy())
         st.handle = handle
-        weakref.finalize(st, self._free_state, handle)
+        weakref.finalize(st, self._host.free_state, handle)
         return st
 
     def set_state(self, state: FMUState) -> None:
-        if self.fmi_version == 3:
-            self._fmu.setFMUState(state.handle)
-        else:
-            self._fmu.setFMUstate(state.handle)
+        self._host.set_state(state.handle, self.t)
         super().set_state(state)
-
-    def _free_state(self, handle) -> None:
-        if not self._alive:
-            return
-        if self.fmi_version == 3:
-            self._fmu.freeFMUState(handle)
-        else:
-            self._fmu.freeFMUstate(handle)
 
 
 def _velocity_moments(pos0, vel0, pos1, vel1, h) -> np.ndarray:
@@ -387,11 +255,50 @@ def _velocity_moments(pos0, vel0, pos1, vel1, h) -> np.ndarray:
     return c1 / (j + 1) + 2 * c2 / (j + 2) + 3 * c3 / (j + 3)
 
 
-def _close(fmu, unzipped, version) -> None:
-    """Terminate and free an FMU instance and remove its unzipped folder."""
+def _start_host(sub: FMUSubsystem, md):
+    """The host process of ``sub``'s FMU, its instance initialised and its
+    first outputs read (``host.outputs0``).
+
+    Raises
+    ------
+    RuntimeError
+        Naming the subsystem and the FMU: it cannot be unpacked, its library
+        is not in its ``binaries`` folder, or it fails (or crashes) while
+        loaded, instantiated or initialised.
+    """
+    from fmpy import platform, platform_tuple, sharedLibraryExtension
+    from cosim.errors import shown
+    from cosim.sides.fmu_client import FMUHost
+    from cosim.sides.fmu_unpack import unpacked
+
+    label = shown(sub.path.name, limit=120)
+    head = f"subsystem `{sub.name}`: FMU {label}"
     try:
-        fmu.terminate()
-        fmu.freeInstance()
-    except Exception:                   # an FMU that failed may refuse to terminate
-        pass
-    shutil.rmtree(unzipped, ignore_errors=True)
+        folder = unpacked(sub.path)
+    except (ValueError, OSError) as exc:
+        raise RuntimeError(f"{head} cannot be unpacked: {exc}") from None
+    identifier = md.coSimulation.modelIdentifier
+    binaries = (folder / "binaries").resolve()
+    library = (binaries / (platform_tuple if sub.fmi_version == 3 else platform)
+               / f"{identifier}{sharedLibraryExtension}")
+    if not library.resolve().is_relative_to(binaries):
+        raise RuntimeError(f"{head}: its `modelIdentifier` {shown(identifier, 80)!r} names a "
+                           f"library outside its `binaries` folder")
+    host = FMUHost(label, sub.name, sub.fmi_version, len(sub._force_vr), len(sub._out_vr),
+                   sub.interpolates_inputs)
+    config = {"fmi_version": sub.fmi_version, "unzipped": str(folder),
+              "library": str(library), "model_identifier": identifier,
+              "token": md.instantiationToken if sub.fmi_version == 3 else md.guid,
+              "instance": sub.name, "output_vrs": sub._out_vr, "force_vrs": sub._force_vr,
+              "interpolates_inputs": sub.interpolates_inputs,
+              "parameter_vrs": [sub._vr(k) for k in sub.parameters],
+              "parameter_values": [float(v) for v in sub.parameters.values()]}
+    try:
+        host.outputs0 = host.start(config)
+    except BaseException as exc:
+        host.close()
+        if isinstance(exc, RuntimeError):
+            raise RuntimeError(f"{head} could not be instantiated and initialised: "
+                               f"{exc}") from None
+        raise
+    return host

@@ -19,30 +19,52 @@ range, and the median CPU time.  :func:`cheapest_within` judges a row by its
 worst copy.  The reference stays one run: at rtol 1e-11 two copies of it
 give the same count and differ by less than 1e-11 in peak and exit velocity
 (``tests/test_work_precision_doc.py``), far below any row's error.
+
+The reference cache (``cache_dir``; ``runs/.bench-cache`` for ``cosim
+bench``) holds one JSON entry per reference, opened as an
+:class:`~cosim.io.rundir.OutputFolder` (a link at its place is refused).  An
+entry is used only when the key it stores equals this run's
+(:func:`cache_key`: cosim's version, the SHA-256 of the scene file and of
+every file it names, FMUs included (:mod:`cosim.scene.inputs`), the scene's
+table after variant and overrides, the reference's settings, the contact
+and the joint), its reference has the fields and types a reference has, and
+its checksum matches its content.  Any other entry (not JSON, a list, cut
+short, for other inputs, a number edited by hand) is never trusted: a
+warning names the file, the reference is run again and the entry replaced.
+
+Trust model: the cache is a convenience, not a signature.  Its checksum
+catches damage and a number edited by hand; whoever can write the cache
+folder can also write an entry whose checksum matches, and such an entry is
+used as it is.  The folder is the user's own (as are the scene files), so
+an entry forged that way is the user's own doing.
 """
 from __future__ import annotations
 
+import contextlib
 import csv
-import hashlib
 import json
 import math
+import os
 import statistics
 import warnings
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from cosim.core.series import atomic_write
-from cosim.errors import SimulationError, UnsafeStepError
-from cosim.io.rundir import inside, output_error
+from cosim.errors import OutputError, SimulationError, UnsafeStepError
+from cosim.io.rundir import OutputFolder, check_name
 from cosim.scene.checks import SceneError
+from cosim.studies.bench_cache import (CACHE_FORMAT, CACHE_MAX_BYTES, REFERENCE, _FIELDS,
+                                        cache_entry, cache_key, entry_name, entry_problem,
+                                        read_entry)
 from cosim.studies.roundoff import OFFSETS, perturbed_overrides
 from cosim.studies.metrics import impact_metrics, relative_errors
 from cosim.studies.strike import find_strike
 from cosim.scene.run import simulate
 from cosim.scene.load import load_scene
 
-__all__ = ["BenchRow", "COLUMNS", "MAX_SPREAD", "reference", "run_bench", "within",
-           "cheapest_within", "write_csv", "read_csv", "write_reference", "plot"]
+__all__ = ["BenchRow", "COLUMNS", "MAX_SPREAD", "CACHE_FORMAT", "CACHE_MAX_BYTES", "REFERENCE",
+           "reference", "run_bench", "within", "cheapest_within", "write_csv", "read_csv", "write_reference",
+           "cache_key", "cache_entry", "entry_problem"]
 
 #: columns of the CSV, in order: the first ten as before the copies (each
 #: error now the median over them), then the copies and the band
@@ -55,8 +77,6 @@ COLUMNS = ("scheme", "label", "macro_step", "tolerance", "cpu_time_s", "err_peak
 #: the most copies a row can run on: the scene and one per round-off offset
 MAX_SPREAD = len(OFFSETS) + 1
 
-#: the reference: monolithic DOP853, every switch located, tight tolerances
-REFERENCE = {"method": "DOP853", "rtol": 1e-11, "atol": 1e-14}
 
 #: the seed paper's method (Lipinski: MATLAB ode45)
 PAPER_RK45 = {"method": "RK45", "max_step": 1e-4, "rtol": 1e-4, "atol": 1e-6}
@@ -118,18 +138,16 @@ def _monolithic(options: dict) -> list[str]:
     return [f"scheme.monolithic.{k}={json.dumps(v)}" for k, v in options.items()]
 
 
-def _key(scene, contact, joint) -> str:
-    blob = json.dumps({"data": scene.data, "reference": REFERENCE, "contact": contact,
-                       "joint": joint}, sort_keys=True, default=str)
-    return hashlib.sha256(blob.encode()).hexdigest()[:16]
-
-
 def reference(path, variant=None, contact=None, joint=None, overrides=(),
               cache_dir=None) -> dict:
     """Impact metrics of the fine monolithic reference, from the cache when
-    the same scene (after variant and overrides) was benched before.
+    the same inputs (the scene file and every file it names, cosim's
+    version, variant and overrides) were benched before.
 
-    ``contact`` and ``joint`` are those of :func:`run_bench`.
+    ``contact`` and ``joint`` are those of :func:`run_bench`.  A cache entry
+    is used only when it is fit (:func:`entry_problem`); an unfit one is
+    named in a warning, run again and replaced (see the module's trust
+    model).
 
     Returns a dict with ``count``, ``peak``, ``exit_velocity``, ``energy``
     and the reference's ``cpu_time_s``.
@@ -139,17 +157,42 @@ def reference(path, variant=None, contact=None, joint=None, overrides=(),
     SceneError
         If the scene has no such ``contact`` or ``joint``, or leaves one out
         and more than one (or no) choice (see :func:`find_strike`).
+    OutputError
+        If the cache folder is a link or a file, or cannot be made or
+        written.
     """
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         scene = load_scene(path, variant, list(overrides), "monolithic")
     contact, joint = find_strike(scene, contact, joint)
-    cache = None
-    if cache_dir is not None:
-        cache = Path(cache_dir) / f"{scene.name}-{variant or 'default'}-" \
-                                  f"{_key(scene, contact, joint)}.json"
-        if cache.exists():
-            return json.loads(cache.read_text())
+    with contextlib.ExitStack() as stack:
+        folder = name = key = None
+        if cache_dir is not None:
+            if os.path.islink(cache_dir):      # said plainly; the folder's own check holds
+                raise OutputError(f"cannot use the reference cache {cache_dir}: it is a "
+                                  f"symbolic link (cosim never writes through one); remove it")
+            folder = stack.enter_context(OutputFolder(cache_dir, lock=False))
+            key = cache_key(scene, variant, contact, joint)
+            name = entry_name(scene, variant, key)
+            got = read_entry(folder, name)
+            problem = got if isinstance(got, str) else (
+                None if got is None else entry_problem(got["entry"], key))
+            if got is not None and problem is None:
+                stored = got["entry"]["reference"]
+                return {k: stored[k] if kind == "count" else float(stored[k])
+                        for k, kind in _FIELDS.items()}
+            if problem is not None:
+                warnings.warn(f"the bench cache entry {folder.path_of(name)} {problem}: not "
+                              f"used; the reference is run again and the entry replaced",
+                              stacklevel=2)
+        ref = _run_reference(path, variant, overrides, contact, joint)
+        if folder is not None:
+            folder.write(name, lambda fh: json.dump(cache_entry(key, ref), fh, indent=1), "w")
+    return ref
+
+
+def _run_reference(path, variant, overrides, contact, joint) -> dict:
+    """Run the reference (:data:`REFERENCE`) and return its metrics."""
     ov = list(overrides) + _monolithic(REFERENCE)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -158,20 +201,14 @@ def reference(path, variant=None, contact=None, joint=None, overrides=(),
         raise SimulationError(f"the reference run failed: {res.message}")
     ref = _metrics(res, contact, joint)
     ref["cpu_time_s"] = res.summary["cpu_time_s"]
-    if cache is not None:
-        try:
-            cache.parent.mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            raise output_error(exc, cache.parent, "cannot make the cache folder") from None
-        write_reference(ref, cache)
     return ref
 
 
-def write_reference(ref: dict, path) -> None:
+def write_reference(ref: dict, path, folder: OutputFolder | None = None) -> Path:
     """The reference's metrics (as :func:`reference` returns them) as JSON,
-    written whole into ``path``'s folder under its checked name."""
-    path = Path(path)
-    _write(path.parent, path.name, lambda fh: json.dump(ref, fh, indent=1), "w")
+    written whole through the checked writer (see :func:`write_csv` for
+    ``path`` and ``folder``)."""
+    return _write(path, folder, lambda fh: json.dump(ref, fh, indent=1), "w")
 
 
 def _once(path, variant, overrides, scheme, ref, contact, joint) -> tuple:
@@ -359,33 +396,44 @@ def cheapest_within(rows, accuracy: float = 0.01) -> dict:
     return best
 
 
-def _write(folder, name: str, write, mode: str) -> Path:
-    """``folder/name``, its name checked by :func:`cosim.io.rundir.inside`,
-    written whole by :func:`cosim.core.series.atomic_write` (an
-    :class:`OSError` becomes an :class:`~cosim.errors.OutputError` naming
-    the file)."""
-    path = inside(folder, name)
-    atomic_write(path, write, mode)
-    return path
+def _write(path, folder: OutputFolder | None, write, mode: str) -> Path:
+    """Write ``path`` whole through :meth:`cosim.io.rundir.OutputFolder.write`:
+    as the name ``path`` in ``folder`` (open, its lock held by the caller),
+    or, without ``folder``, into ``path``'s folder, opened and locked for
+    the write."""
+    if folder is not None:
+        return folder.write(check_name(str(path), folder.path), write, mode)
+    path = Path(path)
+    with OutputFolder(path.parent) as own:
+        return own.write(path.name, write, mode)
 
 
-def write_csv(rows, path) -> None:
-    """The rows as CSV with :data:`COLUMNS`, written whole into ``path``'s
-    folder under its checked name (:func:`cosim.io.rundir.inside`).
+def write_csv(rows, path, folder: OutputFolder | None = None) -> Path:
+    """The rows as CSV with :data:`COLUMNS`, written whole through the
+    checked writer (:class:`cosim.io.rundir.OutputFolder`): a link planted
+    at the name is replaced, never followed.
+
+    Parameters
+    ----------
+    rows : sequence of BenchRow
+    path : path-like or str
+        The file; with ``folder``, its plain name in that folder.
+    folder : OutputFolder, optional
+        The open output folder whose lock the caller holds; without it,
+        ``path``'s folder is opened and locked for the write.
 
     Raises
     ------
     OutputError
-        If the name is no plain file name or the file cannot be written.
+        If the name is no plain file name, the folder is a link or a file,
+        another cosim process holds its lock, or the file cannot be written.
     """
-    path = Path(path)
-
     def write(fh):
         w = csv.DictWriter(fh, fieldnames=COLUMNS)
         w.writeheader()
         for r in rows:
             w.writerow(asdict(r))
-    _write(path.parent, path.name, write, "w")
+    return _write(path, folder, write, "w")
 
 
 def read_csv(path) -> list[BenchRow]:
@@ -398,66 +446,3 @@ def read_csv(path) -> list[BenchRow]:
                                         int(v) if types[k] == "int" else float(v))
                                     for k, v in rec.items()}))
     return rows
-
-
-def plot(rows, path, title="") -> None:
-    """Log-log work-precision plot: the larger of the peak and exit-velocity
-    errors against CPU time, one line per scheme through the medians over
-    the round-off copies, with a bar from the best copy to the worst; the
-    paper's method and the monolithic tolerances as points; runs whose
-    worst copy miscounts the contacts are hollow.  Written whole into
-    ``path``'s folder under its checked name (:func:`cosim.io.rundir.inside`).
-    Needs matplotlib (``pip install "cosim[plot]"``)."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    path = Path(path)
-    fig, ax = plt.subplots(figsize=(6.4, 4.6))
-    groups: dict[str, list[BenchRow]] = {}
-    for r in rows:
-        if r.status == "finished":
-            groups.setdefault(r.label, []).append(r)
-    floor = 1e-8
-    spread = max((r.copies for r in rows), default=1)
-    for label, rs in groups.items():
-        x = [r.cpu_time_s for r in rs]
-        y = [max(r.err_peak, r.err_exit_velocity, floor) for r in rs]
-        lo = [max(_best(r.err_peak_best, r.err_peak), _best(r.err_exit_velocity_best,
-                                                            r.err_exit_velocity), floor)
-              for r in rs]
-        hi = [max(_best(r.err_peak_worst, r.err_peak), _best(r.err_exit_velocity_worst,
-                                                             r.err_exit_velocity), floor)
-              for r in rs]
-        marker = {"paper_rk45": "*", "monolithic": "s"}.get(label, "o")
-        line, = ax.plot(x, y, marker=marker, ls="-" if len(rs) > 1 else "none", label=label)
-        ax.errorbar(x, y, yerr=[[max(yi - li, 0.0) for yi, li in zip(y, lo)],
-                                [max(hi_ - yi, 0.0) for yi, hi_ in zip(y, hi)]],
-                    fmt="none", ecolor=line.get_color(), elinewidth=1.0, capsize=3)
-        for r, xi, yi in zip(rs, x, y):
-            if _best(r.err_count_worst, r.err_count):
-                ax.plot([xi], [yi], marker=marker, mfc="white", mec=line.get_color(), ls="none")
-            if label not in ("paper_rk45", "monolithic"):
-                ax.annotate(f"{r.macro_step:.0e}", (xi, yi), fontsize=7,
-                            textcoords="offset points", xytext=(3, 3))
-    ax.axhline(0.01, color="grey", lw=0.8, ls="--")
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    ax.set_xlabel("CPU time of the run [s]" + (", median" if spread > 1 else ""))
-    ax.set_ylabel("max(peak, exit velocity) relative error")
-    if spread > 1:
-        ax.text(0.99, 0.01, f"median of {spread} round-off copies; bars: best to worst; "
-                f"hollow: a copy miscounts", transform=ax.transAxes, ha="right", va="bottom",
-                fontsize=7, color="dimgrey")
-    ax.set_title(title or "work-precision")
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    try:
-        _write(path.parent, path.name, lambda fh: fig.savefig(fh, dpi=110, format="png"), "wb")
-    finally:
-        plt.close(fig)
-
-
-def _best(x: float, fallback: float) -> float:
-    """``x``, or ``fallback`` where a row has no band (NaN)."""
-    return fallback if math.isnan(x) else x

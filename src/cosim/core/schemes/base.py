@@ -36,6 +36,21 @@ def _pos(v):
     return v > 0 and math.isfinite(v)
 
 
+#: the smallest relative tolerance a scheme accepts: float64's machine
+#: epsilon, the finest relative difference it resolves; a tolerance below it
+#: could never be met, and an iteration held to it only runs out its count
+MIN_RELATIVE_TOLERANCE = float(np.finfo(float).eps)
+
+
+def _relative(v):
+    return math.isfinite(v) and v >= MIN_RELATIVE_TOLERANCE
+
+
+#: the rule of a relative tolerance, as an error states it
+RELATIVE_RULE = (f">= {MIN_RELATIVE_TOLERANCE:.3g} (relative; float64 resolves no finer, "
+                 f"`cosim.core.schemes.base.MIN_RELATIVE_TOLERANCE`)")
+
+
 #: j + 1 for the rows j of force polynomials: int s^j ds over [0, 1] is 1 / (j + 1)
 _POWERS_PLUS_ONE = np.arange(1.0, 9.0)[:, None]
 
@@ -110,7 +125,7 @@ class CoSimulationScheme(MacroStepControl, InputExtrapolation, CouplingScheme):
         "max_energy_gain": Option(float, 0.01, lambda v: v >= 0 and math.isfinite(v), ">= 0"),
         "accept_unsafe_step": Option(bool, False, lambda v: True, "true or false"),
         "contact_step": Option(float, None, _pos, "> 0 s"),
-        "interface_tolerance": Option(float, None, _pos, "> 0 (relative)"),
+        "interface_tolerance": Option(float, None, _relative, RELATIVE_RULE),
         "substeps": Option(dict, None, _substeps_ok,
                            "a table of subsystem name = number of sub-steps (>= 1)"),
     }

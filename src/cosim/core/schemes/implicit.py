@@ -8,7 +8,7 @@ from typing import ClassVar
 import numpy as np
 
 from cosim.core.hermite import hermite_coefficients
-from .base import CoSimulationScheme, CouplingError, Option, _pos
+from .base import RELATIVE_RULE, CoSimulationScheme, CouplingError, Option, _pos, _relative
 
 __all__ = ["Implicit", "Aitken", "IQNILS", "ACCELERATIONS"]
 
@@ -221,7 +221,7 @@ class Implicit(CoSimulationScheme):
         **CoSimulationScheme.options,
         "extrapolation_order": Option(int, 1, lambda v: v in (0, 1, 2), "0, 1 or 2"),
         "max_iterations": Option(int, 50, lambda v: v >= 1, ">= 1"),
-        "tolerance": Option(float, 1e-8, _pos, "> 0 (relative)"),
+        "tolerance": Option(float, 1e-8, _relative, RELATIVE_RULE),
         "force_tolerance": Option(float, 1e-9, _pos, "> 0 N"),
         "relaxation": Option(float, 0.5, lambda v: 0 < v <= 1, "in (0, 1]"),
         "acceleration": Option(str, "aitken", lambda v: v in ACCELERATIONS,

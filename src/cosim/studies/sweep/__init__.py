@@ -9,10 +9,12 @@ again skips the points already done; the records go to one CSV table.
 
 The package is split by concern:
 
-- :mod:`~cosim.studies.sweep.grid`: the grid, its points and their names;
+- :mod:`~cosim.studies.sweep.grid`: the grid (a product, each point made
+  when asked for), its points and their names;
 - :mod:`~cosim.studies.sweep.backends`: where the points run (this process,
   a process pool with time limits, Dask);
-- :mod:`~cosim.studies.sweep.resume`: which points of a sweep folder are done;
+- :mod:`~cosim.studies.sweep.resume`: which points of a sweep folder are done
+  (keyed on the content of every file a point reads and cosim's version);
 - :mod:`~cosim.studies.sweep.table`: the records and the CSV table;
 - :mod:`~cosim.studies.sweep.plot`: the figure;
 - :mod:`~cosim.studies.sweep.study`: study files (the paper's figures 8 and 11);
@@ -26,16 +28,19 @@ or a plot.
 """
 from cosim.scene.load import SceneError  # what a bad scene, grid or study file raises
 from cosim.studies.sweep.backends import CONNECT_TIMEOUT_S, SweepError, default_workers
-from cosim.studies.sweep.driver import SweepEvent, SweepInterrupted, strike_names, sweep
-from cosim.studies.sweep.grid import Point, grid_points, parse_grid_option, point_name, split_values
+from cosim.studies.sweep.driver import (MAX_TIMEOUT_S, SweepEvent, SweepInterrupted, strike_names,
+                                        sweep, sweep_folder)
+from cosim.studies.sweep.grid import (LARGE_GRID, MAX_POINTS, Grid, Point, grid_points,
+                                      parse_grid_option, point_name, split_values)
 from cosim.studies.metrics import impact_regime  # its home is metrics; offered here as before
 from cosim.studies.sweep.plot import plot_sweep
 from cosim.studies.sweep.resume import DONE
 from cosim.studies.sweep.study import Study, load_study, run_study
 from cosim.studies.sweep.table import (PLOT, TABLE, TIMING_COLUMNS, columns, flatten, read_table,
-                                       write_table)
+                                       table_writer, write_table)
 
-__all__ = ["Point", "SweepEvent", "Study", "SweepError", "SweepInterrupted", "sweep", "grid_points",
+__all__ = ["Point", "Grid", "SweepEvent", "Study", "SweepError", "SweepInterrupted", "sweep", "grid_points",
            "strike_names", "split_values", "parse_grid_option", "point_name", "impact_regime", "flatten",
            "columns", "write_table", "read_table", "plot_sweep", "load_study", "run_study",
-           "default_workers", "TIMING_COLUMNS", "TABLE", "PLOT", "DONE", "CONNECT_TIMEOUT_S"]
+           "default_workers", "TIMING_COLUMNS", "TABLE", "PLOT", "DONE", "CONNECT_TIMEOUT_S",
+           "sweep_folder", "table_writer", "LARGE_GRID", "MAX_POINTS", "MAX_TIMEOUT_S"]

@@ -5,17 +5,23 @@ past the time limit is recorded alone), or a Dask cluster (an address, a
 :class:`~cosim.scene.load.Scene` and sends back its
 :class:`~cosim.core.result.SimulationResult`, so it needs cosim but neither
 the scene file nor the output directory.  Dask is imported only when a
-scheduler is asked for.
+scheduler is asked for; an address is first checked to be a Dask scheduler
+with bounded reads of its own (:func:`_probe_scheduler`).
 """
 from __future__ import annotations
 
 import logging
 import os
 import signal
+import socket
+import struct
+import threading
+import time
 import warnings
 
-from cosim.errors import UnsafeStepError
+from cosim.errors import UnsafeStepError, shown
 from cosim.scene.load import SceneError
+from cosim.sides.fmu_unpack import remove_stale_unpacked
 
 __all__ = ["SweepError", "CONNECT_TIMEOUT_S", "default_workers"]
 
@@ -78,6 +84,45 @@ def _worker_main(conn) -> None:
             return
 
 
+class _Feed:
+    """The points still to run, drawn from their source only as they are
+    needed: ``{key: scene}`` or an iterator of ``(key, scene)`` pairs, which
+    a sweep makes one point at a time (a grid of a million points is never
+    loaded whole).  Offers what a queue of points needs: truth (any left?),
+    :meth:`more_than`, :meth:`popleft`, :meth:`appendleft`."""
+
+    def __init__(self, jobs):
+        from collections import deque
+        self._source = iter(jobs.items() if hasattr(jobs, "items") else jobs)
+        self._ahead = deque()
+
+    def _fill(self, n: int) -> int:
+        while len(self._ahead) < n:
+            try:
+                self._ahead.append(next(self._source))
+            except StopIteration:
+                break
+        return len(self._ahead)
+
+    def __bool__(self) -> bool:
+        return self._fill(1) > 0
+
+    def more_than(self, n: int) -> bool:
+        """Whether more than ``n`` points are left."""
+        return self._fill(n + 1) > n
+
+    def popleft(self):
+        self._fill(1)
+        return self._ahead.popleft()
+
+    def appendleft(self, item) -> None:
+        self._ahead.appendleft(item)
+
+    def __iter__(self):
+        while self:
+            yield self.popleft()
+
+
 class _Worker:
     """One process of :class:`_ProcessPool` and the point it holds."""
 
@@ -119,14 +164,12 @@ class _ProcessPool:
         self.failed_starts = 0
 
     def run(self, jobs: dict):
-        import time
-        from collections import deque
         from multiprocessing.connection import wait
 
-        todo = deque(jobs.items())
+        todo = _Feed(jobs)
         while todo or any(w.key is not None for w in self.workers):
             idle = sum(w.key is None for w in self.workers)
-            while todo and len(self.workers) < self.n and idle < len(todo):
+            while len(self.workers) < self.n and todo.more_than(idle):
                 self.workers.append(_Worker(self.ctx))      # started only for work left
                 idle += 1
             for w in self.workers:
@@ -194,6 +237,7 @@ class _ProcessPool:
         w.key = None
         w.stop()
         self.workers.remove(w)
+        remove_stale_unpacked()         # the FMU folders a killed worker could not remove
 
     def close(self, wait: float = 5.0) -> None:
         workers, self.workers = self.workers, []
@@ -201,39 +245,335 @@ class _ProcessPool:
             w.stop(wait if w.key is None else 0.0)
 
 
-#: seconds ``--scheduler ADDRESS`` waits for the scheduler to answer
+#: seconds ``--scheduler ADDRESS`` may take in all to connect, to greet and be
+#: greeted as a Dask scheduler, and to start the sweep's client
 CONNECT_TIMEOUT_S = 10.0
 
+#: the most bytes a scheduler's greeting may announce (Dask's is under 100)
+_GREETING_LIMIT = 1 << 16
 
-def _private_cluster(n_workers: int):
+
+def _scheduler_endpoint(address: str) -> tuple[str, str, int]:
+    """``(scheme, host, port)`` of a scheduler address, as Dask reads it (a
+    bare ``HOST:PORT`` is ``tcp``); a :class:`SweepError` for anything but a
+    ``tcp://`` or ``tls://`` address with a port."""
+    from distributed.comm.addressing import parse_address, parse_host_port
+
+    try:
+        scheme, loc = parse_address(address)
+        if scheme not in ("tcp", "tls"):
+            raise ValueError(f"the scheme {scheme}:// is not one a sweep can reach")
+        host, port = parse_host_port(loc)
+        if not (host and 0 < port < 65536):
+            raise ValueError("a host and a port from 1 to 65535 are needed")
+    except (ValueError, TypeError) as exc:
+        raise SweepError(f"`--scheduler` must be `local` or a Dask scheduler's address "
+                         f"(tcp://HOST:PORT or tls://HOST:PORT), got '{shown(address)}': "
+                         f"{shown(str(exc))}") from None
+    return scheme, host, port
+
+
+def _greeting() -> bytes:
+    """The first message a Dask client sends a scheduler it has connected to
+    (its comm options), in Dask's framing: the byte count of what follows,
+    the number of frames and the byte count of each (unsigned 64-bit
+    integers in the machine's order, as Dask writes them), then the frames;
+    here one frame, a msgpack map.  The map ends in an entry Dask ignores
+    whose text is a blank line, so that a server of a line-based protocol
+    (HTTP above all) has a whole request to answer instead of waiting for
+    the rest of a line."""
+    import pickle
+    import sys
+
+    import msgpack
+
+    body = msgpack.dumps({"compression": None, "python": list(sys.version_info[:3]),
+                          "pickle-protocol": pickle.HIGHEST_PROTOCOL,
+                          "cosim-probe": "\r\n\r\n"}, use_bin_type=True)
+    return struct.pack("QQQ", 16 + len(body), 1, len(body)) + body
+
+
+def _not_dask(first: bytes) -> str:
+    """What a peer that does not speak Dask answered like, from its first bytes."""
+    if first.startswith(b"HTTP/"):
+        status_line = first.split(b"\r\n")[0][:60]
+        return f"it answered like an HTTP server ({status_line!r})"
+    if first.lstrip().lower().startswith((b"<!doctype html", b"<html")):
+        return "it answered like an HTTP server (an HTML page)"
+    if first[:1] == b"\x15" and first[1:2] == b"\x03":
+        return "it answered like a TLS server (give its tls:// address)"
+    return f"its first bytes {first[:32]!r} are not a Dask message"
+
+
+def _probe_scheduler(address: str, timeout: float = CONNECT_TIMEOUT_S) -> None:
+    """Check that a Dask scheduler answers at ``address`` before Dask's client
+    is given it, within ``timeout`` seconds in all.
+
+    The check connects, sends the greeting a Dask client sends, and reads
+    the scheduler's greeting with bounded reads: a Dask scheduler greets each
+    connection at once, in Dask's framing (see :func:`_greeting`).  Dask's
+    own client reads the first eight bytes as a byte count and waits for
+    that many, without a limit in time or size, so a port that accepts and
+    never answers would hold it forever and an HTTP server's answer
+    (``HTTP/1.1`` read as a count) would make it allocate exabytes.
+
+    Raises
+    ------
+    SweepError
+        If the address is malformed, cannot be reached, gives no answer in
+        time, or answers in anything but a Dask greeting.  Nothing is sent
+        past the greeting.
+    """
+    scheme, host, port = _scheduler_endpoint(address)
+    deadline = time.monotonic() + timeout
+    where = f"`--scheduler` '{shown(address)}'"
+
+    def left() -> float:
+        remaining = deadline - time.monotonic()
+        if remaining <= 0:
+            raise socket.timeout
+        return remaining
+
+    def recv_exactly(sock, n: int) -> bytes:
+        data = bytearray()
+        while len(data) < n:
+            sock.settimeout(left())
+            chunk = sock.recv(min(n - len(data), 1 << 16))
+            if not chunk:
+                break
+            data += chunk
+        return bytes(data)
+
+    try:
+        sock = _connect(host, port, left)
+    except socket.timeout:
+        raise SweepError(f"{where} cannot be reached: no connection within "
+                         f"{timeout:g} s") from None
+    except OSError as exc:
+        raise SweepError(f"{where} cannot be reached: {exc}") from None
+    try:
+        if scheme == "tls":
+            sock = _tls_wrap(sock, host, left(), where)
+        sock.settimeout(left())
+        sock.sendall(_greeting())
+        head = recv_exactly(sock, 8)
+        if not head:
+            raise SweepError(f"{where} is not a Dask scheduler: it closed the connection "
+                             f"without a greeting")
+        if len(head) < 8:
+            raise SweepError(f"{where} is not a Dask scheduler: {_not_dask(head)}")
+        (size,) = struct.unpack("Q", head)
+        if not 16 <= size <= _GREETING_LIMIT:
+            raise SweepError(f"{where} is not a Dask scheduler: "
+                             f"{_not_dask(head + _peek(sock))}")
+        body = recv_exactly(sock, size)
+    except socket.timeout:
+        raise SweepError(f"{where}: no answer within {timeout:g} s (a Dask scheduler "
+                         f"greets a client at once)") from None
+    except ConnectionResetError:
+        raise SweepError(f"{where} is not a Dask scheduler: it reset the connection when "
+                         f"greeted" + (" (a TLS server does: is it a tls:// address?)"
+                                       if scheme == "tcp" else "")) from None
+    except OSError as exc:
+        raise SweepError(f"{where} cannot be reached: {exc}") from None
+    finally:
+        sock.close()
+    problem = _greeting_problem(body, size)
+    if problem:
+        raise SweepError(f"{where} is not a Dask scheduler: {problem}")
+
+
+def _connect(host: str, port: int, left):
+    """A TCP socket connected to ``host:port`` within the time ``left()``
+    gives, the name lookup included (the resolver's own time limits can add
+    up to far more): ``socket.timeout`` past it."""
+    box: dict = {}
+
+    def lookup():
+        try:
+            box["found"] = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)
+        except OSError as exc:
+            box["error"] = exc
+
+    thread = threading.Thread(target=lookup, name="cosim-dask-lookup", daemon=True)
+    thread.start()
+    thread.join(left())
+    if thread.is_alive():
+        raise socket.timeout
+    if "error" in box:
+        raise box["error"]
+    error: OSError = OSError(f"no address found for {shown(host)}")
+    for family, kind, proto, _, sockaddr in box["found"]:
+        sock = socket.socket(family, kind, proto)
+        try:
+            sock.settimeout(left())
+            sock.connect(sockaddr)
+            return sock
+        except socket.timeout:
+            sock.close()
+            raise
+        except OSError as exc:
+            sock.close()
+            error = exc
+    raise error
+
+
+def _peek(sock) -> bytes:
+    """Up to 56 more bytes that have already come, to show what answered."""
+    try:
+        sock.settimeout(0.2)
+        return sock.recv(56)
+    except OSError:
+        return b""
+
+
+def _greeting_problem(body: bytes, size: int) -> str | None:
+    """What is wrong with a greeting announced as ``size`` bytes: too short,
+    frame counts that do not add up, or a first frame that is not a msgpack
+    map; ``None`` for a well-formed greeting."""
+    import msgpack
+
+    if len(body) < size:
+        return f"its greeting announced {size} bytes and closed after {len(body)}"
+    (nframes,) = struct.unpack_from("Q", body)
+    if not 1 <= nframes <= 64 or 8 * (1 + nframes) > size:
+        return f"its greeting announced {nframes} frames in {size} bytes"
+    lengths = struct.unpack_from(f"{nframes}Q", body, 8)
+    start = 8 * (1 + nframes)
+    if start + sum(lengths) != size:
+        return "the frame lengths of its greeting do not add up"
+    try:
+        first = msgpack.loads(body[start:start + lengths[0]], raw=False)
+    except Exception:                               # noqa: BLE001 - any malformed msgpack
+        first = None
+    if not isinstance(first, dict):
+        return "its greeting is not a msgpack map"
+    return None
+
+
+def _tls_wrap(sock, host: str, timeout: float, where: str):
+    """``sock`` after a TLS handshake with the client certificate of Dask's
+    ``distributed.comm.tls.*`` configuration, within ``timeout`` seconds."""
+    import ssl
+
+    from distributed.security import Security
+
+    ctx = Security().get_connection_args("client").get("ssl_context")
+    if ctx is None:
+        sock.close()
+        raise SweepError(f"{where}: a tls:// scheduler needs the cluster's certificates in "
+                         f"Dask's distributed.comm.tls.* configuration, and none is set")
+    sock.settimeout(timeout)
+    try:
+        return ctx.wrap_socket(sock, server_hostname=host if ctx.check_hostname else None)
+    except ssl.SSLError as exc:
+        sock.close()
+        raise SweepError(f"{where}: the TLS handshake failed: {exc}") from None
+
+
+def _connect_client(address: str, timeout: float):
+    """Dask's ``Client`` of a scheduler that :func:`_probe_scheduler` found,
+    given ``timeout`` seconds to start.  Dask bounds each of its steps but
+    one, the greeting of each connection, so the client is started in a
+    thread of its own and given up on (a :class:`SweepError`) when it has
+    not started in time; if it starts later, it is closed at once."""
+    from distributed import Client
+
+    lock = threading.Lock()
+    box: dict = {}
+
+    def start():
+        try:
+            client = Client(address, timeout=CONNECT_TIMEOUT_S)
+        except Exception as exc:                     # noqa: BLE001 - reported below
+            box["error"] = exc
+            return
+        with lock:
+            if box.get("abandoned"):
+                client.close()
+            else:
+                box["client"] = client
+
+    thread = threading.Thread(target=start, name="cosim-dask-connect", daemon=True)
+    thread.start()
+    interrupted = True
+    try:
+        thread.join(timeout)
+        interrupted = False
+    finally:                                    # given up, or Ctrl-C: no client is kept
+        with lock:
+            client = box.pop("client", None)
+            box["abandoned"] = True
+        if interrupted and client is not None:
+            client.close()
+    if client is not None:
+        return client
+    where = f"`--scheduler` '{shown(address)}'"
+    exc = box.get("error")
+    if exc is None:
+        raise SweepError(f"{where}: the Dask client did not start within {timeout:g} s")
+    if isinstance(exc, OSError):
+        raise SweepError(f"{where} cannot be reached: {shown(str(exc))}")
+    raise SweepError(f"{where}: the Dask client could not start: "
+                     f"{type(exc).__name__}: {shown(str(exc))}")
+
+
+def _local_security():
+    """The TLS set-up of a private local cluster (a certificate made for it
+    alone), or ``None`` without the ``cryptography`` package."""
+    try:
+        from distributed.security import Security
+        return Security.temporary()
+    except ImportError:
+        return None
+
+
+def _private_cluster(n_workers: int, *, local_directory=None, security=False):
     """A Dask ``LocalCluster`` that other users of this machine cannot use:
     TLS with a certificate made for this cluster alone (mutual: a client or
     a worker must present it), listening on 127.0.0.1; without the
     ``cryptography`` package, the workers are threads of this process
-    reached by the in-process transport (no socket at all)."""
+    reached by the in-process transport (no socket at all).
+
+    Parameters
+    ----------
+    n_workers : int
+        Worker processes (threads without ``cryptography``), one thread each.
+    local_directory : str or os.PathLike, optional
+        Where the scheduler and the workers keep their scratch space (Dask's
+        default is ``dask-scratch-space`` in the system's temporary folder,
+        which it leaves behind).
+    security : distributed.security.Security or None, optional
+        From :func:`_local_security`; made here when not given.
+    """
     from distributed import LocalCluster
-    try:
-        from distributed.security import Security
-        security = Security.temporary()
-    except ImportError:
+
+    if security is False:
+        security = _local_security()
+    where = {} if local_directory is None else {
+        "local_directory": str(local_directory),
+        "scheduler_kwargs": {"local_directory": str(local_directory)}}
+    if security is None:
         log.warning("no `cryptography` package: the local Dask cluster runs its workers "
                     "as threads of this process (no network listener)")
         return LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=False,
-                            protocol="inproc://", dashboard_address=None)
+                            protocol="inproc://", dashboard_address=None, **where)
     return LocalCluster(n_workers=n_workers, threads_per_worker=1, host="127.0.0.1",
-                        protocol="tls://", security=security, dashboard_address=None)
+                        protocol="tls://", security=security, dashboard_address=None, **where)
 
 
 class _Runner:
     """Where the points run: this process, a process pool, or Dask.
 
     A Dask scheduler given by address is reached when the runner is entered
-    (a :class:`SweepError` if it cannot be); a ``local`` cluster is started
-    only when there are points to run."""
+    (a :class:`SweepError` if it cannot be, or is not a Dask scheduler); a
+    ``local`` cluster is started only when there are points to run, with
+    its scratch space in a temporary folder that :meth:`__exit__` removes."""
 
     def __init__(self, workers: int, scheduler, timeout: float | None = None):
         self.workers, self.scheduler, self.timeout = workers, scheduler, timeout
-        self._pool = self._client = self._cluster = None
+        self._pool = self._client = self._cluster = self._scratch = None
+        self._security = False
 
     def __enter__(self):
         if self.scheduler is not None:
@@ -243,17 +583,18 @@ class _Runner:
                 raise ImportError('a Dask scheduler needs dask.distributed: '
                                   'pip install "cosim[dask]"') from exc
             if self.scheduler == "local":
-                pass                                    # started by run()
+                self._security = _local_security()          # the cluster: run()
+                if self._security is None and self.timeout is not None:
+                    raise SweepError(
+                        "`--timeout` with `--scheduler local` needs the local cluster's "
+                        "workers to be processes, which needs the `cryptography` package "
+                        "(pip install \"cosim[dask]\"); without it they are threads, and "
+                        "a thread past the time limit cannot be stopped")
             elif isinstance(self.scheduler, str):
-                try:
-                    self._client = Client(self.scheduler, timeout=CONNECT_TIMEOUT_S)
-                except (ValueError, TypeError) as exc:
-                    raise SweepError(f"`--scheduler` must be `local` or a Dask scheduler's "
-                                     f"address (tcp://HOST:PORT or tls://HOST:PORT), got "
-                                     f"{self.scheduler!r}: {exc}") from None
-                except OSError as exc:
-                    raise SweepError(f"`--scheduler` {self.scheduler!r} cannot be reached: "
-                                     f"{exc}") from None
+                start = time.monotonic()
+                _probe_scheduler(self.scheduler, CONNECT_TIMEOUT_S)
+                self._client = _connect_client(
+                    self.scheduler, max(CONNECT_TIMEOUT_S - (time.monotonic() - start), 0.1))
             else:                                       # a Client or a cluster object
                 self._client = (self.scheduler if hasattr(self.scheduler, "submit")
                                 else Client(self.scheduler))
@@ -262,25 +603,36 @@ class _Runner:
         return self
 
     def __exit__(self, *exc):
-        if self._pool is not None:
-            self._pool.close(wait=0.0 if exc[0] is not None else 5.0)
-        if self._client is not None and self._client is not self.scheduler:
-            self._client.close()
-        if self._cluster is not None:
-            self._cluster.close()
+        try:
+            if self._pool is not None:
+                self._pool.close(wait=0.0 if exc[0] is not None else 5.0)
+            if self._client is not None and self._client is not self.scheduler:
+                self._client.close()
+            if self._cluster is not None:
+                self._cluster.close()
+        finally:
+            if self._scratch is not None:
+                import shutil
+                shutil.rmtree(self._scratch, ignore_errors=True)
 
     def run(self, jobs):
-        """Run ``{key: scene}``; yield ``(key, outcome)`` as each completes."""
+        """Run ``{key: scene}``, or the ``(key, scene)`` pairs of an iterator
+        (drawn only as workers free up); yield ``(key, outcome)`` as each
+        completes."""
         if self.scheduler == "local" and self._client is None:
+            import tempfile
+
             from distributed import Client
-            self._cluster = _private_cluster(max(self.workers, 1))
+            self._scratch = tempfile.mkdtemp(prefix="cosim-dask-")
+            self._cluster = _private_cluster(max(self.workers, 1), security=self._security,
+                                             local_directory=self._scratch)
             self._client = Client(self._cluster)
         if self._client is not None:
             yield from self._run_dask(jobs)
         elif self._pool is not None:
             yield from self._pool.run(jobs)
         else:
-            for key, scene in jobs.items():
+            for key, scene in _Feed(jobs):
                 yield key, _simulate(scene)
 
     def _run_dask(self, jobs):
@@ -289,9 +641,6 @@ class _Runner:
         Dask's to handle: it runs the points that worker held elsewhere, and
         a point that kills workers again and again ends in ``KilledWorker``
         for that point alone."""
-        import time
-        from collections import deque
-
         from distributed import wait
 
         client = self._client
@@ -299,7 +648,7 @@ class _Runner:
             slots = max(sum(client.nthreads().values()), 1)
         except Exception:                          # noqa: BLE001 - not told: one by one
             slots = 1
-        todo = deque(jobs.items())
+        todo = _Feed(jobs)
         live: dict = {}
 
         def submit():

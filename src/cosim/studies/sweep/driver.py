@@ -1,26 +1,36 @@
-"""The sweep itself: the points are loaded and validated on this process,
-handed to a backend (:mod:`cosim.studies.sweep.backends`), and each result is
-written to the point's run directory and made a record of the table.
+"""The sweep itself: the points are made from the grid, loaded, validated
+and checked against their folders on this process one at a time, as the
+backend (:mod:`cosim.studies.sweep.backends`) has a worker free for them, and
+each result is written to the point's run directory, through the checked
+writer of the sweep's folder, and made a record of the table.
 """
 from __future__ import annotations
 
+import contextlib
+import itertools
 import json
 import logging
+import math
+import os
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
-from cosim.core.result import _atomic_write, resolved_scene_text, write_outputs
-from cosim.io.rundir import inside
-from cosim.io.tomlread import TomlLimitError
+from cosim.core.result import resolved_scene_text
+from cosim.core.series import npz_writer
+from cosim.errors import shown
+from cosim.io.rundir import OutputFolder
 from cosim.scene.load import SceneError, load_scene, read_toml_file
 from cosim.studies.strike import find_strike
 from cosim.studies.sweep.backends import _Runner
-from cosim.studies.sweep.grid import Point, grid_points
-from cosim.studies.sweep.resume import _file_hash, _load_done, _spec
-from cosim.studies.sweep.table import TABLE, _record, write_table
+from cosim.studies.sweep.grid import LARGE_GRID, Point, grid_points
+from cosim.scene.inputs import FileDigests, input_files
+from cosim.studies.sweep.resume import (PointFolderError, _load_done,
+                                        open_point, point_key)
+from cosim.studies.sweep.table import TABLE, _record, table_writer
 
-__all__ = ["SweepEvent", "SweepInterrupted", "sweep", "strike_names"]
+__all__ = ["SweepEvent", "SweepInterrupted", "sweep", "sweep_folder", "strike_names",
+           "MAX_TIMEOUT_S"]
 
 log = logging.getLogger(__name__)
 
@@ -42,6 +52,9 @@ class SweepEvent:
         The point was done before (resume) and was not run again.
     done, total : int
         Points accounted for so far, and in all.
+    note : str
+        Why a point that was done before ran again (``run again: ...``: its
+        inputs or cosim changed, or its folder was damaged); empty otherwise.
     """
 
     point: Point
@@ -50,13 +63,16 @@ class SweepEvent:
     skipped: bool
     done: int
     total: int
+    note: str = ""
 
 
 class SweepInterrupted(KeyboardInterrupt):
     """A sweep stopped by Ctrl-C (or by SIGTERM/SIGHUP, which ``cosim sweep``
     turns into this).  ``rows`` holds every point's record in grid order: the
     points that ended before the stop with their status, the others with
-    status ``interrupted``; the table was written."""
+    status ``interrupted`` (in a grid of more than
+    :data:`~cosim.studies.sweep.grid.LARGE_GRID` points, only those begun:
+    the points never started are left out); the table was written."""
 
     def __init__(self, rows: list, signal_name: str = "SIGINT"):
         super().__init__(signal_name)
@@ -88,13 +104,19 @@ def sweep(scene, *, variants=None, grid=None, scheme: str | None = None, workers
         Run on a Dask distributed cluster: its scheduler's address
         (``tcp://host:8786``), ``"local"``, or a ``Client``.  Its workers need
         cosim installed, not the scene file nor ``out``.
-    out : path-like, optional
+    out : path-like or OutputFolder, optional
         The sweep's directory: one run directory per point (named by
-        :func:`point_name`) and the table ``sweep.csv``.  A point whose
-        directory holds a complete run of the same scene file, variant,
-        overrides and scheme that ended ``finished``, ``failed`` or
-        ``refused`` is not run again.  Without ``out`` nothing is written and
-        nothing is skipped.
+        :func:`point_name`) and the table ``sweep.csv``, all written through
+        the checked writer (:class:`cosim.io.rundir.OutputFolder`).  The
+        sweep holds the folder's lock while it runs (an ``OutputFolder``
+        given is held by its caller).  A point whose directory holds a
+        complete run of the same inputs (:mod:`~cosim.studies.sweep.resume`:
+        the scene file and the files it names by content, cosim's version,
+        variant, overrides and scheme) that ended ``finished``, ``failed`` or
+        ``refused`` is not run again; one whose inputs changed or whose
+        directory is damaged runs again (its event's ``note`` says why), and
+        one whose directory is a link is recorded ``error`` and not run.
+        Without ``out`` nothing is written and nothing is skipped.
     retry_failed : bool
         Run the points that failed or were refused before again.
     contact, joint : str, optional
@@ -132,7 +154,14 @@ def sweep(scene, *, variants=None, grid=None, scheme: str | None = None, workers
         If the scene file cannot be read, or ``contact`` or ``joint`` is given
         and a variant's scene has no such contact or joint (nothing written).
     ValueError
-        If the grid is malformed.
+        If the grid is malformed (a repeated variant or value, more than
+        :data:`~cosim.studies.sweep.grid.MAX_POINTS` points), ``workers`` is
+        not a whole number >= 1, or ``timeout`` is not a number of seconds
+        > 0 and at most :data:`MAX_TIMEOUT_S`.
+    cosim.errors.OutputBusyError
+        If another sweep or run holds ``out`` (nothing run).
+    cosim.errors.OutputError
+        If ``out`` is a link, a file or a filesystem root.
     SweepError
         If ``scheduler`` is malformed or cannot be reached (nothing written).
     SweepInterrupted
@@ -145,8 +174,9 @@ def sweep(scene, *, variants=None, grid=None, scheme: str | None = None, workers
     The order of the records, and the table, is grid order, whatever order
     the points finish in, so the same sweep on one process, a pool and a
     cluster gives the same table (``cpu_time_s`` aside).  Points are loaded
-    and validated on the calling process; a point whose overrides do not make
-    a valid scene is recorded ``refused`` without being sent anywhere.
+    and validated on the calling process, one at a time as workers free up
+    (the grid is never built whole); a point whose overrides do not make a
+    valid scene is recorded ``refused`` without being sent anywhere.
 
     Examples
     --------
@@ -155,83 +185,196 @@ def sweep(scene, *, variants=None, grid=None, scheme: str | None = None, workers
     >>> [(r["variant"], r["contacts.C.count"]) for r in rows]          # doctest: +SKIP
     [('f1', 1), ('f100', 9)]
     """
+    _check_options(workers, timeout)
     scene_path = Path(scene)
     table = read_toml_file(scene_path)      # a regular file within the limits, or refused
+    hashes = FileDigests()
     try:
-        scene_hash = _file_hash(scene_path)
-    except (OSError, TomlLimitError) as exc:
-        raise SceneError(scene_path, "", f"cannot be read: {getattr(exc, 'strerror', None) or exc}"
-                         ) from None
+        scene_hash = hashes(scene_path)
+    except OSError as exc:
+        raise SceneError(scene_path, "", f"cannot be read: {exc.strerror or exc}") from None
     if not variants:                    # name the default variant, so the point says it
         default = table.get("default_variant")
         variants = [default] if isinstance(default, str) else None
     points = grid_points(variants, grid)
-    strikes = _strikes(scene_path, [p.variant for p in points], contact, joint)
-    out = Path(out) if out is not None else None
+    strikes = _strikes(scene_path, points.variants, contact, joint)
+    with _held(out) as folder:
+        return _sweep(points, folder, scene_path, scene_hash, hashes, strikes, scheme=scheme,
+                      workers=workers, scheduler=scheduler, retry_failed=retry_failed,
+                      progress=progress, timeout=timeout)
+
+
+#: most wall-clock seconds a point may be given (a `poll` wait holds 24.8 days)
+MAX_TIMEOUT_S = 1e6
+
+
+def _check_options(workers, timeout, names=("workers", "timeout")) -> None:
+    """Refuse a number of workers that is not a whole number >= 1, and a
+    time limit that is not a number of seconds > 0 and at most
+    :data:`MAX_TIMEOUT_S` (``names``: how the message calls them).
+
+    Raises
+    ------
+    ValueError
+    """
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise ValueError(f"`{names[0]}` must be a whole number >= 1, got {workers!r}")
+    if timeout is None:
+        return
+    if (isinstance(timeout, bool) or not isinstance(timeout, (int, float))
+            or not (timeout > 0 and math.isfinite(timeout))):
+        raise ValueError(f"`{names[1]}` must be > 0 s, got {timeout!r}")
+    if timeout > MAX_TIMEOUT_S:
+        raise ValueError(f"`{names[1]}` must be at most {MAX_TIMEOUT_S:.0e} s "
+                         f"({MAX_TIMEOUT_S / 86400:.1f} days), got {timeout!r}")
+
+
+@contextlib.contextmanager
+def sweep_folder(out):
+    """Hold a sweep's folder ``out`` (an :class:`~cosim.io.rundir.OutputFolder`,
+    made when missing and locked) while within; a folder made for it is
+    removed again when nothing was written there (a sweep refused before it
+    began).
+
+    Raises
+    ------
+    cosim.errors.OutputBusyError
+        If another sweep or run holds ``out``.
+    cosim.errors.OutputError
+        If ``out`` is a link, a file or a filesystem root.
+    """
+    folder = OutputFolder(out).open()
+    try:
+        yield folder
+    finally:
+        folder.close()
+        if folder.created:
+            try:
+                os.rmdir(folder.path)           # only when nothing was written there
+            except OSError:
+                pass
+
+
+@contextlib.contextmanager
+def _held(out):
+    """``out`` as a folder held for the sweep: None (nothing written), an
+    :class:`~cosim.io.rundir.OutputFolder` its caller holds, or a path
+    (held here, see :func:`sweep_folder`)."""
+    if out is None or isinstance(out, OutputFolder):
+        yield out
+    else:
+        with sweep_folder(out) as folder:
+            yield folder
+
+
+def _sweep(points, folder, scene_path, scene_hash, hashes, strikes, *, scheme, workers,
+           scheduler, retry_failed, progress, timeout) -> list[dict]:
+    """:func:`sweep` once its grid is made and its folder held.  Each point
+    is loaded, keyed and checked against its folder only when a worker is
+    free for it, so a grid of any size starts at once."""
     total = len(points)
     rows: dict[int, dict] = {}
-    scenes, specs = {}, {}
+    live: dict[int, tuple] = {}         # points loaded, not ended: scene, key, note
     seen_warnings: set[str] = set()
     stopped = None
 
-    def report(point, status, message, skipped):
+    def report(point, status, message, skipped, note=""):
         if progress is not None:
-            progress(SweepEvent(point, status, message, skipped, len(rows), total))
+            progress(SweepEvent(point, status, message, skipped, len(rows), total, note))
+
+    def prepare(p):
+        """The scene of point ``p`` to run, or None when it needs no run (it
+        was done before, or it is refused or cannot be written)."""
+        strike = strikes[p.variant]
+        if folder is not None:
+            try:
+                fd = open_point(folder.fd, p.name)
+            except PointFolderError as exc:
+                message = f"its folder {shown(str(folder.path / p.name))}: {exc.strerror}"
+                rows[p.index] = _record(p, {"variant": p.variant, "status": "error",
+                                            "message": message}, None, None, *strike)
+                report(p, "error", message, False)
+                return None
+            if fd is not None:
+                os.close(fd)
+        key = point_key(p, scene_path, scheme, scene_hash)
+        try:
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always")
+                sc = load_scene(scene_path, p.variant, p.overrides, scheme)
+        except SceneError as exc:
+            _finish(p, key, folder, None, None, "refused", str(exc), rows, *strike)
+            report(p, "refused", str(exc), False)
+            return None
+        for w in caught:                # each warning once per sweep, not per point
+            if str(w.message) not in seen_warnings:
+                seen_warnings.add(str(w.message))
+                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        try:
+            base = scene_path.resolve().parent
+            inputs = [(f"{label} = {os.path.relpath(path, base)}", hashes(path))
+                      for label, path in input_files(sc).items() if label != "scene"]
+        except OSError as exc:
+            message = f"{shown(str(exc.filename or 'an input file'))} cannot be read: " \
+                      f"{exc.strerror or exc}"
+            _finish(p, key, folder, None, sc, "refused", message, rows, *strike)
+            report(p, "refused", message, False)
+            return None
+        key = point_key(p, scene_path, scheme, scene_hash, inputs)
+        note = ""
+        if folder is not None:
+            wanted = (f"dq/{strike[1]}",) if strike[1] else ()
+            done, why = _load_done(folder.fd, p.name, key, retry_failed, wanted)
+            if done is not None:
+                meta, summary, series = done
+                try:
+                    rows[p.index] = _record(p, meta, summary, series, *strike)
+                except (TypeError, ValueError, KeyError, IndexError, AttributeError) as exc:
+                    why = f"its run cannot be read back ({type(exc).__name__})"
+                else:
+                    report(p, meta["status"], meta.get("message") or "", True)
+                    return None
+            if why:
+                note = f"run again: {why}"
+                log.info("point %s: %s", p.name, note)
+        live[p.index] = (sc, key, note)
+        return sc
+
+    def jobs():
+        for p in points:
+            sc = prepare(p)
+            if sc is not None:
+                yield p.index, sc
 
     with _Runner(workers, scheduler, timeout) as runner:
         try:
-            for p in points:
-                spec = _spec(p, scene_path, scheme, scene_hash)
-                specs[p.index] = spec
-                if out is not None:
-                    done = _load_done(out / p.name, spec, retry_failed)
-                    if done is not None:
-                        meta, summary, series = done
-                        rows[p.index] = _record(p, meta, summary, series, *strikes[p.variant])
-                        report(p, meta["status"], meta["message"], True)
-                        continue
-                try:
-                    with warnings.catch_warnings(record=True) as caught:
-                        warnings.simplefilter("always")
-                        sc = load_scene(scene_path, p.variant, p.overrides, scheme)
-                except SceneError as exc:
-                    _finish(p, spec, out, None, None, "refused", str(exc), rows,
+            feed = jobs()
+            first = next(feed, None)        # a local cluster starts only for work to do
+            if first is not None:
+                for index, (kind, payload) in runner.run(itertools.chain([first], feed)):
+                    p = points[index]
+                    sc, key, note = live.pop(index)
+                    res = payload if kind == "ran" else None
+                    status, message = (res.status, res.message) if res else (kind, payload)
+                    _finish(p, key, folder, res, sc, status, message, rows,
                             *strikes[p.variant])
-                    report(p, "refused", str(exc), False)
-                    continue
-                for w in caught:                # each warning once per sweep, not per point
-                    if str(w.message) not in seen_warnings:
-                        seen_warnings.add(str(w.message))
-                        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-                scenes[p.index] = sc
-
-            if scenes:
-                for index, (kind, payload) in runner.run(scenes):
-                    p, spec = points[index], specs[index]
-                    if kind == "ran":
-                        res = payload
-                        _finish(p, spec, out, res, scenes[index], res.status, res.message,
-                                rows, *strikes[p.variant])
-                        report(p, res.status, res.message, False)
-                    else:
-                        _finish(p, spec, out, None, scenes[index], kind, payload, rows,
-                                *strikes[p.variant])
-                        report(p, kind, payload, False)
+                    report(p, status, message, False, note)
         except KeyboardInterrupt as exc:
             # the runner's exit ends the workers; the table keeps what ended
             stopped = exc
     if stopped is not None:
         name = getattr(stopped, "signal_name", None) or "SIGINT"
-        for p in points:
-            if p.index not in rows:
-                rows[p.index] = _record(p, {**specs.get(p.index, {}), "variant": p.variant,
-                                            "status": "interrupted",
-                                            "message": f"the sweep was stopped ({name}) "
-                                                       f"before this point ended"},
-                                        None, None, *strikes[p.variant])
-    records = [rows[p.index] for p in points]
-    if out is not None:
-        write_table(records, out / TABLE)
+        # a large grid lists the points begun; a small one every point
+        left = (live if total > LARGE_GRID
+                else (i for i in range(total) if i not in rows))
+        for i in list(left):
+            p = points[i]
+            rows[i] = _record(p, {"variant": p.variant, "status": "interrupted",
+                                  "message": f"the sweep was stopped ({name}) before this "
+                                             f"point ended"}, None, None, *strikes[p.variant])
+    records = [rows[i] for i in sorted(rows)]
+    if folder is not None:
+        folder.write(TABLE, table_writer(records), "w")
     if stopped is not None:
         raise SweepInterrupted(records, name) from None
     return records
@@ -275,24 +418,25 @@ def strike_names(scene, variants=None, contact: str | None = None, joint: str | 
     return contact, joint
 
 
-def _finish(point, spec, out, res, scene, status, message, rows, contact, joint):
-    """Write a point's run directory (when there is ``out``) and its record."""
-    meta = {**spec, "status": status, "message": message}
+def _finish(point, key, folder, res, scene, status, message, rows, contact, joint):
+    """Write a point's run directory (when there is a sweep ``folder``) and
+    its record.  ``point.json`` goes last, after it was removed first, so a
+    folder whose ``point.json`` says done holds the whole run."""
+    meta = {**key, "status": status, "message": message}
     summary = res.summary if res is not None else None
     series = res.series if res is not None else None
-    if out is not None:
-        d = inside(out, point.name)
-        if res is not None:
-            # the sweep itself chose to (re)run this point: a stale or failed
-            # run of it is what gets replaced
-            write_outputs(res, d, scene, overwrite=True)
-        else:
+    if folder is not None:
+        with folder.folder(point.name) as d:
+            d.remove("point.json")
             for stale in ("summary.json", "series.npz"):
-                (d / stale).unlink(missing_ok=True)
+                d.remove(stale)
             if scene is not None:
                 text = resolved_scene_text(scene)
-                _atomic_write(d / "scene.toml", lambda fh: fh.write(text), "w")
-        _atomic_write(d / "point.json", lambda fh: json.dump(meta, fh, indent=2), "w")
+                d.write("scene.toml", lambda fh: fh.write(text), "w")
+            if res is not None:
+                d.write("series.npz", npz_writer(series), "wb")
+                d.write("summary.json", lambda fh: json.dump(summary, fh, indent=2), "w")
+            d.write("point.json", lambda fh: json.dump(meta, fh, indent=2), "w")
     if status not in ("finished",):
         log.info("point %s: %s: %s", point.name, status, message)
     rows[point.index] = _record(point, meta, summary, series, contact, joint)

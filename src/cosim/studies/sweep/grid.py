@@ -7,15 +7,26 @@ from __future__ import annotations
 import hashlib
 import itertools
 import json
+import math
+import operator
 import re
+from collections.abc import Sequence
 from dataclasses import dataclass
 
+from cosim.errors import shown
 from cosim.scene.load import SceneError, parse_override
 
-__all__ = ["Point", "split_values", "parse_grid_option", "point_name", "grid_points"]
+__all__ = ["Point", "Grid", "split_values", "parse_grid_option", "point_name", "grid_points",
+           "LARGE_GRID", "MAX_POINTS"]
 
 _SAFE = re.compile(r"[^A-Za-z0-9._=+-]")
 _NAME_MAX = 120
+
+#: a grid of more points than this is large: ``cosim sweep`` runs it only with ``--yes``
+LARGE_GRID = 10_000
+#: most points a sweep runs (each gets a folder of its own)
+MAX_POINTS = 10 ** 9
+
 
 def split_values(text: str) -> list[str]:
     """Split ``v1,v2,...`` at the commas that lie outside brackets, braces and
@@ -131,9 +142,34 @@ def point_name(variant: str | None, params) -> str:
     return safe
 
 
-def grid_points(variants=None, grid=None) -> list[Point]:
-    """Every combination of ``variants`` and the values of ``grid``, in grid
-    order.
+def _repeated(values):
+    """The first value of ``values`` that repeats one before it (None when
+    none does): the same value (``1`` and ``1.0`` too), or the same plain
+    text in a point's name (``1`` and ``"1"``, which would share a folder)."""
+    seen, names = set(), set()
+    for v in values:
+        if isinstance(v, (int, float)) and not isinstance(v, bool) and v == v:
+            same = ("number", v)
+        else:
+            same = ("value", json.dumps(v, sort_keys=True, default=repr))
+        text = _text(v)
+        plain = text if _SAFE.sub("_", text) == text and not text.startswith(".") else None
+        if same in seen or (plain is not None and plain in names):
+            return v
+        seen.add(same)
+        if plain is not None:
+            names.add(plain)
+    return None
+
+
+class Grid(Sequence):
+    """The points of a sweep: every combination of its variants and of the
+    values of its keys, in grid order, made one at a time when asked for.
+
+    A grid is a product, so it is never built whole: its length is the
+    product of the number of variants and of each key's values, and point
+    ``i`` is made from ``i``'s digits in that mixed radix.  A grid of a
+    million points takes no more memory than its values.
 
     Parameters
     ----------
@@ -145,23 +181,88 @@ def grid_points(variants=None, grid=None) -> list[Point]:
     Raises
     ------
     ValueError
-        If a variant repeats, a key has no values, or two points would be
-        the same.
+        If a variant repeats, a key has no values or repeats one (each point
+        would run twice, into one folder), or the grid has more than
+        :data:`MAX_POINTS` points.
     """
-    variants = list(variants) if variants else [None]
-    if len(set(variants)) != len(variants):
-        raise ValueError(f"`variants` repeats a name: {variants}")
-    grid = dict(grid or {})
-    for k, vals in grid.items():
-        if isinstance(vals, (str, bytes)) or not len(vals):
-            raise ValueError(f"grid key `{k}` needs a list of values, got {vals!r}")
-    keys = list(grid)
-    points = []
-    for i, (variant, *values) in enumerate(itertools.product(variants, *grid.values())):
-        params = tuple(zip(keys, values))
-        points.append(Point(i, variant, params, point_name(variant, params)))
-    names = [p.name for p in points]
-    if len(set(names)) != len(names):
-        dup = next(n for n in names if names.count(n) > 1)
-        raise ValueError(f"two points of the grid are the same: {dup}")
-    return points
+
+    def __init__(self, variants=None, grid=None):
+        variants = list(variants) if variants else [None]
+        seen = set()
+        for v in variants:
+            if v in seen:
+                raise ValueError(f"`variants` repeats a name: {shown(repr(v), 80)}; give each "
+                                 f"variant once")
+            seen.add(v)
+        values = {}
+        for k, vals in dict(grid or {}).items():
+            if (isinstance(vals, (str, bytes, dict)) or not hasattr(vals, "__len__")
+                    or not len(vals)):
+                raise ValueError(f"grid key `{shown(k, 80)}` needs a list of values, got "
+                                 f"{shown(vals, 80)}")
+            values[k] = tuple(vals)
+            dup = _repeated(values[k])
+            if dup is not None:
+                raise ValueError(f"grid key `{shown(k, 80)}` repeats the value "
+                                 f"{shown(_text(dup), 80)}: give each value once (each point "
+                                 f"runs once, into a folder of its own)")
+        self.variants = tuple(variants)
+        self.keys = tuple(values)
+        self.values = tuple(values.values())
+        self._sizes = (len(self.variants), *map(len, self.values))
+        self.size = math.prod(self._sizes)
+        if self.size > MAX_POINTS:
+            shape = " x ".join(map(str, self._sizes))
+            raise ValueError(f"the grid has {self.size:.3g} points ({shape}): a sweep runs at "
+                             f"most {MAX_POINTS:.0e}")
+
+    def __len__(self) -> int:
+        return self.size
+
+    def __getitem__(self, i):
+        if isinstance(i, slice):
+            return [self[j] for j in range(*i.indices(self.size))]
+        i = operator.index(i)
+        if i < 0:
+            i += self.size
+        if not 0 <= i < self.size:
+            raise IndexError(f"point {i} of a grid of {self.size}")
+        digits, rest = [], i
+        for n in reversed(self._sizes):
+            rest, d = divmod(rest, n)
+            digits.append(d)
+        digits.reverse()
+        variant = self.variants[digits[0]]
+        values = [vals[d] for vals, d in zip(self.values, digits[1:])]
+        return self._point(i, variant, values)
+
+    def __iter__(self):
+        for i, (variant, *values) in enumerate(itertools.product(self.variants, *self.values)):
+            yield self._point(i, variant, values)
+
+    def _point(self, index: int, variant, values) -> Point:
+        params = tuple(zip(self.keys, values))
+        return Point(index, variant, params, point_name(variant, params))
+
+    def __repr__(self) -> str:
+        return f"Grid({len(self.variants)} variant(s), keys {list(self.keys)}: {self.size} points)"
+
+
+def grid_points(variants=None, grid=None) -> Grid:
+    """Every combination of ``variants`` and the values of ``grid``, in grid
+    order: a :class:`Grid`, which makes each point when it is asked for.
+
+    Parameters
+    ----------
+    variants : sequence of str, optional
+        Scene variants; none: the scene's default variant alone.
+    grid : mapping of str to sequence, optional
+        ``key.path`` -> values (TOML values: numbers, strings, arrays...).
+
+    Raises
+    ------
+    ValueError
+        If a variant repeats, a key has no values or repeats a value, or the
+        grid is larger than :data:`MAX_POINTS`.
+    """
+    return Grid(variants, grid)

@@ -7,6 +7,7 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
+from cosim.io.rundir import atomic_write
 from cosim.studies.sweep.grid import _text
 from cosim.studies.sweep.table import _grid_keys
 
@@ -55,7 +56,9 @@ def plot_sweep(rows: list[dict], path, *, contact: str | None = None, x: str | N
     rows : list of dict
         Records of :func:`sweep` (or :func:`read_table`).
     path : path-like
-        The image to write (its suffix picks the format).
+        The image to write (its suffix picks the format), written whole by
+        the checked writer (:func:`cosim.io.rundir.atomic_write`; its folder
+        is made when missing, a link at ``path`` replaced, never followed).
     contact : str, optional
         The contact drawn; by default the first contact of the table (the
         axes' labels name it): name it where the scene has several.
@@ -160,7 +163,10 @@ def plot_sweep(rows: list[dict], path, *, contact: str | None = None, x: str | N
     if title:
         ax1.set_title(title, fontsize=10)
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    fmt = path.suffix[1:].lower() or "png"
+    try:
+        # written whole through the checked writer: a link planted at
+        # ``path`` is replaced, never followed
+        return atomic_write(path, lambda fh: fig.savefig(fh, format=fmt, dpi=110), "wb")
+    finally:
+        plt.close(fig)

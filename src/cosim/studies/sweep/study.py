@@ -7,8 +7,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from cosim.scene.load import read_toml_file
-from cosim.studies.sweep.driver import strike_names, sweep
+from cosim.errors import shown
+from cosim.scene.load import SceneError, read_toml_file
+from cosim.studies.sweep.driver import MAX_TIMEOUT_S, strike_names, sweep, sweep_folder
+from cosim.studies.sweep.grid import _repeated, _text
 from cosim.studies.sweep.plot import plot_sweep
 from cosim.studies.sweep.table import PLOT
 
@@ -72,9 +74,21 @@ def load_study(path) -> Study:
     grid = top.raw("set", {})
     if not isinstance(grid, dict) or not all(isinstance(v, list) and v for v in grid.values()):
         top.error("set", f"must be a table of key = [values], got {grid!r}")
+    dup = next((v for i, v in enumerate(variants) if v in variants[:i]), None)
+    if dup is not None:
+        top.error("variants", f"repeats {shown(dup, 80)!r}: give each variant once")
+    for key, values in grid.items():
+        dup = _repeated(values)
+        if dup is not None:
+            raise SceneError(path, f"set.{key}", f"repeats the value {shown(_text(dup), 80)}: "
+                                                 f"give each value once (each point runs "
+                                                 f"once, into a folder of its own)")
     contact = top.string("contact", None)
     joint = top.string("joint", None)
     timeout = top.number("timeout", None, rule=">0", unit="s")
+    if timeout is not None and timeout > MAX_TIMEOUT_S:
+        top.error("timeout", f"must be at most {MAX_TIMEOUT_S:.0e} s "
+                             f"({MAX_TIMEOUT_S / 86400:.1f} days), got {timeout!r}")
     x = top.table("x", {})
     key = x.string("key", None)
     scale = x.number("scale", 1.0)
@@ -97,12 +111,13 @@ def run_study(study: Study, *, out, workers: int = 1, scheduler=None, scheme=Non
         ``out/sweep.png``; None when ``plot`` is false.
     """
     contact, joint = strike_names(study.scene, study.variants, study.contact, study.joint)
-    rows = sweep(study.scene, variants=study.variants or None, grid=study.grid,
-                 scheme=scheme, workers=workers, scheduler=scheduler, out=out,
-                 retry_failed=retry_failed, contact=contact, joint=joint,
-                 progress=progress, timeout=study.timeout)
-    png = None
-    if plot:
-        png = plot_sweep(rows, Path(out) / PLOT, contact=contact, x=study.x,
-                         x_scale=study.x_scale, x_label=study.x_label, title=study.title)
+    with sweep_folder(out) as folder:       # held from the first point to the figure
+        rows = sweep(study.scene, variants=study.variants or None, grid=study.grid,
+                     scheme=scheme, workers=workers, scheduler=scheduler, out=folder,
+                     retry_failed=retry_failed, contact=contact, joint=joint,
+                     progress=progress, timeout=study.timeout)
+        png = None
+        if plot:
+            png = plot_sweep(rows, folder.path_of(PLOT), contact=contact, x=study.x,
+                             x_scale=study.x_scale, x_label=study.x_label, title=study.title)
     return rows, png

@@ -5,15 +5,15 @@ order so that it reads back exactly, whatever order the points ran in.
 from __future__ import annotations
 
 import csv
-import io
 import json
 from pathlib import Path
 
-from cosim.core.result import _atomic_write
+from cosim.io.rundir import atomic_write
 from cosim.studies.sweep.grid import Point
 from cosim.studies.metrics import impact_regime
 
-__all__ = ["TABLE", "PLOT", "TIMING_COLUMNS", "flatten", "columns", "write_table", "read_table"]
+__all__ = ["TABLE", "PLOT", "TIMING_COLUMNS", "flatten", "columns", "write_table", "table_writer",
+           "read_table"]
 
 #: the table and the plot in a sweep's output directory
 TABLE, PLOT = "sweep.csv", "sweep.png"
@@ -93,18 +93,26 @@ def _grid_keys(rows: list[dict]) -> list[str]:
     return first[:first.index("variant")]
 
 
+def table_writer(rows: list[dict]):
+    """``writer(fh)`` that writes the records as CSV into the text file
+    ``fh`` (see :func:`write_table`), for a caller that holds the folder."""
+    cols = columns(rows)
+
+    def write(fh):
+        w = csv.writer(fh, lineterminator="\n")
+        w.writerow(cols)
+        for r in rows:
+            w.writerow([_cell(r.get(c)) for c in cols])
+    return write
+
+
 def write_table(rows: list[dict], path) -> Path:
     """Write the records as CSV, one row per point in grid order.  Floats are
-    written to round trip, lists as JSON, missing values empty."""
-    cols = columns(rows)
-    buf = io.StringIO()
-    w = csv.writer(buf, lineterminator="\n")
-    w.writerow(cols)
-    for r in rows:
-        w.writerow([_cell(r.get(c)) for c in cols])
-    path = Path(path)
-    _atomic_write(path, lambda fh: fh.write(buf.getvalue()), "w")
-    return path
+    written to round trip, lists as JSON, missing values empty.  The file is
+    written whole through the checked writer
+    (:func:`cosim.io.rundir.atomic_write`): a link planted at ``path`` is
+    replaced, never followed."""
+    return atomic_write(Path(path), table_writer(rows), "w")
 
 
 def read_table(path) -> list[dict]:
