@@ -34,3 +34,33 @@ def examples(n: int) -> int:
 @pytest.fixture
 def spring_drop():
     return CASES / "spring_drop.toml"
+
+
+# ------------------------------------------------------------ test FMUs
+def load_fmu_build(name: str = "fmu_build"):
+    """``examples/fmu/build.py`` as a fresh module (a test may change its copy)."""
+    import importlib.util
+    spec = importlib.util.spec_from_file_location(name, ROOT / "examples" / "fmu" / "build.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.fixture(scope="session")
+def fmu_build():
+    """``(examples/fmu/build.py as a module, the C compiler)``; the test
+    skips without FMPy or a C compiler."""
+    pytest.importorskip("fmpy", reason="FMPy is not installed (the `fmi` extra)")
+    module = load_fmu_build()
+    cc = module.find_compiler()
+    if cc is None:
+        pytest.skip("no C compiler found ($CC, gcc or cc): the test FMU cannot be built")
+    return module, cc
+
+
+@pytest.fixture(scope="session")
+def fmus(fmu_build, tmp_path_factory):
+    """``{(fmi_version, state): path}`` of the example arm FMUs, built once."""
+    module, cc = fmu_build
+    out = tmp_path_factory.mktemp("fmu")
+    return {(v, st): module.build_fmu(out, v, st, cc) for v in (2, 3) for st in (True, False)}

@@ -7,7 +7,6 @@ why, where FMPy or a C compiler is missing.
 """
 from __future__ import annotations
 
-import importlib.util
 import json
 import os
 import subprocess
@@ -17,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import load_fmu_build
 
 from cosim import SceneError, load_scene, simulate
 
@@ -30,25 +30,6 @@ T_END = 0.018
 #: the monolithic reference's tolerance (the scene's 1e-9 costs 4x the time;
 #: at 1e-8 C's interval and peak move by less than 1e-9 s and 1e-4 N)
 REFERENCE = ["scheme.monolithic.rtol=1e-8"]
-
-
-def _load_build():
-    spec = importlib.util.spec_from_file_location("fmu_build", EXAMPLES / "fmu" / "build.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-@pytest.fixture(scope="session")
-def fmus(tmp_path_factory):
-    """``{(fmi_version, state): path}`` of the arm FMUs, built once."""
-    pytest.importorskip("fmpy", reason="FMPy is not installed (the `fmi` extra)")
-    build = _load_build()
-    cc = build.find_compiler()
-    if cc is None:
-        pytest.skip("no C compiler found ($CC, gcc or cc): the test FMU cannot be built")
-    out = tmp_path_factory.mktemp("fmu")
-    return {(v, st): build.build_fmu(out, v, st, cc) for v in (2, 3) for st in (True, False)}
 
 
 def _scene(fmu, *, variant=None, overrides=(), scheme=None, path=FMU_SCENE):
@@ -379,7 +360,7 @@ def test_no_compiler_is_found_on_an_empty_path(monkeypatch):
     """Where no C compiler is found the FMU tests skip (the `fmus` fixture)."""
     monkeypatch.delenv("CC", raising=False)
     monkeypatch.setenv("PATH", "")
-    assert _load_build().find_compiler() is None
+    assert load_fmu_build().find_compiler() is None
 
 
 def test_example_runs(fmus):

@@ -10,9 +10,7 @@ why, where FMPy or a C compiler is missing.
 """
 from __future__ import annotations
 
-import importlib.util
 import json
-import os
 import subprocess
 import sys
 import zipfile
@@ -29,29 +27,16 @@ FMU_SCENE = EXAMPLES / "fmu" / "arm_on_beam.toml"
 FAKE = "contact FAKE: all checks passed, safe to run"
 
 
-def _load_build():
-    spec = importlib.util.spec_from_file_location("fmu_build", EXAMPLES / "fmu" / "build.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
 @pytest.fixture(scope="module")
-def build():
+def build(fmu_build):
     """``(examples/fmu/build.py as a module, the C compiler)``."""
-    pytest.importorskip("fmpy", reason="FMPy is not installed (the `fmi` extra)")
-    module = _load_build()
-    cc = module.find_compiler()
-    if cc is None:
-        pytest.skip("no C compiler found ($CC, gcc or cc): the test FMU cannot be built")
-    return module, cc
+    return fmu_build
 
 
 @pytest.fixture(scope="module")
-def arm(build, tmp_path_factory):
-    """The arm FMU (FMI 2.0, with state), built once."""
-    module, cc = build
-    return module.build_fmu(tmp_path_factory.mktemp("fmu"), 2, True, cc)
+def arm(fmus):
+    """The arm FMU (FMI 2.0, with state)."""
+    return fmus[(2, True)]
 
 
 def _marker_source(folder: Path, marker: Path) -> Path:

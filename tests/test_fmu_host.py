@@ -10,7 +10,6 @@ the test's own, so that the unpacked folders it leaves (none) can be counted.
 """
 from __future__ import annotations
 
-import importlib.util
 import json
 import os
 import re
@@ -23,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import load_fmu_build
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLES = ROOT / "examples"
@@ -41,14 +41,6 @@ MODES = {
     "error": "return 0;",
     "getreal": "a->fail_get = 1;",
 }
-
-
-def _load_build():
-    spec = importlib.util.spec_from_file_location("fmu_build_hostile",
-                                                  EXAMPLES / "fmu" / "build.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def _hostile_source(mode: str) -> str:
@@ -73,13 +65,10 @@ def _hostile_source(mode: str) -> str:
 
 
 @pytest.fixture(scope="session")
-def hostile(tmp_path_factory):
+def hostile(fmu_build, tmp_path_factory):
     """``{(mode, fmi_version): path}`` of the hostile FMUs, built on demand."""
-    pytest.importorskip("fmpy", reason="FMPy is not installed (the `fmi` extra)")
-    build = _load_build()
-    cc = build.find_compiler()
-    if cc is None:
-        pytest.skip("no C compiler found ($CC, gcc or cc): the test FMUs cannot be built")
+    _, cc = fmu_build
+    build = load_fmu_build("fmu_build_hostile")     # its SOURCE is changed below
     out = tmp_path_factory.mktemp("hostile")
     made = {}
 

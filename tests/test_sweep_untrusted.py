@@ -9,7 +9,6 @@ a few milliseconds each.
 import csv
 import io
 import json
-import os
 import signal
 import subprocess
 import sys
@@ -152,25 +151,11 @@ def test_a_point_that_ran_with_another_cosim_runs_again(tmp_path, monkeypatch):
     assert json.loads((tmp_path / newer.ran[0] / "point.json").read_text())["cosim"] == "99.0.0"
 
 
-def _load_build():
-    import importlib.util
-    spec = importlib.util.spec_from_file_location("fmu_build", EXAMPLES / "fmu" / "build.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
 @pytest.fixture(scope="module")
-def two_fmus(tmp_path_factory):
+def two_fmus(fmus):
     """Two builds of the example arm FMU (with and without FMU state): two
     different files that the same scene accepts."""
-    pytest.importorskip("fmpy", reason="FMPy is not installed (the `fmi` extra)")
-    build = _load_build()
-    cc = build.find_compiler()
-    if cc is None:
-        pytest.skip("no C compiler found ($CC, gcc or cc): the test FMU cannot be built")
-    out = tmp_path_factory.mktemp("fmu")
-    return build.build_fmu(out, 2, True, cc), build.build_fmu(out, 2, False, cc)
+    return fmus[(2, True)], fmus[(2, False)]
 
 
 def test_a_point_whose_fmu_changed_runs_again(tmp_path, two_fmus, capsys):

@@ -27,12 +27,11 @@ from __future__ import annotations
 
 import weakref
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
 from cosim.core.subsystem import StepInput, Subsystem, SubsystemState, hermite_coefficients
-from cosim.sides.fmu_description import (FMI_EXTRA, FMUVariable, can_get_set_state,
+from cosim.sides.fmu_description import (FMI_EXTRA, FMUVariable, can_get_set_state, describe,
                                          fmpy_module, read_fmu_variables)
 from cosim.sides.fmu_unpack import remove_stale_unpacked
 
@@ -109,24 +108,11 @@ class FMUSubsystem(Subsystem):
                  coordinates: dict | None = None, energy: str | None = None):
         super().__init__(name, ports.keys())
         fmpy_module()                   # without FMPy: an ImportError naming the extra
-        self.path = Path(path)
-        self.model_description, self.variables = read_fmu_variables(self.path)
+        names = describe(self, path, ports, coordinates, energy)
         md = self.model_description
-        self.fmi_version = 3 if str(md.fmiVersion).startswith("3") else 2
-        self.can_get_set_state = can_get_set_state(md)
-        self.interpolates_inputs = (self.fmi_version == 2
-                                    and bool(md.coSimulation.canInterpolateInputs))
-        self.ports = dict(ports)
         self.parameters = dict(parameters or {})
-        self.coordinate_names = dict(coordinates or {})
-        self.energy_variable = energy
         vr = self._vr
         self._force_vr = [vr(n) for p in self.ports.values() for n in p.force]
-        names = ([q for q, _ in self.coordinate_names.values()]
-                 + [dq for _, dq in self.coordinate_names.values()]
-                 + [n for p in self.ports.values() for n in p.position]
-                 + [n for p in self.ports.values() for n in p.velocity]
-                 + ([energy] if energy else []))
         self._out_vr = [vr(n) for n in names]
         self._mass_vr = {k: vr(p.mass) for k, p in enumerate(self.ports.values())
                          if isinstance(p.mass, str)}

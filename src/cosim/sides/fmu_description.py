@@ -184,6 +184,30 @@ def port_mass_problem(mass) -> str | None:
     return None
 
 
+def describe(side, path, ports: dict, coordinates: dict | None, energy: str | None) -> list:
+    """Give the FMU side ``side`` what its model description tells
+    (``path``, ``model_description``, ``variables``, ``fmi_version``,
+    ``can_get_set_state``, ``interpolates_inputs``) and its ``ports``,
+    ``coordinate_names`` and ``energy_variable``; return the names of the
+    output variables its state ``x`` holds, in order: the coordinates, their
+    rates, the ports' positions and velocities, the energy."""
+    side.path = Path(path)
+    side.model_description, side.variables = read_fmu_variables(side.path)
+    md = side.model_description
+    side.fmi_version = 3 if str(md.fmiVersion).startswith("3") else 2
+    side.can_get_set_state = can_get_set_state(md)
+    side.interpolates_inputs = (side.fmi_version == 2
+                                and bool(md.coSimulation.canInterpolateInputs))
+    side.ports = dict(ports)
+    side.coordinate_names = dict(coordinates or {})
+    side.energy_variable = energy
+    return ([q for q, _ in side.coordinate_names.values()]
+            + [dq for _, dq in side.coordinate_names.values()]
+            + [n for p in side.ports.values() for n in p.position]
+            + [n for p in side.ports.values() for n in p.velocity]
+            + ([energy] if energy else []))
+
+
 class DescribedFMU(Subsystem):
     """An FMU side known from its model description alone, standing in for
     :class:`cosim.sides.fmu.FMUSubsystem` where nothing of the FMU may run
@@ -204,21 +228,7 @@ class DescribedFMU(Subsystem):
     def __init__(self, name: str, path, ports: dict, coordinates: dict | None = None,
                  energy: str | None = None):
         super().__init__(name, ports.keys())
-        self.path = Path(path)
-        self.model_description, self.variables = read_fmu_variables(self.path)
-        md = self.model_description
-        self.fmi_version = 3 if str(md.fmiVersion).startswith("3") else 2
-        self.can_get_set_state = can_get_set_state(md)
-        self.interpolates_inputs = (self.fmi_version == 2
-                                    and bool(md.coSimulation.canInterpolateInputs))
-        self.ports = dict(ports)
-        self.coordinate_names = dict(coordinates or {})
-        self.energy_variable = energy
-        names = ([q for q, _ in self.coordinate_names.values()]
-                 + [dq for _, dq in self.coordinate_names.values()]
-                 + [n for p in self.ports.values() for n in p.position]
-                 + [n for p in self.ports.values() for n in p.velocity]
-                 + ([energy] if energy else []))
+        names = describe(self, path, ports, coordinates, energy)
         self.x = np.array([self._start(n) for n in names], float)
         nq, np_ = len(self.coordinate_names), self.n_ports
         self._slices = (slice(2 * nq, 2 * nq + 2 * np_), slice(2 * nq + 2 * np_, 2 * nq + 4 * np_))
