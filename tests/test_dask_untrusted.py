@@ -27,6 +27,7 @@ import time
 import pytest
 
 from conftest import CASES, ROOT
+from sweeping import leftovers
 
 pytest.importorskip("dask")
 pytest.importorskip("distributed")
@@ -43,19 +44,6 @@ LIMIT = 60
 def cosim(*args, env=None):
     return subprocess.run([sys.executable, "-m", "cosim.cli", *map(str, args)],
                           capture_output=True, text=True, cwd=ROOT, timeout=LIMIT, env=env)
-
-
-def leftovers(session: int) -> list:
-    """Processes still alive in the session of a finished ``cosim``."""
-    time.sleep(0.5)
-    out = []
-    for p in psutil.process_iter(["pid", "status"]):
-        try:
-            if os.getsid(p.pid) == session and p.info["status"] != psutil.STATUS_ZOMBIE:
-                out.append(p)
-        except (ProcessLookupError, PermissionError, psutil.NoSuchProcess):
-            pass
-    return out
 
 
 def with_tmpdir(tmp):

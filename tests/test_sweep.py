@@ -11,6 +11,7 @@ import sys
 import pytest
 
 from conftest import CASES, ROOT
+from sweeping import Events
 from cosim import cli
 from cosim.studies import sweep as sw
 from cosim.studies.metrics import impact_regime
@@ -28,24 +29,6 @@ def table_without_timing(path) -> list[list[str]]:
     rows = list(csv.reader(io.StringIO(path.read_text())))
     keep = [i for i, c in enumerate(rows[0]) if c not in sw.TIMING_COLUMNS]
     return [[r[i] for i in keep] for r in rows]
-
-
-class Events:
-    """A progress callback that keeps what it is told."""
-
-    def __init__(self):
-        self.events = []
-
-    def __call__(self, ev):
-        self.events.append(ev)
-
-    @property
-    def ran(self):
-        return sorted(e.point.name for e in self.events if not e.skipped)
-
-    @property
-    def skipped(self):
-        return sorted(e.point.name for e in self.events if e.skipped)
 
 
 # ------------------------------------------------------------------ the grid

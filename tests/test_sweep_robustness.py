@@ -8,7 +8,6 @@ that no worker process is left behind.  The long point is spring_drop run to
 1000 s (hours of work): it only ever ends by the limit, a kill or a signal.
 """
 import csv
-import os
 import signal
 import subprocess
 import sys
@@ -18,6 +17,7 @@ import psutil
 import pytest
 
 from conftest import CASES, ROOT
+from sweeping import leftovers
 
 SPRING_DROP = CASES / "spring_drop.toml"
 #: what the sweep of the tests waits for at most [s]
@@ -35,19 +35,6 @@ def start(*args):
     return subprocess.Popen([sys.executable, "-m", "cosim.cli", *map(str, args)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             cwd=ROOT, start_new_session=True)
-
-
-def leftovers(session: int) -> list:
-    """Processes still alive in the session of a finished ``cosim``."""
-    time.sleep(0.5)
-    out = []
-    for p in psutil.process_iter(["pid", "status"]):
-        try:
-            if os.getsid(p.pid) == session and p.info["status"] != psutil.STATUS_ZOMBIE:
-                out.append(p)
-        except (ProcessLookupError, PermissionError, psutil.NoSuchProcess):
-            pass
-    return out
 
 
 def table(out):

@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 
 from conftest import CASES, ROOT
+from sweeping import Events
 from cosim import cli
 from cosim.studies import sweep as sw
 
@@ -29,28 +30,6 @@ EXAMPLES = ROOT / "examples"
 SHORT = {"t_end": [0.001, 0.002]}
 #: what a test waits for a `cosim` process at most [s]
 LIMIT = 120
-
-
-class Events:
-    """A progress callback that keeps what it is told."""
-
-    def __init__(self):
-        self.events = []
-
-    def __call__(self, ev):
-        self.events.append(ev)
-
-    @property
-    def ran(self):
-        return sorted(e.point.name for e in self.events if not e.skipped)
-
-    @property
-    def skipped(self):
-        return sorted(e.point.name for e in self.events if e.skipped)
-
-    @property
-    def notes(self):
-        return {e.point.name: e.note for e in self.events if e.note}
 
 
 def table(out):
