@@ -1,4 +1,4 @@
-"""The studies' house (issue 20): each module holds one concern and stays
+"""The studies' house: each module holds one concern and stays
 short enough to read in one sitting.  The layering itself (no study imports
 cosim.cli or cosim.plot) is tests/test_layers.py's."""
 from pathlib import Path
