@@ -98,22 +98,29 @@ def test_raising_the_limit_runs_and_a_large_count_says_so_first(tmp_path):
 def test_info_shows_the_count():
     code, out, err, _ = cosim("info", THREE_MASS, cwd=CASES)
     assert code == 0, err
-    # 0.25 s in contact steps of 30 us; the chain's RK4 at 1 us while C is closed
-    assert ("  work: at most 2.58e+05 integrator steps (8334 macro steps of 3e-05 s "
-            "(`scheme.contact_step`, t_end 0.25 s) x (chain 30 + robot 1) steps each)"
+    # 0.25 s in contact steps of 30 us; the chain steps its closed contact in
+    # closed form, one step per macro step
+    assert ("  work: at most 1.67e+04 integrator steps (8334 macro steps of 3e-05 s "
+            "(`scheme.contact_step`, t_end 0.25 s) x (chain 1 + robot 1) steps each)"
             in out.splitlines()), out
 
 
+#: three_mass with a damped chain: its closed contact is stepped by RK4 at
+#: the chain's `contact_step` (1 us), 30 steps in a macro step of 30 us
+DAMPED = "subsystems.chain.rayleigh=[0.0, 1e-6]"
+
+
 def test_the_count_adds_sub_steps_iterations_and_contact_steps():
-    base = load(THREE_MASS).work()
+    base = load(THREE_MASS, DAMPED).work()
     assert base.steps == 8334 * (30 + 1)
-    multirate = load(THREE_MASS, "scheme.substeps={robot=7}").work()
+    multirate = load(THREE_MASS, DAMPED, "scheme.substeps={robot=7}").work()
     assert multirate.steps == 8334 * (30 + 7)
-    implicit = load(THREE_MASS, scheme="implicit").work()
+    implicit = load(THREE_MASS, DAMPED, scheme="implicit").work()
     assert implicit.steps == 8334 * 50 * (30 + 1)    # max_iterations defaults to 50
     assert implicit.steps > WARN_STEPS / 10
-    free = load(THREE_MASS, "subsystems.chain.integrator.contact_step=3e-5").work()
+    free = load(THREE_MASS, DAMPED, "subsystems.chain.integrator.contact_step=3e-5").work()
     assert free.steps == 8334 * (1 + 1)
+    assert load(THREE_MASS).work().steps == 8334 * (1 + 1)     # undamped: closed form
 
 
 @pytest.mark.parametrize("limit,refused", [(1900, True), (2100, False)])
@@ -254,19 +261,34 @@ def test_the_stability_reach_of_each_explicit_method(method):
     assert EXPLICIT_STABILITY[method] == pytest.approx(found, abs=0.01)
 
 
-@pytest.mark.parametrize("case,override,key", [
-    (THREE_MASS, "t_end=1e308", "scheme.macro_step"),                 # t_end / H is inf
-    (THREE_MASS, "scheme.macro_step=5e-324", "scheme.macro_step"),    # a subnormal step
-    (THREE_MASS, "scheme.contact_step=5e-324", "scheme.contact_step"),
-    (THREE_MASS, "subsystems.chain.integrator.contact_step=5e-324",
+@pytest.mark.parametrize("case,overrides,key", [
+    (THREE_MASS, ["t_end=1e308"], "scheme.macro_step"),                 # t_end / H is inf
+    (THREE_MASS, ["scheme.macro_step=5e-324"], "scheme.macro_step"),    # a subnormal step
+    (THREE_MASS, ["scheme.contact_step=5e-324"], "scheme.contact_step"),
+    (THREE_MASS, [DAMPED, "subsystems.chain.integrator.contact_step=5e-324"],
      "subsystems.chain.integrator.contact_step"),
     # rk4's step in free flight, shorter than its max_step
-    (SPRING_DROP, "subsystems.body.integrator.free_step=5e-324",
+    (SPRING_DROP, ["subsystems.body.integrator.free_step=5e-324"],
      "subsystems.body.integrator.free_step"),
 ])
-def test_a_count_past_the_doubles_is_refused_not_a_traceback(tmp_path, case, override, key):
+def test_a_count_past_the_doubles_is_refused_not_a_traceback(tmp_path, case, overrides, key):
     with pytest.raises(SceneError) as exc:
-        load(case, override)
+        load(case, *overrides)
     assert exc.value.key == key and "at most inf integrator steps" in str(exc.value)
-    code, _, err, _ = cosim("info", case, "--set", override, cwd=tmp_path)
+    sets = [a for o in overrides for a in ("--set", o)]
+    code, _, err, _ = cosim("info", case, *sets, cwd=tmp_path)
     assert code == 2 and err.startswith("error: ") and "Traceback" not in err, err
+
+
+def test_a_structure_stepped_in_closed_form_counts_one_step_per_sub_step():
+    """beam_impact's beam is stepped exactly, undamped, with a linear
+    contact: its closed contacts are stepped in closed form and its RK4
+    `contact_step` is never used, however small (the size series sets
+    1e-15 s); damped, it steps at its `contact_step` while the contact is
+    closed, and the count says so."""
+    beam = CASES / "beam_impact.toml"
+    exact = load(beam).work()
+    tiny = load(beam, "subsystems.beam.integrator.contact_step=1e-15").work()
+    assert tiny.steps == exact.steps == 2600 * (1 + 1)
+    damped = load(beam, "subsystems.beam.rayleigh=[0.0, 1e-6]").work()
+    assert damped.steps == 2600 * (50 + 1)

@@ -69,6 +69,10 @@ class WorkEstimate:
         return {"steps": self.steps, "bound": self.bound, "how": self.how, "key": self.key}
 
 
+#: the structures' types: a closed contact they host is stepped at their ``contact_step``
+STRUCTURES = ("chain", "beam", "cable", "string", "rod")
+
+
 def _count(x: float) -> float:
     """``ceil(x)`` that does not make a step of round-off (``1 + 1e-16`` is 1);
     a count past the doubles (a step of 5e-324 s) is ``inf``."""
@@ -95,10 +99,24 @@ def _side_steps(side, h: float, substeps: int, closed: bool, hosts: bool,
         if free is not None and free < step:
             step, key = free, f"{side.key}.integrator.free_step"
         return substeps * _count(hk / step), key, step
-    if kind in ("chain", "beam", "cable", "string", "rod") and closed and hosts:
+    if kind in STRUCTURES and closed and hosts:
         return (substeps * _count(hk / side.contact_step), f"{side.key}.integrator.contact_step",
                 side.contact_step)
     return float(substeps), "", None       # a structure's exact step, an FMU's doStep
+
+
+def _closed_form(side, contacts) -> bool:
+    """Whether structure ``side`` steps its closed contacts in closed form
+    (:class:`cosim.sides.fem_closed_form.ClosedFormContacts`: stepped
+    exactly, undamped, every embedded contact on it a linear spring), so
+    that its ``contact_step`` is never used: one step per sub-step."""
+    if side.type not in STRUCTURES or getattr(side, "integrator", None) != "exact":
+        return False
+    if any(getattr(side.model, "rayleigh", None) or ()):
+        return False
+    from couplers import LinearLaw
+    mine = [c for c in contacts if c.placement == "embedded" and side.name in (c.a[0], c.b[0])]
+    return bool(mine) and all(type(c.law) is LinearLaw for c in mine)
 
 
 def estimate_work(spec, t_end: float, subsystems=(), contacts=(), system=None
@@ -132,6 +150,7 @@ def estimate_work(spec, t_end: float, subsystems=(), contacts=(), system=None
     iterations = int(opts.get("max_iterations", taken.default)) if taken is not None else 1
     substeps = dict(opts.get("substeps") or {})
     hosted = {side for c in contacts if c.placement == "embedded" for side in (c.a[0], c.b[0])}
+    hosted -= {side.name for side in subsystems if _closed_form(side, contacts)}
     sides = list(subsystems)
     phases = [("macro_step", H, False)]
     hc = opts.get("contact_step")
