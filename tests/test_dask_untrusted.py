@@ -33,7 +33,7 @@ pytest.importorskip("dask")
 pytest.importorskip("distributed")
 psutil = pytest.importorskip("psutil")
 
-from cosim.studies.sweep import backends  # noqa: E402 - after the skips
+from cosim.studies.sweep import backends, scheduler  # noqa: E402 - after the skips
 from cosim.studies.sweep.backends import CONNECT_TIMEOUT_S, SweepError  # noqa: E402
 
 SPRING_DROP = CASES / "spring_drop.toml"
@@ -170,7 +170,7 @@ def test_an_http_server_is_not_a_dask_scheduler(tmp_path, http_listener):
 
 
 def _frame(*frames: bytes, size=None) -> bytes:
-    """Bytes in Dask's framing (see ``backends._greeting``)."""
+    """Bytes in Dask's framing (see ``scheduler._greeting``)."""
     lengths = [len(f) for f in frames]
     body = struct.pack(f"Q{len(frames)}Q", len(frames), *lengths) + b"".join(frames)
     return struct.pack("Q", len(body) if size is None else size) + body
@@ -201,7 +201,7 @@ def test_what_does_not_greet_as_dask_is_named(reply, essence):
     address = f"tcp://127.0.0.1:{server.server_address[1]}"
     try:
         with pytest.raises(SweepError) as exc:
-            backends._probe_scheduler(address, 10.0)
+            scheduler._probe_scheduler(address, 10.0)
     finally:
         close(server, held)
     assert str(exc.value).startswith(f"`--scheduler` '{address}'")
@@ -213,7 +213,7 @@ def test_what_does_not_greet_as_dask_is_named(reply, essence):
 def test_an_address_the_sweep_cannot_reach_is_malformed(address):
     with pytest.raises(SweepError, match=r"^`--scheduler` must be `local` or a Dask "
                                          r"scheduler's address"):
-        backends._probe_scheduler(address, 10.0)
+        scheduler._probe_scheduler(address, 10.0)
 
 
 def scratch(tmp_path) -> dict:
@@ -229,7 +229,7 @@ def test_a_dask_scheduler_passes_the_probe(tmp_path):
 
     with LocalCluster(n_workers=0, processes=False, protocol="tcp://", host="127.0.0.1",
                       dashboard_address=None, **scratch(tmp_path)) as cluster:
-        backends._probe_scheduler(cluster.scheduler_address, 10.0)
+        scheduler._probe_scheduler(cluster.scheduler_address, 10.0)
 
 
 def test_a_client_that_cannot_start_is_given_up_in_time(monkeypatch):
@@ -237,7 +237,7 @@ def test_a_client_that_cannot_start_is_given_up_in_time(monkeypatch):
     own client: the client's start is bounded too (Dask leaves its greeting
     read unbounded)."""
     monkeypatch.setattr(backends, "CONNECT_TIMEOUT_S", 3.0)
-    server, held = replying_listener([backends._greeting(), None])
+    server, held = replying_listener([scheduler._greeting(), None])
     address = f"tcp://127.0.0.1:{server.server_address[1]}"
     t0 = time.monotonic()
     try:
@@ -356,7 +356,7 @@ def test_a_tls_scheduler_is_probed_with_the_configured_certificate(tmp_path):
         address = cluster.scheduler_address
         with pytest.raises(SweepError, match=r"a tls:// scheduler needs the cluster's "
                                              r"certificates in Dask's distributed\.comm\.tls"):
-            backends._probe_scheduler(address, 10.0)
+            scheduler._probe_scheduler(address, 10.0)
         files = {}
         for key, pem in (("ca-file", security.tls_ca_file),
                          ("client.cert", security.tls_client_cert),
@@ -364,7 +364,7 @@ def test_a_tls_scheduler_is_probed_with_the_configured_certificate(tmp_path):
             files[f"distributed.comm.tls.{key}"] = str(tmp_path / key)
             (tmp_path / key).write_text(pem)
         with dask.config.set(files):
-            backends._probe_scheduler(address, 10.0)
+            scheduler._probe_scheduler(address, 10.0)
 
 
 def test_an_echoed_address_is_escaped_and_capped():
@@ -373,7 +373,7 @@ def test_an_echoed_address_is_escaped_and_capped():
     nor flood the terminal."""
     address = "tcp://x\nerror: all clear" + "a" * 100_000
     with pytest.raises(SweepError) as exc:
-        backends._probe_scheduler(address, 10.0)
+        scheduler._probe_scheduler(address, 10.0)
     text = str(exc.value)
     assert "\n" not in text and "x\\nerror: all clear" in text
     assert len(text) < 1000, len(text)
