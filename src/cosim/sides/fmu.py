@@ -31,8 +31,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from cosim.core.subsystem import StepInput, Subsystem, SubsystemState, hermite_coefficients
-from cosim.sides.fmu_description import (FMI_EXTRA, FMUVariable, can_get_set_state, describe,
-                                         fmpy_module, read_fmu_variables)
+from cosim.sides.fmu_description import (FMI_EXTRA, FMUOutputs, FMUVariable, can_get_set_state,
+                                         describe, fmpy_module, read_fmu_variables)
 from cosim.sides.fmu_unpack import remove_stale_unpacked
 
 __all__ = ["FMUSubsystem", "FMUPort", "FMUVariable", "fmpy_module", "read_fmu_variables",
@@ -71,7 +71,7 @@ class FMUState(SubsystemState):
     __slots__ = ("handle", "__weakref__")
 
 
-class FMUSubsystem(Subsystem):
+class FMUSubsystem(FMUOutputs, Subsystem):
     """A co-simulation FMU (FMI 2.0 or 3.0) whose ports are named variables.
 
     Parameters
@@ -118,10 +118,6 @@ class FMUSubsystem(Subsystem):
                          if isinstance(p.mass, str)}
         self._host = _start_host(self, md)
         self._closer = weakref.finalize(self, self._host.close)
-        nq = len(self.coordinate_names)
-        np_ = self.n_ports
-        self._slices = (slice(0, nq), slice(nq, 2 * nq), slice(2 * nq, 2 * nq + 2 * np_),
-                        slice(2 * nq + 2 * np_, 2 * nq + 4 * np_))
         self.x = np.frombuffer(self._host.outputs0, float).copy()
         self.port_moments = np.zeros((3, self.n_ports), complex)
 
@@ -179,16 +175,6 @@ class FMUSubsystem(Subsystem):
                            f"model-exchange face, so the monolithic scheme cannot stack it; "
                            f"use `jacobi`, `gauss_seidel` or `implicit`")
 
-    def outputs(self, t, x):
-        _, _, sp, sv = self._slices      # copies: schemes keep outputs while x moves on
-        return x[sp].reshape(-1, 2).copy(), x[sv].reshape(-1, 2).copy()
-
-    def energy(self, x=None):
-        if self.energy_variable is None:
-            return 0.0
-        x = self.x if x is None else x
-        return float(x[-1])
-
     def port_mass(self, port: int) -> float:
         """The mass port ``port`` presents to a contact [kg]: the declared
         number, or the value of the FMU's variable now."""
@@ -201,10 +187,6 @@ class FMUSubsystem(Subsystem):
         m = self.port_mass(port)
         n = np.asarray(direction, float)
         return float(n @ n) / m if m > 0 else float("inf")
-
-    def coordinates(self):
-        nq = len(self.coordinate_names)
-        return {name: (i, nq + i) for i, name in enumerate(self.coordinate_names)}
 
     def embed_contact(self, contact, *args, **kwargs):
         raise ValueError(f"contact `{contact.name}`: subsystem `{self.name}` is an FMU, a "

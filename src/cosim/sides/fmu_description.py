@@ -32,8 +32,8 @@ import numpy as np
 from cosim.core.subsystem import Subsystem
 from cosim.errors import shown
 
-__all__ = ["FMUVariable", "DescribedFMU", "fmpy_module", "read_fmu_variables",
-           "can_get_set_state", "port_mass_problem", "FMI_EXTRA"]
+__all__ = ["FMUVariable", "DescribedFMU", "FMUOutputs", "describe", "fmpy_module",
+           "read_fmu_variables", "can_get_set_state", "port_mass_problem", "FMI_EXTRA"]
 
 #: how a user installs what an FMU needs
 FMI_EXTRA = 'pip install "cosim[fmi]"'
@@ -187,8 +187,9 @@ def port_mass_problem(mass) -> str | None:
 def describe(side, path, ports: dict, coordinates: dict | None, energy: str | None) -> list:
     """Give the FMU side ``side`` what its model description tells
     (``path``, ``model_description``, ``variables``, ``fmi_version``,
-    ``can_get_set_state``, ``interpolates_inputs``) and its ``ports``,
-    ``coordinate_names`` and ``energy_variable``; return the names of the
+    ``can_get_set_state``, ``interpolates_inputs``), its ``ports``,
+    ``coordinate_names`` and ``energy_variable``, and where its ports lie in
+    ``x`` (for :class:`FMUOutputs`); return the names of the
     output variables its state ``x`` holds, in order: the coordinates, their
     rates, the ports' positions and velocities, the energy."""
     side.path = Path(path)
@@ -201,6 +202,9 @@ def describe(side, path, ports: dict, coordinates: dict | None, energy: str | No
     side.ports = dict(ports)
     side.coordinate_names = dict(coordinates or {})
     side.energy_variable = energy
+    nq, np_ = len(side.coordinate_names), len(side.ports)
+    side._port_slices = (slice(2 * nq, 2 * nq + 2 * np_),
+                         slice(2 * nq + 2 * np_, 2 * nq + 4 * np_))
     return ([q for q, _ in side.coordinate_names.values()]
             + [dq for _, dq in side.coordinate_names.values()]
             + [n for p in side.ports.values() for n in p.position]
@@ -208,7 +212,27 @@ def describe(side, path, ports: dict, coordinates: dict | None, energy: str | No
             + ([energy] if energy else []))
 
 
-class DescribedFMU(Subsystem):
+class FMUOutputs:
+    """What an FMU side's state ``x`` tells (the layout :func:`describe`
+    gives it): its named coordinates, its ports' positions and velocities,
+    its energy."""
+
+    def coordinates(self):
+        nq = len(self.coordinate_names)
+        return {name: (i, nq + i) for i, name in enumerate(self.coordinate_names)}
+
+    def outputs(self, t, x):
+        sp, sv = self._port_slices       # copies: schemes keep outputs while x moves on
+        return x[sp].reshape(-1, 2).copy(), x[sv].reshape(-1, 2).copy()
+
+    def energy(self, x=None):
+        if self.energy_variable is None:
+            return 0.0
+        x = self.x if x is None else x
+        return float(x[-1])
+
+
+class DescribedFMU(FMUOutputs, Subsystem):
     """An FMU side known from its model description alone, standing in for
     :class:`cosim.sides.fmu.FMUSubsystem` where nothing of the FMU may run
     (``cosim info`` without ``--run-fmu``).
@@ -230,8 +254,6 @@ class DescribedFMU(Subsystem):
         super().__init__(name, ports.keys())
         names = describe(self, path, ports, coordinates, energy)
         self.x = np.array([self._start(n) for n in names], float)
-        nq, np_ = len(self.coordinate_names), self.n_ports
-        self._slices = (slice(2 * nq, 2 * nq + 2 * np_), slice(2 * nq + 2 * np_, 2 * nq + 4 * np_))
         self.port_moments = np.zeros((3, self.n_ports), complex)
 
     def _start(self, name: str) -> float:
@@ -271,20 +293,6 @@ class DescribedFMU(Subsystem):
             return math.nan
         n = np.asarray(direction, float)
         return float(n @ n) / m
-
-    def coordinates(self):
-        nq = len(self.coordinate_names)
-        return {name: (i, nq + i) for i, name in enumerate(self.coordinate_names)}
-
-    def outputs(self, t, x):
-        sp, sv = self._slices
-        return x[sp].reshape(-1, 2).copy(), x[sv].reshape(-1, 2).copy()
-
-    def energy(self, x=None):
-        if self.energy_variable is None:
-            return 0.0
-        x = self.x if x is None else x
-        return float(x[-1])
 
     def _step_impl(self, t, h, inputs):
         raise RuntimeError(f"subsystem `{self.name}` is FMU {shown(self.path.name, limit=80)} "

@@ -1,7 +1,8 @@
 """Unpacking FMU files: bounded, once per process and content, and cleaned up.
 
 An FMU is a zip archive from a supplier.  :func:`unpacked` extracts it into
-``$TMPDIR/cosim-fmu-PID-XXXXXXXX`` (``PID`` the process that owns the folder)
+``$TMPDIR/cosim-fmu-PID-RANDOM`` (``PID`` the process that owns the folder,
+``RANDOM`` the letters :func:`tempfile.mkdtemp` chooses)
 and refuses, before writing anything, an archive whose members declare more
 than :func:`unpack_limit` bytes in all; it stops, and removes what it wrote,
 when the bytes actually written pass the limit (a member's header can lie).
