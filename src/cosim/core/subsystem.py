@@ -194,7 +194,7 @@ class Subsystem(ABC):
 
     #: True for a subsystem without dynamics (wall, ground).
     rigid: bool = False
-    #: The optional faces this side has, by name (see :data:`CAPABILITIES`);
+    #: The optional faces this side has, by name (see ``CAPABILITIES`` in this module);
     #: code that uses a face asks ``"NAME" in sub.capabilities`` instead of
     #: probing for a member.
     capabilities: ClassVar[frozenset] = frozenset()
