@@ -210,7 +210,28 @@ class CoSimulationScheme(InputExtrapolation, CouplingScheme):
         sliver = 1e-12 * min(H, t_end)
         h_prev = min(H, t_end)
         k, t, n_rejected = 0, 0.0, 0
-        while True:
+        drv = self._compiled_loop(system, st, d, dd, controlled, h_prev)
+        while drv is not None:          # the compiled loop: one accepted step per call
+            if controlled:
+                if t_end - t <= sliver:
+                    break
+                h = drv.step(t, t_end - t)
+            else:
+                if k >= n:
+                    break
+                t = k * H
+                h = min(H, t_end - t)
+                if h <= sliver:
+                    break
+                drv.step(t, h, h)
+            n_rejected = self.n_rejected = drv.n_rejected
+            k += 1
+            self.n_windows = k
+            system._work = drv.work.copy()      # the exchanged forces' work, as collect_work adds it
+            books.book(t + h, h, drv.d, drv.dd, drv.f, drv.stepped.copy())
+            if controlled:
+                t = t + h
+        while drv is None:
             if controlled:
                 if t_end - t <= sliver:
                     break
@@ -254,6 +275,24 @@ class CoSimulationScheme(InputExtrapolation, CouplingScheme):
 
     #: the macro loop's state (set by :meth:`run`)
     _state = None
+    #: why the last run took the Python loop (None: it took the compiled one)
+    loop_refusal: str | None = None
+
+    def _compiled_loop(self, system, state, d, dd, controlled, h_prev):
+        """The compiled macro loop for this run (:mod:`cosim.core.schemes.driver`),
+        or None where the Python loop runs it (:attr:`loop_refusal` says why)."""
+        from cosim.core.schemes import driver
+        self.loop_refusal = why = driver.refusal(self, system)
+        if why is not None:
+            return None
+        module = driver.compiled_driver()
+        if module is None:
+            self.loop_refusal = "the compiled loop is not built"
+            return None
+        order = self._order(system) if hasattr(self, "_order") else self._moving(system)
+        drv = module.Driver(self, system, order, state, d, dd, controlled)
+        drv.start(h_prev)
+        return drv
 
     # the implicit scheme reads the loop's state by these names
     @property
