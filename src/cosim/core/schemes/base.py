@@ -6,6 +6,7 @@ a step in :mod:`cosim.core.schemes.extrapolation`."""
 from __future__ import annotations
 
 import math
+import time
 from abc import ABC, abstractmethod
 from typing import Any, Callable, ClassVar, NamedTuple
 
@@ -187,6 +188,7 @@ class CoSimulationScheme(InputExtrapolation, CouplingScheme):
         if H is None:
             raise ValueError(f"scheme `{self.name}` needs `macro_step` [s]")
         self.preflight(system, t_end)
+        cpu0 = time.process_time()
         self._system = system
         self._watch_impacts(system, recorder)
         self.n_iterations = self.n_windows = self.n_rejected = 0
@@ -211,10 +213,12 @@ class CoSimulationScheme(InputExtrapolation, CouplingScheme):
         h_prev = min(H, t_end)
         k, t, n_rejected = 0, 0.0, 0
         drv = self._compiled_loop(system, st, d, dd, controlled, h_prev)
+        compiled_cpu = 0.0
         while drv is not None:          # the compiled loop: one accepted step per call
             if controlled:
                 if t_end - t <= sliver:
                     break
+                c0 = time.process_time()
                 h = drv.step(t, t_end - t)
             else:
                 if k >= n:
@@ -223,7 +227,9 @@ class CoSimulationScheme(InputExtrapolation, CouplingScheme):
                 h = min(H, t_end - t)
                 if h <= sliver:
                     break
+                c0 = time.process_time()
                 drv.step(t, h, h)
+            compiled_cpu += time.process_time() - c0
             n_rejected = self.n_rejected = drv.n_rejected
             k += 1
             self.n_windows = k
@@ -271,12 +277,21 @@ class CoSimulationScheme(InputExtrapolation, CouplingScheme):
             books.book(t + h, h, d, dd, f, stepped)
             if controlled:
                 t = t + h
+        self.loop_stats = {"loop": "python" if drv is None else "compiled",
+                           "refusal": self.loop_refusal, "macro_steps": k,
+                           "compiled_cpu_s": compiled_cpu,
+                           "run_cpu_s": time.process_time() - cpu0}
         return {"n_windows": k, "n_iterations": self.n_iterations, "n_rejected": n_rejected}
 
     #: the macro loop's state (set by :meth:`run`)
     _state = None
     #: why the last run took the Python loop (None: it took the compiled one)
     loop_refusal: str | None = None
+    #: the last finished run's loop: ``loop`` (``"compiled"`` or ``"python"``),
+    #: ``refusal`` (:attr:`loop_refusal`), ``macro_steps``, ``compiled_cpu_s``
+    #: (process CPU inside the compiled loop's calls [s]) and ``run_cpu_s``
+    #: (the whole of :meth:`run` [s]), for benchmarks
+    loop_stats: dict | None = None
 
     def _compiled_loop(self, system, state, d, dd, controlled, h_prev):
         """The compiled macro loop for this run (:mod:`cosim.core.schemes.driver`),
