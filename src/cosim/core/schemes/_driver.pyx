@@ -20,7 +20,7 @@ The sides are reached duck-typed through their compiled kernels
 the Python loop's, written in the same order of operations.
 """
 import numpy as np
-from libc.math cimport isnan, NAN
+from libc.math cimport isfinite, isnan, NAN
 from libc.string cimport memcpy
 
 from cosim.core.subsystem import StepInput
@@ -71,6 +71,17 @@ cdef class Driver:
     cdef double[::1] fv, dv, ddv, dd_prev, d1, dd1, f1
     cdef public object stepped, work
     cdef double[::1] stv, wv
+    # the books (StepBooks): per contact, impulse [N s], dissipated [J] and
+    # work [J] so far, the work as recorded (with the embedded contacts'),
+    # the subsystems' internal ledger, and the coupler rows' dissipation rates
+    cdef public object impulse, diss, work_total, work_rec
+    cdef double[::1] impv, dissv, wtv, p_prev
+    cdef public double internal_dissipated, internal_supplied
+    cdef public bint finite
+    cdef long[::1] e_c, e_host, e_slot, law_kind
+    cdef double[::1] law_k, law_c
+    cdef int n_emb
+    cdef bint coupler_diss
     # scratch
     cdef double[:, ::1] base, coeffs
     cdef list saved
@@ -190,6 +201,36 @@ cdef class Driver:
         self.imp0 = np.zeros(max(self.n_hosted, 1))
         self.done = np.zeros(self.nsub, dtype=np.int_)
         self.n_steps = self.n_rejected = 0
+        # the books
+        emb = sorted(system.embedded.items())
+        self.n_emb = len(emb)
+        self.e_c = np.array([c for c, _ in emb], dtype=np.int_)
+        self.e_host = np.array([hs[0] for _, hs in emb], dtype=np.int_)
+        self.e_slot = np.array([hs[1] for _, hs in emb], dtype=np.int_)
+        self.impulse = np.zeros(self.nc)
+        self.diss = np.zeros(self.nc)
+        self.work_total = np.zeros(self.nc)
+        self.impv, self.dissv, self.wtv = self.impulse, self.diss, self.work_total
+        self.work_rec = np.zeros(self.nc)
+        self.p_prev = np.zeros(self.nc)
+        self.coupler_diss = False
+        rates = system.dissipation_rates(self.f, self.d, self.dd)
+        for i in range(self.n_coupler):
+            self.p_prev[self.coupler[i]] = rates[self.coupler[i]]
+        # laws evaluated here: 0 linear, 1 Kelvin-Voigt, -1 the law's own evaluate
+        self.law_kind = np.full(self.nc, -1, dtype=np.int_)
+        self.law_k = np.zeros(self.nc)
+        self.law_c = np.zeros(self.nc)
+        for c, law in enumerate(self.laws):
+            if type(law).__name__ == "LinearLaw" and type(law).__module__.startswith("couplers."):
+                self.law_kind[c], self.law_k[c] = 0, law.contact_stiffness
+            elif type(law).__name__ == "KelvinVoigtLaw" and \
+                    type(law).__module__.startswith("couplers."):
+                self.law_kind[c], self.law_k[c] = 1, law.contact_stiffness
+                self.law_c[c] = law.contact_damping
+                self.coupler_diss = True
+            else:
+                self.coupler_diss = True
 
     # ------------------------------------------------------------ control
     cdef double _propose(self, double remaining):
@@ -394,6 +435,18 @@ cdef class Driver:
                   + (self.V[a, 1] - self.V[b, 1]) * self.normal[c, 1])
 
     cdef double _force(self, int c, double d, double dd):
+        """The law's force (``evaluate(d, dd)[0]``), in C for the linear and
+        Kelvin-Voigt laws, with their formulas."""
+        cdef double k, cd, a, sw, fa
+        cdef int kind = self.law_kind[c]
+        if kind == 0:
+            return self.law_k[c] * d if d > 0.0 else 0.0
+        if kind == 1:
+            k, cd = self.law_k[c], self.law_c[c]
+            a = d + (cd / k) * dd
+            sw = d if d < a else a
+            fa = k * d + cd * dd
+            return (fa if fa > 0.0 else 0.0) if sw > 0.0 else 0.0
         return float(self.laws[c].evaluate(d, dd)[0])
 
     # --------------------------------------------------------- the advance
@@ -565,7 +618,55 @@ cdef class Driver:
         self.fv, self.dv, self.ddv = self.f, self.d, self.dd
         self.h_prev = h
         self.n_steps += 1
+        self._book(h)
         return h
+
+    cdef void _book(self, double h):
+        """StepBooks.book's ledgers: the exchanged forces' work, the coupler
+        rows' impulse and (trapezoidal) dissipation, the embedded contacts'
+        quadratures, the subsystems' internal ledger; and whether the rows
+        are finite."""
+        cdef int i, c, s
+        cdef double a, b
+        cdef double[::1] aux
+        for c in range(self.nc):        # nr == nc: bincount is the rows' own work
+            self.wtv[c] += self.wv[c]
+        if self.n_coupler:
+            if self.coupler_diss:
+                rates = self.system.dissipation_rates(self.f, self.d, self.dd)
+            for i in range(self.n_coupler):
+                c = self.coupler[i]
+                self.impv[c] += self.stv[c]
+                a = rates[c] if self.coupler_diss else 0.0
+                self.dissv[c] += 0.5 * h * (self.p_prev[c] + a)
+                self.p_prev[c] = a
+        for i in range(self.n_emb):
+            aux = self.auxs[self.e_host[i]]
+            c = self.e_c[i]
+            self.impv[c] = aux[4 * self.e_slot[i]]
+            self.dissv[c] = aux[4 * self.e_slot[i] + 1]
+        a = 0.0
+        b = 0.0
+        for s in range(self.nsub):
+            if self.rigid[s]:
+                continue
+            aux = self.auxs[s]
+            a += aux[aux.shape[0] - 2]
+            if self.kind[s] == MULTIBODY:
+                b += aux[aux.shape[0] - 1]
+        self.internal_dissipated, self.internal_supplied = a, b
+        self.work_rec = np.empty(self.nc)
+        cdef double[::1] wr = self.work_rec
+        for c in range(self.nc):
+            wr[c] = self.wtv[c] + 0.0
+        for i in range(self.n_emb):
+            aux = self.auxs[self.e_host[i]]
+            c = self.e_c[i]
+            wr[c] = self.wtv[c] + aux[4 * self.e_slot[i] + 3]
+        self.finite = True
+        for c in range(self.nr):
+            if not (isfinite(self.dv[c]) and isfinite(self.ddv[c])):
+                self.finite = False
 
     def start(self, double h_prev):
         """Set the length the first step's ratio is taken against [s]."""

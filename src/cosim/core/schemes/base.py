@@ -233,8 +233,7 @@ class CoSimulationScheme(InputExtrapolation, CouplingScheme):
             n_rejected = self.n_rejected = drv.n_rejected
             k += 1
             self.n_windows = k
-            system._work = drv.work.copy()      # the exchanged forces' work, as collect_work adds it
-            books.book(t + h, h, drv.d, drv.dd, drv.f, drv.stepped.copy())
+            books.book_driven(t + h, drv)
             if controlled:
                 t = t + h
         while drv is None:

@@ -304,3 +304,20 @@ class StepBooks:
                              cause[1] if cause else None, "non-finite")
         recorder.record(t1, d, dd, f, impulse, diss, self.scheme._internal(system),
                         self.work + system.embedded_work())
+
+    def book_driven(self, t1, drv) -> None:
+        """:meth:`book` for a step the compiled loop took (``drv``, a
+        ``cosim.core.schemes._driver.Driver``), which kept the ledgers: the
+        switches its sides located become edges, and the sample is recorded."""
+        system, recorder = self.system, self.recorder
+        for c, (s, slot) in system.embedded.items():
+            for ts, j, on in system.subsystems[s].switch_log:
+                if j == slot:           # the compiled loop takes no rigid contact
+                    recorder.edge(c, ts, on)
+        d, dd, f = drv.d, drv.dd, drv.f
+        if not drv.finite:
+            cause = nonfinite_cause(system, d, dd, f)
+            raise GuardError(cause[0] if cause else "non-finite state", t1,
+                             cause[1] if cause else None, "non-finite")
+        recorder.record(t1, d, dd, f, drv.impulse, drv.diss,
+                        (drv.internal_dissipated, drv.internal_supplied), drv.work_rec)
