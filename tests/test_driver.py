@@ -76,6 +76,8 @@ EXTRA = [
     ("three_mass", "f10", ('scheme.name="jacobi"',)),
     ("three_mass", "f10", ("scheme.extrapolation_order=0",)),
     ("three_mass", "f10", ("scheme.extrapolation_order=2",)),
+    # a structure step the compiled kernel stalls in, taken by the reference
+    ("three_mass", "f100", ("scheme.contact_step=1e-4", "scheme.accept_unsafe_step=true")),
     # a contact exchanged between two moving sides
     ("three_mass", "f1", ('contacts.C.placement="coupler"', "scheme.accept_unsafe_step=true")),
     ("three_mass", "f1", ('contacts.C.placement="coupler"', "scheme.accept_unsafe_step=true",
