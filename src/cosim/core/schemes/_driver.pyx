@@ -49,7 +49,7 @@ cdef class Driver:
         Whether the step is controlled (``contact_step`` given and rows exchanged).
     """
 
-    cdef object system, subs, laws, kernels, embs, hosted_embs, step_input
+    cdef object system, subs, laws, hosted_embs, step_input
     cdef int nsub, nports, nc, nr, order, width_gs, n_order, n_hosted, n_coupler, n_exch
     cdef bint gs, controlled
     cdef double H, contact_step
@@ -112,28 +112,17 @@ cdef class Driver:
         self.nport = np.zeros(self.nsub, dtype=np.int_)
         self.max_step = np.zeros(self.nsub)
         self.free_step = np.zeros(self.nsub)
-        self.kernels, self.xs, self.auxs, self.peaks, self.closed = [], [], [], [], []
-        self.embs = []
         for s, sub in enumerate(self.subs):
             self.nport[s] = sub.n_ports
             self.port0[s + 1] = self.port0[s] + sub.n_ports
             if sub.rigid:
                 self.kind[s], self.rigid[s] = RIGID, 1
-                kern = None
             elif hasattr(sub, "_closed_end"):
                 self.kind[s] = STRUCTURE
-                kern = sub._compiled_step(None)
             else:
                 self.kind[s] = MULTIBODY
-                kern = sub._compiled_step(None)
                 self.max_step[s] = sub.integrator.max_step
                 self.free_step[s] = sub.integrator.free_step or 0.0
-            self.kernels.append(kern)
-            self.xs.append(sub.x)
-            self.auxs.append(sub.aux)
-            self.peaks.append(sub.peak)
-            self.closed.append(getattr(sub, "_closed_end", None))
-            self.embs.append(list(getattr(sub, "_embedded", [])))
         self.nports = self.port0[self.nsub]
         self.seq = np.array(order, dtype=np.int_)
         self.n_order = len(order)
@@ -317,8 +306,8 @@ cdef class Driver:
             if self.rigid[s]:
                 continue
             sub = self.subs[s]
-            cl = self.closed[s]
-            self.saved[s] = (self.xs[s].copy(), self.auxs[s].copy(), self.peaks[s].copy(),
+            cl = getattr(sub, "_closed_end", None)
+            self.saved[s] = (sub.x.copy(), sub.aux.copy(), sub.peak.copy(),
                              None if cl is None else cl.copy())
             self.saved_t[s] = sub.t
             self.saved_n[s] = sub.n_steps
@@ -330,11 +319,11 @@ cdef class Driver:
                 continue
             sub = self.subs[s]
             x, aux, peak, cl = self.saved[s]
-            self.xs[s][...] = x
-            self.auxs[s][...] = aux
-            self.peaks[s][...] = peak
+            sub.x[...] = x
+            sub.aux[...] = aux
+            sub.peak[...] = peak
             if cl is not None:
-                self.closed[s][...] = cl
+                sub._closed_end[...] = cl
             sub.t = self.saved_t[s]
             sub.n_steps = self.saved_n[s]
         self.P[...] = self.P0
@@ -374,20 +363,23 @@ cdef class Driver:
                 uv[j, k] = acc
         sub = self.subs[s]
         inp = self.step_input(t, h, u.reshape(width, self.nport[s], 2))
-        kern = self.kernels[s]
-        if self.kind[s] == MULTIBODY:
+        # asked at each step, as the side's own step asks: a side may change
+        # its kernel (its basis renewed) or decline one step
+        kern = sub._compiled_step(inp)
+        if kern is None:                # the side's own step: its reference
+            sub._step_impl(t, h, inp)
+            pm = sub.port_moments
+        elif self.kind[s] == MULTIBODY:
             sub._t0, sub._h = t, h
             sub.switch_log = []
             sub.impact_log = []
-            pm = kern.step(t, h, sub.x, sub.aux, inp, self.embs[s], self.max_step[s],
+            pm = kern.step(t, h, sub.x, sub.aux, inp, sub._embedded, self.max_step[s],
                            self.free_step[s], sub._on_switch, sub.peak)
             sub.port_moments = pm
-            sub.t = t + h
-            sub.n_steps += 1
         else:
-            pm = self._step_structure(s, t, h, inp)
-            sub.t = t + h
-            sub.n_steps += 1
+            pm = self._step_structure(s, kern, t, h, inp)
+        sub.t = t + h
+        sub.n_steps += 1
         mom = np.ascontiguousarray(pm).view(float).reshape(3, -1)
         for r in range(self.nr):        # collect_work: einsum("jc,jc->c", coeffs, mom[:p] @ G)
             acc = 0.0
@@ -406,14 +398,13 @@ cdef class Driver:
             gv[r] = h * acc
         return got
 
-    cdef object _step_structure(self, int s, double t, double h, inp):
+    cdef object _step_structure(self, int s, kern, double t, double h, inp):
         """The structure's step by its kernel, as its ``_step_impl`` takes it;
         where the kernel does not take it (a load or motion beyond its
         degree, a stalled step) the structure's own step does (the
         reference, saying so once).  Returns the port moments."""
         sub = self.subs[s]
-        kern = self.kernels[s]
-        embs = self.embs[s]
+        embs = sub._embedded
         sub.switch_log = []
         sub._t0, sub._h = t, h
         if kern.set_step(t, h, inp.coeffs, [(e.t0, e.h, e.motion, e._dmotion) for e in embs]):
@@ -526,7 +517,7 @@ cdef class Driver:
         for r in range(self.nr):
             self.stv[r] = 0.0
         for k in range(self.n_hosted):
-            self.imp0[k] = self.auxs[self.h_host[k]][4 * self.h_slot[k]]
+            self.imp0[k] = self.subs[self.h_host[k]].aux[4 * self.h_slot[k]]
         for i in range(self.n_order):
             s = self.seq[i]
             for j in range(width):
@@ -539,7 +530,7 @@ cdef class Driver:
                     self._partner_motion(k, t, h, self.done[self.h_partner[k]]
                                          and not self.rigid[self.h_partner[k]])
                 elif self.h_partner[k] == s and self.done[host]:    # hosted_force
-                    aux = self.auxs[host]
+                    aux = self.subs[host].aux
                     imp = aux[4 * self.h_slot[k]]
                     mom = aux[4 * self.h_slot[k] + 2]
                     m0 = (imp - self.imp0[k]) / h
@@ -670,7 +661,7 @@ cdef class Driver:
                 self.dissv[c] += 0.5 * h * (self.p_prev[c] + a)
                 self.p_prev[c] = a
         for i in range(self.n_emb):
-            aux = self.auxs[self.e_host[i]]
+            aux = self.subs[self.e_host[i]].aux
             c = self.e_c[i]
             self.impv[c] = aux[4 * self.e_slot[i]]
             self.dissv[c] = aux[4 * self.e_slot[i] + 1]
@@ -679,7 +670,7 @@ cdef class Driver:
         for s in range(self.nsub):
             if self.rigid[s]:
                 continue
-            aux = self.auxs[s]
+            aux = self.subs[s].aux
             a += aux[aux.shape[0] - 2]
             if self.kind[s] == MULTIBODY:
                 b += aux[aux.shape[0] - 1]
@@ -689,7 +680,7 @@ cdef class Driver:
         for c in range(self.nc):
             wr[c] = self.wtv[c] + 0.0
         for i in range(self.n_emb):
-            aux = self.auxs[self.e_host[i]]
+            aux = self.subs[self.e_host[i]].aux
             c = self.e_c[i]
             wr[c] = self.wtv[c] + aux[4 * self.e_slot[i] + 3]
         self.finite = True
