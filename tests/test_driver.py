@@ -199,6 +199,24 @@ def test_the_compiled_loop_is_built_and_taken(monkeypatch):
     assert _refusal("three_mass", "f100") == "the Python loop was asked for (`COSIM_DRIVER=python`)"
 
 
+@needs_compiled
+def test_a_replaced_advance_runs_the_python_loop(monkeypatch):
+    """A scheme whose ``advance`` was wrapped (as tests that inject a fault
+    do) runs the Python loop, which calls it."""
+    from cosim.core.schemes.explicit import GaussSeidel
+    original = GaussSeidel.advance
+    calls = []
+
+    def wrapped(self, system, t, h, ratio):
+        calls.append(t)
+        return original(self, system, t, h, ratio)
+
+    monkeypatch.setattr(GaussSeidel, "advance", wrapped)
+    assert _refusal("spring_drop", None) == "the `advance` of scheme `gauss_seidel` is replaced"
+    res = cosim.simulate(_load("spring_drop", None))
+    assert len(calls) == res.n_windows > 0
+
+
 def test_a_wrong_loop_choice_is_refused(monkeypatch):
     monkeypatch.setenv(driver.DRIVER_ENV, "fast")
     with pytest.raises(ValueError, match=r"`COSIM_DRIVER` must be one of \['compiled', "

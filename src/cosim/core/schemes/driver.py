@@ -91,6 +91,10 @@ def refusal(scheme, system) -> str | None:
         return "the numpy reference was asked for (`COSIM_KERNEL=numpy`)"
     if type(scheme) not in (Jacobi, GaussSeidel):
         return f"scheme `{scheme.name}` is not an explicit scheme the compiled loop knows"
+    advance = type(scheme).advance      # a test or a user may wrap it: theirs must run
+    if (getattr(advance, "__module__", None), getattr(advance, "__qualname__", None)) != (
+            "cosim.core.schemes.explicit", f"{type(scheme).__name__}.advance"):
+        return f"the `advance` of scheme `{scheme.name}` is replaced"
     if scheme.interface_tolerance:
         return "`interface_tolerance` (interface error control) is set"
     if scheme.substeps and any(n != 1 for n in scheme.substeps.values()):
