@@ -101,7 +101,7 @@ def refusal(scheme, system) -> str | None:
         return "`substeps` (multirate) are set"
     if system.connections is not None:
         return "a contact has a grasp or friction connection"
-    if system._followers:
+    if system.followers:
         return "a contact follows a moving point (`follow`)"
     for sub in system.subsystems:
         why = _side_refusal(sub)

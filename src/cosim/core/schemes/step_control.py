@@ -297,7 +297,9 @@ class StepBooks:
                     recorder.edge(c, ts, True)
                     recorder.edge(c, ts, False)
         for s in self.scheme._moving(system):
-            recorder.impacts += getattr(system.subsystems[s], "impact_log", [])
+            sub = system.subsystems[s]
+            if "rigid_impacts" in sub.capabilities:
+                recorder.impacts += sub.impact_log
         if not (np.isfinite(d).all() and np.isfinite(dd).all()):
             cause = nonfinite_cause(system, d, dd, f)
             raise GuardError(cause[0] if cause else "non-finite state", t1,
