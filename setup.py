@@ -11,6 +11,7 @@ from setuptools.command.build_ext import build_ext
 KERNELS = [
     Extension("cosim.sides._multibody_step", ["src/cosim/sides/_multibody_step.pyx"]),
     Extension("cosim.sides._structure_step", ["src/cosim/sides/_structure_step.pyx"]),
+    Extension("cosim.core.schemes._driver", ["src/cosim/core/schemes/_driver.pyx"]),
 ]
 
 #: Every a * b + c in the kernels is rounded twice, as written and as Python and

@@ -1,11 +1,12 @@
 """Base classes of coupling schemes: :class:`CouplingScheme` (options,
 counters) and :class:`CoSimulationScheme`, the macro-step loop the
-co-simulation schemes share.  Its macro-step control is in
-:mod:`cosim.core.schemes.step_control`, the extrapolation of the inputs over
+co-simulation schemes share.  Its macro-step control and the books of a step
+are in :mod:`cosim.core.schemes.step_control`, the extrapolation of the inputs over
 a step in :mod:`cosim.core.schemes.extrapolation`."""
 from __future__ import annotations
 
 import math
+import time
 from abc import ABC, abstractmethod
 from typing import Any, Callable, ClassVar, NamedTuple
 
@@ -13,10 +14,9 @@ import numpy as np
 
 from cosim.core import preflight
 from cosim.errors import CouplingError, UnsafeStepError
-from cosim.core.guard import GuardError, nonfinite_cause
 from cosim.core.preflight import stiffest_normal
 from cosim.core.schemes.extrapolation import InputExtrapolation, extrapolation_coeffs
-from cosim.core.schemes.step_control import MacroStepControl
+from cosim.core.schemes.step_control import StepBooks, StepController, StepState
 from cosim.core.subsystem import reparametrised
 
 __all__ = ["Option", "CouplingScheme", "CoSimulationScheme", "UnsafeStepError", "CouplingError",
@@ -116,7 +116,7 @@ class CouplingScheme(ABC):
         """Advance the system to ``t_end``, recording as it goes."""
 
 
-class CoSimulationScheme(MacroStepControl, InputExtrapolation, CouplingScheme):
+class CoSimulationScheme(InputExtrapolation, CouplingScheme):
     """Macro-step loop shared by the co-simulation schemes.
 
     Contacts placed ``coupler`` are exchanged as forces: at each
@@ -194,21 +194,21 @@ class CoSimulationScheme(MacroStepControl, InputExtrapolation, CouplingScheme):
         if H is None:
             raise ValueError(f"scheme `{self.name}` needs `macro_step` [s]")
         self.preflight(system, t_end)
+        cpu0 = time.process_time()
         self._system = system
         self._watch_impacts(system, recorder)
         self.n_iterations = self.n_windows = self.n_rejected = 0
-        nc = system.n_contacts
-        coupler = system.coupler
+        st = self._state = StepState()
+        ctl = StepController(self, system, st)
         outs = system.outputs()
         d, dd = system.penetrations(outs)
         f = system.forces(d, dd)
-        self._outs, self._f = outs, f
+        st.outs, st.f = outs, f
         # a step longer than the run is one step to t_end: the history and the
         # sliver test below measure it as the step it is
-        self._hist = self._starting_history(system, d, dd, f, min(H, t_end))
-        impulse, diss, work = np.zeros(nc), np.zeros(nc), np.zeros(nc)
-        p_prev = system.dissipation_rates(f, d, dd)[coupler]
-        recorder.record(0.0, d, dd, f, impulse, diss, self._internal(system), work)
+        st.hist = self._starting_history(system, d, dd, f, min(H, t_end))
+        books = StepBooks(self, system, recorder, f, d, dd)
+        books.start(d, dd, f)
         controlled = self.contact_step is not None and len(system.exchanged) > 0
         n = max(1, math.ceil(t_end / H - 1e-9))
         # what is left of the run below this is round-off, not a step: relative
@@ -218,11 +218,35 @@ class CoSimulationScheme(MacroStepControl, InputExtrapolation, CouplingScheme):
         sliver = 1e-12 * min(H, t_end)
         h_prev = min(H, t_end)
         k, t, n_rejected = 0, 0.0, 0
-        while True:
+        drv = self._compiled_loop(system, st, d, dd, controlled, h_prev)
+        compiled_cpu = 0.0
+        while drv is not None:          # the compiled loop: one accepted step per call
             if controlled:
                 if t_end - t <= sliver:
                     break
-                h = self._controlled_step(d, dd, f, t_end - t)
+                c0 = time.process_time()
+                h = drv.step(t, t_end - t)
+            else:
+                if k >= n:
+                    break
+                t = k * H
+                h = min(H, t_end - t)
+                if h <= sliver:
+                    break
+                c0 = time.process_time()
+                drv.step(t, h, h)
+            compiled_cpu += time.process_time() - c0
+            n_rejected = self.n_rejected = drv.n_rejected
+            k += 1
+            self.n_windows = k
+            books.book_driven(t + h, drv)
+            if controlled:
+                t = t + h
+        while drv is None:
+            if controlled:
+                if t_end - t <= sliver:
+                    break
+                h = ctl.propose(d, dd, f, t_end - t)
                 saved = system.get_state()
             else:
                 if k >= n:
@@ -232,94 +256,87 @@ class CoSimulationScheme(MacroStepControl, InputExtrapolation, CouplingScheme):
                 if h <= sliver:
                     break
             if system.followers:
-                system.update_followers(self._outs)
+                system.update_followers(st.outs)
             predicted = self._predicted_end_forces(system, h / h_prev) if self.interface_tolerance \
                 and controlled else None
-            self._unconverged = False
+            st.unconverged = False
             stepped = self.advance(system, t, h, h / h_prev)
             outs = system.outputs()
             d1, dd1 = system.penetrations(outs)
             f = system.forces(d1, dd1)
-            if predicted is not None and not self._aimed:
-                for c, view in system.hosted_view_forces(outs).items():
-                    predicted[c] = view
-                h_new = self._error_control(f, predicted, h)
-                if h_new is not None:           # the interface error is too large
-                    system.set_state(saved)
-                    system.discard_work()
+            if controlled:
+                retry = ctl.judge(d, dd, d1, dd1, f, stepped, predicted, outs, t, h)
+                if retry is not None:           # an onset inside, or too large an error
+                    ctl.retry(saved, *retry)
                     n_rejected += 1
                     self.n_rejected = n_rejected
-                    self._h_next = h_new
-                    self._outs = system.outputs()
                     continue
-            if controlled and h > self.contact_step:
-                if self._unconverged:           # an implicit step found no fixed point
-                    onset = 0.5 * h, False
-                elif not self._aimed:
-                    onset = self._onset(d, dd, d1, dd1, t, h)
-                    if onset is None and self._touched(stepped):
-                        onset = 0.5 * h, False
-                else:                           # the predicted onset may come too late
-                    onset = self._overshot(d, d1, dd1, h)
-                if onset is not None:           # a contact closed inside a long step
-                    system.set_state(saved)
-                    system.discard_work()
-                    n_rejected += 1
-                    self.n_rejected = n_rejected
-                    self._h_next, self._aimed = onset
-                    self._outs = system.outputs()
-                    continue
-            self._aimed = False
-            self._dd_prev, self._h_prev_step = dd.copy(), h
-            self._outs_prev = self._outs
+            if system.connections is not None and system.switch_modes(t + h, d1, dd1):
+                d1, dd1 = system.penetrations(outs)     # a grasp moves the tangential anchor
+                f = system.forces(d1, dd1)
+            ctl.accept(dd, h, outs, f)
             d, dd = d1, dd1
-            if system.connections is not None and system.switch_modes(t + h, d, dd):
-                d, dd = system.penetrations(outs)       # a grasp moves the tangential anchor
-                f = system.forces(d, dd)
             h_prev = h
             k += 1
             self.n_windows = k          # kept as they go: a run that fails reports them
-            self._outs, self._f = outs, f
-            self._hist = (self._hist + [f])[-3:]
-            work += system.exchange_work()
-            if len(coupler):
-                impulse[coupler] += stepped[coupler]
-                p_now = system.dissipation_rates(f, d, dd)[coupler]
-                diss[coupler] += 0.5 * h * (p_prev + p_now)
-                p_prev = p_now
-            emb = system.embedded_quadratures()
-            for c, (s, slot) in system.embedded.items():
-                impulse[c], diss[c] = emb[c]
-                sub = system.subsystems[s]
-                rigid = system.links[c].contact.law.rigid
-                for ts, j, on in sub.switch_log:
-                    if j == slot and not rigid:
-                        recorder.edge(c, ts, on)
-                    elif j == slot and on:            # an impact is an instant
-                        recorder.edge(c, ts, True)
-                        recorder.edge(c, ts, False)
-            for s in self._moving(system):
-                sub = system.subsystems[s]
-                if "rigid_impacts" in sub.capabilities:
-                    recorder.impacts += sub.impact_log
-            if not (np.isfinite(d).all() and np.isfinite(dd).all()):
-                cause = nonfinite_cause(system, d, dd, f)
-                raise GuardError(cause[0] if cause else "non-finite state", t + h,
-                                 cause[1] if cause else None, "non-finite")
-            recorder.record(t + h, d, dd, f, impulse, diss, self._internal(system),
-                            work + system.embedded_work())
+            books.book(t + h, h, d, dd, f, stepped)
             if controlled:
                 t = t + h
+        self.loop_stats = {"loop": "python" if drv is None else "compiled",
+                           "refusal": self.loop_refusal, "macro_steps": k,
+                           "compiled_cpu_s": compiled_cpu,
+                           "run_cpu_s": time.process_time() - cpu0}
         return {"n_windows": k, "n_iterations": self.n_iterations, "n_rejected": n_rejected}
 
-    _h_next = None
-    _unconverged = False    # the implicit scheme's last (long) step did not converge
-    _aimed = False          # the current step ends at a predicted onset: accept it
-    _dd_prev = None
-    _h_prev_step = None
-    _outs_prev = None       # outputs at the communication point before the last
-    _h_adapt = None         # step in contact under interface error control
-    _f_scale = None         # largest force seen per contact [N]
+    #: the macro loop's state (set by :meth:`run`)
+    _state = None
+    #: why the last run took the Python loop (None: it took the compiled one)
+    loop_refusal: str | None = None
+    #: the last finished run's loop: ``loop`` (``"compiled"`` or ``"python"``),
+    #: ``refusal`` (:attr:`loop_refusal`), ``macro_steps``, ``compiled_cpu_s``
+    #: (process CPU inside the compiled loop's calls [s]) and ``run_cpu_s``
+    #: (the whole of :meth:`run` [s]), for benchmarks
+    loop_stats: dict | None = None
+
+    def _compiled_loop(self, system, state, d, dd, controlled, h_prev):
+        """The compiled macro loop for this run (:mod:`cosim.core.schemes.driver`),
+        or None where the Python loop runs it (:attr:`loop_refusal` says why)."""
+        from cosim.core.schemes import driver
+        self.loop_refusal = why = driver.refusal(self, system)
+        if why is not None:
+            return None
+        module = driver.compiled_driver()
+        if module is None:
+            self.loop_refusal = "the compiled loop is not built"
+            return None
+        order = self._order(system) if hasattr(self, "_order") else self._moving(system)
+        drv = module.Driver(self, system, order, state, d, dd, controlled)
+        drv.start(h_prev)
+        return drv
+
+    # the implicit scheme reads the loop's state by these names
+    @property
+    def _f(self):
+        return self._state.f
+
+    @property
+    def _outs(self):
+        return self._state.outs
+
+    @property
+    def _unconverged(self):
+        return self._state.unconverged
+
+    @_unconverged.setter
+    def _unconverged(self, value):
+        self._state.unconverged = value
+
+    def _predicted_end_forces(self, system, ratio):
+        """Force each coupler contact is predicted to carry at the step's
+        end: the extrapolated force at ``s = 1``.  (A hosted contact's
+        prediction is the force its host saw at the step's end, against the
+        partner's extrapolated motion; it is read after the step.)"""
+        return np.sum(self._extrapolated(ratio), axis=0)
 
     @staticmethod
     def _internal(system):

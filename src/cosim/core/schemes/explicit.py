@@ -60,7 +60,7 @@ class GaussSeidel(CoSimulationScheme):
         # per row, the impulse that side `a` (else `b`) receives
         applied = np.zeros(system.n_rows)
         done = {s for s, sub in enumerate(system.subsystems) if sub.rigid}
-        outs_n = self._outs
+        outs_n = self._state.outs
         after = {}                      # outputs at t + h of the subsystems done
         imp0 = self._hosted_impulses(system)
         for s in self._order(system):
@@ -87,8 +87,8 @@ class GaussSeidel(CoSimulationScheme):
                 if other in done:
                     ftilde = float(f_pred[c])
                     coeffs[:, c] = 0.0
-                    coeffs[0, c] = self._f[c]
-                    coeffs[1, c] = ftilde - self._f[c]
+                    coeffs[0, c] = self._state.f[c]
+                    coeffs[1, c] = ftilde - self._state.f[c]
             sub = system.subsystems[s]
             got = self._step_side(system, s, t, h, coeffs, after)
             for c in mine:

@@ -5,7 +5,7 @@ extrapolated from the step's start.
 
 :class:`InputExtrapolation` is a mixin of
 :class:`~cosim.core.schemes.base.CoSimulationScheme`; it reads the macro
-loop's state (``_hist``, ``_outs``, ``_outs_prev``, ``_h_prev_step``).
+loop's state (``_state``, a :class:`~cosim.core.schemes.step_control.StepState`).
 """
 from __future__ import annotations
 
@@ -64,9 +64,9 @@ class InputExtrapolation:
         the extrapolation is kept: its small overshoot into tension after
         release offsets its lag before, and holding it would double the
         rebound error of linear extrapolation."""
-        co = extrapolation_coeffs(self._hist, self.extrapolation_order, ratio)
+        co = extrapolation_coeffs(self._state.hist, self.extrapolation_order, ratio)
         if ratio > 1.0 + 1e-9:
-            co[1:, self._hist[-1] == 0.0] = 0.0
+            co[1:, self._state.hist[-1] == 0.0] = 0.0
         return co
 
     def _set_partner_motion(self, system, c: int, t: float, h: float, after=None) -> None:
@@ -77,15 +77,16 @@ class InputExtrapolation:
         ``+ a tau^2 / 2`` at order >= 1 with ``a`` from the last two
         velocities."""
         _, _, partner, port, emb = system.hosted[c]
-        pos, vel = self._outs[partner]
+        pos, vel = self._state.outs[partner]
         x0, v0 = complex(*pos[port]), complex(*vel[port])
         if after is not None:
             x1, v1 = complex(*after[0][port]), complex(*after[1][port])
             emb.set_motion(t, h, hermite_coefficients(x0, v0, x1, v1, h))
             return
         a = 0j
-        if self.extrapolation_order > 0 and self._outs_prev is not None:
-            a = (v0 - complex(*self._outs_prev[partner][1][port])) / self._h_prev_step
+        st = self._state
+        if self.extrapolation_order > 0 and st.outs_prev is not None:
+            a = (v0 - complex(*st.outs_prev[partner][1][port])) / st.h_prev_step
         emb.set_motion(t, h, (x0, h * v0, 0.5 * a * h * h))
 
     def _predicted_outputs(self, system, s: int, tau: float, t: float, h: float, after: dict,
@@ -105,13 +106,13 @@ class InputExtrapolation:
                     pos = pos + own_ahead * vel
                 out.append((pos, vel))
                 continue
-            x0, v0 = self._outs[p]
+            x0, v0 = self._state.outs[p]
             if p in after:
                 out.append(hermite_point(x0, v0, *after[p], h, sg))
                 continue
             a = 0.0
-            if self.extrapolation_order > 0 and self._outs_prev is not None:
-                a = (v0 - self._outs_prev[p][1]) / self._h_prev_step
+            if self.extrapolation_order > 0 and self._state.outs_prev is not None:
+                a = (v0 - self._state.outs_prev[p][1]) / self._state.h_prev_step
             dt = tau - t
             out.append((x0 + dt * v0 + 0.5 * dt * dt * a, v0 + dt * a))
         return out

@@ -1,0 +1,115 @@
+"""Whether a run of an explicit scheme takes the compiled macro loop
+(:mod:`cosim.core.schemes._driver`), decided once per run, and why not.
+
+The compiled loop covers Jacobi and Gauss-Seidel over sides whose steps run
+in compiled kernels (a multibody side stepped by RK4 in
+``cosim.sides._multibody_step``, a structure stepped by
+``cosim.sides._structure_step``) and rigid references, with contacts
+exchanged as forces under the shipped penalty laws, or hosted by one side
+against a moving partner, extrapolation orders 0 to 2 and the macro-step
+control with rollback.  Anything else runs the Python loop of
+:meth:`cosim.core.schemes.base.CoSimulationScheme.run`, which stays the
+reference the compiled loop is tested against; so does
+``COSIM_KERNEL=numpy``, and ``COSIM_DRIVER=python`` runs it over the
+compiled sides.
+"""
+from __future__ import annotations
+
+import importlib
+import logging
+import os
+
+__all__ = ["DRIVER_ENV", "refusal", "compiled_driver"]
+
+logger = logging.getLogger(__name__)
+
+#: the environment variable that chooses the macro loop: ``compiled`` (the
+#: default: the compiled loop wherever it covers the run) or ``python``
+DRIVER_ENV = "COSIM_DRIVER"
+_CHOICES = ("compiled", "python")
+_missing_said = False
+
+
+def driver_choice() -> str:
+    """``"compiled"`` or ``"python"``, from ``COSIM_DRIVER`` (read at each run).
+
+    Raises
+    ------
+    ValueError
+        For any other value.
+    """
+    value = os.environ.get(DRIVER_ENV, "compiled").strip().lower() or "compiled"
+    if value not in _CHOICES:
+        raise ValueError(f"`{DRIVER_ENV}` must be one of {list(_CHOICES)}, got {value!r}")
+    return value
+
+
+def compiled_driver():
+    """The compiled loop's module, or None where it was not built (said once)."""
+    global _missing_said
+    try:
+        return importlib.import_module("cosim.core.schemes._driver")
+    except ImportError as exc:
+        if not _missing_said:
+            _missing_said = True
+            logger.warning("the compiled macro loop `cosim.core.schemes._driver` is not built "
+                           "(%s): using the Python loop, which is slower; reinstall with "
+                           "`pip install .`", exc)
+        return None
+
+
+def _side_refusal(sub) -> str | None:
+    """Why side ``sub`` cannot be stepped by the compiled loop, or None."""
+    from cosim.core.ode import RK4
+    name = f"side `{sub.name}`"
+    if sub.rigid:
+        if type(sub).__name__ == "RigidReference":
+            return None
+        return f"{name} is a rigid {type(sub).__name__}"
+    if hasattr(sub, "_closed_end") and hasattr(sub, "_compiled_step"):      # a structure
+        if sub._compiled_step(None) is None:
+            return f"{name} is not stepped by its compiled kernel"
+        return None
+    if hasattr(sub, "_kernel_steps") and hasattr(sub, "integrator"):          # a multibody tree
+        if sub.kernel != "compiled":
+            return (f"{name} is not stepped by its compiled kernel (a user's law, drive or "
+                    f"integrator, or a grasp)")
+        if type(sub.integrator) is not RK4:
+            return f"{name} is integrated by {type(sub.integrator).__name__}, not RK4"
+        if any(e.law.rigid for e in sub._embedded):
+            return f"{name} has a rigid contact (its impacts are resolved in Python)"
+        return None
+    return f"{name} ({type(sub).__name__}) has no compiled kernel"
+
+
+def refusal(scheme, system) -> str | None:
+    """Why this run takes the Python loop, or None when it takes the compiled one."""
+    from cosim.core.schemes.explicit import GaussSeidel, Jacobi
+    if driver_choice() == "python":
+        return f"the Python loop was asked for (`{DRIVER_ENV}=python`)"
+    if os.environ.get("COSIM_KERNEL", "compiled").strip().lower() == "numpy":
+        return "the numpy reference was asked for (`COSIM_KERNEL=numpy`)"
+    if type(scheme) not in (Jacobi, GaussSeidel):
+        return f"scheme `{scheme.name}` is not an explicit scheme the compiled loop knows"
+    advance = type(scheme).advance      # a test or a user may wrap it: theirs must run
+    if (getattr(advance, "__module__", None), getattr(advance, "__qualname__", None)) != (
+            "cosim.core.schemes.explicit", f"{type(scheme).__name__}.advance"):
+        return f"the `advance` of scheme `{scheme.name}` is replaced"
+    if scheme.interface_tolerance:
+        return "`interface_tolerance` (interface error control) is set"
+    if scheme.substeps and any(n != 1 for n in scheme.substeps.values()):
+        return "`substeps` (multirate) are set"
+    if system.connections is not None:
+        return "a contact has a grasp or friction connection"
+    if system.followers:
+        return "a contact follows a moving point (`follow`)"
+    for sub in system.subsystems:
+        why = _side_refusal(sub)
+        if why is not None:
+            return why
+    from couplers import laws
+    shipped = {getattr(laws, n) for n in laws.__all__ if n.endswith("Law")}
+    for ln in system.links:
+        if type(ln.contact.law) not in shipped:
+            return f"contact `{ln.contact.name}` has a user's law"
+    return None
