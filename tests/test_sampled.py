@@ -175,6 +175,7 @@ def test_a_guard_stop_is_the_loops(monkeypatch, name, variant, overrides):
     assert loop.status == path.status == "failed"
     assert path.message == loop.message
     assert path.summary["t_end"] == loop.summary["t_end"]
+    assert path.summary["macro_steps"] == loop.summary["macro_steps"]
     assert len(path.t) == len(loop.t)
     tol = 100 * RTOL if name == "manipulator_wall" else 1e-10
     assert series_distance(loop, path) <= tol
@@ -212,6 +213,7 @@ def test_a_kernel_failure_keeps_the_samples_before(monkeypatch):
     path = run(monkeypatch, "manipulator_wall", "mu0", on=True)
     assert loop.status == path.status == "failed"
     assert path.summary["t_end"] == loop.summary["t_end"] == pytest.approx(0.39)
+    assert path.summary["macro_steps"] == loop.summary["macro_steps"]
     assert len(path.t) == len(loop.t)
 
 

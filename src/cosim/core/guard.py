@@ -73,6 +73,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from cosim.errors import SimulationError
+from cosim.core.guard_block import BlockCheck
 
 __all__ = ["GuardOptions", "Guard", "GuardError", "nonfinite_cause", "energy_scale",
            "peak_stored_energy", "DEFAULT_ENERGY_GROWTH", "DEFAULT_ENERGY_FLOOR",
@@ -224,7 +225,7 @@ def nonfinite_cause(system, d, dd, f) -> tuple[str, str | None] | None:
     return None
 
 
-class Guard:
+class Guard(BlockCheck):
     """Stops a run on non-finite values or on energy growth beyond a bound.
 
     Parameters
@@ -332,80 +333,6 @@ class Guard:
         s = d.sum() + dd.sum() + f.sum()
         if s - s != 0 or not created <= self._bound(self.scale, supplied):
             self._judge(t, d, dd, f, created, supplied, dissipated, work, peak)
-
-    #: entries beyond this magnitude may overflow a row's sum: such rows are
-    #: summed one by one, as :meth:`check` sums them
-    _HUGE = 1e300
-
-    def check_block(self, t, d, dd, f, created, supplied, dissipated, work=None,
-                    peak=None) -> None:
-        """:meth:`check` of ``m`` samples in order, with the same verdict.
-
-        Parameters
-        ----------
-        t : (m,) array
-        d, dd, f : (m, n_rows) arrays
-        created, supplied : (m,) arrays
-        dissipated : (m, n_contacts) array
-        work : (m, n_contacts) array, optional
-        peak : (m, n_contacts) array, optional
-            Each contact's largest penetration before each sample.
-
-        Raises
-        ------
-        GuardError
-            As :meth:`check` would at the first sample it refuses; its
-            ``sample`` is that sample's index in the block.
-
-        Notes
-        -----
-        The fast test of :meth:`check` (a non-finite sum of the rows, or
-        the created energy above the bound) is made on the whole block; the
-        first sample it flags goes to the same slow path as one by one,
-        which raises or raises the energy scale, and the test goes on after
-        it with that scale.  A row's sum is non-finite exactly when an entry
-        is, unless entries near the float64 limit overflow it: those rows
-        are summed as :meth:`check` sums them.
-        """
-        t = np.asarray(t, float)
-        m = t.shape[0]
-        if m == 0:
-            return
-        d, dd, f = (np.asarray(a, float).reshape(m, -1) for a in (d, dd, f))
-        created = np.asarray(created, float).reshape(m)
-        supplied = np.asarray(supplied, float).reshape(m)
-        i = 0
-        if self.scale is None:          # the first sample starts the guard: as check does
-            self._one(0, t, d, dd, f, created, supplied, dissipated, work, peak)
-            i = 1
-        rows = np.hstack([d, dd, f])
-        odd = ~np.isfinite(rows).all(axis=1) | (np.abs(rows) > self._HUGE).any(axis=1)
-        for j in np.flatnonzero(odd):
-            s = d[j].sum() + dd[j].sum() + f[j].sum()
-            odd[j] = s - s != 0
-        while i < m:
-            if self.growth == math.inf:
-                bad = odd[i:]
-            else:
-                bound = np.maximum(self.growth * (self.scale + np.abs(supplied[i:])),
-                                   self.options.energy_floor)
-                bad = odd[i:] | ~(created[i:] <= bound)
-            hit = np.flatnonzero(bad)
-            if not hit.size:
-                return
-            i += int(hit[0])
-            self._one(i, t, d, dd, f, created, supplied, dissipated, work, peak)
-            i += 1
-
-    def _one(self, j, t, d, dd, f, created, supplied, dissipated, work, peak):
-        """:meth:`check` of sample ``j`` of a block, naming it if it raises."""
-        try:
-            self.check(float(t[j]), d[j], dd[j], f[j], float(created[j]), float(supplied[j]),
-                       np.asarray(dissipated)[j], None if work is None else np.asarray(work)[j],
-                       None if peak is None else np.asarray(peak)[j])
-        except GuardError as exc:
-            exc.sample = j
-            raise
 
     def warnings(self, created: float, supplied: float, coupling_errors: dict, d,
                  peak=None) -> list[dict]:

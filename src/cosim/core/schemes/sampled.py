@@ -108,11 +108,17 @@ def run_sampled(scheme, system, t_end: float, recorder) -> dict | None:
     emit = _Emitter(system, s, recorder)
     sub = system.subsystems[s]
     k = 0
-    while k < n:
-        k, why = sub.sample_steps(k, min(n, k + BLOCK), H, t_end, sliver, emit)
-        scheme.n_windows = k
-        if why == "end":
-            break
+    try:
+        while k < n:
+            k, why = sub.sample_steps(k, min(n, k + BLOCK), H, t_end, sliver, emit)
+            scheme.n_windows = k
+            if why == "end":
+                break
+    except Exception:
+        # the loop's count: the steps whose samples were kept, and the step
+        # whose sample (or report) was refused; a step that raised is not counted
+        scheme.n_windows = recorder._count - (0 if emit.refused else 1)
+        raise
     return {"n_windows": k, "n_iterations": scheme.n_iterations, "n_rejected": 0}
 
 
@@ -139,7 +145,17 @@ class _Emitter:
         self.laws = [ln.contact.law for ln in system.links]
         self.rigid = np.array([law.rigid for law in self.laws], dtype=bool)
 
+    #: whether the recorder (or the guard) refused a sample
+    refused = False
+
     def __call__(self, smp, switch_row) -> None:
+        try:
+            self._emit(smp, switch_row)
+        except Exception:
+            self.refused = True
+            raise
+
+    def _emit(self, smp, switch_row) -> None:
         sysm, nc = self.system, self.system.n_contacts
         m = len(smp.t)
         pos = np.broadcast_to(self.pos, (m,) + self.pos.shape).copy()
