@@ -202,6 +202,9 @@ class SubsystemState:
 #:   ``omega``, ``basis`` and ``structure`` set in ``__init__``).
 #: - ``skeleton``: a multibody tree that can draw itself (``skeleton``; ``model``).
 #: - ``fmi``: a side made from an FMU (``model_description`` set in ``__init__``).
+#: - ``sampled_steps``: takes many macro steps in one call for the macro loop's
+#:   sampled path (``sampling_refusal``, ``sample_steps``:
+#:   :mod:`cosim.core.schemes.sampled`).
 CAPABILITIES = {
     "rigid_impacts": (),
     "impact_watch": (),
@@ -210,6 +213,7 @@ CAPABILITIES = {
     "modes": ("natural_frequencies_hz", "named_values"),
     "skeleton": ("skeleton",),
     "fmi": (),
+    "sampled_steps": ("sampling_refusal", "sample_steps"),
 }
 
 

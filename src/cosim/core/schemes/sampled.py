@@ -62,7 +62,7 @@ def refusal(scheme, system) -> str | None:
     if len(system.exchanged):
         names = sorted({system.row_names[r] for r in system.exchanged})
         return f"contacts {names} are exchanged between moving sides"
-    if system._followers:
+    if system.followers:
         return "a contact follows a structure's surface"
     if system.connections is not None:
         return "a connection's modes switch at communication points"
@@ -76,10 +76,9 @@ def refusal(scheme, system) -> str | None:
     sub = system.subsystems[moving[0]]
     if (scheme.substeps or {}).get(sub.name, 1) != 1:
         return f"side `{sub.name}` takes sub-steps (multirate)"
-    ask = getattr(sub, "sampling_refusal", None)
-    if ask is None:
+    if "sampled_steps" not in sub.capabilities:
         return f"side `{sub.name}` cannot integrate across output points"
-    return ask()
+    return sub.sampling_refusal()
 
 
 def run_sampled(scheme, system, t_end: float, recorder) -> dict | None:
@@ -219,5 +218,7 @@ class _Emitter:
                 elif j == slot and on:            # an impact is an instant
                     rec.edge(c, ts, True)
                     rec.edge(c, ts, False)
-        rec.impacts += sub.impact_log
-        sub.switch_log, sub.impact_log = [], []
+        if "rigid_impacts" in sub.capabilities:
+            rec.impacts += sub.impact_log
+            sub.impact_log = []
+        sub.switch_log = []
