@@ -73,7 +73,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from cosim.errors import SimulationError
-from cosim.core.guard_block import BlockCheck
 
 __all__ = ["GuardOptions", "Guard", "GuardError", "nonfinite_cause", "energy_scale",
            "peak_stored_energy", "DEFAULT_ENERGY_GROWTH", "DEFAULT_ENERGY_FLOOR",
@@ -225,7 +224,7 @@ def nonfinite_cause(system, d, dd, f) -> tuple[str, str | None] | None:
     return None
 
 
-class Guard(BlockCheck):
+class Guard:
     """Stops a run on non-finite values or on energy growth beyond a bound.
 
     Parameters
@@ -333,6 +332,13 @@ class Guard(BlockCheck):
         s = d.sum() + dd.sum() + f.sum()
         if s - s != 0 or not created <= self._bound(self.scale, supplied):
             self._judge(t, d, dd, f, created, supplied, dissipated, work, peak)
+
+    def check_block(self, t, d, dd, f, created, supplied, dissipated, work=None,
+                    peak=None) -> None:
+        """:meth:`check` of many samples in order, with the same verdict
+        (:func:`cosim.core.guard_block.check_block`)."""
+        from cosim.core.guard_block import check_block        # where a side samples
+        check_block(self, t, d, dd, f, created, supplied, dissipated, work, peak)
 
     def warnings(self, created: float, supplied: float, coupling_errors: dict, d,
                  peak=None) -> list[dict]:

@@ -20,7 +20,6 @@ from typing import Callable, NamedTuple
 import numpy as np
 
 from cosim.core.hermite import hermite_cubic_max, hermite_point
-from cosim.core.recorder_block import BlockRecording
 from cosim.core.result import SimulationResult
 from cosim.core.series import SeriesFile, SeriesStore, chunk_rows
 
@@ -75,7 +74,7 @@ class Progress(NamedTuple):
     elapsed_s: float
 
 
-class Recorder(BlockRecording):
+class Recorder:
     """Collects samples of a run and builds its result.
 
     Parameters
@@ -190,10 +189,8 @@ class Recorder(BlockRecording):
                      self.system.energy(d), None, None)
 
     def _record(self, t, d, dd, f, impulse, dissipated, internal, work, energy, x, taken):
-        """:meth:`record` with the system's energy [J], the stacked states
-        ``x`` (None: the subsystems' own) and the embedded peaks ``taken``
-        (None: the system's :meth:`~cosim.core.system.CoupledSystem.take_peaks`)
-        given."""
+        """:meth:`record` given the energy [J], the stacked states ``x`` and the
+        embedded peaks ``taken`` (None: the system's own, and its ``take_peaks``)."""
         cs = self.system.connections
         if cs is not None:           # energy set free by connection switches
             dissipated = dissipated + cs.lost
@@ -251,8 +248,7 @@ class Recorder(BlockRecording):
             # evaluated now: a connection's potential depends on its mode, and
             # the mode at the end (grasped, released) need not be the start's
             self._stored0 = self.system.contact_potentials(d)
-        self._x_prev = (np.concatenate([sub.x for sub in self.system.subsystems]) if x is None
-                        else np.array(x, float))
+        self._x_prev = np.concatenate([s.x for s in self.system.subsystems]) if x is None else x
         if self._count % self.every == 0:
             self._store(t, self._x_prev, d, f, energy, diss_total)
         self._count += 1
@@ -263,6 +259,12 @@ class Recorder(BlockRecording):
                 begun = sum(map(len, self.intervals)) + sum(o is not None for o in self._open)
                 self._progress(Progress(float(t), float(self.t_end), int(begun),
                                         now - self._wall0))
+
+    def record_block(self, t, d, dd, f, impulse, dissipated, internal, work=None, *, x,
+                     energy=None, peaks=None) -> None:
+        """Add samples as arrays (:func:`cosim.core.recorder_block.record_block`)."""
+        from cosim.core.recorder_block import record_block     # where a side samples
+        record_block(self, t, d, dd, f, impulse, dissipated, internal, work, x, energy, peaks)
 
     def _store(self, t, x, d, f, energy, diss_total):
         sysm = self.system

@@ -16,7 +16,6 @@ from cosim.errors import CouplingError, UnsafeStepError
 from cosim.core.guard import GuardError, nonfinite_cause
 from cosim.core.preflight import stiffest_normal
 from cosim.core.schemes.extrapolation import InputExtrapolation, extrapolation_coeffs
-from cosim.core.schemes.sampled import run_sampled
 from cosim.core.schemes.step_control import MacroStepControl
 from cosim.core.subsystem import reparametrised
 
@@ -194,9 +193,11 @@ class CoSimulationScheme(MacroStepControl, InputExtrapolation, CouplingScheme):
         H = self.macro_step
         if H is None:
             raise ValueError(f"scheme `{self.name}` needs `macro_step` [s]")
-        done = run_sampled(self, system, t_end, recorder)   # all partners rigid: no loop
-        if done is not None:
-            return done
+        if not len(system.exchanged):       # all partners rigid: perhaps no loop at all
+            from cosim.core.schemes.sampled import run_sampled
+            done = run_sampled(self, system, t_end, recorder)
+            if done is not None:
+                return done
         self.preflight(system, t_end)
         self._system = system
         self._watch_impacts(system, recorder)

@@ -25,7 +25,8 @@ What the path gives, against the loop:
   which may differ from the loop's scalar evaluation by round-off.
 - an adaptive method: it no longer restarts at each output point, so its
   steps differ, and so do its states, within the integrator's own error
-  (its tolerances); the samples are its dense output.  The first moments of
+  (its tolerances); the samples are its dense output (it restarts only at
+  a switch and at each block of :data:`BLOCK` samples).  The first moments of
   the embedded contacts' forces then run from the block's start, not the
   macro step's: nothing reads them, for no contact is hosted against a
   moving partner.
