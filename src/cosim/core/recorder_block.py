@@ -189,17 +189,16 @@ def _commit(rec, t, d, dd, f, impulse, dissipated, work, x, energy, diss_total, 
     rec._x_prev = x[k - 1].copy()
     # the stored samples, and the largest penetration since the one before each
     kept = np.flatnonzero((rec._count + np.arange(k)) % rec.every == 0)
-    carry = rec._since
-    start = 0
-    rows = []
-    for i in kept:
-        rows.append(np.maximum(carry, np.max(contrib[start:i + 1], axis=0)))
-        carry, start = np.zeros_like(carry), i + 1
-    rec._since = (np.maximum(carry, np.max(contrib[start:k], axis=0)) if start < k
-                   else carry)
+    carry, start = rec._since, 0
     if kept.size:
-        _store_rows(rec, t[kept], x[kept], d[kept], f[kept], energy[kept],
-                         diss_total[kept], np.array(rows))
+        # each kept sample's peaks: the largest over the samples since the
+        # one kept before it (the first group with what was carried over)
+        rows = np.maximum.reduceat(contrib[:kept[-1] + 1], np.r_[0, kept[:-1] + 1], axis=0)
+        rows[0] = np.maximum(rows[0], carry)
+        carry, start = np.zeros_like(carry), kept[-1] + 1
+        _store_rows(rec, t[kept], x[kept], d[kept], f[kept], energy[kept], diss_total[kept],
+                    rows)
+    rec._since = np.maximum(carry, np.max(contrib[start:k], axis=0)) if start < k else carry
     rec._count += k
     if rec._progress is not None:
         now = time.monotonic()
