@@ -53,7 +53,7 @@ def _sides():
     from cosim.sides.fmu_description import DescribedFMU
     from cosim.sides.multibody import MultibodySubsystem
     return {MultibodySubsystem: {"rigid_impacts", "impact_watch", "connections",
-                                                  "skeleton"},
+                                                  "skeleton", "sampled_steps"},
             StructureSubsystem: {"rigid_impacts", "moving_ports", "modes"},
             FMUSubsystem: {"fmi"}, DescribedFMU: {"fmi"}, RigidReference: set()}
 

@@ -132,6 +132,7 @@ def test_a_nan_in_a_run_stops_it_with_time_and_contact(monkeypatch):
     """A subsystem whose state turns NaN mid-run: the run ends failed at that
     step, the message names the contact and the time, and the series kept
     are finite."""
+    from cosim.core.schemes import sampled
     from cosim.core.schemes.explicit import Jacobi
     original = Jacobi.advance
 
@@ -142,6 +143,7 @@ def test_a_nan_in_a_run_stops_it_with_time_and_contact(monkeypatch):
         return out
 
     monkeypatch.setattr(Jacobi, "advance", poisoned)
+    monkeypatch.setattr(sampled, "ENABLED", False)      # the loop, which calls `advance`
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         scene = cosim.load_scene(CASES / "spring_drop.toml", overrides=[

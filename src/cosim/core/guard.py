@@ -112,6 +112,9 @@ class GuardError(SimulationError):
         (:func:`cosim.simulate`), which is the summary's ``t_end``.
     """
 
+    #: the index of the refused sample in a block (:meth:`Guard.check_block`), else None
+    sample: int | None = None
+
     def __init__(self, reason: str, t: float, contact: str | None, cause: str):
         super().__init__(f"run stopped at t = {t:.6g} s: {reason}")
         self.t, self.contact, self.cause, self.reason = t, contact, cause, reason
@@ -329,6 +332,13 @@ class Guard:
         s = d.sum() + dd.sum() + f.sum()
         if s - s != 0 or not created <= self._bound(self.scale, supplied):
             self._judge(t, d, dd, f, created, supplied, dissipated, work, peak)
+
+    def check_block(self, t, d, dd, f, created, supplied, dissipated, work=None,
+                    peak=None) -> None:
+        """:meth:`check` of many samples in order, with the same verdict
+        (:func:`cosim.core.guard_block.check_block`)."""
+        from cosim.core.guard_block import check_block        # where a side samples
+        check_block(self, t, d, dd, f, created, supplied, dissipated, work, peak)
 
     def warnings(self, created: float, supplied: float, coupling_errors: dict, d,
                  peak=None) -> list[dict]:

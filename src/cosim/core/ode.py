@@ -279,6 +279,107 @@ class ScipyStepper(TimeStepper):
                     sign = switch(t, y) > 0
         return y
 
+    def sample(self, f, t0: float, y0: np.ndarray, t_out: np.ndarray, switch, on_switch,
+               probe, n_peaks: int, emit) -> np.ndarray:
+        """Integrate from ``t0`` through the output times ``t_out``
+        (increasing, the last the end) without restarting at them: each
+        output state is read from the solver's dense output (the last is
+        the end state itself).
+
+        Switches are terminal events as in :meth:`integrate`, and the
+        integration restarts at each; a watched quantity's maxima (``probe``,
+        ``n_peaks`` of them) are non-terminal events.  ``emit(i0, i1, Y, P)``
+        receives the samples ``i0 .. i1 - 1`` in order: their states ``Y``
+        (rows) and each watched quantity's largest value since the sample
+        before, ``P`` (rows; at least 0: the peaks :meth:`integrate` raises
+        from zero at each step, over the maxima located, the ends of the
+        solver's runs and the sample itself).  Every sample before a switch
+        is emitted before ``on_switch`` is told of it.  Returns the end state.
+        """
+        from scipy.integrate import solve_ivp
+
+        t_out = np.asarray(t_out, float)
+        t, y = t0, y0
+        sign = None if switch is None else switch(t, y) > 0
+        n_sw = 0 if sign is None else len(sign)
+        watch = [self._rate_event(probe, j) for j in range(n_peaks)] if probe else []
+        t1 = float(t_out[-1])
+        i = 0                                  # the next sample to emit
+        pk = np.zeros(n_peaks)                 # peaks since the last sample emitted
+        while True:
+            if t >= t1:                        # a switch at the last output time
+                P = np.zeros((1, n_peaks))
+                if watch:
+                    d_s = probe(t, y)[0]
+                    for q in range(n_peaks):
+                        P[0, q] = max(pk[q], float(d_s[q]))
+                emit(i, i + 1, y[None, :].copy(), P)
+                return y
+            events = None
+            if switch is not None:
+                events = [self._event(switch, j, bool(sign[j])) for j in range(len(sign))]
+            if watch:
+                events = (events or []) + watch
+            sol = solve_ivp(f, (t, t1), y, method=self.method, rtol=self.rtol, atol=self.atol,
+                            max_step=self.max_step, events=events, dense_output=True)
+            t_seg = float(sol.t[-1])
+            last = sol.status == 0
+            # samples inside this run: before its end, or up to it when it
+            # reached t1 (a sample at a switch takes the state after it)
+            j = int(np.searchsorted(t_out, t_seg, side="right" if last else "left"))
+            ev = [(float(te), ye) for k in range(len(watch))
+                  for te, ye in zip(sol.t_events[n_sw + k], sol.y_events[n_sw + k])]
+            ev_t = np.array([e[0] for e in ev])
+            if j > i:
+                ts = t_out[i:j]
+                inner = ts < t_seg
+                Y = np.empty((j - i, len(y)))
+                Y[~inner] = sol.y[:, -1]          # the end itself, not its interpolant
+                if inner.any():
+                    Y[inner] = sol.sol(ts[inner]).T
+                P = np.zeros((j - i, n_peaks))
+                lo = t
+                for r in range(j - i):
+                    hi = t_out[i + r]
+                    if watch:
+                        p = pk if r == 0 else np.zeros(n_peaks)
+                        for (te, ye) in (ev[k] for k in np.flatnonzero((ev_t > lo) & (ev_t <= hi))):
+                            d_ev = probe(te, ye)[0]
+                            for q in range(n_peaks):
+                                p[q] = max(p[q], float(d_ev[q]))
+                        d_s = probe(float(hi), Y[r])[0]
+                        for q in range(n_peaks):
+                            P[r, q] = max(p[q], float(d_s[q]))
+                    lo = hi
+                pk = np.zeros(n_peaks)
+                emit(i, j, Y, P)
+                i = j
+            if watch:                      # maxima after the last sample, and this run's end
+                lo = t_out[i - 1] if i else t0
+                for (te, ye) in (ev[k] for k in np.flatnonzero(ev_t > lo)):
+                    d_ev = probe(te, ye)[0]
+                    for q in range(n_peaks):
+                        pk[q] = max(pk[q], float(d_ev[q]))
+            if sol.status == -1:
+                raise RuntimeError(f"integrator {self.name} failed at t = {t_seg:.6g} s: "
+                                   f"{sol.message}")
+            t, y = t_seg, sol.y[:, -1]
+            if last:
+                return y
+            if watch:
+                d_end = probe(t, y)[0]
+                for q in range(n_peaks):
+                    pk[q] = max(pk[q], float(d_end[q]))
+            jn = min((k for k in range(n_sw) if len(sol.t_events[k])),
+                     key=lambda k: sol.t_events[k][0])
+            sign = sign.copy()
+            sign[jn] = not sign[jn]
+            if on_switch is not None:
+                jumped = on_switch(t, jn, bool(sign[jn]), y)
+                if jumped is not None:
+                    y = jumped
+                    sign = switch(t, y) > 0
+
     @staticmethod
     def _rate_event(probe, j):
         def ev(t, y):

@@ -185,7 +185,12 @@ class Recorder:
         inside the subsystems and supplied to them by drives, in total;
         ``work`` is per contact, the work its forces did on the subsystems so
         far (as the scheme applied them)."""
-        energy = self.system.energy(d)
+        self._record(t, d, dd, f, impulse, dissipated, internal, work,
+                     self.system.energy(d), None, None)
+
+    def _record(self, t, d, dd, f, impulse, dissipated, internal, work, energy, x, taken):
+        """:meth:`record` given the energy [J], the stacked states ``x`` and the
+        embedded peaks ``taken`` (None: the system's own, and its ``take_peaks``)."""
         cs = self.system.connections
         if cs is not None:           # energy set free by connection switches
             dissipated = dissipated + cs.lost
@@ -223,7 +228,7 @@ class Recorder:
             np.maximum(since, np.where(active, d[:nc], 0.0), out=since)
             # embedded contacts: the peaks their hosts' integrators located
             # inside the steps since the last sample
-            np.maximum(since, self.system.take_peaks(), out=since)
+            np.maximum(since, self.system.take_peaks() if taken is None else taken, out=since)
             np.maximum(self.peak, since, out=self.peak)
         self._since = since
         # the ledger's extremes count kept samples only (an edge above may
@@ -243,7 +248,7 @@ class Recorder:
             # evaluated now: a connection's potential depends on its mode, and
             # the mode at the end (grasped, released) need not be the start's
             self._stored0 = self.system.contact_potentials(d)
-        self._x_prev = np.concatenate([sub.x for sub in self.system.subsystems])
+        self._x_prev = np.concatenate([s.x for s in self.system.subsystems]) if x is None else x
         if self._count % self.every == 0:
             self._store(t, self._x_prev, d, f, energy, diss_total)
         self._count += 1
@@ -254,6 +259,12 @@ class Recorder:
                 begun = sum(map(len, self.intervals)) + sum(o is not None for o in self._open)
                 self._progress(Progress(float(t), float(self.t_end), int(begun),
                                         now - self._wall0))
+
+    def record_block(self, t, d, dd, f, impulse, dissipated, internal, work=None, *, x,
+                     energy=None, peaks=None) -> None:
+        """Add samples as arrays (:func:`cosim.core.recorder_block.record_block`)."""
+        from cosim.core.recorder_block import record_block     # where a side samples
+        record_block(self, t, d, dd, f, impulse, dissipated, internal, work, x, energy, peaks)
 
     def _store(self, t, x, d, f, energy, diss_total):
         sysm = self.system

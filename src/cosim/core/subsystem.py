@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
-from typing import ClassVar
+from typing import ClassVar, NamedTuple
 
 import numpy as np
 
@@ -20,7 +20,7 @@ from couplers.contact import penetration_c
 
 from cosim.core.hermite import hermite_coefficients
 
-__all__ = ["QUADRATURES", "IMPULSE", "DISSIPATED", "MOMENT", "WORK", "CAPABILITIES", "StepInput", "Subsystem", "RigidReference", "SubsystemState", "EmbeddedContact",
+__all__ = ["QUADRATURES", "IMPULSE", "DISSIPATED", "MOMENT", "WORK", "CAPABILITIES", "StepInput", "Subsystem", "RigidReference", "SubsystemState", "EmbeddedContact", "Samples",
            "reparametrised", "hermite_coefficients"]
 
 
@@ -70,6 +70,39 @@ class StepInput:
     @classmethod
     def zero(cls, t0: float, h: float, n_ports: int) -> "StepInput":
         return cls(t0, h, np.zeros((1, n_ports, 2)))
+
+
+class Samples(NamedTuple):
+    """A side's state at many output points, as its ``sample_steps`` hands
+    them to the macro loop (:mod:`cosim.core.schemes.sampled`).
+
+    Attributes
+    ----------
+    t : (m,) array
+        Times [s].
+    x : (m, n_states) array
+        States.
+    quadratures : (m, n_embedded, 4) array
+        Each embedded contact's :data:`QUADRATURES` (impulse [N s],
+        dissipated [J], first moment [N s^2], work [J]).
+    ledger : (m, 2) array
+        Energy dissipated inside the side and supplied by drives [J].
+    peak : (m, n_embedded) array
+        Each embedded contact's largest penetration since the sample before [m].
+    energy : (m,) array
+        The side's energy [J].
+    position, velocity : (m, n_ports, 2) arrays
+        Ports' positions [m] and velocities [m/s].
+    """
+
+    t: np.ndarray
+    x: np.ndarray
+    quadratures: np.ndarray
+    ledger: np.ndarray
+    peak: np.ndarray
+    energy: np.ndarray
+    position: np.ndarray
+    velocity: np.ndarray
 
 
 class EmbeddedContact:
@@ -169,6 +202,9 @@ class SubsystemState:
 #:   ``omega``, ``basis`` and ``structure`` set in ``__init__``).
 #: - ``skeleton``: a multibody tree that can draw itself (``skeleton``; ``model``).
 #: - ``fmi``: a side made from an FMU (``model_description`` set in ``__init__``).
+#: - ``sampled_steps``: takes many macro steps in one call for the macro loop's
+#:   sampled path (``sampling_refusal``, ``sample_steps``:
+#:   :mod:`cosim.core.schemes.sampled`).
 CAPABILITIES = {
     "rigid_impacts": (),
     "impact_watch": (),
@@ -177,6 +213,7 @@ CAPABILITIES = {
     "modes": ("natural_frequencies_hz", "named_values"),
     "skeleton": ("skeleton",),
     "fmi": (),
+    "sampled_steps": ("sampling_refusal", "sample_steps"),
 }
 
 

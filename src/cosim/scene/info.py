@@ -140,6 +140,11 @@ def first_touch(scene, budget_s: float = FIRST_TOUCH_BUDGET_S) -> tuple[dict, st
                 raise _Touched
             super().record(t, *args, **kw)
 
+        def record_block(self, t, *args, **kw):     # the sampled path's samples
+            if time.process_time() - cpu0 > budget_s:
+                raise _Touched
+            super().record_block(t, *args, **kw)
+
     mono = sch.name == "monolithic"
     auto = False if mono else [c not in system.embedded for c in range(system.n_contacts)]
     probe = Probe(system, scene.name, sch.name, scene.t_end, every=2**62, auto_edges=auto)

@@ -191,6 +191,10 @@ cdef class MultibodyStep:
     cdef double[::1] d_tab                     # tables: times then values, per drive
     #: number of right-hand-side evaluations so far
     cdef public long n_rhs
+    #: number of located switches told to the host so far
+    cdef public long n_switches
+    #: rows :meth:`sample_steps` has filled in its current (or last) call
+    cdef public long n_sampled
 
     def __init__(self, parent, revolute, offset, axis, angle0, ancestors, mass, inertia, com,
                  rot_mass, gravity, port_body, port_local, contacts, effects=None):
@@ -261,6 +265,8 @@ cdef class MultibodyStep:
         self.sws = np.zeros((4, max(self.nc, 1)))
         self.pen = np.zeros((4, max(self.nc, 1)))
         self.n_rhs = 0
+        self.n_switches = 0
+        self.n_sampled = 0
         self._set_effects(n, effects)
 
     def _set_effects(self, int n, effects):
@@ -778,6 +784,7 @@ cdef class MultibodyStep:
         """Tell the host of each flipped switch; apply a jump it returns."""
         cdef int j, i
         flips = [j for j in range(self.nc) if (s_old[j] > 0.0) != (s_new[j] > 0.0)]
+        self.n_switches += len(flips)
         for j in flips:
             yarr = np.asarray(<double[:self.ny]> y).copy()
             jumped = on_switch(t, j, bool(s_new[j] > 0.0), yarr)
@@ -813,14 +820,27 @@ cdef class MultibodyStep:
         contact), each contact's largest penetration over the step is located
         on the accepted sub-steps' cubic Hermite and raised into it, as the
         reference's ``probe``/``peak`` do.  Returns the new state."""
+        ybuf = np.array(y0, dtype=float)
+        if ybuf.size != self.ny:
+            raise ValueError(f"`y0` must have {self.ny} entries, got {ybuf.size}")
+        cdef double[::1] yv = ybuf
+        cdef double[::1] pkv
+        cdef double* pk = NULL
+        if peak is not None and self.nc > 0:
+            pkv = peak
+            if pkv.shape[0] != self.nc:
+                raise ValueError(f"`peak` must have {self.nc} entries, got {pkv.shape[0]}")
+            pk = &pkv[0]
+        self._integrate(t0, &yv[0], t1, max_step, free_step, coarse, on_switch, pk)
+        return ybuf
+
+    cdef int _integrate(self, double t0, double* y, double t1, double max_step,
+                        double free_step, bint coarse, object on_switch,
+                        double* pk) except -1:
+        """:meth:`integrate` in place on ``y``; ``pk`` NULL: no peaks."""
         cdef int ny = self.ny, nc = self.nc, i, n, it, k
         cdef double t = t0, te, h, dt, step, ts
         cdef bint any_closed, any_flip, has_sw = nc > 0
-        ybuf = np.array(y0, dtype=float)
-        if ybuf.size != ny:
-            raise ValueError(f"`y0` must have {ny} entries, got {ybuf.size}")
-        cdef double[::1] yv = ybuf
-        cdef double* y = &yv[0]
         cdef double* k1 = &self.stage[0, 0]
         cdef double* y1 = &self.stage[5, 0]
         cdef double* k1n = &self.stage[6, 0]
@@ -828,13 +848,6 @@ cdef class MultibodyStep:
         cdef double* s1 = &self.sws[1, 0]
         cdef double* snew = &self.sws[3, 0]
         cdef char flipped[MAX_CONTACTS]
-        cdef double[::1] pkv
-        cdef double* pk = NULL
-        if peak is not None and nc > 0:
-            pkv = peak
-            if pkv.shape[0] != nc:
-                raise ValueError(f"`peak` must have {nc} entries, got {pkv.shape[0]}")
-            pk = &pkv[0]
         if self._rhs(t, y, k1, s0):
             self._fail(t)
         if pk != NULL:
@@ -904,7 +917,7 @@ cdef class MultibodyStep:
             memcpy(y, y1, ny * sizeof(double))
             memcpy(k1, k1n, ny * sizeof(double))
             i += 1
-        return ybuf
+        return 0
 
     # ------------------------------------------------------- Python faces
     def rhs(self, double t, y):
@@ -979,17 +992,21 @@ cdef class MultibodyStep:
         (:meth:`multibody.TreeModel.kinetic_energy` and ``potential_energy``)."""
         yin = np.ascontiguousarray(y, dtype=float)
         cdef double[::1] yv = yin
+        return self._energy(&yv[0])
+
+    cdef double _energy(self, const double* y) noexcept nogil:
+        """:meth:`energy` at ``y``."""
         cdef int i, j, n = self.n
         cdef double kin = 0.0, pot = 0.0, row
-        self._frames(&yv[0], &yv[n])
+        self._frames(y, y + n)
         for i in range(n):
-            self._point(i, i, self.com_re[i], self.com_im[i], &yv[n], True)
+            self._point(i, i, self.com_re[i], self.com_im[i], y + n, True)
         self._mass_and_forces()
         for i in range(n):
             row = 0.0
             for j in range(n):
-                row += self.M[i, j] * yv[n + j]
-            kin += yv[n + i] * row
+                row += self.M[i, j] * y[n + j]
+            kin += y[n + i] * row
         if self.has_g:
             for i in range(n):
                 pot -= self.mass[i] * (self.px_re[i] * self.g_re + self.px_im[i] * self.g_im)
@@ -1012,3 +1029,115 @@ cdef class MultibodyStep:
             ds.append(d)
             dds.append(dd)
         return ds, dds
+
+    # ------------------------------------------------- many output points
+    def sample_steps(self, x, aux, embedded, long k0, long k1, double H, double t_end,
+                     double sliver, double max_step, double free_step, on_switch, peak,
+                     double[::1] T, double[:, ::1] Y, double[:, ::1] PK, moments):
+        """Take the host's macro steps ``k0 .. k1 - 1`` in one call, each as
+        :meth:`step` takes it (from ``t = k H`` over ``h = min(H, t_end - t)``,
+        RK4 restarted at ``t``, first moments from zero, no input force: a
+        side whose contacts all have rigid partners receives none), and
+        keep what a recorder needs at the end of each.
+
+        Row ``j`` of ``T`` gets the step's end time ``t + h`` [s], of ``Y``
+        the state ``[x, aux]`` there and of ``PK`` each contact's largest
+        penetration over the step (``peak`` is raised during the step, copied,
+        then zeroed: what the host's ``take_peaks`` gives at each sample).
+        ``x`` and ``aux`` are advanced in place; ``moments`` (the host's
+        ``port_moments``, ``(3, n_p)`` complex) gets the last step's.
+
+        Returns after step ``k1 - 1``, after a step ``h`` of which is at
+        most ``sliver`` (not taken: the run has ended), after a step in
+        which a switch was located (the host was told: its logs hold the
+        step's switches and impacts, which its recorder must see before
+        the sample), or after a step that left the state non-finite.
+        Returns ``(rows, why)``, ``why`` one of ``"steps"``, ``"end"``,
+        ``"switch"``, ``"nonfinite"``.  :attr:`n_sampled` counts the rows
+        filled as they are, so a caller that catches an exception raised
+        inside a step (by the host's ``on_switch``) knows which rows hold
+        whole steps.
+        """
+        cdef double[::1] xv = x
+        cdef double[::1] av = aux
+        cdef int i, nx = xv.shape[0], na = av.shape[0], ny = self.ny, nc = self.nc
+        cdef long k, j = 0, switches
+        cdef double t, h
+        cdef double[::1] pkv
+        cdef double* pk = NULL
+        cdef bint finite
+        if nx + na + 6 * self.np_ != ny:
+            raise ValueError(f"`x` and `aux` must hold {ny - 6 * self.np_} entries, "
+                             f"got {nx + na}")
+        if Y.shape[1] != nx + na or PK.shape[1] != nc or T.shape[0] < k1 - k0 \
+                or Y.shape[0] < k1 - k0 or PK.shape[0] < k1 - k0:
+            raise ValueError(f"the buffers must hold {k1 - k0} rows of {nx + na} states and "
+                             f"{nc} peaks")
+        if nc > 0:
+            if peak is None or len(peak) != nc:
+                raise ValueError(f"`peak` must have {nc} entries")
+            pkv = peak
+            pk = &pkv[0]
+        self.n_sampled = 0
+        ybuf = np.zeros(ny)
+        cdef double[::1] yv = ybuf
+        cdef double* y = &yv[0]
+        for i in range(nx):
+            y[i] = xv[i]
+        for i in range(na):
+            y[nx + i] = av[i]
+        self.set_step(k0 * H, H, None, embedded)
+        why = "steps"
+        for k in range(k0, k1):
+            t = k * H
+            h = H if H <= t_end - t else t_end - t
+            if h <= sliver:
+                why = "end"
+                break
+            self.t0, self.h = t, h
+            for i in range(nc):
+                y[nx + 4 * i + 2] = 0.0              # first moments are per step
+            for i in range(nx + na, ny):
+                y[i] = 0.0
+            switches = self.n_switches
+            self._integrate(t, y, t + h, max_step, free_step, True, on_switch, pk)
+            T[j] = t + h
+            finite = True
+            for i in range(nx + na):
+                Y[j, i] = y[i]
+                if not isfinite(y[i]):
+                    finite = False
+            for i in range(nc):
+                PK[j, i] = pk[i]
+                pk[i] = 0.0
+            j += 1
+            self.n_sampled = j
+            for i in range(nx):
+                xv[i] = y[i]
+            for i in range(na):
+                av[i] = y[nx + i]
+            if not finite:
+                why = "nonfinite"
+                break
+            if self.n_switches != switches:
+                why = "switch"
+                break
+        moments[...] = ybuf[nx + na:].view(complex).reshape(3, self.np_)
+        return j, why
+
+    def sample_outputs(self, double[:, ::1] Y, double[:, :, ::1] P, double[::1] E):
+        """Ports' positions and velocities and the energy (:meth:`outputs`,
+        :meth:`energy`) at each row of states ``Y`` (``[q, dq, ...]``):
+        ``P[j] = [positions (n_p, 2), velocities (n_p, 2)]`` stacked as
+        ``(2 n_p, 2)``, ``E[j]`` [J]."""
+        cdef int j, p, n = self.n, npt = self.np_
+        cdef int m = Y.shape[0]
+        if P.shape[0] < m or P.shape[1] != 2 * npt or E.shape[0] < m or Y.shape[1] < 2 * n:
+            raise ValueError(f"`P` must be ({m}, {2 * npt}, 2) and `E` ({m},)")
+        for j in range(m):
+            E[j] = self._energy(&Y[j, 0])
+            for p in range(npt):
+                self._point(n + p, self.port_body[p], self.pl_re[p], self.pl_im[p], &Y[j, n],
+                            False)
+                P[j, p, 0], P[j, p, 1] = self.px_re[n + p], self.px_im[n + p]
+                P[j, npt + p, 0], P[j, npt + p, 1] = self.pv_re[n + p], self.pv_im[n + p]

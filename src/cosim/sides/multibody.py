@@ -15,7 +15,7 @@ from multibody import TreeModel
 from cosim.errors import SimulationError
 from cosim.core.ode import INTEGRATORS, RK4, TimeStepper
 from cosim.sides.kernel import compiled_module
-from cosim.sides.multibody_kernel import kernel_effects, kernel_law
+from cosim.sides.multibody_kernel import SampledSteps, kernel_effects, kernel_law
 from cosim.core.subsystem import (DISSIPATED, IMPULSE, MOMENT, QUADRATURES, WORK, EmbeddedContact,
                         StepInput, Subsystem)
 
@@ -29,7 +29,7 @@ __all__ = ["MultibodySubsystem", "kernel_law"]
 KERNEL_INTEGRATORS = tuple(INTEGRATORS.values())
 
 
-class MultibodySubsystem(Subsystem):
+class MultibodySubsystem(SampledSteps, Subsystem):
     """A :class:`multibody.TreeModel` with state ``x = [q, dq]``.
 
     Parameters
@@ -58,7 +58,8 @@ class MultibodySubsystem(Subsystem):
     the integrator's sub-steps (:func:`cosim.core.ode.substep_peaks`).
     """
 
-    capabilities = frozenset({"rigid_impacts", "impact_watch", "connections", "skeleton"})
+    capabilities = frozenset({"rigid_impacts", "impact_watch", "connections", "skeleton",
+                              "sampled_steps"})
 
     def __init__(self, name: str, model: TreeModel, q0, dq0, ports: dict,
                  gravity=None, integrator: TimeStepper | None = None,
@@ -179,8 +180,7 @@ class MultibodySubsystem(Subsystem):
         kernel = self._compiled()
         if kernel is not None:       # the tree's part of a right-hand side in Python
             return (dq, *kernel.evaluate(y))
-        M, F, x, v, J, _ = self.model.evaluate(q, dq, self._g, self._port_body,
-                                               self._port_local_c)
+        M, F, x, v, J, _ = self.model.evaluate(q, dq, self._g, self._port_body, self._port_local_c)
         return dq, M, F, x, v, J
 
     @staticmethod
@@ -426,8 +426,7 @@ class MultibodySubsystem(Subsystem):
                 "dq_after": dict(zip(joints, map(float, res.dq_plus))),
                 "energy_loss": float(res.energy_loss) * (p_i / total if total else 0.0),
                 "slip_history": [[float(a), float(b), m] for a, b, m in res.slip_history],
-                "slip_end": res.slip_end,
-            })
+                "slip_end": res.slip_end})
             # a rigid law's restitution is above 0 (refused at load otherwise), so
             # a rebound of e |vn| follows however slow the approach, and a train
             # of them accumulates (the run guard's chatter rule stops it); only a

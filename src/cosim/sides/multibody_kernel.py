@@ -1,18 +1,26 @@
 """The contact laws and joint effects of a multibody side as the compiled
 kernel ``cosim.sides._multibody_step`` takes them: plain tuples of kinds and
 parameters, built once when the kernel is built, or None where the kernel
-does not know the law or effect (the numpy reference then steps)."""
+does not know the law or effect (the numpy reference then steps).  And the
+side's macro steps taken by the kernel across many output points
+(:class:`SampledSteps`, which :class:`cosim.sides.multibody.MultibodySubsystem`
+inherits), for the macro loop's sampled path (:mod:`cosim.core.schemes.sampled`)."""
 from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+import numpy as np
+
 from couplers.laws import (FloresLaw, HertzLaw, HuntCrossleyLaw, KelvinVoigtLaw,
                            LankaraniNikraveshLaw, LinearLaw, RigidLaw)
+
+from cosim.core.ode import RK4, ScipyStepper
+from cosim.core.subsystem import MOMENT, QUADRATURES, Samples
 
 if TYPE_CHECKING:
     from multibody import JointEffects
 
-__all__ = ["kernel_law", "kernel_effects"]
+__all__ = ["kernel_law", "kernel_effects", "SampledSteps"]
 
 
 def kernel_law(law):
@@ -61,3 +69,134 @@ def kernel_effects(effects: JointEffects | None):
             raise TypeError(f"drive {type(d).__name__}")
         drives.append((d.joint, kind, gains, ref_kind, ref_par, ts, vs))
     return effects.stiffness, effects.rest, effects.damping, drives
+
+
+class SampledSteps:
+    """The sampled face of :class:`~cosim.sides.multibody.MultibodySubsystem`
+    (a mixin: it reads the side's kernel, state and logs)."""
+
+    def sampling_refusal(self) -> str | None:
+        """Why :meth:`sample_steps` cannot take this side's macro steps, or
+        None when it can: the compiled kernel steps it, with RK4 or an
+        adaptive scipy method."""
+        if self._compiled() is None or not self._kernel_steps:
+            return (f"side `{self.name}` is stepped by the numpy reference (`COSIM_KERNEL`, or "
+                    f"a law, drive, connection or integrator the kernel does not take)")
+        if type(self.integrator) is not RK4 and not isinstance(self.integrator, ScipyStepper):
+            return f"side `{self.name}`'s integrator is neither RK4 nor an adaptive scipy method"
+        return None
+
+    def sample_steps(self, k0: int, k1: int, H: float, t_end: float, sliver: float, emit):
+        """Take macro steps ``k0 .. k1 - 1`` (from ``k H`` over
+        ``min(H, t_end - k H)``) without a return to Python at each, with
+        no input force (every partner of this side is rigid).
+
+        RK4 takes each step as :meth:`step` does, restarted at its start,
+        in one call of the kernel; an adaptive method integrates across the
+        steps' ends and samples them from its dense output
+        (:meth:`cosim.core.ode.ScipyStepper.sample`).  ``emit(samples,
+        switch_row)`` receives the steps' ends in order as
+        :class:`~cosim.core.subsystem.Samples`; ``switch_row`` (or None) is
+        the sample before which :attr:`switch_log` and :attr:`impact_log`
+        hold switches to report.  Every sample before a step that raises
+        is emitted before the exception goes on.
+
+        Returns
+        -------
+        k : int
+            The macro steps taken so far (``k0`` plus those taken).
+        why : str
+            ``"steps"`` (all taken), ``"end"`` (the next would be a sliver
+            of round-off: the run is over), ``"switch"``, ``"nonfinite"``.
+        """
+        kernel = self._compiled()
+        integ = self.integrator
+        self.switch_log, self.impact_log = [], []
+        self._last_switch = (None, None, None, None)
+        if type(integ) is RK4:
+            m = k1 - k0
+            T = np.empty(m)
+            Y = np.empty((m, self.x.size + self.aux.size))
+            PK = np.empty((m, len(self._embedded)))
+            self.port_moments = np.zeros((3, self.n_ports), complex)
+            try:
+                rows, why = kernel.sample_steps(
+                    self.x, self.aux, self._embedded, k0, k1, H, t_end, sliver,
+                    integ.max_step, integ.free_step or 0.0, self._on_switch, self.peak, T, Y,
+                    PK, self.port_moments)
+            except Exception:
+                self.status = "failed"
+                done = kernel.n_sampled
+                if done:
+                    self._sampled_clock(T, done)
+                    emit(self._samples(T[:done], Y[:done], PK[:done]), None)
+                raise
+            if rows:
+                self._sampled_clock(T, rows)
+                emit(self._samples(T[:rows], Y[:rows], PK[:rows]),
+                     rows - 1 if why == "switch" else None)
+            return k0 + rows, why
+        T, why = [], "steps"
+        for k in range(k0, k1):
+            t = k * H
+            h = min(H, t_end - t)
+            if h <= sliver:
+                why = "end"
+                break
+            T.append(t + h)
+        if not T:
+            return k0, why
+        T = np.array(T)
+        na, nx = self.aux.size, self.x.size
+        t0 = k0 * H
+        kernel.set_step(t0, T[-1] - t0, None, self._embedded)
+        self.aux[MOMENT:-2:len(QUADRATURES)] = 0.0
+        y0 = np.concatenate([self.x, self.aux, np.zeros(6 * self.n_ports)])
+
+        refused = []            # the recorder's exceptions: the side itself did not fail
+
+        def out(i0, i1, Yb, Pb):
+            # the side stands at the sample whose switches are reported (the
+            # loop reports them at the end of their step), else at the last
+            row = 0 if self.switch_log else i1 - i0 - 1
+            self.x[:] = Yb[row, :nx]
+            self.aux[:] = Yb[row, nx:nx + na]
+            self._sampled_clock(T[i0:i0 + row + 1], row + 1)
+            self.n_steps += i1 - i0 - row - 1
+            try:
+                emit(self._samples(T[i0:i1], np.ascontiguousarray(Yb[:, :nx + na]), Pb),
+                     0 if self.switch_log else None)
+            except BaseException:
+                refused.append(True)
+                raise
+
+        try:
+            y1 = integ.sample(kernel.rhs, t0, y0, T, kernel.switch if self._embedded else None,
+                              self._on_switch, self._probe if self._embedded else None,
+                              len(self._embedded), out)
+        except Exception:
+            if not refused:
+                self.status = "failed"
+            raise
+        self.x[:] = y1[:nx]
+        self.aux[:] = y1[nx:nx + na]
+        self.t = float(T[-1])
+        self.port_moments = y1[nx + na:].view(complex).reshape(3, self.n_ports)
+        return k0 + len(T), why
+
+    def _sampled_clock(self, T, rows):
+        """The clock after ``rows`` more macro steps, ending at ``T[:rows]``."""
+        self.t = float(T[rows - 1])
+        self.n_steps += rows
+
+    def _samples(self, T, Y, PK) -> Samples:
+        """What a recorder needs at states ``Y`` (rows ``[x, aux]``) at times ``T``."""
+        m, n2, npt = len(T), 2 * self.n_dof, self.n_ports
+        P = np.empty((m, 2 * npt, 2))
+        E = np.empty(m)
+        self._compiled().sample_outputs(Y, P, E)
+        if self.effects is not None:
+            E += np.array([self.effects.potential(Y[j, :self.n_dof]) for j in range(m)])
+        ne = len(self._embedded)
+        return Samples(T, Y[:, :n2], Y[:, n2:n2 + len(QUADRATURES) * ne].reshape(
+            m, ne, len(QUADRATURES)), Y[:, -2:], PK, E, P[:, :npt], P[:, npt:])

@@ -193,6 +193,11 @@ class CoSimulationScheme(InputExtrapolation, CouplingScheme):
         H = self.macro_step
         if H is None:
             raise ValueError(f"scheme `{self.name}` needs `macro_step` [s]")
+        if not len(system.exchanged):       # all partners rigid: perhaps no loop at all
+            from cosim.core.schemes.sampled import run_sampled
+            done = run_sampled(self, system, t_end, recorder)
+            if done is not None:
+                return done
         self.preflight(system, t_end)
         cpu0 = time.process_time()
         self._system = system

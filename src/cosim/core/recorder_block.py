@@ -1,0 +1,235 @@
+"""Recording many samples at once: :func:`record_block`, the array twin of
+:meth:`cosim.core.recorder.Recorder.record`, behind
+:meth:`Recorder.record_block <cosim.core.recorder.Recorder.record_block>`
+(imported where a run first takes it: a run that never does loads nothing
+of it).
+
+A scheme whose side integrates across the output points (the macro loop's
+sampled path, :mod:`cosim.core.schemes.sampled`) hands them over as arrays:
+the statistics, the run guard's verdict (:meth:`cosim.core.guard.Guard.check_block`)
+and the stored series are those of one call of ``record`` per sample, found
+with array operations; the edges and the guard's slow path are taken one at a
+time where they fall.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from cosim.core.guard import GuardError
+from cosim.core.hermite import hermite_cubic_max
+
+__all__ = ["record_block"]
+
+
+def record_block(rec, t, d, dd, f, impulse, dissipated, internal, work, x, energy=None,
+                 peaks=None) -> None:
+    """Add ``m`` samples at once: what ``m`` calls of
+    :meth:`~cosim.core.recorder.Recorder.record` would
+    keep, with the statistics, the guard's verdict and the stored series
+    the same, found with array operations over the block.
+
+    Parameters
+    ----------
+    rec : cosim.core.recorder.Recorder
+        The recorder; its state is read and kept as ``record`` keeps it.
+    t : (m,) array
+        Sample times [s], increasing, after the last sample recorded.
+    d, dd, f : (m, n_rows) arrays
+        Penetrations [m], their rates [m/s] and the row forces [N].
+    impulse, dissipated : (m, n_contacts) arrays
+        Each contact's impulse [N s] and dissipated energy [J] so far.
+    internal : (m, 2) array
+        Energy dissipated inside the subsystems and supplied by drives so
+        far [J] (:meth:`record`'s ``internal`` at each sample).
+    work : (m, n_contacts) array, optional
+        Work each contact's forces did on the subsystems so far [J].
+    x : (m, n_states) array
+        The subsystems' states at each sample, stacked as
+        :meth:`~cosim.core.system.CoupledSystem.stacked` orders them.
+    energy : (m,) array, optional
+        The system's energy at each sample [J]
+        (:meth:`~cosim.core.system.CoupledSystem.energy`); computed from
+        ``x`` and ``d`` by the same sum when not given.
+    peaks : (m, n_contacts) array, optional
+        Per sample, the largest penetration of each contact since the
+        sample before, as its host's integrator located it: what
+        :meth:`~cosim.core.system.CoupledSystem.take_peaks` would have
+        given there (0 for rigid laws and for contacts not embedded).
+        None: zeros.
+
+    Raises
+    ------
+    GuardError
+        As :meth:`record` would at the first sample the guard refuses, or
+        at an edge that makes a contact chatter; the samples before it
+        are kept, as they would be one by one.
+
+    Notes
+    -----
+    The subsystems' own states are not read: a scheme that integrated
+    past the block (it returns at ``t_end``, a full buffer or a switch)
+    hands the states at each sample in ``x``.  Connection modes must not
+    change inside the block: switches logged since the last sample
+    belong to its first sample, as :meth:`record` would take them.  The
+    progress callback is told once, at the block's end.
+    """
+    t = np.asarray(t, float)
+    m = t.shape[0]
+    if m == 0:
+        return
+    sysm = rec.system
+    nc = sysm.n_contacts
+    d, dd, f = (np.asarray(a, float).reshape(m, -1) for a in (d, dd, f))
+    impulse = np.asarray(impulse, float).reshape(m, nc)
+    dissipated = np.asarray(dissipated, float).reshape(m, nc)
+    internal = np.asarray(internal, float).reshape(m, 2)
+    work = None if work is None else np.asarray(work, float).reshape(m, nc)
+    x = np.asarray(x, float).reshape(m, -1)
+    peaks = np.zeros((m, nc)) if peaks is None else np.asarray(peaks, float).reshape(m, nc)
+    if energy is None:
+        off = sysm.stacked()
+        energy = np.array([float(sum([sub.energy(x[i, off[s]:off[s + 1]])
+                                      for s, sub in enumerate(sysm.subsystems)]))
+                           + sysm.contact_potential(d[i]) for i in range(m)])
+    energy = np.asarray(energy, float).reshape(m)
+    i0 = 0
+    if rec.e0 is None:             # the first sample sets the start: one by one
+        rec._record(t[0], d[0], dd[0], f[0], impulse[0], dissipated[0], internal[0],
+                     None if work is None else work[0], float(energy[0]), x[0].copy(), peaks[0])
+        i0 = 1
+        if m == 1:
+            return
+    t, d, dd, f, impulse, dissipated, internal, x, energy, peaks = (
+        a[i0:] for a in (t, d, dd, f, impulse, dissipated, internal, x, energy, peaks))
+    work = None if work is None else work[i0:]
+    m -= i0
+    cs = sysm.connections
+    if cs is not None:           # energy set free by connection switches
+        dissipated = dissipated + cs.lost
+    diss_total = np.sum(dissipated, axis=1) + internal[:, 0]
+    drift = energy + diss_total - internal[:, 1] - rec.e0
+    active = f[:, :nc] > 0
+    switched, released = [], set()
+    if cs is not None:
+        active |= sysm.in_touch(np.zeros(nc))[None, :]       # grasped
+        switched = cs.log[rec._n_log:]
+        rec._n_log = len(cs.log)
+        released = {sysm.contact_names.index(e["contact"]) for e in switched
+                    if e["to"] == "released"}
+    tp, dp, ddp, ap = rec._prev
+    t_prev = np.concatenate([[tp], t[:-1]])
+    d_prev = np.concatenate([dp[None, :], d[:-1]])
+    dd_prev = np.concatenate([ddp[None, :], dd[:-1]])
+    a_prev = np.concatenate([np.asarray(ap, bool)[None, :], active[:-1]])
+    h = t - t_prev
+    # each sample's share of the peaks: what record() folds into `since`
+    contrib = np.maximum(np.where(active, d[:, :nc], 0.0), peaks)
+    rise = ((h > 0)[:, None] & (a_prev | active) & (dd_prev[:, :nc] > 0)
+            & (dd[:, :nc] <= 0) & ~rec._located[None, :])
+    for i, c in zip(*np.nonzero(rise)):
+        contrib[i, c] = max(contrib[i, c], hermite_cubic_max(
+            d_prev[i, c], dd_prev[i, c], d[i, c], dd[i, c], h[i])[0])
+    peak_before = np.maximum(rec.peak[None, :], np.vstack(
+        [np.full((1, nc), -np.inf), np.maximum.accumulate(contrib, axis=0)[:-1]]))
+    flip = (a_prev != active) & rec.auto_edges[None, :]
+    if released:
+        flip[0, sorted(released)] = False
+    edge_rows = sorted(set(np.nonzero(flip)[0].tolist()) | ({0} if switched else set()))
+    pos = 0
+    for je in edge_rows + [m]:
+        hi = min(je + 1, m)
+        if rec.guard is not None and hi > pos:
+            try:
+                rec.guard.check_block(
+                    t[pos:hi], d[pos:hi], dd[pos:hi], f[pos:hi], drift[pos:hi],
+                    internal[pos:hi, 1], dissipated[pos:hi],
+                    None if work is None else work[pos:hi], peak_before[pos:hi])
+            except GuardError as exc:
+                _commit(rec, t, d, dd, f, impulse, dissipated, work, x, energy, diss_total,
+                        drift, internal, active, contrib, pos + exc.sample)
+                raise
+        if je == m:
+            break
+        try:
+            for c in np.flatnonzero(flip[je]):
+                c = int(c)
+                rec.edge(c, rec._crossing(c, t_prev[je], d_prev[je, c], dd_prev[je, c],
+                                          t[je], d[je, c], dd[je, c], a_prev[je, c]),
+                         bool(active[je, c]))
+            if je == 0:
+                for e in switched:  # a grasp holds from its switch; a release frees
+                    c = sysm.contact_names.index(e["contact"])
+                    rec.edge(c, e["time"], e["to"] == "grasped" or e["closed"])
+        except GuardError:
+            _commit(rec, t, d, dd, f, impulse, dissipated, work, x, energy, diss_total,
+                    drift, internal, active, contrib, je)
+            raise
+        pos = hi
+    _commit(rec, t, d, dd, f, impulse, dissipated, work, x, energy, diss_total, drift,
+            internal, active, contrib, m)
+
+
+def _commit(rec, t, d, dd, f, impulse, dissipated, work, x, energy, diss_total, drift,
+            internal, active, contrib, k) -> None:
+    """Keep the first ``k`` samples of a block (:meth:`record_block`)."""
+    if k <= 0:
+        return
+    np.maximum(rec.peak, np.max(contrib[:k], axis=0), out=rec.peak)
+    rec.supplied = internal[k - 1, 1]
+    rec.max_drift = max(rec.max_drift, float(np.max(np.abs(drift[:k]))))
+    top = float(np.max(drift[:k]))
+    if top > rec.max_created:
+        rec.max_created = top
+    rec._prev = (t[k - 1], d[k - 1].copy(), dd[k - 1].copy(), active[k - 1].copy())
+    rec.last = (t[k - 1], impulse[k - 1].copy(), dissipated[k - 1].copy(),
+                 float(energy[k - 1]), float(diss_total[k - 1]),
+                 None if work is None else work[k - 1].copy(), d[k - 1].copy())
+    rec._x_prev = x[k - 1].copy()
+    # the stored samples, and the largest penetration since the one before each
+    kept = np.flatnonzero((rec._count + np.arange(k)) % rec.every == 0)
+    carry, start = rec._since, 0
+    if kept.size:
+        # each kept sample's peaks: the largest over the samples since the
+        # one kept before it (the first group with what was carried over)
+        rows = np.maximum.reduceat(contrib[:kept[-1] + 1], np.r_[0, kept[:-1] + 1], axis=0)
+        rows[0] = np.maximum(rows[0], carry)
+        carry, start = np.zeros_like(carry), kept[-1] + 1
+        _store_rows(rec, t[kept], x[kept], d[kept], f[kept], energy[kept], diss_total[kept],
+                    rows)
+    rec._since = np.maximum(carry, np.max(contrib[start:k], axis=0)) if start < k else carry
+    rec._count += k
+    if rec._progress is not None:
+        now = time.monotonic()
+        if now >= rec._next_progress:
+            rec._next_progress = now + rec._progress_interval
+            begun = sum(map(len, rec.intervals)) + sum(o is not None for o in rec._open)
+            from cosim.core.recorder import Progress      # the recorder imports this module
+            rec._progress(Progress(float(t[k - 1]), float(rec.t_end), int(begun),
+                                    now - rec._wall0))
+
+
+def _store_rows(rec, t, x, d, f, energy, diss_total, pk) -> None:
+    """:meth:`_store` of many rows (``pk``: each row's ``peak`` columns)."""
+    sysm = rec.system
+    L = rec._slices
+    n, i = len(t), 0
+    while i < n:
+        room = len(rec._buf) - rec._n_buf
+        j = min(n, i + room)
+        rows = rec._buf[rec._n_buf:rec._n_buf + j - i]
+        rows[:, 0] = t[i:j]
+        rows[:, L["x"]] = x[i:j]
+        rows[:, L["d"]] = d[i:j]
+        rows[:, L["f"]] = f[i:j]
+        rows[:, L["e"]] = energy[i:j]
+        rows[:, L["diss"]] = diss_total[i:j]
+        if sysm.connections is not None:
+            rows[:, L["mode"]] = sysm.connections.mode
+        rows[:, L["pk"]] = pk[i:j]
+        rec._n_buf += j - i
+        i = j
+        if rec._n_buf == len(rec._buf):
+            rec._flush()
+    rec._last_t = t[-1]

@@ -1,0 +1,225 @@
+"""The macro loop's sampled path: a side whose contacts all have rigid
+partners integrates across the output points.
+
+Where every contact is embedded in its moving side against a rigid partner
+(no row is exchanged, no surface point follows, no connection switches
+modes), the co-simulation adds no coupling error: the communication points
+are only the output rate.  The loop of :meth:`CoSimulationScheme.run
+<cosim.core.schemes.base.CoSimulationScheme.run>` would still return to
+Python at each of them to restart the side's integrator and record one
+sample.  Here the side takes many macro steps in one call (its
+``sample_steps``: the compiled RK4 kernel restarted at each step exactly as
+the loop restarts it, or an adaptive scipy method sampled from its dense
+output) and the recorder takes the samples as arrays
+(:meth:`~cosim.core.recorder.Recorder.record_block`).  The side returns to
+Python at the end, at a full buffer of :data:`BLOCK` samples, after a step
+in which a switch was located (an impact, a touch or a release: the
+recorder and the run guard see them before that step's sample, as in the
+loop), or at a non-finite state.
+
+What the path gives, against the loop:
+
+- RK4: the same steps from the same states (each macro step restarted at
+  ``k H`` over ``min(H, t_end - k H)``, first moments from zero), so the same
+  states; penetrations, forces and energies are then evaluated on arrays,
+  which may differ from the loop's scalar evaluation by round-off.
+- an adaptive method: it no longer restarts at each output point, so its
+  steps differ, and so do its states, within the integrator's own error
+  (its tolerances); the samples are its dense output (it restarts only at
+  a switch and at each block of :data:`BLOCK` samples).  The first moments of
+  the embedded contacts' forces then run from the block's start, not the
+  macro step's: nothing reads them, for no contact is hosted against a
+  moving partner.
+
+:func:`refusal` says why a run does not take the path (logged at debug
+level); :data:`ENABLED` False keeps every run in the loop.
+"""
+from __future__ import annotations
+
+import logging
+import math
+
+import numpy as np
+
+from cosim.core.guard import GuardError, nonfinite_cause
+
+__all__ = ["ENABLED", "BLOCK", "refusal", "run_sampled"]
+
+log = logging.getLogger(__name__)
+
+#: False keeps every run in the macro loop (the reference the path is tested against)
+ENABLED = True
+#: most samples a side returns at once [-]: its buffers' rows
+BLOCK = 2048
+
+
+def refusal(scheme, system) -> str | None:
+    """Why ``scheme`` runs ``system`` in the macro loop and not on the
+    sampled path, in words; None when it takes the path."""
+    if not ENABLED:
+        return "the sampled path is switched off (`cosim.core.schemes.sampled.ENABLED`)"
+    if not scheme.explicit:
+        return f"scheme `{scheme.name}` iterates its macro steps"
+    if len(system.exchanged):
+        names = sorted({system.row_names[r] for r in system.exchanged})
+        return f"contacts {names} are exchanged between moving sides"
+    if system.followers:
+        return "a contact follows a structure's surface"
+    if system.connections is not None:
+        return "a connection's modes switch at communication points"
+    loose = [system.contact_names[c] for c in range(system.n_contacts)
+             if c not in system.embedded]
+    if loose:
+        return f"contacts {loose} are not embedded in a moving side"
+    moving = [s for s, sub in enumerate(system.subsystems) if not sub.rigid]
+    if len(moving) != 1:
+        return f"{len(moving)} moving sides (the path takes one)"
+    sub = system.subsystems[moving[0]]
+    if (scheme.substeps or {}).get(sub.name, 1) != 1:
+        return f"side `{sub.name}` takes sub-steps (multirate)"
+    if "sampled_steps" not in sub.capabilities:
+        return f"side `{sub.name}` cannot integrate across output points"
+    return sub.sampling_refusal()
+
+
+def run_sampled(scheme, system, t_end: float, recorder) -> dict | None:
+    """Run ``system`` to ``t_end`` on the sampled path and return the
+    counters :meth:`CoSimulationScheme.run
+    <cosim.core.schemes.base.CoSimulationScheme.run>` returns, or None
+    (having done nothing) where :func:`refusal` gives a reason."""
+    why = refusal(scheme, system)
+    if why is not None:
+        log.debug("macro loop, not the sampled path: %s", why)
+        return None
+    H = scheme.macro_step
+    # what the loop does before its first step
+    scheme.preflight(system, t_end)
+    scheme._system = system
+    scheme._watch_impacts(system, recorder)
+    scheme.n_iterations = scheme.n_windows = scheme.n_rejected = 0
+    nc = system.n_contacts
+    d, dd = system.penetrations(system.outputs())
+    f = system.forces(d, dd)
+    zero = np.zeros(nc)
+    recorder.record(0.0, d, dd, f, zero, zero.copy(), scheme._internal(system), zero.copy())
+    n = max(1, math.ceil(t_end / H - 1e-9))
+    sliver = 1e-12 * min(H, t_end)
+    s = next(i for i, sub in enumerate(system.subsystems) if not sub.rigid)
+    emit = _Emitter(system, s, recorder)
+    sub = system.subsystems[s]
+    k = 0
+    try:
+        while k < n:
+            k, why = sub.sample_steps(k, min(n, k + BLOCK), H, t_end, sliver, emit)
+            scheme.n_windows = k
+            if why == "end":
+                break
+    except Exception:
+        # the loop's count: the steps whose samples were kept, and the step
+        # whose sample (or report) was refused; a step that raised is not counted
+        scheme.n_windows = recorder._count - (0 if emit.refused else 1)
+        raise
+    return {"n_windows": k, "n_iterations": scheme.n_iterations, "n_rejected": 0}
+
+
+class _Emitter:
+    """Turns a side's :class:`~cosim.core.subsystem.Samples` into the
+    recorder's block: the contacts' penetrations, forces, quadratures and
+    peaks, the system's energy, and the switches the loop reports before a
+    step's sample."""
+
+    def __init__(self, system, s, recorder):
+        self.system, self.s, self.recorder = system, s, recorder
+        self.sub = system.subsystems[s]
+        subs = system.subsystems
+        first = np.cumsum([0] + [sub.n_ports for sub in subs])
+        self.ports = slice(first[s], first[s + 1])
+        # every other side is rigid: its ports stand still
+        self.pos = np.concatenate([sub.outputs(sub.t, sub.x)[0] for sub in subs]).reshape(-1, 2)
+        self.vel = np.concatenate([sub.outputs(sub.t, sub.x)[1] for sub in subs]).reshape(-1, 2)
+        self.off = system.stacked()
+        self.x_rest = [(self.off[i], self.off[i + 1], sub.x.copy())
+                       for i, sub in enumerate(subs) if i != s]
+        self.slots = np.array([system.embedded[c][1] for c in range(system.n_contacts)],
+                              dtype=int)
+        self.laws = [ln.contact.law for ln in system.links]
+        self.rigid = np.array([law.rigid for law in self.laws], dtype=bool)
+
+    #: whether the recorder (or the guard) refused a sample
+    refused = False
+
+    def __call__(self, smp, switch_row) -> None:
+        try:
+            self._emit(smp, switch_row)
+        except Exception:
+            self.refused = True
+            raise
+
+    def _emit(self, smp, switch_row) -> None:
+        sysm, nc = self.system, self.system.n_contacts
+        m = len(smp.t)
+        pos = np.broadcast_to(self.pos, (m,) + self.pos.shape).copy()
+        vel = np.broadcast_to(self.vel, (m,) + self.vel.shape).copy()
+        pos[:, self.ports], vel[:, self.ports] = smp.position, smp.velocity
+        # CoupledSystem.penetrations, on every sample at once
+        dx = pos[:, sysm._row_a] - pos[:, sysm._row_b]
+        dv = vel[:, sysm._row_a] - vel[:, sysm._row_b]
+        d = sysm._offsets - np.einsum("mcx,cx->mc", dx, sysm._normals)
+        dd = -np.einsum("mcx,cx->mc", dv, sysm._normals)
+        f = np.empty((m, nc))
+        energy = smp.energy.copy()          # the other sides are rigid: no energy
+        for c, law in enumerate(self.laws):
+            f[:, c] = law.force(d[:, c], dd[:, c])
+        pot = 0
+        for c, law in enumerate(self.laws):
+            pot = pot + law.potential(d[:, c])
+        energy = energy + pot
+        quad = smp.quadratures[:, self.slots]
+        peaks = np.where(self.rigid[None, :], 0.0, smp.peak[:, self.slots])
+        x = np.empty((m, self.off[-1]))
+        x[:, self.off[self.s]:self.off[self.s + 1]] = smp.x
+        for a, b, xr in self.x_rest:
+            x[:, a:b] = xr
+        block = (smp.t, d, dd, f, quad[:, :, 0], quad[:, :, 1], smp.ledger, quad[:, :, 3], x,
+                 energy, peaks)
+        if switch_row is None:
+            self._push(block, 0, m)
+            return
+        self._push(block, 0, switch_row)
+        self._report()
+        self._push(block, switch_row, m)
+
+    def _push(self, block, a, b) -> None:
+        """Record rows ``a .. b - 1``; stop at a non-finite one as the loop does."""
+        if b <= a:
+            return
+        t, d, dd, f, impulse, diss, ledger, work, x, energy, peaks = block
+        ok = np.isfinite(d[a:b]).all(axis=1) & np.isfinite(dd[a:b]).all(axis=1)
+        bad = np.flatnonzero(~ok)
+        stop = b if not bad.size else a + int(bad[0])
+        if stop > a:
+            self.recorder.record_block(t[a:stop], d[a:stop], dd[a:stop], f[a:stop],
+                                       impulse[a:stop], diss[a:stop], ledger[a:stop],
+                                       work[a:stop], x=x[a:stop], energy=energy[a:stop],
+                                       peaks=peaks[a:stop])
+        if stop < b:
+            cause = nonfinite_cause(self.system, d[stop], dd[stop], f[stop])
+            raise GuardError(cause[0] if cause else "non-finite state", float(t[stop]),
+                             cause[1] if cause else None, "non-finite")
+
+    def _report(self) -> None:
+        """The switches and impacts of the side's last step, as the loop
+        reports them before the step's sample."""
+        sysm, sub, rec = self.system, self.sub, self.recorder
+        for c, (_, slot) in sysm.embedded.items():
+            rigid = sysm.links[c].contact.law.rigid
+            for ts, j, on in sub.switch_log:
+                if j == slot and not rigid:
+                    rec.edge(c, ts, on)
+                elif j == slot and on:            # an impact is an instant
+                    rec.edge(c, ts, True)
+                    rec.edge(c, ts, False)
+        if "rigid_impacts" in sub.capabilities:
+            rec.impacts += sub.impact_log
+            sub.impact_log = []
+        sub.switch_log = []
