@@ -6,8 +6,10 @@ One call advances an undamped linear structure in its kept modes over a macro
 step in closed form: each phase between switches of its hosted linear springs
 is a linear system under a polynomial load, stepped exactly in the modes of
 that phase; touch and release are located on the exact solution (sampled,
-then safeguarded Newton); the springs' impulses, first moments and work and
-the ports' velocity moments are integrated in closed form; each closed
+then safeguarded Newton; a phase with every spring open is not sampled where
+a bound of the exact solution proves none can close in it); the springs'
+impulses, first moments and work and the ports' velocity moments are
+integrated in closed form; each closed
 spring's largest penetration over a segment is located on the exact solution
 where its rate falls through zero (Illinois regula falsi), and raises the
 host's ``peak``.  A structure that
@@ -354,6 +356,12 @@ cdef class StructureStep:
     #: bases asked of the host (several springs closed, or the rank-one
     #: update declined)
     cdef public long n_host_bases
+    #: segments with every contact open that a bound proved stay open, so
+    #: stepped without probes (see :meth:`_stays_open`)
+    cdef public long n_unprobed
+    #: whether :meth:`_stays_open` may spare a segment its probes (the
+    #: host's ``bound_open``; False probes every segment)
+    cdef public bint bound_open
 
     def __init__(self, omega, R, ref, direction, g_modal, contacts, basis):
         cdef int m = len(omega)
@@ -419,6 +427,8 @@ cdef class StructureStep:
         self.r1_V = np.zeros(m * m)
         self.n_segments = 0
         self.n_host_bases = 0
+        self.n_unprobed = 0
+        self.bound_open = True
 
     # --------------------------------------------------------------- loading
     def forget_bases(self):
@@ -824,6 +834,78 @@ cdef class StructureStep:
             self.q[i] = z
             self.dq[i] = dz
 
+    cdef bint _stays_open(self, double tc, double L, const double* P) noexcept nogil:
+        """:meth:`StructureSubsystem._stays_open`: True where every contact,
+        open at the segment's start, provably stays open over ``[0, L]``.
+
+        Contact ``k``'s penetration is ``f(tau) + beta (w_p - Q_p)(tau)``:
+        ``f`` the partner's motion and the offset less ``beta`` times the
+        port's particular polynomial ``Q_p`` (degree 3), and ``w_p - Q_p`` a
+        sum of harmonics, at most ``E_p = sum_i |P_ip| |(A_i, B_i)|``.  With
+        ``tau^j`` in ``[0, L^j]``, ``f(tau) <= f_0 + sum_j max(f_j, 0) L^j``;
+        that bound plus ``|beta| E_p`` below ``-margin`` (the probes' own
+        round-off, with room to spare) means no probe could find it closed.
+        A rigid mode (its polynomial of degree 5) is not bounded here."""
+        cdef int i, j, k, p, n, m = self.m, npt = self.np_
+        cdef double beta, nre, nim, E, S, amp, Lj, f, bound, margin, pr
+        cdef double alpha[DEG1]
+        cdef double alphai[DEG1]
+        cdef double Q[DEG1]
+        cdef double wL = 0.0
+        for i in range(m):
+            if self.rigid[i]:
+                return False
+            if self.om[i] * L > wL:
+                wL = self.om[i] * L
+        # relative to the terms' sizes S: the probes sum m modes, each with
+        # its phase omega tau rounded (about omega L eps), and the gap a few
+        # terms more; plus 1e-9 of S, for a segment that near a touch loses
+        # nothing by being probed
+        margin = 1e-9 + 16.0 * DBL_EPSILON * (m + 4 + wL)
+        for k in range(self.nc):
+            p = self.c_port[k]
+            nre, nim = self.c_nre[k], self.c_nim[k]
+            beta = self.c_side[k] * (nre * self.dre + nim * self.dim)
+            n = self.m_len[k]
+            for j in range(DEG1):
+                alpha[j] = 0.0
+                alphai[j] = 0.0
+                Q[j] = 0.0
+            self._reparam(&self.m_re[k, 0], n, (tc - self.m_t0[k]) / self.m_h[k],
+                          1.0 / self.m_h[k], alpha)
+            self._reparam(&self.m_im[k, 0], n, (tc - self.m_t0[k]) / self.m_h[k],
+                          1.0 / self.m_h[k], alphai)
+            for j in range(n):
+                alpha[j] = self.c_side[k] * (nre * alpha[j] + nim * alphai[j])
+            S = fabs(self.c_off[k]) + fabs(nre * self.ref[p, 0] + nim * self.ref[p, 1])
+            alpha[0] += self.c_off[k] - self.c_side[k] * (nre * self.ref[p, 0]
+                                                          + nim * self.ref[p, 1])
+            E = 0.0
+            amp = 0.0
+            for i in range(m):
+                pr = P[i * npt + p]
+                Q[0] += pr * self.b0[i]
+                Q[1] += pr * self.b1[i]
+                Q[2] += pr * self.b2[i]
+                Q[3] += pr * self.b3[i]
+                E += fabs(pr) * sqrt(self.A[i] * self.A[i] + self.B[i] * self.B[i])
+                amp += fabs(pr) * (fabs(self.b0[i]) + L * (fabs(self.b1[i]) + L * (
+                    fabs(self.b2[i]) + L * fabs(self.b3[i]))) + fabs(self.A[i])
+                    + fabs(self.B[i]))
+            bound = alpha[0] - beta * Q[0]
+            Lj = 1.0
+            for j in range(DEG1):
+                if j:
+                    Lj *= L
+                    f = alpha[j] - beta * Q[j]
+                    if f > 0.0:
+                        bound += f * Lj
+                S += fabs(alpha[j]) * Lj
+            S += fabs(beta) * amp
+            if bound + fabs(beta) * E >= -margin * S:
+                return False
+        return True
+
     cdef void _quadratures(self, double[::1] aux, double[:, ::1] pm, double tc, double L,
                            const double* P, bint any_active) noexcept nogil:
         """:meth:`StructureSubsystem._segment_quadratures` over ``[tc, tc + L]``."""
@@ -1057,6 +1139,13 @@ cdef class StructureStep:
             n = <long> ceil(2.0 * L * wmax)
             if n < 2:
                 n = 2
+            if self.bound_open and not any_active and self._stays_open(tc, L, P):
+                # every contact open and bound to stay so: the probes would
+                # find nothing, and the segment ends as theirs would
+                self.n_unprobed += 1
+                self._quadratures(aux, pm, tc, L, P, any_active)
+                self._end_state(s, L * n / n)
+                break
             row = -1
             for k in range(nc):
                 self.dprev[k] = self.d0[k]
