@@ -72,6 +72,10 @@ def rank_one_eigh(d, z, *, max_iterations: int = 50):
     tol = 8.0 * _EPS * max(float(np.abs(ds).max()), z2sum)
     keep = np.abs(zs) * np.sqrt(z2sum) > tol
     idx = np.flatnonzero(keep)
+    if not idx.size:                # every coupling below round-off: diag(d) itself
+        out = np.empty_like(V)
+        out[order] = V
+        return lam, out
     dk, zk = ds[idx], zs[idx]
     if idx.size > 1 and np.any(np.diff(dk) <= tol):
         return None
