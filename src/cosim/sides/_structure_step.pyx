@@ -30,7 +30,7 @@ in place between steps, as a contact that follows a moving point does): the
 ports' shape rows ``R`` (n_p, m) and reference positions ``ref`` (n_p, 2).
 After changing ``R`` the host calls :meth:`StructureStep.forget_bases`.
 """
-from libc.math cimport sin, cos, pow, ceil, fabs, sqrt, copysign, isfinite, INFINITY
+from libc.math cimport sin, cos, pow, ceil, fabs, sqrt, hypot, copysign, isfinite, INFINITY
 from libc.float cimport DBL_EPSILON
 
 import numpy as np
@@ -216,7 +216,7 @@ def rank_one_eigh(d, z, int max_iterations=50):
     """:func:`fem.rank_one.rank_one_eigh` compiled: ``(lam, V)`` of
     ``diag(d) + z z^T``, or None where the reference declines."""
     cdef int m = len(d)
-    ws = np.empty(3 * m * m + 16 * m)
+    ws = np.empty(3 * m * m + 20 * m)
     lam = np.empty(m)
     V = np.empty((m, m))
     cdef double[::1] dv = np.ascontiguousarray(d, dtype=float)
@@ -233,7 +233,7 @@ def rank_one_eigh(d, z, int max_iterations=50):
 cdef int _rank_one(int m, const double* d, const double* z, double* lam, double* out,
                    int max_iterations, double* work) noexcept nogil:
     """:func:`fem.rank_one.rank_one_eigh` into ``lam`` (m) and ``out`` (m, m)
-    row-major; -1 where the reference returns None.  ``work``: 3 m^2 + 16 m."""
+    row-major; -1 where the reference returns None.  ``work``: 3 m^2 + 20 m."""
     cdef double* ds = work
     cdef double* zs = work + m
     cdef double* order = work + 2 * m        # the sorting permutation (as doubles)
@@ -242,9 +242,11 @@ cdef int _rank_one(int m, const double* d, const double* z, double* lam, double*
     cdef double* lk = work + 5 * m
     cdef double* Vk = work + 6 * m           # (n, n)
     cdef double* sec = Vk + m * m            # _secular's 2 n^2 + 8 n
-    cdef int i, j, n, a, b
-    cdef double z2sum = 0.0, dmax = 0.0, tol, x
     cdef int* idx = <int*> (sec + 2 * m * m + 8 * m)    # m ints in 2 m doubles' room
+    # the rotations of _deflate_close: pairs (i, j) as doubles, c, s
+    cdef double* rot = sec + 2 * m * m + 10 * m         # (m, 4)
+    cdef int i, j, n, a, b, nrot = 0, ri, rj
+    cdef double z2sum = 0.0, dmax = 0.0, tol, x, r, c, s_, di, vi, vj
     # stable argsort of d (insertion sort: once per new set of closed springs)
     for i in range(m):
         j = i
@@ -259,27 +261,42 @@ cdef int _rank_one(int m, const double* d, const double* z, double* lam, double*
         if fabs(ds[i]) > dmax:
             dmax = fabs(ds[i])
     for i in range(m):
-        lam[i] = ds[i]
         for j in range(m):
             out[i * m + j] = 0.0
-    if z2sum == 0.0:
-        for i in range(m):
-            out[(<int> order[i]) * m + i] = 1.0
-        return 0
     tol = 8.0 * DBL_EPSILON * (dmax if dmax > z2sum else z2sum)
     n = 0
     x = sqrt(z2sum)
     for i in range(m):
         if fabs(zs[i]) * x > tol:
+            if n > 0:
+                # _deflate_close: the last kept entry against this one
+                a = idx[n - 1]
+                r = hypot(zs[a], zs[i])
+                c = zs[i] / r
+                s_ = zs[a] / r
+                if fabs((ds[i] - ds[a]) * c * s_) <= tol:
+                    # c^2 d_a + s^2 d_i and s^2 d_a + c^2 d_i, exact where equal
+                    di = s_ * s_ * (ds[i] - ds[a])
+                    ds[a] = ds[a] + di
+                    ds[i] = ds[i] - di
+                    zs[a] = 0.0
+                    zs[i] = r
+                    rot[4 * nrot] = a
+                    rot[4 * nrot + 1] = i
+                    rot[4 * nrot + 2] = c
+                    rot[4 * nrot + 3] = s_
+                    nrot += 1
+                    idx[n - 1] = i
+                    continue
             idx[n] = i
-            dk[n] = ds[i]
-            zk[n] = zs[i]
             n += 1
-    for i in range(1, n):
-        if dk[i] - dk[i - 1] <= tol:
-            return -1
-    if _secular(n, dk, zk, lk, Vk, max_iterations, sec):
+    for a in range(n):
+        dk[a] = ds[idx[a]]
+        zk[a] = zs[idx[a]]
+    if n and _secular(n, dk, zk, lk, Vk, max_iterations, sec):
         return -1
+    for i in range(m):
+        lam[i] = ds[i]
     # V = I with the kept block replaced; rows back in the original order
     for i in range(m):
         out[(<int> order[i]) * m + i] = 1.0
@@ -289,6 +306,17 @@ cdef int _rank_one(int m, const double* d, const double* z, double* lam, double*
     for a in range(n):
         for b in range(n):
             out[(<int> order[idx[a]]) * m + idx[b]] = Vk[a * n + b]
+    # the rotations undone, last first: rows i, j <- (c v_i + s v_j, c v_j - s v_i)
+    for a in range(nrot - 1, -1, -1):
+        ri = <int> order[<int> rot[4 * a]]
+        rj = <int> order[<int> rot[4 * a + 1]]
+        c = rot[4 * a + 2]
+        s_ = rot[4 * a + 3]
+        for b in range(m):
+            vi = out[ri * m + b]
+            vj = out[rj * m + b]
+            out[ri * m + b] = c * vi + s_ * vj
+            out[rj * m + b] = c * vj - s_ * vi
     return 0
 
 
@@ -421,7 +449,7 @@ cdef class StructureStep:
         self.dcur = np.zeros(nc); self.ddcur = np.zeros(nc)
         self.ddprev = np.zeros(nc); self.seg_peak = np.zeros(nc)
         self.active = np.zeros(nc, dtype=np.int_)
-        self.r1_work = np.zeros(3 * m * m + 16 * m)
+        self.r1_work = np.zeros(3 * m * m + 20 * m)
         self.r1_z = np.zeros(m)
         self.r1_lam = np.zeros(m)
         self.r1_V = np.zeros(m * m)

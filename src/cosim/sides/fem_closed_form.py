@@ -63,7 +63,7 @@ class ClosedFormContacts:
                     springs.append(math.sqrt(e.law.contact_stiffness) * abs(c) * self._R[e.port])
             # one spring: diag(omega^2) + z z^T by its secular equation, O(m^2)
             # (follow = true asks for one basis per step in contact, and a
-            # dense solve is O(m^3)); several, or a case it declines: LAPACK
+            # dense solve is O(m^3)); several, or a root that did not converge: LAPACK
             res = rank_one_eigh(self.omega ** 2, springs[0]) if len(springs) == 1 else None
             if res is None:
                 K = np.diag(self.omega ** 2)
