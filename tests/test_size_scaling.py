@@ -240,9 +240,20 @@ def test_rank_one_eigh_matches_a_dense_solver(case):
             assert d[j] in lam
 
 
-def test_rank_one_eigh_declines_equal_coupled_entries():
+def test_rank_one_eigh_rotates_equal_coupled_entries_apart():
+    """diag(1, 2, 2, 3) + 1 1^T: the two equal entries are rotated so that
+    one of them, (0, 1, -1, 0) / sqrt 2, keeps the eigenvalue 2 uncoupled;
+    the other three roots are the secular equation's."""
     from fem.rank_one import rank_one_eigh
-    assert rank_one_eigh(np.array([1.0, 2.0, 2.0, 3.0]), np.ones(4)) is None
+    d = np.array([1.0, 2.0, 2.0, 3.0])
+    lam, V = rank_one_eigh(d, np.ones(4))
+    A = np.diag(d) + 1.0
+    np.testing.assert_allclose(np.sort(lam), np.linalg.eigvalsh(A), rtol=0, atol=1e-14 * 7)
+    assert np.abs(A @ V - V * lam).max() <= 1e-14 * 7
+    assert np.abs(V.T @ V - np.eye(4)).max() <= 1e-15 * 4
+    j = int(np.argmin(np.abs(lam - 2.0)))
+    assert lam[j] == 2.0
+    np.testing.assert_allclose(np.abs(V[:, j]), [0.0, 0.5 ** 0.5, 0.5 ** 0.5, 0.0], atol=1e-15)
     lam, V = rank_one_eigh(np.array([1.0, 2.0]), np.zeros(2))
     np.testing.assert_array_equal(lam, [1.0, 2.0])
     np.testing.assert_array_equal(V, np.eye(2))

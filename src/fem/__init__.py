@@ -14,14 +14,15 @@ from .chain import Chain, ChainStructure
 from .linear_structure import LinearStructure, LineStructure
 from .modal import DENSE_LIMIT, ModalBasis, modes, natural_frequencies, residual_compliance
 from .rank_one import rank_one_eigh
-from .response import undamped_moments, undamped_response
+from .response import undamped_envelope, undamped_moments, undamped_response
 
 __all__ = ["Beam", "String", "Section", "rectangular_section", "circular_section", "Chain",
            "ChainStructure", "Rod", "LinearStructure", "LineStructure", "ModalBasis", "modes",
            "natural_frequencies", "StructuralIntegrator", "Newmark", "HHTAlpha",
            "GeneralizedAlpha", "CentralDifference", "ExactModal", "STRUCTURAL_INTEGRATORS",
            "get_structural_integrator", "BEAM_ENDS", "ROD_ENDS", "DENSE_LIMIT",
-           "residual_compliance", "undamped_response", "undamped_moments", "rank_one_eigh"]
+           "residual_compliance", "undamped_response", "undamped_moments", "undamped_envelope",
+           "rank_one_eigh"]
 
 #: public name -> the submodule that defines it, imported on first use
 _LAZY = {**dict.fromkeys(("Beam", "String", "Section", "rectangular_section",

@@ -11,8 +11,16 @@ each eigenvector is ``(D - lam)^-1 z`` normalised.  Solving the ``m`` roots
 costs O(m) each, so the whole decomposition O(m^2) against O(m^3) for a
 dense eigen-solver.
 
+Components of ``z`` below round-off are deflated (their ``d`` and unit
+vector kept), and so are entries of ``d`` that the term couples but that
+are equal to round-off: a plane rotation moves the pair's coupling onto one
+of them, and the other is left with a residual coupling of round-off size,
+dropped ([1]_, and LAPACK's ``dlaed2``, which we follow in the criterion).
+
 References
 ----------
+.. [0] G. H. Golub, "Some modified matrix eigenvalue problems", SIAM Review
+   15 (1973) 318-334: the secular equation of a rank-one modification.
 .. [1] J. R. Bunch, C. P. Nielsen, D. C. Sorensen, "Rank-one modification of
    the symmetric eigenproblem", Numer. Math. 31 (1978) 31-48: interlacing,
    deflation and the secular equation.
@@ -24,6 +32,8 @@ References
    roots (Loewner's formula), so the eigenvectors come out orthogonal.
 """
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
@@ -49,9 +59,9 @@ def rank_one_eigh(d, z, *, max_iterations: int = 50):
     (lam, V) or None
         ``lam`` (m,) and ``V`` (m, m) with ``V^T V = I`` and
         ``(diag(d) + z z^T) V = V diag(lam)``; eigenvalues are not sorted.
-        ``None`` when two diagonal entries that the term couples are equal
-        to round-off (a case that needs a rotation first) or the iteration
-        did not converge: the caller then uses a dense solver.
+        ``None`` when the iteration did not converge: the caller then uses
+        a dense solver.  Entries of ``d`` that the term couples and that are
+        equal to round-off are first rotated apart (:func:`_deflate_close`).
     """
     d = np.asarray(d, float)
     z = np.asarray(z, float)
@@ -61,29 +71,60 @@ def rank_one_eigh(d, z, *, max_iterations: int = 50):
     order = np.argsort(d, kind="stable")
     ds, zs = d[order], z[order]
     z2sum = float(zs @ zs)
-    lam = ds.copy()
     V = np.eye(m)
-    if z2sum == 0.0:
-        out = np.empty_like(V)
-        out[order] = V
-        return lam, out
     # deflation: a component whose coupling to the rest is below round-off
     # keeps its diagonal entry and unit vector
-    tol = 8.0 * _EPS * max(float(np.abs(ds).max()), z2sum)
-    keep = np.abs(zs) * np.sqrt(z2sum) > tol
-    idx = np.flatnonzero(keep)
-    dk, zk = ds[idx], zs[idx]
-    if idx.size > 1 and np.any(np.diff(dk) <= tol):
-        return None
-    res = _secular(dk, zk, max_iterations)
-    if res is None:
-        return None
-    lam_k, Vk = res
-    lam[idx] = lam_k
-    V[np.ix_(idx, idx)] = Vk
+    tol = 8.0 * _EPS * max(float(np.abs(ds).max(initial=0.0)), z2sum)
+    idx = np.flatnonzero(np.abs(zs) * math.sqrt(z2sum) > tol)
+    rotations = []
+    if idx.size > 1:
+        idx, rotations = _deflate_close(ds, zs, idx, tol)
+    if idx.size:
+        res = _secular(ds[idx], zs[idx], max_iterations)
+        if res is None:
+            return None
+        lam_k, Vk = res
+        V[np.ix_(idx, idx)] = Vk
+    lam = ds.copy()
+    if idx.size:
+        lam[idx] = lam_k
+    for i, j, c, s in reversed(rotations):
+        V[[i, j]] = c * V[i] + s * V[j], c * V[j] - s * V[i]
     out = np.empty_like(V)
     out[order] = V
     return lam, out
+
+
+def _deflate_close(d, z, idx, tol):
+    """Rotate away the couplings of entries of ``d`` too close to part.
+
+    Two kept entries ``d_i < d_j`` (consecutive among ``idx``) are turned
+    by the rotation ``G`` of their plane that takes ``(z_i, z_j)`` to
+    ``(0, r)``; ``G diag(d) G^T`` then couples them by ``c s (d_i - d_j)``.
+    Where that is at most ``tol`` it is dropped (a perturbation of the
+    matrix of round-off size, as in [1]'s deflation): ``i`` keeps
+    ``c^2 d_i + s^2 d_j`` and its unit vector, and ``j`` goes on with
+    ``s^2 d_i + c^2 d_j`` and ``z_j = r``, compared with the next entry.
+    Modifies ``d`` and ``z`` in place; returns the entries still coupled
+    (sorted, each pair apart by more than ``2 tol``) and the rotations
+    ``(i, j, c, s)`` in the order made."""
+    kept = [int(idx[0])]
+    rotations = []
+    for j in idx[1:]:
+        j = int(j)
+        i = kept[-1]
+        r = math.hypot(z[i], z[j])
+        c, s = z[j] / r, z[i] / r
+        if abs((d[j] - d[i]) * c * s) <= tol:
+            # c^2 d_i + s^2 d_j and s^2 d_i + c^2 d_j, exact where d_i = d_j
+            t = s * s * (d[j] - d[i])
+            d[i], d[j] = d[i] + t, d[j] - t
+            z[i], z[j] = 0.0, r
+            rotations.append((i, j, c, s))
+            kept[-1] = j
+        else:
+            kept.append(j)
+    return np.array(kept), rotations
 
 
 def _secular(d, z, max_iterations):

@@ -17,7 +17,7 @@ from math import factorial
 
 import numpy as np
 
-__all__ = ["undamped_response", "undamped_moments"]
+__all__ = ["undamped_response", "undamped_moments", "undamped_envelope"]
 
 _DEGREE = 3
 
@@ -206,3 +206,43 @@ def undamped_moments(lam, z0, dz0, a, length, rows, degree=3):
     q = np.arange(6)
     j = np.arange(degree + 1)[:, None]
     return (L ** (q + j + 1) / (q + j + 1)) @ poly + C @ Pa + S @ Pb
+
+
+def undamped_envelope(lam, z0, dz0, a, rows, length):
+    """Bounds of the response of :func:`undamped_response` combined by
+    ``rows``, over ``0 <= tau <= L``, in O(m p): without evaluating it.
+
+    Each elastic mode is its particular polynomial plus a harmonic
+    ``A cos(omega tau) + B sin(omega tau)``, at most ``hypot(A, B)`` in size,
+    so ``z(tau) @ rows`` lies within ``E`` of the polynomial ``Q(tau)``.
+
+    Parameters
+    ----------
+    lam, z0, dz0, a
+        As in :func:`undamped_response`.
+    rows : (m, p) array
+        Combinations of the modes (for instance the displacements of points).
+    length : float
+        ``L`` [s].
+
+    Returns
+    -------
+    (Q, E, size) or None
+        ``Q`` (4, p) the polynomial's coefficients in powers of ``tau``,
+        lowest first; ``E`` (p,) the harmonics' bound; ``size`` (p,) the sum
+        of the magnitudes of the terms a value is made of over ``[0, L]``
+        (the scale of its round-off).  None where a mode is rigid (its
+        polynomial has degree 5; not bounded here).
+    """
+    rigid, omega, b, A, B, _, _, _ = _split(lam, z0, dz0, a)
+    if np.any(rigid):
+        return None
+    rows = np.asarray(rows, float)
+    if rows.ndim != 2 or rows.shape[0] != omega.size:
+        raise ValueError(f"`rows` must have shape ({omega.size}, p), got {rows.shape}")
+    L = float(length)
+    b0, b1, b2, b3 = (np.abs(x) for x in b)
+    ar = np.abs(rows)
+    E = np.sqrt(A * A + B * B) @ ar
+    size = (b0 + L * (b1 + L * (b2 + L * b3)) + np.abs(A) + np.abs(B)) @ ar
+    return np.stack(b) @ rows, E, size

@@ -6,8 +6,10 @@ One call advances an undamped linear structure in its kept modes over a macro
 step in closed form: each phase between switches of its hosted linear springs
 is a linear system under a polynomial load, stepped exactly in the modes of
 that phase; touch and release are located on the exact solution (sampled,
-then safeguarded Newton); the springs' impulses, first moments and work and
-the ports' velocity moments are integrated in closed form; each closed
+then safeguarded Newton; a phase with every spring open is not sampled where
+a bound of the exact solution proves none can close in it); the springs'
+impulses, first moments and work and the ports' velocity moments are
+integrated in closed form; each closed
 spring's largest penetration over a segment is located on the exact solution
 where its rate falls through zero (Illinois regula falsi), and raises the
 host's ``peak``.  A structure that
@@ -28,7 +30,7 @@ in place between steps, as a contact that follows a moving point does): the
 ports' shape rows ``R`` (n_p, m) and reference positions ``ref`` (n_p, 2).
 After changing ``R`` the host calls :meth:`StructureStep.forget_bases`.
 """
-from libc.math cimport sin, cos, pow, ceil, fabs, sqrt, copysign, isfinite, INFINITY
+from libc.math cimport sin, cos, pow, ceil, fabs, sqrt, hypot, copysign, isfinite, INFINITY
 from libc.float cimport DBL_EPSILON
 
 import numpy as np
@@ -214,7 +216,7 @@ def rank_one_eigh(d, z, int max_iterations=50):
     """:func:`fem.rank_one.rank_one_eigh` compiled: ``(lam, V)`` of
     ``diag(d) + z z^T``, or None where the reference declines."""
     cdef int m = len(d)
-    ws = np.empty(3 * m * m + 16 * m)
+    ws = np.empty(3 * m * m + 20 * m)
     lam = np.empty(m)
     V = np.empty((m, m))
     cdef double[::1] dv = np.ascontiguousarray(d, dtype=float)
@@ -231,7 +233,7 @@ def rank_one_eigh(d, z, int max_iterations=50):
 cdef int _rank_one(int m, const double* d, const double* z, double* lam, double* out,
                    int max_iterations, double* work) noexcept nogil:
     """:func:`fem.rank_one.rank_one_eigh` into ``lam`` (m) and ``out`` (m, m)
-    row-major; -1 where the reference returns None.  ``work``: 3 m^2 + 16 m."""
+    row-major; -1 where the reference returns None.  ``work``: 3 m^2 + 20 m."""
     cdef double* ds = work
     cdef double* zs = work + m
     cdef double* order = work + 2 * m        # the sorting permutation (as doubles)
@@ -240,9 +242,11 @@ cdef int _rank_one(int m, const double* d, const double* z, double* lam, double*
     cdef double* lk = work + 5 * m
     cdef double* Vk = work + 6 * m           # (n, n)
     cdef double* sec = Vk + m * m            # _secular's 2 n^2 + 8 n
-    cdef int i, j, n, a, b
-    cdef double z2sum = 0.0, dmax = 0.0, tol, x
     cdef int* idx = <int*> (sec + 2 * m * m + 8 * m)    # m ints in 2 m doubles' room
+    # the rotations of _deflate_close: pairs (i, j) as doubles, c, s
+    cdef double* rot = sec + 2 * m * m + 10 * m         # (m, 4)
+    cdef int i, j, n, a, b, nrot = 0, ri, rj
+    cdef double z2sum = 0.0, dmax = 0.0, tol, x, r, c, s_, di, vi, vj
     # stable argsort of d (insertion sort: once per new set of closed springs)
     for i in range(m):
         j = i
@@ -257,27 +261,42 @@ cdef int _rank_one(int m, const double* d, const double* z, double* lam, double*
         if fabs(ds[i]) > dmax:
             dmax = fabs(ds[i])
     for i in range(m):
-        lam[i] = ds[i]
         for j in range(m):
             out[i * m + j] = 0.0
-    if z2sum == 0.0:
-        for i in range(m):
-            out[(<int> order[i]) * m + i] = 1.0
-        return 0
     tol = 8.0 * DBL_EPSILON * (dmax if dmax > z2sum else z2sum)
     n = 0
     x = sqrt(z2sum)
     for i in range(m):
         if fabs(zs[i]) * x > tol:
+            if n > 0:
+                # _deflate_close: the last kept entry against this one
+                a = idx[n - 1]
+                r = hypot(zs[a], zs[i])
+                c = zs[i] / r
+                s_ = zs[a] / r
+                if fabs((ds[i] - ds[a]) * c * s_) <= tol:
+                    # c^2 d_a + s^2 d_i and s^2 d_a + c^2 d_i, exact where equal
+                    di = s_ * s_ * (ds[i] - ds[a])
+                    ds[a] = ds[a] + di
+                    ds[i] = ds[i] - di
+                    zs[a] = 0.0
+                    zs[i] = r
+                    rot[4 * nrot] = a
+                    rot[4 * nrot + 1] = i
+                    rot[4 * nrot + 2] = c
+                    rot[4 * nrot + 3] = s_
+                    nrot += 1
+                    idx[n - 1] = i
+                    continue
             idx[n] = i
-            dk[n] = ds[i]
-            zk[n] = zs[i]
             n += 1
-    for i in range(1, n):
-        if dk[i] - dk[i - 1] <= tol:
-            return -1
-    if _secular(n, dk, zk, lk, Vk, max_iterations, sec):
+    for a in range(n):
+        dk[a] = ds[idx[a]]
+        zk[a] = zs[idx[a]]
+    if n and _secular(n, dk, zk, lk, Vk, max_iterations, sec):
         return -1
+    for i in range(m):
+        lam[i] = ds[i]
     # V = I with the kept block replaced; rows back in the original order
     for i in range(m):
         out[(<int> order[i]) * m + i] = 1.0
@@ -287,6 +306,17 @@ cdef int _rank_one(int m, const double* d, const double* z, double* lam, double*
     for a in range(n):
         for b in range(n):
             out[(<int> order[idx[a]]) * m + idx[b]] = Vk[a * n + b]
+    # the rotations undone, last first: rows i, j <- (c v_i + s v_j, c v_j - s v_i)
+    for a in range(nrot - 1, -1, -1):
+        ri = <int> order[<int> rot[4 * a]]
+        rj = <int> order[<int> rot[4 * a + 1]]
+        c = rot[4 * a + 2]
+        s_ = rot[4 * a + 3]
+        for b in range(m):
+            vi = out[ri * m + b]
+            vj = out[rj * m + b]
+            out[ri * m + b] = c * vi + s_ * vj
+            out[rj * m + b] = c * vj - s_ * vi
     return 0
 
 
@@ -354,6 +384,12 @@ cdef class StructureStep:
     #: bases asked of the host (several springs closed, or the rank-one
     #: update declined)
     cdef public long n_host_bases
+    #: segments with every contact open that a bound proved stay open, so
+    #: stepped without probes (see :meth:`_stays_open`)
+    cdef public long n_unprobed
+    #: whether :meth:`_stays_open` may spare a segment its probes (the
+    #: host's ``bound_open``; False probes every segment)
+    cdef public bint bound_open
 
     def __init__(self, omega, R, ref, direction, g_modal, contacts, basis):
         cdef int m = len(omega)
@@ -413,12 +449,14 @@ cdef class StructureStep:
         self.dcur = np.zeros(nc); self.ddcur = np.zeros(nc)
         self.ddprev = np.zeros(nc); self.seg_peak = np.zeros(nc)
         self.active = np.zeros(nc, dtype=np.int_)
-        self.r1_work = np.zeros(3 * m * m + 16 * m)
+        self.r1_work = np.zeros(3 * m * m + 20 * m)
         self.r1_z = np.zeros(m)
         self.r1_lam = np.zeros(m)
         self.r1_V = np.zeros(m * m)
         self.n_segments = 0
         self.n_host_bases = 0
+        self.n_unprobed = 0
+        self.bound_open = True
 
     # --------------------------------------------------------------- loading
     def forget_bases(self):
@@ -824,6 +862,78 @@ cdef class StructureStep:
             self.q[i] = z
             self.dq[i] = dz
 
+    cdef bint _stays_open(self, double tc, double L, const double* P) noexcept nogil:
+        """:meth:`StructureSubsystem._stays_open`: True where every contact,
+        open at the segment's start, provably stays open over ``[0, L]``.
+
+        Contact ``k``'s penetration is ``f(tau) + beta (w_p - Q_p)(tau)``:
+        ``f`` the partner's motion and the offset less ``beta`` times the
+        port's particular polynomial ``Q_p`` (degree 3), and ``w_p - Q_p`` a
+        sum of harmonics, at most ``E_p = sum_i |P_ip| |(A_i, B_i)|``.  With
+        ``tau^j`` in ``[0, L^j]``, ``f(tau) <= f_0 + sum_j max(f_j, 0) L^j``;
+        that bound plus ``|beta| E_p`` below ``-margin`` (the probes' own
+        round-off, with room to spare) means no probe could find it closed.
+        A rigid mode (its polynomial of degree 5) is not bounded here."""
+        cdef int i, j, k, p, n, m = self.m, npt = self.np_
+        cdef double beta, nre, nim, E, S, amp, Lj, f, bound, margin, pr
+        cdef double alpha[DEG1]
+        cdef double alphai[DEG1]
+        cdef double Q[DEG1]
+        cdef double wL = 0.0
+        for i in range(m):
+            if self.rigid[i]:
+                return False
+            if self.om[i] * L > wL:
+                wL = self.om[i] * L
+        # relative to the terms' sizes S: the probes sum m modes, each with
+        # its phase omega tau rounded (about omega L eps), and the gap a few
+        # terms more; plus 1e-9 of S, for a segment that near a touch loses
+        # nothing by being probed
+        margin = 1e-9 + 16.0 * DBL_EPSILON * (m + 4 + wL)
+        for k in range(self.nc):
+            p = self.c_port[k]
+            nre, nim = self.c_nre[k], self.c_nim[k]
+            beta = self.c_side[k] * (nre * self.dre + nim * self.dim)
+            n = self.m_len[k]
+            for j in range(DEG1):
+                alpha[j] = 0.0
+                alphai[j] = 0.0
+                Q[j] = 0.0
+            self._reparam(&self.m_re[k, 0], n, (tc - self.m_t0[k]) / self.m_h[k],
+                          1.0 / self.m_h[k], alpha)
+            self._reparam(&self.m_im[k, 0], n, (tc - self.m_t0[k]) / self.m_h[k],
+                          1.0 / self.m_h[k], alphai)
+            for j in range(n):
+                alpha[j] = self.c_side[k] * (nre * alpha[j] + nim * alphai[j])
+            S = fabs(self.c_off[k]) + fabs(nre * self.ref[p, 0] + nim * self.ref[p, 1])
+            alpha[0] += self.c_off[k] - self.c_side[k] * (nre * self.ref[p, 0]
+                                                          + nim * self.ref[p, 1])
+            E = 0.0
+            amp = 0.0
+            for i in range(m):
+                pr = P[i * npt + p]
+                Q[0] += pr * self.b0[i]
+                Q[1] += pr * self.b1[i]
+                Q[2] += pr * self.b2[i]
+                Q[3] += pr * self.b3[i]
+                E += fabs(pr) * sqrt(self.A[i] * self.A[i] + self.B[i] * self.B[i])
+                amp += fabs(pr) * (fabs(self.b0[i]) + L * (fabs(self.b1[i]) + L * (
+                    fabs(self.b2[i]) + L * fabs(self.b3[i]))) + fabs(self.A[i])
+                    + fabs(self.B[i]))
+            bound = alpha[0] - beta * Q[0]
+            Lj = 1.0
+            for j in range(DEG1):
+                if j:
+                    Lj *= L
+                    f = alpha[j] - beta * Q[j]
+                    if f > 0.0:
+                        bound += f * Lj
+                S += fabs(alpha[j]) * Lj
+            S += fabs(beta) * amp
+            if bound + fabs(beta) * E >= -margin * S:
+                return False
+        return True
+
     cdef void _quadratures(self, double[::1] aux, double[:, ::1] pm, double tc, double L,
                            const double* P, bint any_active) noexcept nogil:
         """:meth:`StructureSubsystem._segment_quadratures` over ``[tc, tc + L]``."""
@@ -1057,6 +1167,13 @@ cdef class StructureStep:
             n = <long> ceil(2.0 * L * wmax)
             if n < 2:
                 n = 2
+            if self.bound_open and not any_active and self._stays_open(tc, L, P):
+                # every contact open and bound to stay so: the probes would
+                # find nothing, and the segment ends as theirs would
+                self.n_unprobed += 1
+                self._quadratures(aux, pm, tc, L, P, any_active)
+                self._end_state(s, L * n / n)
+                break
             row = -1
             for k in range(nc):
                 self.dprev[k] = self.d0[k]

@@ -333,8 +333,10 @@ class StructureSubsystem(ClosedFormContacts, Subsystem):
         contacts = []
         for e in self._embedded:
             contacts.append((e.port, e.side, e.normal, e.offset, e.law.contact_stiffness))
-        return module.StructureStep(self.omega, self._R, self._ref, self._dir, self._g_modal,
-                                    contacts, self._active_basis)
+        kernel = module.StructureStep(self.omega, self._R, self._ref, self._dir, self._g_modal,
+                                      contacts, self._active_basis)
+        kernel.bound_open = self.bound_open
+        return kernel
 
     @property
     def kernel(self) -> str:
