@@ -252,6 +252,13 @@ class Subsystem(ABC):
         """Named coordinates: name -> (index of q in x, index of dq in x)."""
         return {}
 
+    def compiled_face(self):
+        """The compiled model-exchange face (a ``cosim.core._stacked.Face``:
+        :meth:`derivatives`, :meth:`outputs` and :meth:`ledger_rates` in
+        compiled code) that the monolithic reference's compiled right-hand
+        side calls, or None where there is none (the Python one then runs)."""
+        return None
+
     def take_peaks(self) -> np.ndarray:
         """Each embedded contact's largest penetration [m] since the last
         call (0 if it never penetrated), and start again from 0."""
@@ -301,3 +308,10 @@ class RigidReference(Subsystem):
 
     def energy(self, x=None):
         return 0.0
+
+    def compiled_face(self):
+        try:
+            from cosim.core._stacked import FixedFace
+        except ImportError:             # not built: the Python right-hand side runs
+            return None
+        return FixedFace(self._pos)

@@ -30,6 +30,7 @@ import math
 import numpy as np
 
 from cosim.core.ode import RK4
+from cosim.sides.faces import ModalFaceMixin
 from cosim.sides.fem_closed_form import ClosedFormContacts
 from cosim.sides.kernel import compiled_module
 from cosim.core.subsystem import EmbeddedContact, StepInput, Subsystem
@@ -46,7 +47,7 @@ STEP_API = 2
 _stale_said = False
 
 
-class StructureSubsystem(ClosedFormContacts, Subsystem):
+class StructureSubsystem(ModalFaceMixin, ClosedFormContacts, Subsystem):
     """A :class:`fem.LinearStructure` reduced to the modes of ``basis``.
 
     Parameters

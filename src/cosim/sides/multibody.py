@@ -14,6 +14,7 @@ from multibody import TreeModel
 
 from cosim.errors import SimulationError
 from cosim.core.ode import INTEGRATORS, RK4, TimeStepper
+from cosim.sides.faces import TreeFaceMixin
 from cosim.sides.kernel import compiled_module
 from cosim.sides.multibody_kernel import kernel_effects, kernel_law
 from cosim.core.subsystem import (DISSIPATED, IMPULSE, MOMENT, QUADRATURES, WORK, EmbeddedContact,
@@ -29,7 +30,7 @@ __all__ = ["MultibodySubsystem", "kernel_law"]
 KERNEL_INTEGRATORS = tuple(INTEGRATORS.values())
 
 
-class MultibodySubsystem(Subsystem):
+class MultibodySubsystem(TreeFaceMixin, Subsystem):
     """A :class:`multibody.TreeModel` with state ``x = [q, dq]``.
 
     Parameters

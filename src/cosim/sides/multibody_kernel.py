@@ -6,29 +6,12 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from couplers.laws import (FloresLaw, HertzLaw, HuntCrossleyLaw, KelvinVoigtLaw,
-                           LankaraniNikraveshLaw, LinearLaw, RigidLaw)
+from cosim.core.kernel_laws import kernel_law     # the numbering every kernel shares
 
 if TYPE_CHECKING:
     from multibody import JointEffects
 
 __all__ = ["kernel_law", "kernel_effects"]
-
-
-def kernel_law(law):
-    """``(kind, k, c_or_chi, exponent)`` of a penalty law for the compiled
-    kernel (``cosim.sides._multibody_step``), or None for a law it does not know
-    (a user's own law is stepped by the reference)."""
-    kind = type(law)
-    if kind is LinearLaw:
-        return (0, law.contact_stiffness, 0.0, 1.0)
-    if kind is KelvinVoigtLaw:
-        return (1, law.contact_stiffness, law.contact_damping, 1.0)
-    if kind in (HertzLaw, HuntCrossleyLaw, LankaraniNikraveshLaw, FloresLaw):
-        return (2, law.contact_stiffness, law._chi(), law.exponent)
-    if kind is RigidLaw:
-        return (3, 0.0, 0.0, 1.0)
-    return None
 
 
 def kernel_effects(effects: JointEffects | None):

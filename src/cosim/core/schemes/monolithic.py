@@ -29,6 +29,28 @@ def _connection_forces(system, d, dd, f_normal):
             f[r] = conn.friction.force(f[c], de)
     return f
 
+def _compiled_rhs(system, active):
+    """The stacked right-hand side in compiled code
+    (:class:`cosim.core._stacked.StackedRHS`), or None where the Python one
+    must run: a grasp or friction connection, a law the kernels do not
+    know, a subsystem without a compiled face (``COSIM_KERNEL=numpy``, a
+    kernel not built, a user's own subsystem), or a following contact on a
+    side that cannot move its port."""
+    from cosim.core.kernel_laws import kernel_law
+    if system.connections is not None:
+        return None
+    faces = [getattr(sub, "compiled_face", lambda: None)() for sub in system.subsystems]
+    laws = [kernel_law(ln.contact.law) for ln in system.links]
+    if any(f is None for f in faces) or any(law is None for law in laws):
+        return None
+    if any(ln.follow and not faces[ln.sub_b].can_follow for ln in system.links):
+        return None
+    from cosim.core._stacked import StackedRHS
+    contacts = [(ln.sub_a, ln.port_a, ln.sub_b, ln.port_b, *ln.contact.normal,
+                 ln.contact.offset, *law, ln.follow) for ln, law in zip(system.links, laws)]
+    return StackedRHS(faces, system.stacked(), contacts, active)
+
+
 _METHODS = ("RK45", "RK23", "DOP853", "Radau", "BDF", "LSODA")
 
 
@@ -81,7 +103,7 @@ class Monolithic(CouplingScheme):
                 f = _connection_forces(system, d, dd, f)
             return xs, d, dd, f
 
-        def rhs(t, y):
+        def py_rhs(t, y):
             xs, d, dd, f = contact_state(y)
             parts = [sub.derivatives(t, xs[s], system.port_forces(s, f))
                      for s, sub in enumerate(subs)]
@@ -95,7 +117,19 @@ class Monolithic(CouplingScheme):
                 np.add.at(work, system.row_contact[nc:], f[nc:] * dd[nc:])
             return np.concatenate(parts + [f[:nc], diss, work, led])
 
+        # the same right-hand side and event values in compiled code where
+        # every side has a compiled face; the Python one stays the reference
+        stacked = _compiled_rhs(system, active)
+        self.compiled = stacked is not None
+        rhs = py_rhs if stacked is None else stacked.rhs
+
         def make_switch(c):
+            if stacked is not None:
+                def ev(t, y):
+                    return float(stacked.events(y)[c])
+                ev.terminal = True
+                return ev
+
             def ev(t, y):
                 _, d, dd, _ = contact_state(y)
                 if conns is not None and system.links[c].connection is not None:
@@ -113,6 +147,8 @@ class Monolithic(CouplingScheme):
 
         def make_peak(c):
             def ev(t, y):
+                if stacked is not None:
+                    return float(stacked.events(y)[nc + c])
                 _, d, dd, _ = contact_state(y)
                 return float(dd[c])
             ev.terminal = False
