@@ -29,6 +29,52 @@ def _connection_forces(system, d, dd, f_normal):
             f[r] = conn.friction.force(f[c], de)
     return f
 
+
+def _python_rhs(system, active):
+    """``contact_state(y)`` (the subsystems' states, and the rows'
+    penetrations, rates and forces) and ``rhs(t, y)`` of the stacked ODE in
+    Python: the reference, which :class:`cosim.core._stacked.StackedRHS`
+    reproduces in compiled code.  ``active`` (bool per contact) is read at
+    each call."""
+    subs = system.subsystems
+    off = system.stacked()
+    nc = system.n_contacts
+    laws = [ln.contact.law for ln in system.links]
+    conns = system.connections
+
+    def split(y):
+        return [y[off[s]:off[s + 1]] for s in range(len(subs))]
+
+    def contact_state(y):
+        xs = split(y)
+        outs = [sub.outputs(0.0, xs[s]) for s, sub in enumerate(subs)]
+        if system._followers:      # surface points move with the point above them
+            system.update_followers(outs, xs)
+            outs = [sub.outputs(0.0, xs[s]) for s, sub in enumerate(subs)]
+        d, dd = system.penetrations(outs)
+        f = np.array([max(float(laws[c].force_active(d[c], dd[c])), 0.0) if active[c]
+                      else 0.0 for c in range(nc)])
+        if conns is not None:
+            f = _connection_forces(system, d, dd, f)
+        return xs, d, dd, f
+
+    def py_rhs(t, y):
+        xs, d, dd, f = contact_state(y)
+        parts = [sub.derivatives(t, xs[s], system.port_forces(s, f))
+                 for s, sub in enumerate(subs)]
+        if conns is None:
+            diss = [float(laws[c].dissipation_rate(f[c], d[c], dd[c])) for c in range(nc)]
+        else:
+            diss = system.dissipation_rates(f, d, dd)
+        led = np.sum([sub.ledger_rates(t, xs[s]) for s, sub in enumerate(subs)], axis=0)
+        work = -f[:nc] * dd[:nc]
+        if system.n_rows > nc:      # tangential rows: force on a along t, times de
+            np.add.at(work, system.row_contact[nc:], f[nc:] * dd[nc:])
+        return np.concatenate(parts + [f[:nc], diss, work, led])
+
+    return contact_state, py_rhs
+
+
 def _compiled_rhs(system, active):
     """The stacked right-hand side in compiled code
     (:class:`cosim.core._stacked.StackedRHS`), or None where the Python one
@@ -87,35 +133,7 @@ class Monolithic(CouplingScheme):
         active = np.zeros(nc, dtype=bool)
         conns = system.connections
 
-        def split(y):
-            return [y[off[s]:off[s + 1]] for s in range(len(subs))]
-
-        def contact_state(y):
-            xs = split(y)
-            outs = [sub.outputs(0.0, xs[s]) for s, sub in enumerate(subs)]
-            if system._followers:      # surface points move with the point above them
-                system.update_followers(outs, xs)
-                outs = [sub.outputs(0.0, xs[s]) for s, sub in enumerate(subs)]
-            d, dd = system.penetrations(outs)
-            f = np.array([max(float(laws[c].force_active(d[c], dd[c])), 0.0) if active[c]
-                          else 0.0 for c in range(nc)])
-            if conns is not None:
-                f = _connection_forces(system, d, dd, f)
-            return xs, d, dd, f
-
-        def py_rhs(t, y):
-            xs, d, dd, f = contact_state(y)
-            parts = [sub.derivatives(t, xs[s], system.port_forces(s, f))
-                     for s, sub in enumerate(subs)]
-            if conns is None:
-                diss = [float(laws[c].dissipation_rate(f[c], d[c], dd[c])) for c in range(nc)]
-            else:
-                diss = system.dissipation_rates(f, d, dd)
-            led = np.sum([sub.ledger_rates(t, xs[s]) for s, sub in enumerate(subs)], axis=0)
-            work = -f[:nc] * dd[:nc]
-            if system.n_rows > nc:      # tangential rows: force on a along t, times de
-                np.add.at(work, system.row_contact[nc:], f[nc:] * dd[nc:])
-            return np.concatenate(parts + [f[:nc], diss, work, led])
+        contact_state, py_rhs = _python_rhs(system, active)
 
         # the same right-hand side and event values in compiled code where
         # every side has a compiled face; the Python one stays the reference
@@ -161,11 +179,10 @@ class Monolithic(CouplingScheme):
         dt_out = self.output_interval or t_end / 1000.0
 
         def record(t, yy):
-            xs = split(yy)
+            xs, d, dd, f = contact_state(yy)
             for s, sub in enumerate(subs):
                 sub.x[...] = xs[s]
                 sub.t = t
-            _, d, dd, f = contact_state(yy)
             recorder.record(t, d, dd, f, yy[n_x:n_x + nc], yy[n_x + nc:n_x + 2 * nc],
                             (yy[-2], yy[-1]), yy[n_x + 2 * nc:n_x + 3 * nc])
 
