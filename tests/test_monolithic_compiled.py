@@ -120,6 +120,15 @@ class Comparison:
                 M = sub._compiled().evaluate(x)[0]
                 acc = slice(n, 2 * n)
                 bound[acc] = 4 * EPS * np.linalg.cond(M) * np.max(np.abs(b[acc]))
+            if sub is not None and sl.stop > sl.start:
+                # and what the contact forces' own bounds move them by
+                x, zero = y[sl], np.zeros(self.system.n_rows)
+                s_i = self.system.subsystems.index(sub)
+                base = sub.derivatives(t, x, self.system.port_forces(s_i, zero))
+                for c in range(self.system.n_contacts):
+                    e = zero.copy()
+                    e[c] = df[c]
+                    bound += np.abs(sub.derivatives(t, x, self.system.port_forces(s_i, e)) - base)
             if name == "force":
                 bound = bound + df
             elif name in ("dissipated", "work"):
