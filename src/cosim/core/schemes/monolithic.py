@@ -110,6 +110,13 @@ class Monolithic(CouplingScheme):
     branch switched, so no step straddles a kink.  Each contact's peak
     penetration is an event too.  The impulse and the dissipated energy of
     each contact are integrated as extra states.
+
+    The right-hand side and the event values are evaluated in compiled code
+    (:class:`cosim.core._stacked.StackedRHS`) where every subsystem hands out
+    a compiled face (:meth:`cosim.core.subsystem.Subsystem.compiled_face`) and
+    no contact has a grasp or friction connection; ``COSIM_KERNEL=numpy``
+    runs the Python one (:func:`_python_rhs`), the reference it is tested
+    against.  ``compiled`` tells which ran last.
     """
 
     name: ClassVar[str] = "monolithic"
@@ -121,6 +128,8 @@ class Monolithic(CouplingScheme):
         "max_step": Option(float, math.inf, lambda v: v > 0, "> 0 s"),
         "output_interval": Option(float, None, _pos, "> 0 s"),
     }
+    #: whether the last run evaluated its right-hand side in compiled code
+    compiled: bool = False
 
     def run(self, system, t_end, recorder):
         from scipy.integrate import solve_ivp
