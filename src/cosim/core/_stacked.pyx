@@ -9,50 +9,61 @@ contacts' surface points (:meth:`cosim.core.system.CoupledSystem.update_follower
 the penetrations, the forces of the active contacts, each subsystem's
 derivatives under its port forces, the contacts' dissipated power and work
 and the subsystems' ledger rates.  It reaches the subsystems only through
-their compiled model-exchange faces (:class:`Face`, declared in
-``_stacked.pxd``), which the sides' kernel modules implement; the core
-imports no side.  :meth:`StackedRHS.events` gives the switch value and the
+their compiled model-exchange faces (a ``FaceTable`` of C functions,
+declared in ``_stacked.pxd``), which the sides' kernel modules fill; the
+core imports no side, and no side imports this module.  :meth:`StackedRHS.events` gives the switch value and the
 penetration rate of every contact, the event functions' values.
 
 The two agree to round-off, not bit for bit (a Cholesky solve against
 LAPACK's LU, sums in another order): ``tests/test_monolithic_compiled.py``
 bounds the difference.
 """
+from cpython.pycapsule cimport PyCapsule_GetPointer, PyCapsule_New
 from libc.math cimport pow
+from libc.stdlib cimport free, malloc
 
 import numpy as np
 
 cdef enum:
-    # law kinds, as cosim.core.kernel_laws.kernel_law numbers them
+    # law kinds, as cosim.core.links.kernel_law numbers them
     LINEAR = 0          # f = k d
     KELVIN_VOIGT = 1    # f = k d + c dd, switch min(d, d + c/k dd)
     POWER = 2           # f = k max(d, 0)^n (1 + chi dd), switch d or min(d, d (1 + chi dd))
     RIGID = 3           # no force; switch d, or min(d, dd * 1 s) moving away
 
 
-cdef class Face:
-    """Base of the compiled faces: a subsystem without states or ports.
-    Subclasses override what their subsystem has."""
+#: the name of the capsule a face's ``table()`` returns
+FACE_CAPSULE = "cosim.FaceTable"
+cdef const char* FACE_CAPSULE_C = b"cosim.FaceTable"
 
-    cdef int outputs(self, const double* x, double* pos, double* vel) except -1:
-        return 0
 
-    cdef int derivatives(self, double t, const double* x, const double* u,
+cdef int _fixed_outputs(void* obj, const double* x, double* pos, double* vel) except -1:
+    cdef FixedFace face = <FixedFace>obj
+    cdef int i
+    for i in range(2 * face.tab.n_ports):
+        pos[i] = face.pos[i]
+        vel[i] = 0.0
+    return 0
+
+
+cdef int _no_derivatives(void* obj, double t, const double* x, const double* u,
                          double* dx) except -1:
-        return 0
+    return 0
 
-    cdef int ledger_rates(self, double t, const double* x, double* rates) except -1:
-        rates[0] = 0.0
-        rates[1] = 0.0
-        return 0
 
-    cdef int follow(self, int port, double px, double py, const double* x,
+cdef int _no_ledger(void* obj, double t, const double* x, double* rates) except -1:
+    rates[0] = 0.0
+    rates[1] = 0.0
+    return 0
+
+
+cdef int _no_follow(void* obj, int port, double px, double py, const double* x,
                     double* out) except -1:
-        raise TypeError(f"{type(self).__name__} cannot move a port")
+    raise TypeError("this subsystem cannot move a port")
 
 
-cdef class FixedFace(Face):
-    """A rigid reference (wall, ground): fixed ports, no states.
+cdef class FixedFace:
+    """The face of a rigid reference (wall, ground): fixed ports, no states.
 
     Parameters
     ----------
@@ -61,20 +72,27 @@ cdef class FixedFace(Face):
     """
 
     cdef double[::1] pos
+    cdef FaceTable tab
 
     def __init__(self, positions):
         p = np.ascontiguousarray(positions, dtype=float).reshape(-1)
         self.pos = p.copy()
-        self.n_states = 0
-        self.n_ports = p.size // 2
-        self.can_follow = False
+        self.tab.obj = <void*>self
+        self.tab.n_states = 0
+        self.tab.n_ports = p.size // 2
+        self.tab.can_follow = 0
+        self.tab.outputs = _fixed_outputs
+        self.tab.derivatives = _no_derivatives
+        self.tab.ledger_rates = _no_ledger
+        self.tab.follow = _no_follow
 
-    cdef int outputs(self, const double* x, double* pos, double* vel) except -1:
-        cdef int i
-        for i in range(2 * self.n_ports):
-            pos[i] = self.pos[i]
-            vel[i] = 0.0
-        return 0
+    def table(self):
+        """The ``FaceTable``, in a capsule named :data:`FACE_CAPSULE`."""
+        return PyCapsule_New(&self.tab, FACE_CAPSULE_C, NULL)
+
+    @property
+    def can_follow(self):
+        return False
 
 
 cdef class StackedRHS:
@@ -82,14 +100,15 @@ cdef class StackedRHS:
 
     Parameters
     ----------
-    faces : list of Face
-        One per subsystem, in the system's order.
+    faces : list
+        One per subsystem, in the system's order: objects whose ``table()``
+        gives their :c:type:`FaceTable` (``Subsystem.compiled_face``).
     offsets : (n_sub + 1,) int array
         Each subsystem's slice of the stacked state.
     contacts : list of tuples
         Per contact: ``(sub_a, port_a, sub_b, port_b, normal_x, normal_y,
         offset [m], kind, k, c_or_chi, exponent, follow)`` with the law as
-        :func:`cosim.core.kernel_laws.kernel_law` gives it and ``follow``
+        :func:`cosim.core.links.kernel_law` gives it and ``follow``
         true for a contact whose surface point moves under the point.
     active : (n_contacts,) bool array
         Which contacts are on their active branch; read at each call (the
@@ -97,6 +116,7 @@ cdef class StackedRHS:
     """
 
     cdef list faces
+    cdef FaceTable** tab
     cdef int ns, nc, n_x, n_out
     cdef long[::1] off, first, sub_a, port_a, sub_b, port_b, kind, fol
     cdef double[::1] nx, ny, c_off, c_k, c_c, c_n
@@ -115,16 +135,19 @@ cdef class StackedRHS:
         if self.off.shape[0] != self.ns + 1:
             raise ValueError(f"`offsets` must have {self.ns + 1} entries, "
                              f"got {self.off.shape[0]}")
+        self.tab = <FaceTable**>malloc(max(self.ns, 1) * sizeof(FaceTable*))
+        if self.tab == NULL:
+            raise MemoryError()
         first = [0]
         for s in range(self.ns):
             n_ports = first[s]
-            face = self.faces[s]
-            if not isinstance(face, Face):
-                raise TypeError(f"faces[{s}] is a {type(face).__name__}, not a Face")
-            if (<Face>face).n_states != self.off[s + 1] - self.off[s]:
-                raise ValueError(f"faces[{s}] has {(<Face>face).n_states} states, its slice "
+            # the face objects stay referenced by self.faces: their tables live
+            self.tab[s] = <FaceTable*>PyCapsule_GetPointer(self.faces[s].table(),
+                                                           FACE_CAPSULE_C)
+            if self.tab[s].n_states != self.off[s + 1] - self.off[s]:
+                raise ValueError(f"faces[{s}] has {self.tab[s].n_states} states, its slice "
                                  f"{self.off[s + 1] - self.off[s]}")
-            first.append(n_ports + (<Face>face).n_ports)
+            first.append(n_ports + self.tab[s].n_ports)
         self.first = np.array(first, dtype=np.int_)
         self.n_x = self.off[self.ns]
         self.n_out = self.n_x + 3 * self.nc + 2
@@ -141,7 +164,7 @@ cdef class StackedRHS:
             for s, p in ((self.sub_a[c], self.port_a[c]), (self.sub_b[c], self.port_b[c])):
                 if not (0 <= s < self.ns and 0 <= p < self.first[s + 1] - self.first[s]):
                     raise ValueError(f"contact {c}: no port {p} on subsystem {s}")
-            if self.fol[c] and not (<Face>self.faces[self.sub_b[c]]).can_follow:
+            if self.fol[c] and not self.tab[self.sub_b[c]].can_follow:
                 raise ValueError(f"contact {c} follows its point, and subsystem "
                                  f"{self.sub_b[c]}'s face cannot move a port")
         self.has_followers = bool(np.any(self.fol))
@@ -160,23 +183,26 @@ cdef class StackedRHS:
         self.has_last = False
         self.n_rhs = self.n_events = 0
 
+    def __dealloc__(self):
+        free(self.tab)
+
     # ------------------------------------------------------------- contacts
     cdef int _state(self, const double* y) except -1:
         """Port outputs, moved surface points, penetrations and rates at ``y``."""
         cdef int s, c, a, b
-        cdef Face face
+        cdef FaceTable* face
         cdef double* tmp = &self.tmp[0]
         for s in range(self.ns):
-            face = <Face>self.faces[s]
-            face.outputs(y + self.off[s], &self.pos[2 * self.first[s]],
+            face = self.tab[s]
+            face.outputs(face.obj, y + self.off[s], &self.pos[2 * self.first[s]],
                          &self.vel[2 * self.first[s]])
         if self.has_followers:      # as CoupledSystem.update_followers, then outputs again
             for c in range(self.nc):
                 if not self.fol[c]:
                     continue
                 a = 2 * (self.first[self.sub_a[c]] + self.port_a[c])
-                face = <Face>self.faces[self.sub_b[c]]
-                if face.follow(self.port_b[c], self.pos[a], self.pos[a + 1],
+                face = self.tab[self.sub_b[c]]
+                if face.follow(face.obj, self.port_b[c], self.pos[a], self.pos[a + 1],
                                y + self.off[self.sub_b[c]], tmp):
                     self.sigma[c] = self.nx[c] * tmp[2] + self.ny[c] * tmp[3]
                     self.axis[2 * c], self.axis[2 * c + 1] = tmp[0], tmp[1]
@@ -184,8 +210,8 @@ cdef class StackedRHS:
                     self.sigma[c] = 0.0
                     self.axis[2 * c], self.axis[2 * c + 1] = 0.0, 0.0
             for s in range(self.ns):
-                face = <Face>self.faces[s]
-                face.outputs(y + self.off[s], &self.pos[2 * self.first[s]],
+                face = self.tab[s]
+                face.outputs(face.obj, y + self.off[s], &self.pos[2 * self.first[s]],
                              &self.vel[2 * self.first[s]])
         for c in range(self.nc):
             a = 2 * (self.first[self.sub_a[c]] + self.port_a[c])
@@ -249,7 +275,7 @@ cdef class StackedRHS:
         cdef double[::1] ov = out
         cdef int s, c, a, b, i, nc = self.nc, n_x = self.n_x
         cdef double fc, ca0, ca1
-        cdef Face face
+        cdef FaceTable* face
         self.n_rhs += 1
         self._state(&yv[0])
         for i in range(self.u.shape[0]):
@@ -275,10 +301,10 @@ cdef class StackedRHS:
         ov[n_x + 3 * nc] = 0.0
         ov[n_x + 3 * nc + 1] = 0.0
         for s in range(self.ns):
-            face = <Face>self.faces[s]
-            face.derivatives(t, &yv[self.off[s]], &self.u[2 * self.first[s]],
+            face = self.tab[s]
+            face.derivatives(face.obj, t, &yv[self.off[s]], &self.u[2 * self.first[s]],
                              &ov[self.off[s]])
-            face.ledger_rates(t, &yv[self.off[s]], &self.rates[0])
+            face.ledger_rates(face.obj, t, &yv[self.off[s]], &self.rates[0])
             ov[n_x + 3 * nc] += self.rates[0]
             ov[n_x + 3 * nc + 1] += self.rates[1]
         for c in range(nc):

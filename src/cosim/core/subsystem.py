@@ -253,10 +253,12 @@ class Subsystem(ABC):
         return {}
 
     def compiled_face(self):
-        """The compiled model-exchange face (a ``cosim.core._stacked.Face``:
-        :meth:`derivatives`, :meth:`outputs` and :meth:`ledger_rates` in
-        compiled code) that the monolithic reference's compiled right-hand
-        side calls, or None where there is none (the Python one then runs)."""
+        """The compiled model-exchange face that the monolithic reference's
+        compiled right-hand side calls (:meth:`derivatives`, :meth:`outputs`
+        and :meth:`ledger_rates` in compiled code: an object whose
+        ``table()`` gives the ``FaceTable`` declared in
+        ``cosim/core/_stacked.pxd``, and ``can_follow``), or None where there
+        is none (the Python right-hand side then runs)."""
         return None
 
     def take_peaks(self) -> np.ndarray:

@@ -5,7 +5,7 @@
 :class:`ModalFace` is :meth:`cosim.sides.fem.StructureSubsystem.derivatives`,
 ``outputs`` and ``ledger_rates`` (the kept modes' diagonal equations, the
 ports' shape rows) as the monolithic reference's compiled right-hand side
-calls them (:class:`cosim.core._stacked.Face`), and, on a structure meshed
+calls them (through the ``FaceTable`` of ``cosim.core._stacked``), and, on a structure meshed
 along a line (:class:`fem.linear_structure.LineStructure`), the move of a
 port under a point with its surface slope
 (:meth:`~cosim.sides.fem.StructureSubsystem.move_port` and
@@ -15,10 +15,31 @@ subsystem's (the Python reference's) as they are.
 """
 import numpy as np
 
-from cosim.core._stacked cimport Face
+from cpython.pycapsule cimport PyCapsule_New
+
+# a C struct only: nothing of the core is imported at run time
+from cosim.core._stacked cimport FaceTable
 
 
-cdef class ModalFace(Face):
+cdef int _modal_outputs(void* obj, const double* x, double* pos, double* vel) except -1:
+    return (<ModalFace>obj).outputs(x, pos, vel)
+
+
+cdef int _modal_derivatives(void* obj, double t, const double* x, const double* u,
+                            double* dx) except -1:
+    return (<ModalFace>obj).derivatives(t, x, u, dx)
+
+
+cdef int _modal_ledger(void* obj, double t, const double* x, double* rates) except -1:
+    return (<ModalFace>obj).ledger_rates(t, x, rates)
+
+
+cdef int _modal_follow(void* obj, int port, double px, double py, const double* x,
+                       double* out) except -1:
+    return (<ModalFace>obj).follow(port, px, py, x, out)
+
+
+cdef class ModalFace:
     """Parameters
     ----------
     rows : (n_ports, m) array
@@ -35,7 +56,9 @@ cdef class ModalFace(Face):
         structure, whose ports may then follow a point; None: they may not.
     """
 
-    cdef int m
+    cdef int m, n_ports
+    cdef bint follows
+    cdef FaceTable tab
     cdef double[:, ::1] R, ref, Phi
     cdef double[::1] dirv, w2, damp, gmod, nodes, origin, axis, s_port, row
     cdef long[:, ::1] dof_map
@@ -52,9 +75,16 @@ cdef class ModalFace(Face):
         self.damp = np.array(damping, dtype=float)
         self.gmod = np.array(gravity, dtype=float)
         self.n_ports = self.R.shape[0]
-        self.n_states = 2 * self.m
         self.row = np.zeros(max(self.m, 1))
-        self.can_follow = line is not None
+        self.follows = line is not None
+        self.tab.obj = <void*>self
+        self.tab.n_states = 2 * self.m
+        self.tab.n_ports = self.n_ports
+        self.tab.can_follow = self.follows
+        self.tab.outputs = _modal_outputs
+        self.tab.derivatives = _modal_derivatives
+        self.tab.ledger_rates = _modal_ledger
+        self.tab.follow = _modal_follow
         if line is not None:
             nodes, dof_map, hermite, shapes, origin, axis, s_port = line
             self.nodes = np.array(nodes, dtype=float)
@@ -65,6 +95,14 @@ cdef class ModalFace(Face):
             self.axis = np.array(axis, dtype=float)
             self.s_port = np.array(s_port, dtype=float)
             self.length = self.nodes[self.nodes.shape[0] - 1] - self.nodes[0]
+
+    def table(self):
+        """The face's ``FaceTable`` in a capsule named ``cosim.FaceTable``."""
+        return PyCapsule_New(&self.tab, b"cosim.FaceTable", NULL)
+
+    @property
+    def can_follow(self):
+        return bool(self.follows)
 
     cdef int outputs(self, const double* x, double* pos, double* vel) except -1:
         cdef int p, j, m = self.m
@@ -156,7 +194,7 @@ cdef class ModalFace(Face):
         (it no longer moves with the point), 1 elsewhere."""
         cdef int j, m = self.m
         cdef double s_raw, s, wp
-        if not self.can_follow:
+        if not self.follows:
             raise TypeError("this structure's ports cannot follow a point")
         s_raw = (px - self.origin[0]) * self.axis[0] + (py - self.origin[1]) * self.axis[1]
         s = s_raw

@@ -28,7 +28,10 @@ from libc.string cimport memcpy
 
 import numpy as np
 
-from cosim.core._stacked cimport Face
+from cpython.pycapsule cimport PyCapsule_New
+
+# a C struct only: nothing of the core is imported at run time
+from cosim.core._stacked cimport FaceTable
 
 cdef enum:
     # law kinds (couplers.laws)
@@ -1021,23 +1024,54 @@ cdef class MultibodyStep:
         return ds, dds
 
 
-cdef class TreeFace(Face):
-    """The model-exchange face of a tree (:class:`cosim.core._stacked.Face`):
-    :meth:`MultibodySubsystem.derivatives`, ``outputs`` and ``ledger_rates``
-    on the kernel's kinematics, mass matrix and joint effects, for state
-    ``x = [q, dq]``.  It shares the kernel's workspace (the monolithic
-    reference does not step the tree)."""
+cdef int _tree_outputs(void* obj, const double* x, double* pos, double* vel) except -1:
+    return (<TreeFace>obj).outputs(x, pos, vel)
+
+
+cdef int _tree_derivatives(void* obj, double t, const double* x, const double* u,
+                           double* dx) except -1:
+    return (<TreeFace>obj).derivatives(t, x, u, dx)
+
+
+cdef int _tree_ledger(void* obj, double t, const double* x, double* rates) except -1:
+    return (<TreeFace>obj).ledger_rates(t, x, rates)
+
+
+cdef int _tree_follow(void* obj, int port, double px, double py, const double* x,
+                      double* out) except -1:
+    raise TypeError("a tree's ports do not follow a point")
+
+
+cdef class TreeFace:
+    """The model-exchange face of a tree (``cosim.core._stacked``'s
+    ``FaceTable``): :meth:`MultibodySubsystem.derivatives`, ``outputs`` and
+    ``ledger_rates`` on the kernel's kinematics, mass matrix and joint
+    effects, for state ``x = [q, dq]``.  It shares the kernel's workspace (the
+    monolithic reference does not step the tree)."""
 
     cdef MultibodyStep k
     cdef double[::1] rates
+    cdef FaceTable tab
 
     def __init__(self, MultibodyStep kernel):
         self.k = kernel
-        self.n_states = 2 * kernel.n
-        self.n_ports = kernel.np_
-        self.can_follow = False
         self.rates = np.zeros(2)
+        self.tab.obj = <void*>self
+        self.tab.n_states = 2 * kernel.n
+        self.tab.n_ports = kernel.np_
+        self.tab.can_follow = 0
+        self.tab.outputs = _tree_outputs
+        self.tab.derivatives = _tree_derivatives
+        self.tab.ledger_rates = _tree_ledger
+        self.tab.follow = _tree_follow
 
+    def table(self):
+        """The face's ``FaceTable`` in a capsule named ``cosim.FaceTable``."""
+        return PyCapsule_New(&self.tab, b"cosim.FaceTable", NULL)
+
+    @property
+    def can_follow(self):
+        return False
     cdef int outputs(self, const double* x, double* pos, double* vel) except -1:
         cdef MultibodyStep k = self.k
         cdef int p, n = k.n

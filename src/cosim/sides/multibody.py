@@ -14,9 +14,8 @@ from multibody import TreeModel
 
 from cosim.errors import SimulationError
 from cosim.core.ode import INTEGRATORS, RK4, TimeStepper
-from cosim.sides.faces import TreeFaceMixin
 from cosim.sides.kernel import compiled_module
-from cosim.sides.multibody_kernel import kernel_effects, kernel_law
+from cosim.sides.multibody_kernel import TreeFaceMixin, kernel_effects, kernel_law
 from cosim.core.subsystem import (DISSIPATED, IMPULSE, MOMENT, QUADRATURES, WORK, EmbeddedContact,
                         StepInput, Subsystem)
 

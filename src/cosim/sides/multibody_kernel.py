@@ -1,17 +1,18 @@
 """The contact laws and joint effects of a multibody side as the compiled
 kernel ``cosim.sides._multibody_step`` takes them: plain tuples of kinds and
 parameters, built once when the kernel is built, or None where the kernel
-does not know the law or effect (the numpy reference then steps)."""
+does not know the law or effect (the numpy reference then steps); and the
+tree's compiled model-exchange face (:class:`TreeFaceMixin`)."""
 from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from cosim.core.kernel_laws import kernel_law     # the numbering every kernel shares
+from cosim.core.links import kernel_law     # the numbering every kernel shares
 
 if TYPE_CHECKING:
     from multibody import JointEffects
 
-__all__ = ["kernel_law", "kernel_effects"]
+__all__ = ["kernel_law", "kernel_effects", "TreeFaceMixin"]
 
 
 def kernel_effects(effects: JointEffects | None):
@@ -44,3 +45,18 @@ def kernel_effects(effects: JointEffects | None):
             raise TypeError(f"drive {type(d).__name__}")
         drives.append((d.joint, kind, gains, ref_kind, ref_par, ts, vs))
     return effects.stiffness, effects.rest, effects.damping, drives
+
+
+class TreeFaceMixin:
+    """``compiled_face`` of a :class:`cosim.sides.multibody.MultibodySubsystem`
+    (:meth:`cosim.core.subsystem.Subsystem.compiled_face`): the tree's kernel
+    (``cosim.sides._multibody_step.TreeFace``), or None where the kernel is
+    not built or not chosen (``COSIM_KERNEL=numpy``) or does not step the
+    side (a user's own drive or integrator: its joint effects are not
+    loaded), or was built from older sources without a face."""
+
+    def compiled_face(self):
+        kernel = self._compiled()
+        if kernel is None or not self._kernel_steps or not hasattr(kernel, "face"):
+            return None
+        return kernel.face()

@@ -82,7 +82,7 @@ def _compiled_rhs(system, active):
     know, a subsystem without a compiled face (``COSIM_KERNEL=numpy``, a
     kernel not built, a user's own subsystem), or a following contact on a
     side that cannot move its port."""
-    from cosim.core.kernel_laws import kernel_law
+    from cosim.core.links import kernel_law
     if system.connections is not None:
         return None
     faces = [getattr(sub, "compiled_face", lambda: None)() for sub in system.subsystems]
