@@ -8,10 +8,17 @@ from Cython.Build import cythonize
 from setuptools import Extension, setup
 from setuptools.command.build_ext import build_ext
 
+#: the face every side's compiled model-exchange face derives from (cimported)
+FACE = "src/cosim/core/_stacked.pxd"
+
 KERNELS = [
-    Extension("cosim.sides._multibody_step", ["src/cosim/sides/_multibody_step.pyx"]),
+    Extension("cosim.sides._multibody_step", ["src/cosim/sides/_multibody_step.pyx"],
+              depends=[FACE]),
     Extension("cosim.sides._structure_step", ["src/cosim/sides/_structure_step.pyx"]),
     Extension("cosim.core.schemes._driver", ["src/cosim/core/schemes/_driver.pyx"]),
+    # the monolithic reference's right-hand side, and the structure's face it calls
+    Extension("cosim.core._stacked", ["src/cosim/core/_stacked.pyx"], depends=[FACE]),
+    Extension("cosim.sides._modal_face", ["src/cosim/sides/_modal_face.pyx"], depends=[FACE]),
 ]
 
 #: Every a * b + c in the kernels is rounded twice, as written and as Python and
@@ -40,6 +47,6 @@ class BuildKernels(build_ext):
         super().build_extensions()
 
 
-setup(ext_modules=cythonize(KERNELS, language_level=3,
+setup(ext_modules=cythonize(KERNELS, language_level=3, include_path=["src"],
                             compiler_directives={"embedsignature": True}),
       cmdclass={"build_ext": BuildKernels})

@@ -1,6 +1,7 @@
 """How a contact is wired into a coupled system: the two ports it links,
-where its law is evaluated (:data:`PLACEMENTS`), and, for a contact hosted by
-one side against a moving partner, the host's view of it."""
+where its law is evaluated (:data:`PLACEMENTS`), for a contact hosted by one
+side against a moving partner the host's view of it, and its law as the
+compiled kernels take it (:func:`kernel_law`)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -11,7 +12,7 @@ from cosim.core.subsystem import EmbeddedContact
 if TYPE_CHECKING:
     from couplers import Connection, PointContact
 
-__all__ = ["ContactLink", "HostedContact", "PLACEMENTS"]
+__all__ = ["ContactLink", "HostedContact", "PLACEMENTS", "kernel_law"]
 
 #: Where a contact's penalty law is evaluated in a co-simulation.
 PLACEMENTS = ("embedded", "coupler")
@@ -52,3 +53,23 @@ class ContactLink:
     host: int | None = None
     #: grasp and friction beyond the unilateral law (None: a plain contact)
     connection: Connection | None = None
+
+
+def kernel_law(law):
+    """``(kind, k, c_or_chi, exponent)`` of a penalty law for the compiled
+    kernels (the multibody side's step, ``cosim.sides._multibody_step``, and
+    the monolithic reference's right-hand side, ``cosim.core._stacked``,
+    number the kinds alike), or None for a law they do not know (a user's
+    own law is evaluated by the reference)."""
+    from couplers.laws import (FloresLaw, HertzLaw, HuntCrossleyLaw, KelvinVoigtLaw,
+                               LankaraniNikraveshLaw, LinearLaw, RigidLaw)
+    kind = type(law)
+    if kind is LinearLaw:
+        return (0, law.contact_stiffness, 0.0, 1.0)
+    if kind is KelvinVoigtLaw:
+        return (1, law.contact_stiffness, law.contact_damping, 1.0)
+    if kind in (HertzLaw, HuntCrossleyLaw, LankaraniNikraveshLaw, FloresLaw):
+        return (2, law.contact_stiffness, law._chi(), law.exponent)
+    if kind is RigidLaw:
+        return (3, 0.0, 0.0, 1.0)
+    return None

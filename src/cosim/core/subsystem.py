@@ -346,6 +346,13 @@ class Subsystem(ABC):
     def unknown_port_mass(self, port: int) -> str | None:
         """Why the mass behind ``port`` is unknown before the side runs (an
         FMU known from its model description alone), or None."""
+    def compiled_face(self):
+        """The compiled model-exchange face that the monolithic reference's
+        compiled right-hand side calls (:meth:`derivatives`, :meth:`outputs`
+        and :meth:`ledger_rates` in compiled code: an object whose
+        ``table()`` gives the ``FaceTable`` declared in
+        ``cosim/core/_stacked.pxd``, and ``can_follow``), or None where there
+        is none (the Python right-hand side then runs)."""
         return None
 
     def take_peaks(self) -> np.ndarray:
@@ -397,3 +404,10 @@ class RigidReference(Subsystem):
 
     def energy(self, x=None):
         return 0.0
+
+    def compiled_face(self):
+        try:
+            from cosim.core._stacked import FixedFace
+        except ImportError:             # not built: the Python right-hand side runs
+            return None
+        return FixedFace(self._pos)

@@ -212,6 +212,22 @@ class StructureSubsystem(ClosedFormContacts, Subsystem):
     def coordinates(self):
         return {}
 
+    def compiled_face(self):
+        """The compiled model-exchange face (``cosim.sides._modal_face.ModalFace``)
+        at the ports' present rows, or None where it is not built or not
+        chosen; on a structure meshed along a line it can move them under a
+        point (:meth:`move_port`)."""
+        module = compiled_module("_modal_face")
+        if module is None:
+            return None
+        st = self.structure
+        line = None
+        if all(hasattr(st, a) for a in ("node_coordinates", "dof_map", "hermite", "length")):
+            line = (st.node_coordinates, st.dof_map, st.hermite, self.Phi, st.origin, st.axis,
+                    self.port_coordinates)
+        return module.ModalFace(self._R, self._ref, self._dir, self.omega, self.modal_damping,
+                                self._g_modal, line)
+
     def named_values(self, X):
         """Physical DOFs of states ``X`` (..., 2 m): names, u, v."""
         m = self.n_modes

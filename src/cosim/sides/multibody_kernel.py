@@ -1,18 +1,19 @@
 """The contact laws and joint effects of a multibody side as the compiled
 kernel ``cosim.sides._multibody_step`` takes them: plain tuples of kinds and
 parameters, built once when the kernel is built, or None where the kernel
-does not know the law or effect (the numpy reference then steps).  And the
+does not know the law or effect (the numpy reference then steps); the
 side's macro steps taken by the kernel across many output points
-(:class:`SampledSteps`, which :class:`cosim.sides.multibody.MultibodySubsystem`
-inherits), for the macro loop's sampled path (:mod:`cosim.core.schemes.sampled`)."""
+(:class:`SampledSteps`, for the macro loop's sampled path,
+:mod:`cosim.core.schemes.sampled`); and the tree's compiled model-exchange
+face (:class:`TreeFaceMixin`).  :class:`cosim.sides.multibody.MultibodySubsystem`
+inherits both."""
 from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from couplers.laws import (FloresLaw, HertzLaw, HuntCrossleyLaw, KelvinVoigtLaw,
-                           LankaraniNikraveshLaw, LinearLaw, RigidLaw)
+from cosim.core.links import kernel_law     # the numbering every kernel shares
 
 from cosim.core.ode import RK4, ScipyStepper
 from cosim.core.subsystem import MOMENT, QUADRATURES, Samples
@@ -20,23 +21,7 @@ from cosim.core.subsystem import MOMENT, QUADRATURES, Samples
 if TYPE_CHECKING:
     from multibody import JointEffects
 
-__all__ = ["kernel_law", "kernel_effects", "SampledSteps"]
-
-
-def kernel_law(law):
-    """``(kind, k, c_or_chi, exponent)`` of a penalty law for the compiled
-    kernel (``cosim.sides._multibody_step``), or None for a law it does not know
-    (a user's own law is stepped by the reference)."""
-    kind = type(law)
-    if kind is LinearLaw:
-        return (0, law.contact_stiffness, 0.0, 1.0)
-    if kind is KelvinVoigtLaw:
-        return (1, law.contact_stiffness, law.contact_damping, 1.0)
-    if kind in (HertzLaw, HuntCrossleyLaw, LankaraniNikraveshLaw, FloresLaw):
-        return (2, law.contact_stiffness, law._chi(), law.exponent)
-    if kind is RigidLaw:
-        return (3, 0.0, 0.0, 1.0)
-    return None
+__all__ = ["kernel_law", "kernel_effects", "SampledSteps", "TreeFaceMixin"]
 
 
 def kernel_effects(effects: JointEffects | None):
@@ -200,3 +185,16 @@ class SampledSteps:
         ne = len(self._embedded)
         return Samples(T, Y[:, :n2], Y[:, n2:n2 + len(QUADRATURES) * ne].reshape(
             m, ne, len(QUADRATURES)), Y[:, -2:], PK, E, P[:, :npt], P[:, npt:])
+class TreeFaceMixin:
+    """``compiled_face`` of a :class:`cosim.sides.multibody.MultibodySubsystem`
+    (:meth:`cosim.core.subsystem.Subsystem.compiled_face`): the tree's kernel
+    (``cosim.sides._multibody_step.TreeFace``), or None where the kernel is
+    not built or not chosen (``COSIM_KERNEL=numpy``) or does not step the
+    side (a user's own drive or integrator: its joint effects are not
+    loaded), or was built from older sources without a face."""
+
+    def compiled_face(self):
+        kernel = self._compiled()
+        if kernel is None or not self._kernel_steps or not hasattr(kernel, "face"):
+            return None
+        return kernel.face()

@@ -29,6 +29,74 @@ def _connection_forces(system, d, dd, f_normal):
             f[r] = conn.friction.force(f[c], de)
     return f
 
+
+def _python_rhs(system, active):
+    """``contact_state(y)`` (the subsystems' states, and the rows'
+    penetrations, rates and forces) and ``rhs(t, y)`` of the stacked ODE in
+    Python: the reference, which :class:`cosim.core._stacked.StackedRHS`
+    reproduces in compiled code.  ``active`` (bool per contact) is read at
+    each call."""
+    subs = system.subsystems
+    off = system.stacked()
+    nc = system.n_contacts
+    laws = [ln.contact.law for ln in system.links]
+    conns = system.connections
+
+    def split(y):
+        return [y[off[s]:off[s + 1]] for s in range(len(subs))]
+
+    def contact_state(y):
+        xs = split(y)
+        outs = [sub.outputs(0.0, xs[s]) for s, sub in enumerate(subs)]
+        if system.followers:      # surface points move with the point above them
+            system.update_followers(outs, xs)
+            outs = [sub.outputs(0.0, xs[s]) for s, sub in enumerate(subs)]
+        d, dd = system.penetrations(outs)
+        f = np.array([max(float(laws[c].force_active(d[c], dd[c])), 0.0) if active[c]
+                      else 0.0 for c in range(nc)])
+        if conns is not None:
+            f = _connection_forces(system, d, dd, f)
+        return xs, d, dd, f
+
+    def py_rhs(t, y):
+        xs, d, dd, f = contact_state(y)
+        parts = [sub.derivatives(t, xs[s], system.port_forces(s, f))
+                 for s, sub in enumerate(subs)]
+        if conns is None:
+            diss = [float(laws[c].dissipation_rate(f[c], d[c], dd[c])) for c in range(nc)]
+        else:
+            diss = system.dissipation_rates(f, d, dd)
+        led = np.sum([sub.ledger_rates(t, xs[s]) for s, sub in enumerate(subs)], axis=0)
+        work = -f[:nc] * dd[:nc]
+        if system.n_rows > nc:      # tangential rows: force on a along t, times de
+            np.add.at(work, system.row_contact[nc:], f[nc:] * dd[nc:])
+        return np.concatenate(parts + [f[:nc], diss, work, led])
+
+    return contact_state, py_rhs
+
+
+def _compiled_rhs(system, active):
+    """The stacked right-hand side in compiled code
+    (:class:`cosim.core._stacked.StackedRHS`), or None where the Python one
+    must run: a grasp or friction connection, a law the kernels do not
+    know, a subsystem without a compiled face (``COSIM_KERNEL=numpy``, a
+    kernel not built, a user's own subsystem), or a following contact on a
+    side that cannot move its port."""
+    from cosim.core.links import kernel_law
+    if system.connections is not None:
+        return None
+    faces = [getattr(sub, "compiled_face", lambda: None)() for sub in system.subsystems]
+    laws = [kernel_law(ln.contact.law) for ln in system.links]
+    if any(f is None for f in faces) or any(law is None for law in laws):
+        return None
+    if any(ln.follow and not faces[ln.sub_b].can_follow for ln in system.links):
+        return None
+    from cosim.core._stacked import StackedRHS
+    contacts = [(ln.sub_a, ln.port_a, ln.sub_b, ln.port_b, *ln.contact.normal,
+                 ln.contact.offset, *law, ln.follow) for ln, law in zip(system.links, laws)]
+    return StackedRHS(faces, system.stacked(), contacts, active)
+
+
 _METHODS = ("RK45", "RK23", "DOP853", "Radau", "BDF", "LSODA")
 
 
@@ -42,6 +110,13 @@ class Monolithic(CouplingScheme):
     branch switched, so no step straddles a kink.  Each contact's peak
     penetration is an event too.  The impulse and the dissipated energy of
     each contact are integrated as extra states.
+
+    The right-hand side and the event values are evaluated in compiled code
+    (:class:`cosim.core._stacked.StackedRHS`) where every subsystem hands out
+    a compiled face (:meth:`cosim.core.subsystem.Subsystem.compiled_face`) and
+    no contact has a grasp or friction connection; ``COSIM_KERNEL=numpy``
+    runs the Python one (:func:`_python_rhs`), the reference it is tested
+    against.  ``compiled`` tells which ran last.
     """
 
     name: ClassVar[str] = "monolithic"
@@ -53,6 +128,8 @@ class Monolithic(CouplingScheme):
         "max_step": Option(float, math.inf, lambda v: v > 0, "> 0 s"),
         "output_interval": Option(float, None, _pos, "> 0 s"),
     }
+    #: whether the last run evaluated its right-hand side in compiled code
+    compiled: bool = False
 
     def run(self, system, t_end, recorder):
         from scipy.integrate import solve_ivp
@@ -65,37 +142,21 @@ class Monolithic(CouplingScheme):
         active = np.zeros(nc, dtype=bool)
         conns = system.connections
 
-        def split(y):
-            return [y[off[s]:off[s + 1]] for s in range(len(subs))]
+        contact_state, py_rhs = _python_rhs(system, active)
 
-        def contact_state(y):
-            xs = split(y)
-            outs = [sub.outputs(0.0, xs[s]) for s, sub in enumerate(subs)]
-            if system.followers:      # surface points move with the point above them
-                system.update_followers(outs, xs)
-                outs = [sub.outputs(0.0, xs[s]) for s, sub in enumerate(subs)]
-            d, dd = system.penetrations(outs)
-            f = np.array([max(float(laws[c].force_active(d[c], dd[c])), 0.0) if active[c]
-                          else 0.0 for c in range(nc)])
-            if conns is not None:
-                f = _connection_forces(system, d, dd, f)
-            return xs, d, dd, f
-
-        def rhs(t, y):
-            xs, d, dd, f = contact_state(y)
-            parts = [sub.derivatives(t, xs[s], system.port_forces(s, f))
-                     for s, sub in enumerate(subs)]
-            if conns is None:
-                diss = [float(laws[c].dissipation_rate(f[c], d[c], dd[c])) for c in range(nc)]
-            else:
-                diss = system.dissipation_rates(f, d, dd)
-            led = np.sum([sub.ledger_rates(t, xs[s]) for s, sub in enumerate(subs)], axis=0)
-            work = -f[:nc] * dd[:nc]
-            if system.n_rows > nc:      # tangential rows: force on a along t, times de
-                np.add.at(work, system.row_contact[nc:], f[nc:] * dd[nc:])
-            return np.concatenate(parts + [f[:nc], diss, work, led])
+        # the same right-hand side and event values in compiled code where
+        # every side has a compiled face; the Python one stays the reference
+        stacked = _compiled_rhs(system, active)
+        self.compiled = stacked is not None
+        rhs = py_rhs if stacked is None else stacked.rhs
 
         def make_switch(c):
+            if stacked is not None:
+                def ev(t, y):
+                    return float(stacked.events(y)[c])
+                ev.terminal = True
+                return ev
+
             def ev(t, y):
                 _, d, dd, _ = contact_state(y)
                 if conns is not None and system.links[c].connection is not None:
@@ -113,6 +174,8 @@ class Monolithic(CouplingScheme):
 
         def make_peak(c):
             def ev(t, y):
+                if stacked is not None:
+                    return float(stacked.events(y)[nc + c])
                 _, d, dd, _ = contact_state(y)
                 return float(dd[c])
             ev.terminal = False
@@ -125,11 +188,10 @@ class Monolithic(CouplingScheme):
         dt_out = self.output_interval or t_end / 1000.0
 
         def record(t, yy):
-            xs = split(yy)
+            xs, d, dd, f = contact_state(yy)
             for s, sub in enumerate(subs):
                 sub.x[...] = xs[s]
                 sub.t = t
-            _, d, dd, f = contact_state(yy)
             recorder.record(t, d, dd, f, yy[n_x:n_x + nc], yy[n_x + nc:n_x + 2 * nc],
                             (yy[-2], yy[-1]), yy[n_x + 2 * nc:n_x + 3 * nc])
 
