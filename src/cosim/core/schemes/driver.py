@@ -82,6 +82,15 @@ def _side_refusal(sub) -> str | None:
     return f"{name} ({type(sub).__name__}) has no compiled kernel"
 
 
+def advance_replaced(scheme) -> bool:
+    """Whether the ``advance`` of ``scheme``'s class is not the explicit
+    schemes' own (a test or a user wrapped it): theirs must run, so only the
+    Python loop, which calls it, may run the scheme."""
+    advance = type(scheme).advance
+    return (getattr(advance, "__module__", None), getattr(advance, "__qualname__", None)) != (
+        "cosim.core.schemes.explicit", f"{type(scheme).__name__}.advance")
+
+
 def refusal(scheme, system) -> str | None:
     """Why this run takes the Python loop, or None when it takes the compiled one."""
     from cosim.core.schemes.explicit import GaussSeidel, Jacobi
@@ -91,9 +100,7 @@ def refusal(scheme, system) -> str | None:
         return "the numpy reference was asked for (`COSIM_KERNEL=numpy`)"
     if type(scheme) not in (Jacobi, GaussSeidel):
         return f"scheme `{scheme.name}` is not an explicit scheme the compiled loop knows"
-    advance = type(scheme).advance      # a test or a user may wrap it: theirs must run
-    if (getattr(advance, "__module__", None), getattr(advance, "__qualname__", None)) != (
-            "cosim.core.schemes.explicit", f"{type(scheme).__name__}.advance"):
+    if advance_replaced(scheme):
         return f"the `advance` of scheme `{scheme.name}` is replaced"
     if scheme.interface_tolerance:
         return "`interface_tolerance` (interface error control) is set"

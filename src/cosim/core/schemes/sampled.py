@@ -60,6 +60,9 @@ def refusal(scheme, system) -> str | None:
         return "the sampled path is switched off (`cosim.core.schemes.sampled.ENABLED`)"
     if not scheme.explicit:
         return f"scheme `{scheme.name}` iterates its macro steps"
+    from cosim.core.schemes.driver import advance_replaced
+    if advance_replaced(scheme):
+        return f"the `advance` of scheme `{scheme.name}` is replaced"
     if len(system.exchanged):
         names = sorted({system.row_names[r] for r in system.exchanged})
         return f"contacts {names} are exchanged between moving sides"
