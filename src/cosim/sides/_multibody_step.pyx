@@ -26,6 +26,8 @@ State layout (``y``, length ``2 n + 4 n_c + 2 + 6 n_p``)::
 from libc.math cimport sin, cos, pow, ceil, fabs, sqrt, isfinite
 from libc.string cimport memcpy
 
+from cosim.core._side_kernel cimport CompiledSide
+
 import numpy as np
 
 cdef enum:
@@ -128,7 +130,7 @@ cdef void _substep_peaks(double* peak, const double* d0, const double* v0, const
             peak[j] = p
 
 
-cdef class MultibodyStep:
+cdef class MultibodyStep(CompiledSide):
     """Compiled RK4 step of one :class:`cosim.sides.multibody.MultibodySubsystem`.
 
     Parameters
@@ -191,6 +193,10 @@ cdef class MultibodyStep:
     cdef double[::1] d_tab                     # tables: times then values, per drive
     #: number of right-hand-side evaluations so far
     cdef public long n_rhs
+    # the C face (cosim.core._side_kernel): RK4's largest and free sub-steps,
+    # and the stepping state
+    cdef double cs_max_step, cs_free_step
+    cdef double[::1] cs_y
 
     def __init__(self, parent, revolute, offset, axis, angle0, ancestors, mass, inertia, com,
                  rot_mass, gravity, port_body, port_local, contacts, effects=None):
@@ -262,6 +268,9 @@ cdef class MultibodyStep:
         self.pen = np.zeros((4, max(self.nc, 1)))
         self.n_rhs = 0
         self._set_effects(n, effects)
+        self.cs_nx, self.cs_naux, self.cs_nports = 2 * n, 4 * self.nc + 2, self.np_
+        self.cs_max_step, self.cs_free_step = 0.0, 0.0
+        self.cs_y = np.zeros(self.ny)
 
     def _set_effects(self, int n, effects):
         """Joint springs, dampers and drives from ``effects``: None, or
@@ -368,6 +377,52 @@ cdef class MultibodyStep:
         for i in range(na):
             av[i] = yv[nx + i]
         return y1[nx + na:].view(complex).reshape(3, self.np_)
+
+    # ------------------------------------------------------------ the C face
+    def configure_side(self, double max_step, double free_step):
+        """RK4's largest sub-step and its sub-step while no contact is closed
+        (``<= 0``: none) [s], for :meth:`side_step`."""
+        self.cs_max_step, self.cs_free_step = max_step, free_step
+
+    cdef int side_step(self, double t, double h, const double* u, int rows, double* x,
+                       double* aux, double* pm) except -1:
+        """:meth:`step` of a tree that hosts no contact, under the input
+        polynomial ``u`` ((rows, n_p, 2) row-major, in ``(time - t) / h``)."""
+        cdef int j, p, i, nx = self.nq, na = self.cs_naux
+        cdef double* y = &self.cs_y[0]
+        if self.nc or rows > MAX_COEF or self.cs_max_step <= 0.0:
+            raise ValueError("the C step takes a tree that hosts no contact, an input of at "
+                             f"most {MAX_COEF} coefficients, and `configure_side` first")
+        self.t0, self.h = t, h
+        self.u_len = rows
+        self.u_t0, self.u_h = t, h
+        for j in range(rows):
+            for p in range(self.np_):
+                self.u_coef[j, p, 0] = u[(j * self.np_ + p) * 2]
+                self.u_coef[j, p, 1] = u[(j * self.np_ + p) * 2 + 1]
+        for i in range(nx):
+            y[i] = x[i]
+        for i in range(na):
+            y[nx + i] = aux[i]
+        for i in range(nx + na, self.ny):
+            y[i] = 0.0
+        self._integrate(t, y, t + h, self.cs_max_step, self.cs_free_step, True, None, NULL)
+        for i in range(nx):
+            x[i] = y[i]
+        for i in range(na):
+            aux[i] = y[nx + i]
+        for i in range(6 * self.np_):
+            pm[i] = y[nx + na + i]
+        return 0
+
+    cdef void side_outputs(self, const double* x, double* pos, double* vel) noexcept:
+        """:meth:`outputs` into ``pos`` and ``vel`` ((n_p, 2) row-major)."""
+        cdef int p, n = self.n
+        self._frames(&x[0], &x[n])
+        for p in range(self.np_):
+            self._point(n + p, self.port_body[p], self.pl_re[p], self.pl_im[p], &x[n], False)
+            pos[2 * p], pos[2 * p + 1] = self.px_re[n + p], self.px_im[n + p]
+            vel[2 * p], vel[2 * p + 1] = self.pv_re[n + p], self.pv_im[n + p]
 
     # ------------------------------------------------------------ kinematics
     cdef void _frames(self, const double* q, const double* dq) noexcept nogil:
@@ -813,14 +868,27 @@ cdef class MultibodyStep:
         contact), each contact's largest penetration over the step is located
         on the accepted sub-steps' cubic Hermite and raised into it, as the
         reference's ``probe``/``peak`` do.  Returns the new state."""
+        ybuf = np.array(y0, dtype=float)
+        if ybuf.size != self.ny:
+            raise ValueError(f"`y0` must have {self.ny} entries, got {ybuf.size}")
+        cdef double[::1] yv = ybuf
+        cdef double[::1] pkv
+        cdef double* pk = NULL
+        if peak is not None and self.nc > 0:
+            pkv = peak
+            if pkv.shape[0] != self.nc:
+                raise ValueError(f"`peak` must have {self.nc} entries, got {pkv.shape[0]}")
+            pk = &pkv[0]
+        self._integrate(t0, &yv[0], t1, max_step, free_step, coarse, on_switch, pk)
+        return ybuf
+
+    cdef int _integrate(self, double t0, double* y, double t1, double max_step,
+                        double free_step, bint coarse, object on_switch,
+                        double* pk) except -1:
+        """:meth:`integrate` of ``y`` in place (``pk``: the peaks, or NULL)."""
         cdef int ny = self.ny, nc = self.nc, i, n, it, k
         cdef double t = t0, te, h, dt, step, ts
         cdef bint any_closed, any_flip, has_sw = nc > 0
-        ybuf = np.array(y0, dtype=float)
-        if ybuf.size != ny:
-            raise ValueError(f"`y0` must have {ny} entries, got {ybuf.size}")
-        cdef double[::1] yv = ybuf
-        cdef double* y = &yv[0]
         cdef double* k1 = &self.stage[0, 0]
         cdef double* y1 = &self.stage[5, 0]
         cdef double* k1n = &self.stage[6, 0]
@@ -828,13 +896,6 @@ cdef class MultibodyStep:
         cdef double* s1 = &self.sws[1, 0]
         cdef double* snew = &self.sws[3, 0]
         cdef char flipped[MAX_CONTACTS]
-        cdef double[::1] pkv
-        cdef double* pk = NULL
-        if peak is not None and nc > 0:
-            pkv = peak
-            if pkv.shape[0] != nc:
-                raise ValueError(f"`peak` must have {nc} entries, got {pkv.shape[0]}")
-            pk = &pkv[0]
         if self._rhs(t, y, k1, s0):
             self._fail(t)
         if pk != NULL:
@@ -904,7 +965,7 @@ cdef class MultibodyStep:
             memcpy(y, y1, ny * sizeof(double))
             memcpy(k1, k1n, ny * sizeof(double))
             i += 1
-        return ybuf
+        return 0
 
     # ------------------------------------------------------- Python faces
     def rhs(self, double t, y):

@@ -286,6 +286,29 @@ class MultibodySubsystem(Subsystem):
         ``"numpy"`` when the reference does."""
         return "compiled" if self._compiled() is not None and self._kernel_steps else "numpy"
 
+    def compiled_side(self):
+        """The compiled kernel as a :class:`cosim.core._side_kernel.CompiledSide`,
+        for a scheme that steps this side from compiled code, or None where
+        the kernel does not step it, where its integrator is not RK4, or where
+        a contact is embedded here (its switches call back into Python)."""
+        kernel = self._compiled_step(None)
+        integ = self.integrator
+        if kernel is None or self._embedded or type(integ) is not RK4:
+            return None
+        kernel.configure_side(integ.max_step, integ.free_step or 0.0)
+        return kernel
+
+    def took_compiled_step(self, t: float, h: float, port_moments) -> None:
+        """Record the step over ``[t, t + h]`` that a scheme took through
+        :meth:`compiled_side` (the state and quadratures are advanced in
+        place): what :meth:`step` records besides them."""
+        self._t0, self._h = t, h
+        self.switch_log = []
+        self.impact_log = []
+        self.port_moments = port_moments
+        self.t = t + h
+        self.n_steps += 1
+
     def _probe(self, t, y):
         """Penetrations and rates of the embedded contacts at ``(t, y)``: those
         the right-hand side just found there, else evaluated."""

@@ -7,7 +7,10 @@ from typing import ClassVar
 
 import numpy as np
 
+from couplers.linear_laws import KelvinVoigtLaw, LinearLaw
+
 from cosim.core.hermite import hermite_coefficients
+from cosim.core.subsystem import RigidReference
 from .base import RELATIVE_RULE, CoSimulationScheme, CouplingError, Option, _pos, _relative
 
 __all__ = ["Implicit", "Aitken", "IQNILS", "ACCELERATIONS"]
@@ -239,6 +242,13 @@ class Implicit(CoSimulationScheme):
     #: options that only IQN-ILS reads
     _IQN_OPTIONS: ClassVar[tuple] = ("reuse", "filter_tolerance")
 
+    #: iterate in compiled code (:mod:`cosim.core.schemes._implicit_step`)
+    #: where the system allows it (:meth:`_compiled_iterations`); False makes
+    #: the Python reference iterate whatever the system (the tests compare
+    #: the two)
+    compiled_iterations: ClassVar[bool] = True
+    _kernel = None
+
     def __init__(self, **opts):
         super().__init__(**opts)
         ignored = sorted(k for k in self._IQN_OPTIONS if k in opts)
@@ -251,9 +261,96 @@ class Implicit(CoSimulationScheme):
         if self.acceleration == "iqn_ils":
             kw.update({k: getattr(self, k) for k in self._IQN_OPTIONS})
         self._accel = ACCELERATIONS[self.acceleration](**kw)
+        self._kernel = self._compiled_iterations(system) if self.compiled_iterations else None
+        self._kernel_key = None
         return super().run(system, t_end, recorder)
 
+    # ------------------------------------------------- compiled iterations
+    def _compiled_iterations(self, system):
+        """The compiled iterations of this system
+        (:class:`cosim.core.schemes._implicit_step.ImplicitStep`), or None
+        where the Python reference iterates: the kernel not built, a contact
+        hosted by a moving side or following a point, a moving side that
+        offers no compiled step without Python (``compiled_side``: the numpy
+        reference chosen, a contact embedded in it, another integrator), a
+        rigid side other than :class:`RigidReference`, or a coupler contact
+        whose law is not linear or Kelvin-Voigt, or with friction."""
+        if system.hosted or system._followers or not len(system.coupler_rows):
+            return None
+        try:
+            from cosim.core.schemes import _implicit_step
+        except ImportError:             # not built: the reference iterates
+            return None
+        cs = system.connections
+        if cs is not None and cs.mode.dtype != np.int64:
+            return None
+        contacts = []
+        for c in system.coupler:
+            ln = system.links[c]
+            law, conn = ln.contact.law, ln.connection
+            if type(law) not in (LinearLaw, KelvinVoigtLaw) or (
+                    conn is not None and conn.friction is not None):
+                return None
+            g = None if conn is None else conn.grasp
+            contacts.append((int(c), int(system._row_a[c]), int(system._row_b[c]),
+                             system._normals[c], system._offsets[c],
+                             _implicit_step.LAW_KINDS[law.name], law.contact_stiffness,
+                             getattr(law, "contact_damping", 0.0), int(system.tangent_row[c]),
+                             None if g is None else (g.stiffness, g.damping,
+                                                     g.tangential_stiffness,
+                                                     g.tangential_damping)))
+        first = np.cumsum([0] + [sub.n_ports for sub in system.subsystems])
+        sides, moving = [], self._moving(system)
+        for s, sub in enumerate(system.subsystems):
+            if s not in moving:
+                if type(sub) is not RigidReference:
+                    return None
+                continue
+            get = getattr(sub, "compiled_side", None)
+            kernel = None if get is None else get()
+            if kernel is None:
+                return None
+            sides.append((kernel, sub.x, sub.aux, system._Gc[s], int(first[s])))
+        outs = system.outputs()
+        opts = {"max_iterations": self.max_iterations, "tolerance": self.tolerance,
+                "force_tolerance": self.force_tolerance, "acceleration": self.acceleration,
+                "relaxation": self.relaxation, "reuse": self.reuse,
+                "filter_tolerance": self.filter_tolerance, "roundoff": _ROUNDOFF}
+        self._kernel_sides = list(moving)
+        return _implicit_step.ImplicitStep(
+            sides, np.concatenate([o[0] for o in outs]), np.concatenate([o[1] for o in outs]),
+            contacts, system.coupler_rows, system.n_rows,
+            None if cs is None else cs.mode, None if cs is None else cs.anchor, opts)
+
+    def _advance_compiled(self, system, t, h, ratio):
+        """:meth:`advance` by the compiled iterations: one call."""
+        kernel, coupler = self._kernel, system.coupler_rows
+        f_n = self._f
+        guess = np.sum(self._extrapolated(ratio), axis=0)
+        # IQNILS.start: the columns of earlier steps apply at the same step
+        # length and the same closed coupler contacts
+        key = (h, tuple(f_n[coupler] > 0))
+        old = self._kernel_key
+        keep = old is not None and math.isclose(h, old[0], rel_tol=1e-9) and key[1] == old[1]
+        self._kernel_key = key
+        try:
+            it, converged = kernel.advance(t, h, f_n, guess, keep)
+        except Exception:
+            if kernel.failed_side >= 0:     # as Subsystem.step marks a side whose step raised
+                system.subsystems[self._kernel_sides[kernel.failed_side]].status = "failed"
+            raise
+        coeffs = np.stack([f_n, guess - f_n])
+        for i, s in enumerate(self._kernel_sides):
+            system.subsystems[s].took_compiled_step(t, h, kernel.port_moments(i))
+            system._applied[s] = (coeffs, system._Gc[s])     # as step_input keeps them
+        self.n_iterations += it
+        if converged:
+            return h * (f_n + 0.5 * (guess - f_n))
+        return self._not_converged(system, t, h, f_n, guess, kernel.residual, coupler, [])
+
     def advance(self, system, t, h, ratio):
+        if self._kernel is not None:
+            return self._advance_compiled(system, t, h, ratio)
         coupler = system.coupler_rows      # normal and tangential rows exchanged
         hosted = list(system.hosted)
         hosts = {system.hosted[c].host for c in hosted}
@@ -318,6 +415,11 @@ class Implicit(CoSimulationScheme):
             guess[coupler] = z[:nc]
             motion = self._unscaled(z[nc:], k, h)
         self.n_iterations += self.max_iterations
+        return self._not_converged(system, t, h, f_n, guess, r, coupler, hosted)
+
+    def _not_converged(self, system, t, h, f_n, guess, r, coupler, hosted):
+        """The step did not converge: retried shorter (flagged for the macro
+        loop) where a long step may be, a :class:`CouplingError` otherwise."""
         if self.contact_step is not None and h > self.contact_step * (1 + 1e-9):
             # a long step over a contact that touches and leaves inside it (a
             # vibrating side): no fixed point to find; the step is retried shorter
