@@ -344,20 +344,11 @@ class StructureSubsystem(ClosedFormContacts, Subsystem):
         """The compiled kernel as a :class:`cosim.core._side_kernel.CompiledSide`,
         for a scheme that steps this side from compiled code, or None where
         the kernel does not step it exactly with no Python call: a contact
-        embedded here, damping, or a scheme of ``fem.STRUCTURAL_INTEGRATORS``."""
+        embedded here, damping, or a scheme of ``fem.STRUCTURAL_INTEGRATORS``.
+        The scheme records each such step with :meth:`took_compiled_step`."""
         if self._embedded or self._ts is not None or np.any(self.modal_damping):
             return None
         return self._compiled_step(None)
-
-    def took_compiled_step(self, t: float, h: float, port_moments) -> None:
-        """Record the step over ``[t, t + h]`` that a scheme took through
-        :meth:`compiled_side` (the state is advanced in place): what
-        :meth:`step` records besides it."""
-        self._t0, self._h = t, h
-        self.switch_log = []
-        self.port_moments = port_moments
-        self.t = t + h
-        self.n_steps += 1
 
     #: whether a stalled compiled step was said (see :meth:`_step_impl`)
     _stall_said = False

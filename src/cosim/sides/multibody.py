@@ -15,7 +15,7 @@ from multibody import TreeModel
 from cosim.errors import SimulationError
 from cosim.core.ode import INTEGRATORS, RK4, TimeStepper
 from cosim.sides.kernel import compiled_module
-from cosim.sides.multibody_kernel import kernel_effects, kernel_law
+from cosim.sides.multibody_kernel import CompiledFace, kernel_effects, kernel_law
 from cosim.core.subsystem import (DISSIPATED, IMPULSE, MOMENT, QUADRATURES, WORK, EmbeddedContact,
                         StepInput, Subsystem)
 
@@ -29,7 +29,7 @@ __all__ = ["MultibodySubsystem", "kernel_law"]
 KERNEL_INTEGRATORS = tuple(INTEGRATORS.values())
 
 
-class MultibodySubsystem(Subsystem):
+class MultibodySubsystem(CompiledFace, Subsystem):
     """A :class:`multibody.TreeModel` with state ``x = [q, dq]``.
 
     Parameters
@@ -285,29 +285,6 @@ class MultibodySubsystem(Subsystem):
         """``"compiled"`` when the compiled kernel takes this side's steps,
         ``"numpy"`` when the reference does."""
         return "compiled" if self._compiled() is not None and self._kernel_steps else "numpy"
-
-    def compiled_side(self):
-        """The compiled kernel as a :class:`cosim.core._side_kernel.CompiledSide`,
-        for a scheme that steps this side from compiled code, or None where
-        the kernel does not step it, where its integrator is not RK4, or where
-        a contact is embedded here (its switches call back into Python)."""
-        kernel = self._compiled_step(None)
-        integ = self.integrator
-        if kernel is None or self._embedded or type(integ) is not RK4:
-            return None
-        kernel.configure_side(integ.max_step, integ.free_step or 0.0)
-        return kernel
-
-    def took_compiled_step(self, t: float, h: float, port_moments) -> None:
-        """Record the step over ``[t, t + h]`` that a scheme took through
-        :meth:`compiled_side` (the state and quadratures are advanced in
-        place): what :meth:`step` records besides them."""
-        self._t0, self._h = t, h
-        self.switch_log = []
-        self.impact_log = []
-        self.port_moments = port_moments
-        self.t = t + h
-        self.n_steps += 1
 
     def _probe(self, t, y):
         """Penetrations and rates of the embedded contacts at ``(t, y)``: those

@@ -1,7 +1,8 @@
 """The contact laws and joint effects of a multibody side as the compiled
 kernel ``cosim.sides._multibody_step`` takes them: plain tuples of kinds and
 parameters, built once when the kernel is built, or None where the kernel
-does not know the law or effect (the numpy reference then steps)."""
+does not know the law or effect (the numpy reference then steps); and the
+side's C face for a scheme that steps it from compiled code."""
 from __future__ import annotations
 
 from typing import TYPE_CHECKING
@@ -9,10 +10,12 @@ from typing import TYPE_CHECKING
 from couplers.laws import (FloresLaw, HertzLaw, HuntCrossleyLaw, KelvinVoigtLaw,
                            LankaraniNikraveshLaw, LinearLaw, RigidLaw)
 
+from cosim.core.ode import RK4
+
 if TYPE_CHECKING:
     from multibody import JointEffects
 
-__all__ = ["kernel_law", "kernel_effects"]
+__all__ = ["kernel_law", "kernel_effects", "CompiledFace"]
 
 
 def kernel_law(law):
@@ -61,3 +64,20 @@ def kernel_effects(effects: JointEffects | None):
             raise TypeError(f"drive {type(d).__name__}")
         drives.append((d.joint, kind, gains, ref_kind, ref_par, ts, vs))
     return effects.stiffness, effects.rest, effects.damping, drives
+
+
+class CompiledFace:
+    """:meth:`compiled_side` of :class:`cosim.sides.multibody.MultibodySubsystem`."""
+
+    def compiled_side(self):
+        """The compiled kernel as a :class:`cosim.core._side_kernel.CompiledSide`,
+        for a scheme that steps this side from compiled code, or None where
+        the kernel does not step it, where its integrator is not RK4, or where
+        a contact is embedded here (its switches call back into Python).  The
+        scheme records each such step with :meth:`took_compiled_step`."""
+        kernel = self._compiled_step(None)
+        integ = self.integrator
+        if kernel is None or self._embedded or type(integ) is not RK4:
+            return None
+        kernel.configure_side(integ.max_step, integ.free_step or 0.0)
+        return kernel

@@ -128,6 +128,207 @@ cdef void _solve_r(const double* A, const double* beta, int n, int m, const doub
         alpha[k] = s / beta[k]
 
 
+
+cdef class Acceleration:
+    """The next guess of a fixed-point iteration on ``n`` unknowns:
+    :class:`cosim.core.schemes.implicit.Aitken` (``kind = "aitken"``) or
+    :class:`~cosim.core.schemes.implicit.IQNILS` (``"iqn_ils"``, with
+    ``reuse`` and ``filter_tolerance``), at most ``max_columns`` iterations
+    a step.  Its Python face (:meth:`start`, :meth:`update`, :meth:`finish`)
+    is the reference classes' (``start`` takes whether the columns of
+    earlier steps still apply, which :meth:`IQNILS.start` decides from its
+    key), for the tests to compare them; :class:`ImplicitStep` calls its C
+    face."""
+
+    cdef int kind, n, reuse, max_cols
+    cdef double relax, filt, omega
+    cdef bint have_prev
+    cdef double[::1] r_prev, hx_prev
+    # this step's columns in the order they came; the kept steps' blocks,
+    # newest first, each newest column first (IQNILS._old)
+    cdef double[:, ::1] cur_v, cur_w
+    cdef int n_cur
+    cdef double[:, :, ::1] old_v, old_w
+    cdef long[::1] old_n
+    cdef int n_old
+    # the columns in use, newest first: block (-1 this step's) and index
+    cdef long[::1] col_blk, col_idx
+    cdef double[::1] qr_a, qr_beta, qr_b, qr_alpha
+
+    def __init__(self, str kind, int n, double relaxation, int reuse=0,
+                 double filter_tolerance=1e-6, int max_columns=50):
+        if kind not in ACCELERATION_KINDS:
+            raise ValueError(f"`kind` must be one of {sorted(ACCELERATION_KINDS)}, got {kind!r}")
+        self.kind = ACCELERATION_KINDS[kind]
+        self.n = n
+        self.relax = relaxation
+        self.reuse = reuse if self.kind == IQN_ILS else 0
+        self.filt = filter_tolerance
+        self.max_cols = max(max_columns, 1)
+        nq = max(n, 1)
+        self.r_prev = np.zeros(nq)
+        self.hx_prev = np.zeros(nq)
+        self.cur_v = np.zeros((self.max_cols, nq))
+        self.cur_w = np.zeros((self.max_cols, nq))
+        self.old_v = np.zeros((max(self.reuse, 1), self.max_cols, nq))
+        self.old_w = np.zeros((max(self.reuse, 1), self.max_cols, nq))
+        self.old_n = np.zeros(max(self.reuse, 1), dtype=np.int_)
+        self.n_cur = self.n_old = 0
+        ncol = self.max_cols * (self.reuse + 1)
+        self.col_blk = np.zeros(ncol, dtype=np.int_)
+        self.col_idx = np.zeros(ncol, dtype=np.int_)
+        self.qr_a = np.zeros(nq * nq)
+        self.qr_beta = np.zeros(nq)
+        self.qr_b = np.zeros(nq)
+        self.qr_alpha = np.zeros(nq)
+        self.c_start(False)
+
+    # ------------------------------------------------------ Python face
+    def start(self, bint keep_old):
+        """Begin a macro step; ``keep_old``: the kept columns still apply."""
+        self.c_start(keep_old)
+
+    def update(self, z, hz, r):
+        """The next guess from the guess ``z``, its image ``hz`` and the
+        residual ``r = hz - z`` (a new array)."""
+        out = np.array(z, dtype=float)
+        cdef double[::1] zv = out
+        cdef double[::1] hv = np.ascontiguousarray(hz, dtype=float)
+        cdef double[::1] rv = np.ascontiguousarray(r, dtype=float)
+        if zv.shape[0] != self.n or hv.shape[0] != self.n or rv.shape[0] != self.n:
+            raise ValueError(f"`z`, `hz` and `r` must have {self.n} entries")
+        if self.kind == IQN_ILS and self.have_prev and self.n_cur == self.max_cols:
+            raise ValueError(f"more than {self.max_cols} columns in one step")
+        if self.n:
+            self.c_update(&zv[0], &hv[0], &rv[0])
+        return out
+
+    def finish(self):
+        """The macro step converged."""
+        self.c_finish()
+
+    # ----------------------------------------------------------- C face
+    cdef void c_start(self, bint keep_old) noexcept:
+        self.omega = self.relax
+        self.have_prev = False
+        self.n_cur = 0
+        if not keep_old:
+            self.n_old = 0
+
+    cdef void c_finish(self) noexcept:
+        """IQN-ILS: keep this step's columns (newest first) for the next steps."""
+        cdef int b, j, i, k
+        if self.kind != IQN_ILS or not self.reuse or not self.n_cur:
+            return
+        k = self.n_old if self.n_old < self.reuse else self.reuse - 1
+        for b in range(k, 0, -1):           # shift the kept blocks back by one
+            self.old_n[b] = self.old_n[b - 1]
+            for j in range(self.old_n[b]):
+                for i in range(self.n):
+                    self.old_v[b, j, i] = self.old_v[b - 1, j, i]
+                    self.old_w[b, j, i] = self.old_w[b - 1, j, i]
+        self.old_n[0] = self.n_cur
+        for j in range(self.n_cur):
+            for i in range(self.n):
+                self.old_v[0, j, i] = self.cur_v[self.n_cur - 1 - j, i]
+                self.old_w[0, j, i] = self.cur_w[self.n_cur - 1 - j, i]
+        self.n_old = k + 1
+
+    cdef void c_update(self, double* z, const double* hz, const double* r) noexcept:
+        """The next guess into ``z`` (in: the guess), from its image ``hz``
+        and the residual ``r``."""
+        cdef int i
+        cdef double dot_rd, denom, dr
+        if self.kind == AITKEN:
+            if self.have_prev:
+                denom = 0.0
+                dot_rd = 0.0
+                for i in range(self.n):
+                    dr = r[i] - self.r_prev[i]
+                    denom += dr * dr
+                    dot_rd += self.r_prev[i] * dr
+                if denom > 0:
+                    self.omega = -self.omega * dot_rd / denom
+            for i in range(self.n):
+                self.r_prev[i] = r[i]
+                z[i] = z[i] + self.omega * r[i]
+            self.have_prev = True
+            return
+        if self.have_prev:
+            for i in range(self.n):
+                self.cur_v[self.n_cur, i] = r[i] - self.r_prev[i]
+                self.cur_w[self.n_cur, i] = hz[i] - self.hx_prev[i]
+            self.n_cur += 1
+        for i in range(self.n):
+            self.r_prev[i] = r[i]
+            self.hx_prev[i] = hz[i]
+        self.have_prev = True
+        self._iqn(z, hz, r)
+
+    cdef double* _col(self, int j, bint w) noexcept:
+        """Column ``j`` of the combined ``V`` (or ``W``), newest first."""
+        cdef int b = self.col_blk[j], k = self.col_idx[j]
+        if b < 0:
+            return &self.cur_w[k, 0] if w else &self.cur_v[k, 0]
+        return &self.old_w[b, k, 0] if w else &self.old_v[b, k, 0]
+
+    cdef void _iqn(self, double* z, const double* hz, const double* r) noexcept:
+        """:meth:`IQNILS.update` after the new column: the QR filter
+        (:meth:`IQNILS._columns`), then the least-squares solve."""
+        cdef int n = self.n, N = 0, m = 0, j, i, jj, bad
+        cdef double* A = &self.qr_a[0]
+        cdef double* beta = &self.qr_beta[0]
+        cdef double* col
+        cdef double norm, s
+        for j in range(self.n_cur - 1, -1, -1):
+            self.col_blk[N] = -1
+            self.col_idx[N] = j
+            N += 1
+        for i in range(self.n_old):
+            for j in range(self.old_n[i]):
+                self.col_blk[N] = i
+                self.col_idx[N] = j
+                N += 1
+        while N > 0:
+            m = N if N < n else n
+            for j in range(m):
+                col = self._col(j, False)
+                for i in range(n):
+                    A[j * n + i] = col[i]
+            _householder(A, n, m, beta)
+            bad = -1
+            for j in range(m):
+                col = self._col(j, False)
+                s = 0.0
+                for i in range(n):
+                    s += col[i] * col[i]
+                norm = sqrt(s)
+                # not (>=) also drops zero or non-finite columns
+                if not (fabs(beta[j]) >= self.filt * norm):
+                    bad = j
+                    break
+            if bad < 0:
+                break
+            for jj in range(bad, N - 1):
+                self.col_blk[jj] = self.col_blk[jj + 1]
+                self.col_idx[jj] = self.col_idx[jj + 1]
+            N -= 1
+        if N == 0:
+            for i in range(n):
+                z[i] = z[i] + self.relax * r[i]
+            return
+        # A holds the QR of the kept head V[:, :m]: alpha = R^-1 Q^T (-r)
+        for i in range(n):
+            self.qr_b[i] = -r[i]
+        _apply(A, beta, n, m, &self.qr_b[0])
+        _solve_r(A, beta, n, m, &self.qr_b[0], &self.qr_alpha[0])
+        for i in range(n):
+            s = 0.0
+            for j in range(m):
+                s += self._col(j, True)[i] * self.qr_alpha[j]
+            z[i] = hz[i] + s
+
+
 cdef class ImplicitStep:
     """The compiled iterations of :class:`cosim.core.schemes.implicit.Implicit`
     on one system (built by :meth:`Implicit._compiled_iterations`).
@@ -170,17 +371,7 @@ cdef class ImplicitStep:
     cdef long[::1] rows
     cdef double ftol, tol, roundoff
     cdef double[::1] f, coef1, z, hz, r
-    cdef int accel, reuse
-    cdef double relax, filt, omega
-    cdef bint have_prev
-    cdef double[::1] r_prev, hx_prev
-    cdef double[:, ::1] cur_v, cur_w
-    cdef int n_cur
-    cdef double[:, :, ::1] old_v, old_w
-    cdef long[::1] old_n
-    cdef int n_old
-    cdef double[::1] qr_a, qr_beta, qr_b, qr_alpha
-    cdef long[::1] col_blk, col_idx
+    cdef Acceleration acc
     #: the side whose step raised (its index among ``sides``), -1 if none
     cdef public int failed_side
 
@@ -243,30 +434,14 @@ cdef class ImplicitStep:
         self.tol = options["tolerance"]
         self.ftol = options["force_tolerance"]
         self.roundoff = options["roundoff"]
-        self.accel = ACCELERATION_KINDS[options["acceleration"]]
-        self.relax = options["relaxation"]
-        self.reuse = options.get("reuse", 0) if self.accel == IQN_ILS else 0
-        self.filt = options.get("filter_tolerance", 1e-6)
+        self.acc = Acceleration(options["acceleration"], self.nq, options["relaxation"],
+                                options.get("reuse", 0), options.get("filter_tolerance", 1e-6),
+                                self.max_it)
         self.f = np.zeros(max(n_rows, 1))
         self.coef1 = np.zeros(max(n_rows, 1))
         self.z = np.zeros(nq)
         self.hz = np.zeros(nq)
         self.r = np.zeros(nq)
-        self.r_prev = np.zeros(nq)
-        self.hx_prev = np.zeros(nq)
-        self.cur_v = np.zeros((self.max_it, nq))
-        self.cur_w = np.zeros((self.max_it, nq))
-        self.old_v = np.zeros((max(self.reuse, 1), self.max_it, nq))
-        self.old_w = np.zeros((max(self.reuse, 1), self.max_it, nq))
-        self.old_n = np.zeros(max(self.reuse, 1), dtype=np.int_)
-        self.n_cur = self.n_old = 0
-        ncol = self.max_it * (max(self.reuse, 0) + 1)
-        self.col_blk = np.zeros(ncol, dtype=np.int_)
-        self.col_idx = np.zeros(ncol, dtype=np.int_)
-        self.qr_a = np.zeros(nq * nq)
-        self.qr_beta = np.zeros(nq)
-        self.qr_b = np.zeros(nq)
-        self.qr_alpha = np.zeros(nq)
         self.failed_side = -1
 
     # ------------------------------------------------------------ results
@@ -298,7 +473,7 @@ cdef class ImplicitStep:
                 self.saved_x[s, i] = xv[i]
             for i in range(self.s_na[s]):
                 self.saved_aux[s, i] = av[i]
-        self._start(keep_old)
+        self.acc.c_start(keep_old)
         for it in range(1, self.max_it + 1):
             if it > 1:
                 for s in range(self.ns):
@@ -311,9 +486,9 @@ cdef class ImplicitStep:
             self._pass(t, h, f_n, guess)
             self._forces()
             if self._residual(guess):
-                self._finish()
+                self.acc.c_finish()
                 return it, True
-            self._update()
+            self.acc.c_update(&self.z[0], &self.hz[0], &self.r[0])
             for i in range(self.nq):
                 guess[self.rows[i]] = self.z[i]
         return self.max_it, False
@@ -400,124 +575,3 @@ cdef class ImplicitStep:
             if not (fabs(self.r[i]) <= self.ftol + self.tol * scale + fl):
                 ok = False
         return ok
-
-    # ------------------------------------------------------ accelerations
-    cdef void _start(self, bint keep_old) noexcept:
-        self.omega = self.relax
-        self.have_prev = False
-        self.n_cur = 0
-        if not keep_old:
-            self.n_old = 0
-
-    cdef void _finish(self) noexcept:
-        """IQN-ILS: keep this step's columns (newest first) for the next steps."""
-        cdef int b, j, i, k
-        if self.accel != IQN_ILS or not self.reuse or not self.n_cur:
-            return
-        k = self.n_old if self.n_old < self.reuse else self.reuse - 1
-        for b in range(k, 0, -1):           # shift the kept blocks back by one
-            self.old_n[b] = self.old_n[b - 1]
-            for j in range(self.old_n[b]):
-                for i in range(self.nq):
-                    self.old_v[b, j, i] = self.old_v[b - 1, j, i]
-                    self.old_w[b, j, i] = self.old_w[b - 1, j, i]
-        self.old_n[0] = self.n_cur
-        for j in range(self.n_cur):
-            for i in range(self.nq):
-                self.old_v[0, j, i] = self.cur_v[self.n_cur - 1 - j, i]
-                self.old_w[0, j, i] = self.cur_w[self.n_cur - 1 - j, i]
-        self.n_old = k + 1
-
-    cdef void _update(self) noexcept:
-        """The next guess into ``z`` (:meth:`Aitken.update`, :meth:`IQNILS.update`)."""
-        cdef int i
-        cdef double dot_rd, denom, dr
-        if self.accel == AITKEN:
-            if self.have_prev:
-                denom = 0.0
-                dot_rd = 0.0
-                for i in range(self.nq):
-                    dr = self.r[i] - self.r_prev[i]
-                    denom += dr * dr
-                    dot_rd += self.r_prev[i] * dr
-                if denom > 0:
-                    self.omega = -self.omega * dot_rd / denom
-            for i in range(self.nq):
-                self.r_prev[i] = self.r[i]
-                self.z[i] = self.z[i] + self.omega * self.r[i]
-            self.have_prev = True
-            return
-        if self.have_prev:
-            for i in range(self.nq):
-                self.cur_v[self.n_cur, i] = self.r[i] - self.r_prev[i]
-                self.cur_w[self.n_cur, i] = self.hz[i] - self.hx_prev[i]
-            self.n_cur += 1
-        for i in range(self.nq):
-            self.r_prev[i] = self.r[i]
-            self.hx_prev[i] = self.hz[i]
-        self.have_prev = True
-        self._iqn()
-
-    cdef double* _col(self, int j, bint w) noexcept:
-        """Column ``j`` of the combined ``V`` (or ``W``), newest first."""
-        cdef int b = self.col_blk[j], k = self.col_idx[j]
-        if b < 0:
-            return &self.cur_w[k, 0] if w else &self.cur_v[k, 0]
-        return &self.old_w[b, k, 0] if w else &self.old_v[b, k, 0]
-
-    cdef void _iqn(self) noexcept:
-        """:meth:`IQNILS.update` after the new column: the QR filter, then
-        the least-squares solve."""
-        cdef int n = self.nq, N = 0, m, j, i, jj, bad
-        cdef double* A = &self.qr_a[0]
-        cdef double* beta = &self.qr_beta[0]
-        cdef double* col
-        cdef double norm, s
-        for j in range(self.n_cur - 1, -1, -1):
-            self.col_blk[N] = -1
-            self.col_idx[N] = j
-            N += 1
-        for i in range(self.n_old):
-            for j in range(self.old_n[i]):
-                self.col_blk[N] = i
-                self.col_idx[N] = j
-                N += 1
-        m = 0
-        while N > 0:
-            m = N if N < n else n
-            for j in range(m):
-                col = self._col(j, False)
-                for i in range(n):
-                    A[j * n + i] = col[i]
-            _householder(A, n, m, beta)
-            bad = -1
-            for j in range(m):
-                col = self._col(j, False)
-                s = 0.0
-                for i in range(n):
-                    s += col[i] * col[i]
-                norm = sqrt(s)
-                # not (>=) also drops zero or non-finite columns
-                if not (fabs(beta[j]) >= self.filt * norm):
-                    bad = j
-                    break
-            if bad < 0:
-                break
-            for jj in range(bad, N - 1):
-                self.col_blk[jj] = self.col_blk[jj + 1]
-                self.col_idx[jj] = self.col_idx[jj + 1]
-            N -= 1
-        if N == 0:
-            for i in range(n):
-                self.z[i] = self.z[i] + self.relax * self.r[i]
-            return
-        # A holds the QR of the kept head V[:, :m]: alpha = R^-1 Q^T (-r)
-        for i in range(n):
-            self.qr_b[i] = -self.r[i]
-        _apply(A, beta, n, m, &self.qr_b[0])
-        _solve_r(A, beta, n, m, &self.qr_b[0], &self.qr_alpha[0])
-        for i in range(n):
-            s = 0.0
-            for j in range(m):
-                s += self._col(j, True)[i] * self.qr_alpha[j]
-            self.z[i] = self.hz[i] + s
