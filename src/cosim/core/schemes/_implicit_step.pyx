@@ -303,8 +303,8 @@ cdef class Acceleration:
                 for i in range(n):
                     s += col[i] * col[i]
                 norm = sqrt(s)
-                # not (>=) also drops zero or non-finite columns
-                if not (fabs(beta[j]) >= self.filt * norm):
+                # not (>=) also drops non-finite columns, norm == 0 zero ones
+                if not (fabs(beta[j]) >= self.filt * norm) or norm == 0.0:
                     bad = j
                     break
             if bad < 0:

@@ -160,8 +160,10 @@ class IQNILS:
             head = V[:, :n]
             R = np.linalg.qr(head, mode="r")
             norms = np.linalg.norm(head, axis=0)
-            # not (>=) also drops zero or non-finite columns
-            bad = np.flatnonzero(~(np.abs(np.diag(R)) >= self.filter_tolerance * norms))
+            # not (>=) also drops non-finite columns, and norms == 0 zero
+            # ones (a residual repeated exactly), which 0 >= 0 would keep
+            bad = np.flatnonzero(~(np.abs(np.diag(R)) >= self.filter_tolerance * norms)
+                                 | (norms == 0))
             if not bad.size:
                 break
             V, W = np.delete(V, bad[0], axis=1), np.delete(W, bad[0], axis=1)
