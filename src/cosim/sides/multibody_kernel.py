@@ -77,7 +77,8 @@ class CompiledFace:
         scheme records each such step with :meth:`took_compiled_step`."""
         kernel = self._compiled_step(None)
         integ = self.integrator
-        if kernel is None or self._embedded or type(integ) is not RK4:
+        if (kernel is None or self._embedded or type(integ) is not RK4
+                or not hasattr(kernel, "configure_side")):     # built before the C face
             return None
         kernel.configure_side(integ.max_step, integ.free_step or 0.0)
         return kernel
