@@ -9,9 +9,8 @@ from setuptools import Extension, setup
 from setuptools.command.build_ext import build_ext
 
 KERNELS = [
-    # the C face of a side's step, which the sides' kernels implement and the
-    # implicit scheme's compiled iterations call
-    Extension("cosim.core._side_kernel", ["src/cosim/core/_side_kernel.pyx"]),
+    # the implicit scheme's iterations, which call the sides' kernels through
+    # the C face they fill in (cosim/core/_side_face.pxd, declarations only)
     Extension("cosim.core.schemes._implicit_step", ["src/cosim/core/schemes/_implicit_step.pyx"]),
     Extension("cosim.sides._multibody_step", ["src/cosim/sides/_multibody_step.pyx"]),
     Extension("cosim.sides._structure_step", ["src/cosim/sides/_structure_step.pyx"]),
@@ -43,7 +42,7 @@ class BuildKernels(build_ext):
         super().build_extensions()
 
 
-# include_path: the kernels cimport cosim.core._side_kernel from the sources
+# include_path: the kernels cimport cosim.core._side_face from the sources
 setup(ext_modules=cythonize(KERNELS, language_level=3, include_path=["src"],
                             compiler_directives={"embedsignature": True}),
       cmdclass={"build_ext": BuildKernels})

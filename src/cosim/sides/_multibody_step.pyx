@@ -26,7 +26,9 @@ State layout (``y``, length ``2 n + 4 n_c + 2 + 6 n_p``)::
 from libc.math cimport sin, cos, pow, ceil, fabs, sqrt, isfinite
 from libc.string cimport memcpy
 
-from cosim.core._side_kernel cimport CompiledSide
+from cpython.pycapsule cimport PyCapsule_New
+
+from cosim.core._side_face cimport COSIM_SIDE_FACE, SideFace
 
 import numpy as np
 
@@ -130,7 +132,7 @@ cdef void _substep_peaks(double* peak, const double* d0, const double* v0, const
             peak[j] = p
 
 
-cdef class MultibodyStep(CompiledSide):
+cdef class MultibodyStep:
     """Compiled RK4 step of one :class:`cosim.sides.multibody.MultibodySubsystem`.
 
     Parameters
@@ -193,10 +195,11 @@ cdef class MultibodyStep(CompiledSide):
     cdef double[::1] d_tab                     # tables: times then values, per drive
     #: number of right-hand-side evaluations so far
     cdef public long n_rhs
-    # the C face (cosim.core._side_kernel): RK4's largest and free sub-steps,
+    # the C face (cosim.core._side_face): RK4's largest and free sub-steps,
     # and the stepping state
     cdef double cs_max_step, cs_free_step
     cdef double[::1] cs_y
+    cdef SideFace face
 
     def __init__(self, parent, revolute, offset, axis, angle0, ancestors, mass, inertia, com,
                  rot_mass, gravity, port_body, port_local, contacts, effects=None):
@@ -268,7 +271,7 @@ cdef class MultibodyStep(CompiledSide):
         self.pen = np.zeros((4, max(self.nc, 1)))
         self.n_rhs = 0
         self._set_effects(n, effects)
-        self.cs_nx, self.cs_naux, self.cs_nports = 2 * n, 4 * self.nc + 2, self.np_
+        self.face.nx, self.face.naux, self.face.nports = 2 * n, 4 * self.nc + 2, self.np_
         self.cs_max_step, self.cs_free_step = 0.0, 0.0
         self.cs_y = np.zeros(self.ny)
 
@@ -384,11 +387,19 @@ cdef class MultibodyStep(CompiledSide):
         (``<= 0``: none) [s], for :meth:`side_step`."""
         self.cs_max_step, self.cs_free_step = max_step, free_step
 
+    def side_face(self):
+        """The C face of :meth:`side_step` and :meth:`side_outputs`, a
+        capsule (:mod:`cosim.core._side_face`) that lives as long as this kernel."""
+        self.face.side = <void*> self
+        self.face.step = _face_step
+        self.face.outputs = _face_outputs
+        return PyCapsule_New(&self.face, COSIM_SIDE_FACE, NULL)
+
     cdef int side_step(self, double t, double h, const double* u, int rows, double* x,
                        double* aux, double* pm) except -1:
         """:meth:`step` of a tree that hosts no contact, under the input
         polynomial ``u`` ((rows, n_p, 2) row-major, in ``(time - t) / h``)."""
-        cdef int j, p, i, nx = self.nq, na = self.cs_naux
+        cdef int j, p, i, nx = self.nq, na = self.face.naux
         cdef double* y = &self.cs_y[0]
         if self.nc or rows > MAX_COEF or self.cs_max_step <= 0.0:
             raise ValueError("the C step takes a tree that hosts no contact, an input of at "
@@ -1073,3 +1084,13 @@ cdef class MultibodyStep(CompiledSide):
             ds.append(d)
             dds.append(dd)
         return ds, dds
+
+
+# ------------------------------------------------- the C face's functions
+cdef int _face_step(void* side, double t, double h, const double* u, int rows, double* x,
+                    double* aux, double* pm) except -1:
+    return (<MultibodyStep> side).side_step(t, h, u, rows, x, aux, pm)
+
+
+cdef void _face_outputs(void* side, const double* x, double* pos, double* vel) noexcept:
+    (<MultibodyStep> side).side_outputs(x, pos, vel)

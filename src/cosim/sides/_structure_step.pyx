@@ -31,7 +31,9 @@ After changing ``R`` the host calls :meth:`StructureStep.forget_bases`.
 from libc.math cimport sin, cos, pow, ceil, fabs, sqrt, copysign, isfinite, INFINITY
 from libc.float cimport DBL_EPSILON
 
-from cosim.core._side_kernel cimport CompiledSide
+from cpython.pycapsule cimport PyCapsule_New
+
+from cosim.core._side_face cimport COSIM_SIDE_FACE, SideFace
 
 import numpy as np
 
@@ -292,7 +294,7 @@ cdef int _rank_one(int m, const double* d, const double* z, double* lam, double*
     return 0
 
 
-cdef class StructureStep(CompiledSide):
+cdef class StructureStep:
     """Compiled step of one :class:`cosim.sides.fem.StructureSubsystem`.
 
     Parameters
@@ -356,6 +358,8 @@ cdef class StructureStep(CompiledSide):
     #: bases asked of the host (several springs closed, or the rank-one
     #: update declined)
     cdef public long n_host_bases
+    # the C face (cosim.core._side_face)
+    cdef SideFace face
 
     def __init__(self, omega, R, ref, direction, g_modal, contacts, basis):
         cdef int m = len(omega)
@@ -421,9 +425,9 @@ cdef class StructureStep(CompiledSide):
         self.r1_V = np.zeros(m * m)
         self.n_segments = 0
         self.n_host_bases = 0
-        # the C face (cosim.core._side_kernel): a structure that hosts no
-        # contact, stepped exactly; its quadratures are not touched
-        self.cs_nx, self.cs_naux, self.cs_nports = 2 * m, 0, self.np_
+        # the C face: a structure that hosts no contact, stepped exactly; its
+        # quadratures are not touched
+        self.face.nx, self.face.naux, self.face.nports = 2 * m, 0, self.np_
 
     # --------------------------------------------------------------- loading
     def forget_bases(self):
@@ -485,6 +489,14 @@ cdef class StructureStep(CompiledSide):
             self.Gin[0, i] += self.g_modal[i]
 
     # ------------------------------------------------------ the C face
+    def side_face(self):
+        """The C face of :meth:`side_step` and :meth:`side_outputs`, a
+        capsule (:mod:`cosim.core._side_face`) that lives as long as this kernel."""
+        self.face.side = <void*> self
+        self.face.step = _face_step
+        self.face.outputs = _face_outputs
+        return PyCapsule_New(&self.face, COSIM_SIDE_FACE, NULL)
+
     cdef int side_step(self, double t, double h, const double* u, int rows, double* x,
                        double* aux, double* pm) except -1:
         """The exact step of a structure that hosts no contact (what
@@ -1219,3 +1231,13 @@ cdef class StructureStep(CompiledSide):
         for i in range(m):
             x[i] = self.zt[i]
             x[m + i] = self.dzt[i]
+
+
+# ------------------------------------------------- the C face's functions
+cdef int _face_step(void* side, double t, double h, const double* u, int rows, double* x,
+                    double* aux, double* pm) except -1:
+    return (<StructureStep> side).side_step(t, h, u, rows, x, aux, pm)
+
+
+cdef void _face_outputs(void* side, const double* x, double* pos, double* vel) noexcept:
+    (<StructureStep> side).side_outputs(x, pos, vel)

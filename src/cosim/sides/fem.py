@@ -341,8 +341,9 @@ class StructureSubsystem(ClosedFormContacts, Subsystem):
         return "compiled" if self._kernel else "numpy"
 
     def compiled_side(self):
-        """The compiled kernel as a :class:`cosim.core._side_kernel.CompiledSide`,
-        for a scheme that steps this side from compiled code, or None where
+        """The compiled kernel, whose ``side_face()`` is its C face
+        (:mod:`cosim.core._side_face`), for a scheme that steps this side from
+        compiled code, or None where
         the kernel does not step it exactly with no Python call: a contact
         embedded here, damping, or a scheme of ``fem.STRUCTURAL_INTEGRATORS``.
         The scheme records each such step with :meth:`took_compiled_step`."""

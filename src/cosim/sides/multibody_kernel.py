@@ -70,8 +70,9 @@ class CompiledFace:
     """:meth:`compiled_side` of :class:`cosim.sides.multibody.MultibodySubsystem`."""
 
     def compiled_side(self):
-        """The compiled kernel as a :class:`cosim.core._side_kernel.CompiledSide`,
-        for a scheme that steps this side from compiled code, or None where
+        """The compiled kernel, whose ``side_face()`` is its C face
+        (:mod:`cosim.core._side_face`), for a scheme that steps this side from
+        compiled code, or None where
         the kernel does not step it, where its integrator is not RK4, or where
         a contact is embedded here (its switches call back into Python).  The
         scheme records each such step with :meth:`took_compiled_step`."""

@@ -8,7 +8,7 @@ whose moving sides all step in compiled code with no contact embedded in
 them, and whose coupler contacts have a linear or Kelvin-Voigt law, with or
 without a grasp: restore the sides' states, step each side under the force
 polynomials of the current guess (through the C face of its kernel,
-:class:`cosim.core._side_kernel.CompiledSide`), read its ports, evaluate the
+:mod:`cosim.core._side_face`), read its ports, evaluate the
 coupler rows' forces in the connections' current modes, test the residual
 and find the next guess by Aitken relaxation or IQN-ILS
 (:class:`cosim.core.schemes.implicit.Aitken`, :class:`~cosim.core.schemes.implicit.IQNILS`),
@@ -21,9 +21,11 @@ factorisations of IQN-ILS, done here by Householder reflections), whose
 sums may be ordered otherwise: the two agree to round-off, which
 ``tests/test_implicit_kernel.py`` holds them to.
 """
+from cpython.pycapsule cimport PyCapsule_GetPointer, PyCapsule_IsValid
 from libc.math cimport fabs, sqrt, copysign
+from libc.stdlib cimport free, malloc
 
-from cosim.core._side_kernel cimport CompiledSide
+from cosim.core._side_face cimport COSIM_SIDE_FACE, SideFace
 
 import numpy as np
 
@@ -337,7 +339,7 @@ cdef class ImplicitStep:
     ----------
     sides : list of tuples
         Per moving side: ``(kernel, x, aux, G, first)``: its
-        :class:`~cosim.core._side_kernel.CompiledSide`, its state and
+        kernel (its ``side_face()``, :mod:`cosim.core._side_face`), its state and
         quadratures (arrays stepped in place), its port-force map of the
         exchanged rows ``(2 n_p, n_rows)`` and the index of its first port
         among all ports.
@@ -359,6 +361,7 @@ cdef class ImplicitStep:
 
     cdef int ns, n_rows, nq, ncc, max_it, maxp
     cdef list kernels, xs, auxs
+    cdef SideFace* faces
     cdef long[::1] s_nx, s_na, s_np, s_first
     cdef double[:, ::1] saved_x, saved_aux
     cdef double[:, :, ::1] G
@@ -378,15 +381,22 @@ cdef class ImplicitStep:
     def __init__(self, sides, pos, vel, contacts, rows, int n_rows, mode, anchor, options):
         cdef int s, i
         self.ns = len(sides)
+        # the kernels are kept: their faces point into them
         self.kernels = [sd[0] for sd in sides]
-        for k in self.kernels:
-            if not isinstance(k, CompiledSide):
-                raise TypeError(f"{type(k).__name__} is not a compiled side")
+        self.faces = <SideFace*> malloc(max(self.ns, 1) * sizeof(SideFace))
+        if self.faces == NULL:
+            raise MemoryError()
+        for s in range(self.ns):
+            cap = self.kernels[s].side_face()
+            if not PyCapsule_IsValid(cap, COSIM_SIDE_FACE):
+                raise TypeError(f"{type(self.kernels[s]).__name__}.side_face() is not a "
+                                f"capsule of the C face")
+            self.faces[s] = (<SideFace*> PyCapsule_GetPointer(cap, COSIM_SIDE_FACE))[0]
         self.xs = [sd[1] for sd in sides]
         self.auxs = [sd[2] for sd in sides]
-        self.s_nx = np.array([(<CompiledSide> sd[0]).cs_nx for sd in sides], dtype=np.int_)
-        self.s_na = np.array([(<CompiledSide> sd[0]).cs_naux for sd in sides], dtype=np.int_)
-        self.s_np = np.array([(<CompiledSide> sd[0]).cs_nports for sd in sides], dtype=np.int_)
+        self.s_nx = np.array([self.faces[s].nx for s in range(self.ns)], dtype=np.int_)
+        self.s_na = np.array([self.faces[s].naux for s in range(self.ns)], dtype=np.int_)
+        self.s_np = np.array([self.faces[s].nports for s in range(self.ns)], dtype=np.int_)
         self.s_first = np.array([sd[4] for sd in sides], dtype=np.int_)
         for s in range(self.ns):
             if np.asarray(self.xs[s]).shape != (self.s_nx[s],) or \
@@ -444,6 +454,9 @@ cdef class ImplicitStep:
         self.r = np.zeros(nq)
         self.failed_side = -1
 
+    def __dealloc__(self):
+        free(self.faces)
+
     # ------------------------------------------------------------ results
     @property
     def residual(self):
@@ -498,7 +511,6 @@ cdef class ImplicitStep:
         cdef int s, q, r, j, npt
         cdef double a, b
         cdef double[::1] xv, av
-        cdef CompiledSide k
         for r in range(self.n_rows):
             self.coef1[r] = guess[r] - f_n[r]
         for s in range(self.ns):
@@ -512,15 +524,14 @@ cdef class ImplicitStep:
                     b += self.G[s, q, r] * self.coef1[r]
                 self.u[s, q] = a
                 self.u[s, 2 * npt + q] = b
-            k = <CompiledSide> self.kernels[s]
             xv = self.xs[s]
             av = self.auxs[s]
             self.failed_side = s
-            k.side_step(t, h, &self.u[s, 0], 2, &xv[0], &av[0] if av.shape[0] else NULL,
-                        &self.pm[s, 0])
+            self.faces[s].step(self.faces[s].side, t, h, &self.u[s, 0], 2, &xv[0],
+                               &av[0] if av.shape[0] else NULL, &self.pm[s, 0])
             self.failed_side = -1
             j = 2 * self.s_first[s]
-            k.side_outputs(&xv[0], &self.pos[j], &self.vel[j])
+            self.faces[s].outputs(self.faces[s].side, &xv[0], &self.pos[j], &self.vel[j])
         return 0
 
     cdef void _forces(self) noexcept:

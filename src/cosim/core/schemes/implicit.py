@@ -280,7 +280,6 @@ class Implicit(CoSimulationScheme):
         if system.hosted or system._followers or not len(system.coupler_rows):
             return None
         try:
-            from cosim.core._side_kernel import CompiledSide
             from cosim.core.schemes import _implicit_step
         except ImportError:             # not built: the reference iterates
             return None
@@ -311,7 +310,7 @@ class Implicit(CoSimulationScheme):
                 continue
             get = getattr(sub, "compiled_side", None)
             kernel = None if get is None else get()
-            if not isinstance(kernel, CompiledSide):    # none, or built before the C face
+            if not hasattr(kernel, "side_face"):    # none, or built before the C face
                 return None
             sides.append((kernel, sub.x, sub.aux, system._Gc[s], int(first[s])))
         outs = system.outputs()
