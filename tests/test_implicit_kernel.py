@@ -145,6 +145,36 @@ def test_an_unconverged_step_fails_as_in_the_reference():
     assert "contact `gripper1.t` has a force residual of 0.653 N" in out[0]
 
 
+@pytest.mark.parametrize("law", ["linear", "kelvin_voigt"])
+def test_the_compiled_row_forces_are_the_systems_in_every_mode(law):
+    """Both grippers open, grasped or released, at random port positions
+    and velocities around the touch: the kernel's row forces are
+    ``CoupledSystem.forces`` of the coupler rows (the same formulas in the
+    same order: within a few ulps of the largest)."""
+    over = [] if law == "linear" else [
+        f'contacts.{g}.law={{ type = "kelvin_voigt", contact_stiffness = 1e5, '
+        f'contact_damping = 50.0 }}' for g in ("gripper1", "gripper2")]
+    system, scheme = load(overrides=over).build()
+    kernel = scheme._compiled_iterations(system)
+    assert kernel is not None
+    cs = system.connections
+    rng = np.random.default_rng(3)
+    outs = system.outputs()
+    pos0, vel0 = np.concatenate([o[0] for o in outs]), np.concatenate([o[1] for o in outs])
+    rows = system.coupler_rows
+    assert len(rows) == 4
+    for trial in range(200):
+        cs.mode[:] = rng.integers(0, 3, size=cs.mode.size)     # open, grasped, released
+        cs.anchor[:] = rng.normal(scale=1e-3, size=cs.anchor.size)
+        pos = pos0 + rng.normal(scale=3e-3, size=pos0.shape)  # the gap is +-3 mm
+        vel = vel0 + rng.normal(scale=0.5, size=vel0.shape)
+        cuts = np.cumsum([len(o[0]) for o in outs])[:-1]
+        at = list(zip(np.split(pos, cuts), np.split(vel, cuts)))
+        want = system.forces(*system.penetrations(at))[rows]
+        got = kernel.row_forces(pos, vel)[rows]
+        assert np.max(np.abs(got - want)) <= 4 * np.spacing(np.max(np.abs(want))), trial
+
+
 # ------------------------------------------------------- the accelerations
 def _fixed_point(rng, n):
     """A contracting-or-not affine map H(x) = A x + b, as an interface of n rows."""

@@ -468,6 +468,23 @@ cdef class ImplicitStep:
         n = self.s_np[s]
         return np.array(self.pm[s, :6 * n]).view(complex).reshape(3, n)
 
+    def row_forces(self, pos, vel):
+        """The coupler rows' forces [N] (``(n_rows,)``, the other rows 0) at
+        the ports' positions and velocities ``pos``, ``vel`` (every
+        subsystem's, ``(n_ports, 2)``) in the connections' current modes:
+        what :meth:`cosim.core.system.CoupledSystem.forces` gives them, for
+        the tests to compare."""
+        p = np.ascontiguousarray(pos, dtype=float).ravel()
+        v = np.ascontiguousarray(vel, dtype=float).ravel()
+        if p.shape[0] != self.pos.shape[0] or v.shape[0] != self.vel.shape[0]:
+            raise ValueError(f"`pos` and `vel` must hold {self.pos.shape[0] // 2} ports")
+        at, rate, f = np.asarray(self.pos), np.asarray(self.vel), np.asarray(self.f)
+        kept = at.copy(), rate.copy()
+        at[:], rate[:], f[:] = p, v, 0.0
+        self._forces()
+        at[:], rate[:] = kept       # the rigid sides' ports are read from here
+        return f[:self.n_rows].copy()
+
     # ------------------------------------------------------------ the step
     def advance(self, double t, double h, double[::1] f_n, double[::1] guess, bint keep_old):
         """Iterate the macro step ``[t, t + h]`` from the forces ``f_n`` at
