@@ -375,6 +375,10 @@ cdef class ImplicitStep:
     cdef double ftol, tol, roundoff
     cdef double[::1] f, coef1, z, hz, r
     cdef Acceleration acc
+    # IQNILS.start's key of the last step: its length, the closed coupler rows
+    cdef bint have_key
+    cdef double key_h
+    cdef long[::1] key_closed
     #: the side whose step raised (its index among ``sides``), -1 if none
     cdef public int failed_side
 
@@ -452,6 +456,8 @@ cdef class ImplicitStep:
         self.z = np.zeros(nq)
         self.hz = np.zeros(nq)
         self.r = np.zeros(nq)
+        self.have_key, self.key_h = False, 0.0
+        self.key_closed = np.zeros(nq, dtype=np.int_)
         self.failed_side = -1
 
     def __dealloc__(self):
@@ -465,8 +471,12 @@ cdef class ImplicitStep:
 
     def port_moments(self, int s):
         """Side ``s``'s port velocity moments of the last pass, ``(3, n_p)`` complex."""
-        n = self.s_np[s]
-        return np.array(self.pm[s, :6 * n]).view(complex).reshape(3, n)
+        cdef int i, n = self.s_np[s]
+        out = np.empty((3, n), dtype=complex)
+        cdef double[::1] ov = out.reshape(-1).view(float)
+        for i in range(6 * n):
+            ov[i] = self.pm[s, i]
+        return out
 
     def row_forces(self, pos, vel):
         """The coupler rows' forces [N] (``(n_rows,)``, the other rows 0) at
@@ -486,16 +496,37 @@ cdef class ImplicitStep:
         return f[:self.n_rows].copy()
 
     # ------------------------------------------------------------ the step
-    def advance(self, double t, double h, double[::1] f_n, double[::1] guess, bint keep_old):
+    def advance(self, double t, double h, double[::1] f_n, co):
         """Iterate the macro step ``[t, t + h]`` from the forces ``f_n`` at
-        ``t`` and the predicted forces ``guess`` at ``t + h`` (n_rows, the
-        coupler rows of ``guess`` updated in place to the last guess);
-        ``keep_old``: IQN-ILS keeps the columns of earlier steps.  Returns
-        the number of iterations and whether they converged."""
-        cdef int s, i, it
+        ``t`` (n_rows) and their extrapolation over the step ``co`` (rows of
+        polynomial coefficients, (k, n_rows)), whose sum is the first guess
+        of the forces at ``t + h`` (as ``numpy.sum(co, axis=0)``).  IQN-ILS
+        keeps the columns of earlier steps at the same step length and the
+        same closed coupler rows (:meth:`IQNILS.start`).
+
+        Returns ``(iterations, converged, guess, impulse, coeffs,
+        moments)``: the last guess (n_rows), the impulse
+        ``h (f_n + (guess - f_n) / 2)`` [N s] the step applied, its force
+        polynomials ``[f_n, guess - f_n]`` (2, n_rows) and each side's port
+        velocity moments ((3, n_p) complex), all new arrays."""
+        cdef int s, i, r, it, n = self.n_rows, converged = 0
         cdef double[::1] xv, av
-        if f_n.shape[0] != self.n_rows or guess.shape[0] != self.n_rows:
-            raise ValueError(f"`f_n` and `guess` must have {self.n_rows} entries")
+        cdef double[:, :] cv = co
+        cdef bint keep
+        if f_n.shape[0] != n or cv.shape[1] != n or cv.shape[0] < 1:
+            raise ValueError(f"`f_n` must have {n} entries and `co` (k >= 1, {n})")
+        guess_a = np.empty(n)
+        cdef double[::1] guess = guess_a
+        for r in range(n):                  # numpy's sum over rows: one row after another
+            guess[r] = cv[0, r]
+            for i in range(1, cv.shape[0]):
+                guess[r] += cv[i, r]
+        keep = self.have_key and fabs(h - self.key_h) <= 1e-9 * max(fabs(h), fabs(self.key_h))
+        for i in range(self.nq):
+            if keep and (f_n[self.rows[i]] > 0) != self.key_closed[i]:
+                keep = False
+            self.key_closed[i] = f_n[self.rows[i]] > 0
+        self.have_key, self.key_h = True, h
         for s in range(self.ns):
             xv = self.xs[s]
             av = self.auxs[s]
@@ -503,7 +534,7 @@ cdef class ImplicitStep:
                 self.saved_x[s, i] = xv[i]
             for i in range(self.s_na[s]):
                 self.saved_aux[s, i] = av[i]
-        self.acc.c_start(keep_old)
+        self.acc.c_start(keep)
         for it in range(1, self.max_it + 1):
             if it > 1:
                 for s in range(self.ns):
@@ -517,11 +548,21 @@ cdef class ImplicitStep:
             self._forces()
             if self._residual(guess):
                 self.acc.c_finish()
-                return it, True
+                converged = 1
+                break
             self.acc.c_update(&self.z[0], &self.hz[0], &self.r[0])
             for i in range(self.nq):
                 guess[self.rows[i]] = self.z[i]
-        return self.max_it, False
+        impulse_a = np.empty(n)
+        coeffs_a = np.empty((2, n))
+        cdef double[::1] impulse = impulse_a
+        cdef double[:, ::1] coeffs = coeffs_a
+        for r in range(n):
+            coeffs[0, r] = f_n[r]
+            coeffs[1, r] = guess[r] - f_n[r]
+            impulse[r] = h * (f_n[r] + 0.5 * (guess[r] - f_n[r]))
+        moments = [self.port_moments(s) for s in range(self.ns)]
+        return it, bool(converged), guess_a, impulse_a, coeffs_a, moments
 
     cdef int _pass(self, double t, double h, double[::1] f_n, double[::1] guess) except -1:
         """Step every side under ``[f_n, guess - f_n]`` and read its ports."""

@@ -264,7 +264,6 @@ class Implicit(CoSimulationScheme):
             kw.update({k: getattr(self, k) for k in self._IQN_OPTIONS})
         self._accel = ACCELERATIONS[self.acceleration](**kw)
         self._kernel = self._compiled_iterations(system) if self.compiled_iterations else None
-        self._kernel_key = None
         return super().run(system, t_end, recorder)
 
     # ------------------------------------------------- compiled iterations
@@ -326,29 +325,22 @@ class Implicit(CoSimulationScheme):
 
     def _advance_compiled(self, system, t, h, ratio):
         """:meth:`advance` by the compiled iterations: one call."""
-        kernel, coupler = self._kernel, system.coupler_rows
-        f_n = self._f
-        guess = np.sum(self._extrapolated(ratio), axis=0)
-        # IQNILS.start: the columns of earlier steps apply at the same step
-        # length and the same closed coupler contacts
-        key = (h, tuple(f_n[coupler] > 0))
-        old = self._kernel_key
-        keep = old is not None and math.isclose(h, old[0], rel_tol=1e-9) and key[1] == old[1]
-        self._kernel_key = key
+        kernel, f_n = self._kernel, self._f
         try:
-            it, converged = kernel.advance(t, h, f_n, guess, keep)
+            it, converged, guess, stepped, coeffs, moments = kernel.advance(
+                t, h, f_n, self._extrapolated(ratio))
         except Exception:
             if kernel.failed_side >= 0:     # as Subsystem.step marks a side whose step raised
                 system.subsystems[self._kernel_sides[kernel.failed_side]].status = "failed"
             raise
-        coeffs = np.stack([f_n, guess - f_n])
-        for i, s in enumerate(self._kernel_sides):
-            system.subsystems[s].took_compiled_step(t, h, kernel.port_moments(i))
+        for s, pm in zip(self._kernel_sides, moments):
+            system.subsystems[s].took_compiled_step(t, h, pm)
             system._applied[s] = (coeffs, system._Gc[s])     # as step_input keeps them
         self.n_iterations += it
         if converged:
-            return h * (f_n + 0.5 * (guess - f_n))
-        return self._not_converged(system, t, h, f_n, guess, kernel.residual, coupler, [])
+            return stepped
+        return self._not_converged(system, t, h, f_n, guess, kernel.residual,
+                                   system.coupler_rows, [])
 
     def advance(self, system, t, h, ratio):
         if self._kernel is not None:
