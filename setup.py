@@ -14,6 +14,9 @@ FACE = "src/cosim/core/_stacked.pxd"
 KERNELS = [
     Extension("cosim.sides._multibody_step", ["src/cosim/sides/_multibody_step.pyx"],
               depends=[FACE]),
+    # the implicit scheme's iterations, which call the sides' kernels through
+    # the C face they fill in (cosim/core/_side_face.pxd, declarations only)
+    Extension("cosim.core.schemes._implicit_step", ["src/cosim/core/schemes/_implicit_step.pyx"]),
     Extension("cosim.sides._structure_step", ["src/cosim/sides/_structure_step.pyx"]),
     Extension("cosim.core.schemes._driver", ["src/cosim/core/schemes/_driver.pyx"]),
     # the monolithic reference's right-hand side, and the structure's face it calls
@@ -47,6 +50,7 @@ class BuildKernels(build_ext):
         super().build_extensions()
 
 
+# include_path: the kernels cimport cosim.core._side_face from the sources
 setup(ext_modules=cythonize(KERNELS, language_level=3, include_path=["src"],
                             compiler_directives={"embedsignature": True}),
       cmdclass={"build_ext": BuildKernels})

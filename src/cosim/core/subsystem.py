@@ -362,6 +362,17 @@ class Subsystem(ABC):
         self.peak[:] = 0.0
         return out
 
+    def took_compiled_step(self, t: float, h: float, port_moments) -> None:
+        """Record the step over ``[t, t + h]`` that a scheme took in compiled
+        code through the side's ``compiled_side`` (which advanced the state
+        and quadratures in place, locating no switch): what :meth:`step`
+        records besides them, and the ports' velocity moments."""
+        self._t0, self._h = t, h
+        self.port_moments = port_moments
+        self.switch_log, self.impact_log = [], []
+        self.t = t + h
+        self.n_steps += 1
+
     def get_state(self) -> SubsystemState:
         return SubsystemState(self.t, self.x.copy(), self.aux.copy(), self.n_steps, self.status,
                               self.peak.copy())

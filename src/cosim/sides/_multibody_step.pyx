@@ -26,9 +26,11 @@ State layout (``y``, length ``2 n + 4 n_c + 2 + 6 n_p``)::
 from libc.math cimport sin, cos, pow, ceil, fabs, sqrt, isfinite
 from libc.string cimport memcpy
 
-import numpy as np
-
 from cpython.pycapsule cimport PyCapsule_New
+
+from cosim.core._side_face cimport COSIM_SIDE_FACE, SideFace
+
+import numpy as np
 
 # a C struct only: nothing of the core is imported at run time
 from cosim.core._stacked cimport FaceTable
@@ -200,6 +202,11 @@ cdef class MultibodyStep:
     cdef public long n_switches
     #: rows :meth:`sample_steps` has filled in its current (or last) call
     cdef public long n_sampled
+    # the C face (cosim.core._side_face): RK4's largest and free sub-steps,
+    # and the stepping state
+    cdef double cs_max_step, cs_free_step
+    cdef double[::1] cs_y
+    cdef SideFace cface
 
     def __init__(self, parent, revolute, offset, axis, angle0, ancestors, mass, inertia, com,
                  rot_mass, gravity, port_body, port_local, contacts, effects=None):
@@ -273,6 +280,9 @@ cdef class MultibodyStep:
         self.n_switches = 0
         self.n_sampled = 0
         self._set_effects(n, effects)
+        self.cface.nx, self.cface.naux, self.cface.nports = 2 * n, 4 * self.nc + 2, self.np_
+        self.cs_max_step, self.cs_free_step = 0.0, 0.0
+        self.cs_y = np.zeros(self.ny)
 
     def _set_effects(self, int n, effects):
         """Joint springs, dampers and drives from ``effects``: None, or
@@ -379,6 +389,60 @@ cdef class MultibodyStep:
         for i in range(na):
             av[i] = yv[nx + i]
         return y1[nx + na:].view(complex).reshape(3, self.np_)
+
+    # ------------------------------------------------------------ the C face
+    def configure_side(self, double max_step, double free_step):
+        """RK4's largest sub-step and its sub-step while no contact is closed
+        (``<= 0``: none) [s], for :meth:`side_step`."""
+        self.cs_max_step, self.cs_free_step = max_step, free_step
+
+    def side_face(self):
+        """The C face of :meth:`side_step` and :meth:`side_outputs`, a
+        capsule (:mod:`cosim.core._side_face`) that lives as long as this kernel."""
+        self.cface.side = <void*> self
+        self.cface.step = _face_step
+        self.cface.outputs = _face_outputs
+        return PyCapsule_New(&self.cface, COSIM_SIDE_FACE, NULL)
+
+    cdef int side_step(self, double t, double h, const double* u, int rows, double* x,
+                       double* aux, double* pm) except -1:
+        """:meth:`step` of a tree that hosts no contact, under the input
+        polynomial ``u`` ((rows, n_p, 2) row-major, in ``(time - t) / h``)."""
+        cdef int j, p, i, nx = self.nq, na = self.cface.naux
+        cdef double* y = &self.cs_y[0]
+        if self.nc or rows > MAX_COEF or self.cs_max_step <= 0.0:
+            raise ValueError("the C step takes a tree that hosts no contact, an input of at "
+                             f"most {MAX_COEF} coefficients, and `configure_side` first")
+        self.t0, self.h = t, h
+        self.u_len = rows
+        self.u_t0, self.u_h = t, h
+        for j in range(rows):
+            for p in range(self.np_):
+                self.u_coef[j, p, 0] = u[(j * self.np_ + p) * 2]
+                self.u_coef[j, p, 1] = u[(j * self.np_ + p) * 2 + 1]
+        for i in range(nx):
+            y[i] = x[i]
+        for i in range(na):
+            y[nx + i] = aux[i]
+        for i in range(nx + na, self.ny):
+            y[i] = 0.0
+        self._integrate(t, y, t + h, self.cs_max_step, self.cs_free_step, True, None, NULL)
+        for i in range(nx):
+            x[i] = y[i]
+        for i in range(na):
+            aux[i] = y[nx + i]
+        for i in range(6 * self.np_):
+            pm[i] = y[nx + na + i]
+        return 0
+
+    cdef void side_outputs(self, const double* x, double* pos, double* vel) noexcept:
+        """:meth:`outputs` into ``pos`` and ``vel`` ((n_p, 2) row-major)."""
+        cdef int p, n = self.n
+        self._frames(&x[0], &x[n])
+        for p in range(self.np_):
+            self._point(n + p, self.port_body[p], self.pl_re[p], self.pl_im[p], &x[n], False)
+            pos[2 * p], pos[2 * p + 1] = self.px_re[n + p], self.px_im[n + p]
+            vel[2 * p], vel[2 * p + 1] = self.pv_re[n + p], self.pv_im[n + p]
 
     # ------------------------------------------------------------ kinematics
     cdef void _frames(self, const double* q, const double* dq) noexcept nogil:
@@ -1247,3 +1311,12 @@ cdef class TreeFace:
             rates[0] = 0.0
             rates[1] = 0.0
         return 0
+
+# ------------------------------------------------- the C face's functions
+cdef int _face_step(void* side, double t, double h, const double* u, int rows, double* x,
+                    double* aux, double* pm) except -1:
+    return (<MultibodyStep> side).side_step(t, h, u, rows, x, aux, pm)
+
+
+cdef void _face_outputs(void* side, const double* x, double* pos, double* vel) noexcept:
+    (<MultibodyStep> side).side_outputs(x, pos, vel)

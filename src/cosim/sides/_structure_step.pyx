@@ -33,6 +33,10 @@ After changing ``R`` the host calls :meth:`StructureStep.forget_bases`.
 from libc.math cimport sin, cos, pow, ceil, fabs, sqrt, hypot, copysign, isfinite, INFINITY
 from libc.float cimport DBL_EPSILON
 
+from cpython.pycapsule cimport PyCapsule_New
+
+from cosim.core._side_face cimport COSIM_SIDE_FACE, SideFace
+
 import numpy as np
 
 #: the interface the host (:mod:`cosim.sides.fem`, its ``STEP_API``) calls:
@@ -390,6 +394,8 @@ cdef class StructureStep:
     #: whether :meth:`_stays_open` may spare a segment its probes (the
     #: host's ``bound_open``; False probes every segment)
     cdef public bint bound_open
+    # the C face (cosim.core._side_face)
+    cdef SideFace face
 
     def __init__(self, omega, R, ref, direction, g_modal, contacts, basis):
         cdef int m = len(omega)
@@ -457,6 +463,9 @@ cdef class StructureStep:
         self.n_host_bases = 0
         self.n_unprobed = 0
         self.bound_open = True
+        # the C face: a structure that hosts no contact, stepped exactly; its
+        # quadratures are not touched
+        self.face.nx, self.face.naux, self.face.nports = 2 * m, 0, self.np_
 
     # --------------------------------------------------------------- loading
     def forget_bases(self):
@@ -472,8 +481,7 @@ cdef class StructureStep:
 
         Returns False, loading nothing, when the step is beyond the kernel
         (a load or a motion of degree above 3): the reference takes it."""
-        cdef int j, k, i, p, m = self.m, rows = 1
-        cdef double s, u
+        cdef int k, i, rows = 1
         cdef double[:, :, ::1] cv
         if coeffs is not None:
             cv = np.ascontiguousarray(coeffs, dtype=float)
@@ -483,23 +491,7 @@ cdef class StructureStep:
         for mt0, mh, mc, dmc in motions:
             if len(mc) > DEG1 or len(dmc) > DEG1:
                 return False
-        self.t, self.h = t, h
-        self.g_len = rows
-        self.loaded = False
-        for j in range(DEG1):
-            for i in range(m):
-                self.Gin[j, i] = 0.0
-        if coeffs is not None:
-            # (u @ dir) @ R, then the weight
-            for j in range(rows):
-                for p in range(self.np_):
-                    if cv[j, p, 0] != 0.0 or cv[j, p, 1] != 0.0:
-                        self.loaded = True
-                    u = cv[j, p, 0] * self.dre + cv[j, p, 1] * self.dim
-                    for i in range(m):
-                        self.Gin[j, i] += u * self.R[p, i]
-        for i in range(m):
-            self.Gin[0, i] += self.g_modal[i]
+        self._load(t, h, NULL if coeffs is None else &cv[0, 0, 0], rows)
         for k, (mt0, mh, mc, dmc) in enumerate(motions):
             self.m_t0[k], self.m_h[k] = mt0, mh
             self.m_len[k], self.dm_len[k] = len(mc), len(dmc)
@@ -510,6 +502,68 @@ cdef class StructureStep:
                 self.dm_re[k, i] = dmc[i].real
                 self.dm_im[k, i] = dmc[i].imag
         return True
+
+    cdef void _load(self, double t, double h, const double* cv, int rows) noexcept nogil:
+        """The step's start, length and modal load from the port forces
+        ``cv`` ((rows, n_p, 2) row-major, or NULL for none)."""
+        cdef int j, i, p, m = self.m, npt = self.np_
+        cdef double u
+        self.t, self.h = t, h
+        self.g_len = rows
+        self.loaded = False
+        for j in range(DEG1):
+            for i in range(m):
+                self.Gin[j, i] = 0.0
+        if cv != NULL:
+            # (u @ dir) @ R, then the weight
+            for j in range(rows):
+                for p in range(npt):
+                    if cv[(j * npt + p) * 2] != 0.0 or cv[(j * npt + p) * 2 + 1] != 0.0:
+                        self.loaded = True
+                    u = cv[(j * npt + p) * 2] * self.dre + cv[(j * npt + p) * 2 + 1] * self.dim
+                    for i in range(m):
+                        self.Gin[j, i] += u * self.R[p, i]
+        for i in range(m):
+            self.Gin[0, i] += self.g_modal[i]
+
+    # ------------------------------------------------------ the C face
+    def side_face(self):
+        """The C face of :meth:`side_step` and :meth:`side_outputs`, a
+        capsule (:mod:`cosim.core._side_face`) that lives as long as this kernel."""
+        self.face.side = <void*> self
+        self.face.step = _face_step
+        self.face.outputs = _face_outputs
+        return PyCapsule_New(&self.face, COSIM_SIDE_FACE, NULL)
+
+    cdef int side_step(self, double t, double h, const double* u, int rows, double* x,
+                       double* aux, double* pm) except -1:
+        """The exact step of a structure that hosts no contact (what
+        :meth:`set_step` and :meth:`step_free` do for its Python host);
+        ``aux`` is not touched."""
+        cdef int i
+        if self.nc or rows > DEG1 - 1:
+            raise ValueError("the C step takes a structure that hosts no contact, under a "
+                             f"load of at most {DEG1 - 1} coefficients")
+        self._load(t, h, u, rows)
+        for i in range(6 * self.np_):
+            pm[i] = 0.0
+        self._free(x, pm)
+        return 0
+
+    cdef void side_outputs(self, const double* x, double* pos, double* vel) noexcept:
+        """Ports' positions and velocities (:meth:`StructureSubsystem.outputs`)."""
+        cdef int i, p, m = self.m
+        cdef double w, dw
+        for p in range(self.np_):
+            w = 0.0
+            dw = 0.0
+            for i in range(m):
+                w += self.R[p, i] * x[i]
+                dw += self.R[p, i] * x[m + i]
+            pos[2 * p] = self.ref[p, 0] + w * self.dre
+            pos[2 * p + 1] = self.ref[p, 1] + w * self.dim
+            vel[2 * p] = dw * self.dre
+            vel[2 * p + 1] = dw * self.dim
 
     # ------------------------------------------------- closed-form response
     cdef void _split(self, const double* lam) noexcept nogil:
@@ -1255,6 +1309,13 @@ cdef class StructureStep:
         (:meth:`fem.ExactModal.step_modal` on undamped modes), and the
         ports' velocity moments ``pm`` by three-point Gauss-Legendre when a
         port is loaded (the reference's ``_gauss_moments``)."""
+        if x.shape[0] != 2 * self.m or pm.shape[0] != 3 or pm.shape[1] != 2 * self.np_:
+            raise ValueError(f"`x` must have {2 * self.m} entries and `pm` shape "
+                             f"(3, {2 * self.np_})")
+        self._free(&x[0], &pm[0, 0])
+
+    cdef void _free(self, double* x, double* pm) noexcept nogil:
+        """:meth:`step_free` on ``x`` (2 m) and ``pm`` ((3, 2 n_p) row-major)."""
         cdef int m = self.m, npt = self.np_, i, j, p, g
         cdef double col[DEG1]
         cdef double out[DEG1]
@@ -1277,13 +1338,23 @@ cdef class StructureStep:
                     v = 0.0
                     for i in range(m):
                         v += self.R[p, i] * self.dzt[i]
-                    pm[0, 2 * p] += wh * (v * self.dre)
-                    pm[0, 2 * p + 1] += wh * (v * self.dim)
-                    pm[1, 2 * p] += wh * (sn * (v * self.dre))
-                    pm[1, 2 * p + 1] += wh * (sn * (v * self.dim))
-                    pm[2, 2 * p] += wh * (sn * sn * (v * self.dre))
-                    pm[2, 2 * p + 1] += wh * (sn * sn * (v * self.dim))
+                    pm[2 * p] += wh * (v * self.dre)
+                    pm[2 * p + 1] += wh * (v * self.dim)
+                    pm[2 * npt + 2 * p] += wh * (sn * (v * self.dre))
+                    pm[2 * npt + 2 * p + 1] += wh * (sn * (v * self.dim))
+                    pm[4 * npt + 2 * p] += wh * (sn * sn * (v * self.dre))
+                    pm[4 * npt + 2 * p + 1] += wh * (sn * sn * (v * self.dim))
         self._modes_at(self.h)
         for i in range(m):
             x[i] = self.zt[i]
             x[m + i] = self.dzt[i]
+
+
+# ------------------------------------------------- the C face's functions
+cdef int _face_step(void* side, double t, double h, const double* u, int rows, double* x,
+                    double* aux, double* pm) except -1:
+    return (<StructureStep> side).side_step(t, h, u, rows, x, aux, pm)
+
+
+cdef void _face_outputs(void* side, const double* x, double* pos, double* vel) noexcept:
+    (<StructureStep> side).side_outputs(x, pos, vel)

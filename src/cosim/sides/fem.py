@@ -360,6 +360,17 @@ class StructureSubsystem(ClosedFormContacts, Subsystem):
         otherwise."""
         return "compiled" if self._kernel else "numpy"
 
+    def compiled_side(self):
+        """The compiled kernel, whose ``side_face()`` is its C face
+        (:mod:`cosim.core._side_face`), for a scheme that steps this side from
+        compiled code, or None where
+        the kernel does not step it exactly with no Python call: a contact
+        embedded here, damping, or a scheme of ``fem.STRUCTURAL_INTEGRATORS``.
+        The scheme records each such step with :meth:`took_compiled_step`."""
+        if self._embedded or self._ts is not None or np.any(self.modal_damping):
+            return None
+        return self._compiled_step(None)
+
     #: whether a stalled compiled step was said (see :meth:`_step_impl`)
     _stall_said = False
 

@@ -15,8 +15,8 @@ from multibody import TreeModel
 from cosim.errors import SimulationError
 from cosim.core.ode import INTEGRATORS, RK4, TimeStepper
 from cosim.sides.kernel import compiled_module
-from cosim.sides.multibody_kernel import (SampledSteps, TreeFaceMixin, kernel_effects,
-                                          kernel_law)
+from cosim.sides.multibody_kernel import (CompiledFace, SampledSteps, TreeFaceMixin,
+                                          kernel_effects, kernel_law)
 from cosim.core.subsystem import (DISSIPATED, IMPULSE, MOMENT, QUADRATURES, WORK, EmbeddedContact,
                         StepInput, Subsystem)
 
@@ -30,7 +30,7 @@ __all__ = ["MultibodySubsystem", "kernel_law"]
 KERNEL_INTEGRATORS = tuple(INTEGRATORS.values())
 
 
-class MultibodySubsystem(SampledSteps, TreeFaceMixin, Subsystem):
+class MultibodySubsystem(SampledSteps, TreeFaceMixin, CompiledFace, Subsystem):
     """A :class:`multibody.TreeModel` with state ``x = [q, dq]``.
 
     Parameters

@@ -4,9 +4,10 @@ parameters, built once when the kernel is built, or None where the kernel
 does not know the law or effect (the numpy reference then steps); the
 side's macro steps taken by the kernel across many output points
 (:class:`SampledSteps`, for the macro loop's sampled path,
-:mod:`cosim.core.schemes.sampled`); and the tree's compiled model-exchange
-face (:class:`TreeFaceMixin`).  :class:`cosim.sides.multibody.MultibodySubsystem`
-inherits both."""
+:mod:`cosim.core.schemes.sampled`); the tree's compiled model-exchange face
+(:class:`TreeFaceMixin`); and its C face for a scheme that steps it from
+compiled code (:class:`CompiledFace`).
+:class:`cosim.sides.multibody.MultibodySubsystem` inherits all three."""
 from __future__ import annotations
 
 from typing import TYPE_CHECKING
@@ -21,7 +22,7 @@ from cosim.core.subsystem import MOMENT, QUADRATURES, Samples
 if TYPE_CHECKING:
     from multibody import JointEffects
 
-__all__ = ["kernel_law", "kernel_effects", "SampledSteps", "TreeFaceMixin"]
+__all__ = ["kernel_law", "kernel_effects", "SampledSteps", "TreeFaceMixin", "CompiledFace"]
 
 
 def kernel_effects(effects: JointEffects | None):
@@ -198,3 +199,20 @@ class TreeFaceMixin:
         if kernel is None or not self._kernel_steps or not hasattr(kernel, "face"):
             return None
         return kernel.face()
+class CompiledFace:
+    """:meth:`compiled_side` of :class:`cosim.sides.multibody.MultibodySubsystem`."""
+
+    def compiled_side(self):
+        """The compiled kernel, whose ``side_face()`` is its C face
+        (:mod:`cosim.core._side_face`), for a scheme that steps this side from
+        compiled code, or None where
+        the kernel does not step it, where its integrator is not RK4, or where
+        a contact is embedded here (its switches call back into Python).  The
+        scheme records each such step with :meth:`took_compiled_step`."""
+        kernel = self._compiled_step(None)
+        integ = self.integrator
+        if (kernel is None or self._embedded or type(integ) is not RK4
+                or not hasattr(kernel, "configure_side")):     # built before the C face
+            return None
+        kernel.configure_side(integ.max_step, integ.free_step or 0.0)
+        return kernel

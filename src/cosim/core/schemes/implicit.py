@@ -7,7 +7,10 @@ from typing import ClassVar
 
 import numpy as np
 
+from couplers.linear_laws import KelvinVoigtLaw, LinearLaw
+
 from cosim.core.hermite import hermite_coefficients
+from cosim.core.subsystem import RigidReference
 from .base import RELATIVE_RULE, CoSimulationScheme, CouplingError, Option, _pos, _relative
 
 __all__ = ["Implicit", "Aitken", "IQNILS", "ACCELERATIONS"]
@@ -157,8 +160,10 @@ class IQNILS:
             head = V[:, :n]
             R = np.linalg.qr(head, mode="r")
             norms = np.linalg.norm(head, axis=0)
-            # not (>=) also drops zero or non-finite columns
-            bad = np.flatnonzero(~(np.abs(np.diag(R)) >= self.filter_tolerance * norms))
+            # not (>=) also drops non-finite columns, and norms == 0 zero
+            # ones (a residual repeated exactly), which 0 >= 0 would keep
+            bad = np.flatnonzero(~(np.abs(np.diag(R)) >= self.filter_tolerance * norms)
+                                 | (norms == 0))
             if not bad.size:
                 break
             V, W = np.delete(V, bad[0], axis=1), np.delete(W, bad[0], axis=1)
@@ -239,6 +244,13 @@ class Implicit(CoSimulationScheme):
     #: options that only IQN-ILS reads
     _IQN_OPTIONS: ClassVar[tuple] = ("reuse", "filter_tolerance")
 
+    #: iterate in compiled code (:mod:`cosim.core.schemes._implicit_step`)
+    #: where the system allows it (:meth:`_compiled_iterations`); False makes
+    #: the Python reference iterate whatever the system (the tests compare
+    #: the two)
+    compiled_iterations: ClassVar[bool] = True
+    _kernel = None
+
     def __init__(self, **opts):
         super().__init__(**opts)
         ignored = sorted(k for k in self._IQN_OPTIONS if k in opts)
@@ -251,9 +263,88 @@ class Implicit(CoSimulationScheme):
         if self.acceleration == "iqn_ils":
             kw.update({k: getattr(self, k) for k in self._IQN_OPTIONS})
         self._accel = ACCELERATIONS[self.acceleration](**kw)
+        self._kernel = self._compiled_iterations(system) if self.compiled_iterations else None
         return super().run(system, t_end, recorder)
 
+    # ------------------------------------------------- compiled iterations
+    def _compiled_iterations(self, system):
+        """The compiled iterations of this system
+        (:class:`cosim.core.schemes._implicit_step.ImplicitStep`), or None
+        where the Python reference iterates: the kernel not built, a contact
+        hosted by a moving side or following a point, a moving side that
+        offers no compiled step without Python (``compiled_side``: the numpy
+        reference chosen, a contact embedded in it, another integrator), a
+        rigid side other than :class:`RigidReference`, or a coupler contact
+        whose law is not linear or Kelvin-Voigt, or with friction."""
+        if system.hosted or system._followers or not len(system.coupler_rows):
+            return None
+        try:
+            from cosim.core.schemes import _implicit_step
+        except ImportError:             # not built: the reference iterates
+            return None
+        cs = system.connections
+        if cs is not None and cs.mode.dtype != np.int64:
+            return None
+        contacts = []
+        for c in system.coupler:
+            ln = system.links[c]
+            law, conn = ln.contact.law, ln.connection
+            if type(law) not in (LinearLaw, KelvinVoigtLaw) or (
+                    conn is not None and conn.friction is not None):
+                return None
+            g = None if conn is None else conn.grasp
+            contacts.append((int(c), int(system._row_a[c]), int(system._row_b[c]),
+                             system._normals[c], system._offsets[c],
+                             _implicit_step.LAW_KINDS[law.name], law.contact_stiffness,
+                             getattr(law, "contact_damping", 0.0), int(system.tangent_row[c]),
+                             None if g is None else (g.stiffness, g.damping,
+                                                     g.tangential_stiffness,
+                                                     g.tangential_damping)))
+        first = np.cumsum([0] + [sub.n_ports for sub in system.subsystems])
+        sides, moving = [], self._moving(system)
+        for s, sub in enumerate(system.subsystems):
+            if s not in moving:
+                if type(sub) is not RigidReference:
+                    return None
+                continue
+            get = getattr(sub, "compiled_side", None)
+            kernel = None if get is None else get()
+            if not hasattr(kernel, "side_face"):    # none, or built before the C face
+                return None
+            sides.append((kernel, sub.x, sub.aux, system._Gc[s], int(first[s])))
+        outs = system.outputs()
+        opts = {"max_iterations": self.max_iterations, "tolerance": self.tolerance,
+                "force_tolerance": self.force_tolerance, "acceleration": self.acceleration,
+                "relaxation": self.relaxation, "reuse": self.reuse,
+                "filter_tolerance": self.filter_tolerance, "roundoff": _ROUNDOFF}
+        self._kernel_sides = list(moving)
+        return _implicit_step.ImplicitStep(
+            sides, np.concatenate([o[0] for o in outs]), np.concatenate([o[1] for o in outs]),
+            contacts, system.coupler_rows, system.n_rows,
+            None if cs is None else cs.mode, None if cs is None else cs.anchor, opts)
+
+    def _advance_compiled(self, system, t, h, ratio):
+        """:meth:`advance` by the compiled iterations: one call."""
+        kernel, f_n = self._kernel, self._f
+        try:
+            it, converged, guess, stepped, coeffs, moments = kernel.advance(
+                t, h, f_n, self._extrapolated(ratio))
+        except Exception:
+            if kernel.failed_side >= 0:     # as Subsystem.step marks a side whose step raised
+                system.subsystems[self._kernel_sides[kernel.failed_side]].status = "failed"
+            raise
+        for s, pm in zip(self._kernel_sides, moments):
+            system.subsystems[s].took_compiled_step(t, h, pm)
+            system._applied[s] = (coeffs, system._Gc[s])     # as step_input keeps them
+        self.n_iterations += it
+        if converged:
+            return stepped
+        return self._not_converged(system, t, h, f_n, guess, kernel.residual,
+                                   system.coupler_rows, [])
+
     def advance(self, system, t, h, ratio):
+        if self._kernel is not None:
+            return self._advance_compiled(system, t, h, ratio)
         coupler = system.coupler_rows      # normal and tangential rows exchanged
         hosted = list(system.hosted)
         hosts = {system.hosted[c].host for c in hosted}
@@ -318,6 +409,11 @@ class Implicit(CoSimulationScheme):
             guess[coupler] = z[:nc]
             motion = self._unscaled(z[nc:], k, h)
         self.n_iterations += self.max_iterations
+        return self._not_converged(system, t, h, f_n, guess, r, coupler, hosted)
+
+    def _not_converged(self, system, t, h, f_n, guess, r, coupler, hosted):
+        """The step did not converge: retried shorter (flagged for the macro
+        loop) where a long step may be, a :class:`CouplingError` otherwise."""
         if self.contact_step is not None and h > self.contact_step * (1 + 1e-9):
             # a long step over a contact that touches and leaves inside it (a
             # vibrating side): no fixed point to find; the step is retried shorter
