@@ -55,18 +55,45 @@ def _print_summary(s: dict, out: Path | None) -> None:
         print(f"  wrote {out / 'summary.json'}, {out / 'series.npz'} and {out / 'scene.toml'}")
 
 
+def _default_name(scene) -> str:
+    """``SCENE[-VARIANT][-SCHEME]`` (:func:`cosim.io.rundir.run_folder_name`):
+    the scheme named when it is not the one the scene (with its variant)
+    gives, whether `--scheme` or `--set scheme.name=` chose it."""
+    import re
+
+    from cosim.core.result import written_by_a_run
+    from cosim.io.rundir import name_problem, run_folder_name
+    from cosim.scene.read import read_scene
+
+    own, _ = read_scene(scene.path, scene.variant)
+    table = own.get("scheme")
+    own_scheme = table.get("name") if isinstance(table, dict) else None
+    scheme = scene.scheme if scene.scheme != own_scheme else None
+    run = Path(scene.path).resolve().parent.name
+    if written_by_a_run(scene.path) and name_problem(run) is None:
+        # a run's scene.toml again: named after that run (its variant is in its name)
+        return run_folder_name(re.sub(r"-\d+$", "", run), None, scheme)
+    return run_folder_name(scene.name, scene.variant, scheme)
+
+
 def _cmd_run(args) -> int:
     with _StopOnSignals():
         return _run(args)
 
 
 def _run(args) -> int:
+    from cosim.io.rundir import fresh_folder
     from cosim.scene.run import RunInterrupted, simulate
     from cosim.scene.load import load_scene
 
     scene = load_scene(args.scene, args.variant, args.set or (), args.scheme)
-    out = Path(args.out) if args.out else Path("runs") / (
-        scene.name + (f"-{scene.variant}" if scene.variant else ""))
+    made = None                 # a default folder, new: removed again if the run is refused
+    if args.out:
+        out = Path(args.out)
+    elif args.overwrite:                # the default folder itself, its run replaced
+        out = Path("runs") / _default_name(scene)
+    else:                               # a new folder: a run again never meets the one before
+        out = made = fresh_folder("runs", _default_name(scene))
     progress = _progress_line(args.quiet)
     code, crash = None, None
     try:
@@ -81,6 +108,8 @@ def _run(args) -> int:
     finally:
         if progress is not None:
             progress.close()
+        if made is not None and made.is_dir() and not any(made.iterdir()):
+            made.rmdir()
     _print_summary(res.summary, out)
     for name in scene.export:
         print(f"  wrote {out / (name + '.xdmf')} (open in ParaView)")
@@ -102,8 +131,12 @@ def _run(args) -> int:
 def _cmd_verify(args) -> int:
     from cosim.studies.verify import run_checks
 
+    cases = args.cases
+    if cases is None:                   # the scenes cosim ships, from any folder
+        from cosim.scene.shipped import shipped_folder
+        cases = shipped_folder("cases") or "cases"
     failed = 0
-    for check in run_checks(args.cases, hard=args.hard):
+    for check in run_checks(cases, hard=args.hard):
         failed += not check.passed
         print(f"{'PASS' if check.passed else 'FAIL'}  {check.name}: {check.detail}", flush=True)
     print(f"{'all checks passed' if not failed else f'{failed} check(s) failed'}")
@@ -202,7 +235,15 @@ def _machine() -> str:
 
 def _cmd_bench(args) -> int:
     from cosim.io.rundir import OutputFolder
+    from cosim.scene.shipped import find_scene
+    from cosim.studies.strike import find_strike
 
+    args.scene = find_scene(args.scene)     # a path, or the name of a shipped scene
+    # the contact and joint compared, as `cosim sweep` chooses them: checked
+    # (and a scene that leaves no single choice refused, naming its contacts)
+    # before a folder is made or anything runs
+    args.contact, args.joint = find_strike(args.scene, args.contact, args.joint,
+                                           variant=args.variant)
     out = Path(args.out) if args.out else Path("runs") / (
         Path(args.scene).stem + (f"-{args.variant}" if args.variant else "") + "-bench")
     # the folder is opened (a link or a file at its place refused) and locked
@@ -231,6 +272,7 @@ def _bench(args, folder) -> bool:
     spread = args.spread
     print(f"bench {args.scene}" + (f" --variant {args.variant}" if args.variant else "")
           + f" on {_machine()}")
+    print(f"contact {args.contact}, exit velocity of joint {args.joint}")
     print(f"each row: the scene and {spread - 1} round-off copies; errors median / worst, "
           f"contact counts min-max, CPU median" if spread > 1 else "each row: one run")
     print(f"{'scheme':<14}{'step [s]':>10}{'rtol':>9}{'CPU [s]':>9}{'peak':>20}{'contacts':>9}"

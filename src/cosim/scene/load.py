@@ -14,13 +14,14 @@ typed specs (:mod:`cosim.scene.specs`).  It never imports the builder.
 """
 from __future__ import annotations
 
-from pathlib import Path
+import os
 
 from cosim.core.guard import GuardOptions
 from cosim.scene.checks import (MAX_ELEMENTS, MAX_STEPS, SceneError, Table, check_name,
                                  echo)
 from cosim.scene.contacts import check_conditions, contact_spec
 from cosim.scene.read import parse_override, read_scene, read_toml_file
+from cosim.scene.shipped import find_scene, not_found
 from cosim.scene.specs import STRUCTURE_TYPES, SUBSYSTEM_TYPES, Scene, resolve_scheme
 from cosim.scene.subsystems import subsystem_spec
 
@@ -42,6 +43,8 @@ def load_scene(path, variant: str | None = None, overrides=(), scheme: str | Non
     Parameters
     ----------
     path : path-like
+        The scene file, or the name of a scene cosim ships (``spring_drop``;
+        :func:`cosim.scene.shipped.find_scene`): a file that exists wins.
     variant : str, optional
         Name of a ``[variants.NAME]`` table; the scene's ``default_variant``
         when omitted.
@@ -60,7 +63,9 @@ def load_scene(path, variant: str | None = None, overrides=(), scheme: str | Non
     ------
     SceneError
     """
-    file = Path(path)
+    file = find_scene(path)
+    if not os.path.lexists(file):
+        raise SceneError(file, "", f"cannot be read: {not_found(path)}")
     data, chosen = read_scene(file, variant, overrides, scheme)
     return _validate(data, file, chosen)
 
