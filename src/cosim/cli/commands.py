@@ -12,7 +12,34 @@ from cosim.cli.terminal import _progress_line
 __all__: list[str] = []
 
 
-def _print_summary(s: dict, out: Path | None) -> None:
+def _units(scene):
+    """``units(SUBSYSTEM, NAME) -> (" m", " m/s")``: the units of a final
+    state's q and dq, as the scene declares them: a prismatic joint's metres,
+    a revolute joint's radians; a structure's rotation DOFs (``t0``, ``t1``,
+    ... of a beam) in radians, its other DOFs (displacements) in metres; an
+    FMU's coordinates without (their units are the FMU's)."""
+    import re
+
+    kinds = {}
+    for spec in scene.subsystems:
+        if spec.type == "multibody":
+            kinds[spec.name] = {j.name: j.kind for j in spec.joints}
+        elif spec.type not in ("fmu", "rigid"):
+            kinds[spec.name] = "structure"
+
+    def units(sub, name):
+        kind = kinds.get(sub)
+        if kind == "structure":
+            kind = "revolute" if re.fullmatch(r"t\d+", name) else "prismatic"
+        elif isinstance(kind, dict):
+            kind = kind.get(name)
+        return {"revolute": (" rad", " rad/s"), "prismatic": (" m", " m/s")}.get(kind, ("", ""))
+    return units
+
+
+def _print_summary(s: dict, out: Path | None, units=None) -> None:
+    """The run's summary on the terminal.  ``units`` (:func:`_units`) puts
+    the units after the final state's values."""
     e = s["energy"]
     print(f"scene {s['scene']}  scheme {s['scheme']}  status {s['status']}")
     print(f"  t_end {s['t_end']:.6g} s  cpu {s['cpu_time_s']:.3g} s  macro steps "
@@ -26,8 +53,11 @@ def _print_summary(s: dict, out: Path | None) -> None:
             t0, t1 = c["intervals"][0][0], c["intervals"][-1][1]
             print(f"    first touch {t0:.6g} s, last release {t1:.6g} s (span {t1 - t0:.6g} s, "
                   f"in touch {c['in_touch_time']:.6g} s)")
-    print(f"  energy: initial {e['initial']:.6g} J, final {e['final']:.6g} J, dissipated "
-          f"{e['dissipated']:.4g} J, max drift {e['max_abs_drift']:.3g} J")
+    supplied = e.get("supplied", 0.0)
+    expected = e["initial"] + supplied - e["dissipated"]
+    print(f"  energy: initial {e['initial']:.6g} J + supplied {supplied:.6g} J - dissipated "
+          f"{e['dissipated']:.6g} J = {expected:.6g} J; final {e['final']:.6g} J (drift "
+          f"{e['final'] - expected:.3g} J at the end, at most {e['max_abs_drift']:.3g} J)")
     for w in s.get("warnings", []):
         print(f"  warning: {w['message']}")
     for imp in s["impacts"]:
@@ -43,12 +73,15 @@ def _print_summary(s: dict, out: Path | None) -> None:
         print(f"    joint velocities after [rad/s]: {after}")
     for sw in s.get("switches", []):
         print(f"  switch {sw['contact']} at t = {sw['time']:.6g} s: {sw['from']} -> {sw['to']}")
+    if s["final_state"]:
+        print("  final state (q, and its rate dq):")
     for sub, joints in s["final_state"].items():
         if len(joints) > 12:
-            print(f"  final {sub}: {len(joints)} DOFs (in summary.json)")
+            print(f"    {sub}: {len(joints)} DOFs (in summary.json)")
             continue
-        vals = ", ".join(f"{j} = {v['q']:.6g} ({v['dq']:.6g}/s)" for j, v in joints.items())
-        print(f"  final {sub}: {vals}")
+        for j, v in joints.items():
+            q, dq = units(sub, j) if units is not None else ("", "")
+            print(f"    {sub}/{j}: q = {v['q']:.6g}{q}, dq = {v['dq']:.6g}{dq}")
     if s["message"] and s["status"] == "finished":
         print(f"  message: {s['message']}")      # a run that did not finish says it once, below
     if out is not None:
@@ -110,7 +143,7 @@ def _run(args) -> int:
             progress.close()
         if made is not None and made.is_dir() and not any(made.iterdir()):
             made.rmdir()
-    _print_summary(res.summary, out)
+    _print_summary(res.summary, out, _units(scene))
     for name in scene.export:
         print(f"  wrote {out / (name + '.xdmf')} (open in ParaView)")
     if res.status != "finished":
@@ -155,13 +188,16 @@ def _cmd_info(args) -> int:
     from cosim.scene.info import scene_info
     from cosim.scene.load import load_scene
 
+    if args.list or args.scene is None:
+        return _list_scenes(args)
     info = scene_info(load_scene(args.scene, args.variant, args.set or ()),
                       run_fmu=args.run_fmu)
     if args.json:
         print(json.dumps(info, indent=2))
         return 0
-    print(f"scene {info['scene']}  variant {info['variant']}  scheme {info['scheme']}  "
-          f"t_end {info['t_end']:g} s")
+    print(f"scene {info['scene']}" + (f"  variant {info['variant']}" if info["variant"] else "")
+          + f"  scheme {info['scheme']}  t_end {info['t_end']:g} s")
+    _print_variants(info)
     work = info["work"]
     print(f"  work: {work['bound']} {work['steps']:.3g} integrator steps ({work['how']})")
     for name, s in info["subsystems"].items():
@@ -222,6 +258,46 @@ def _cmd_info(args) -> int:
         print("  FMU code " + ("run (--run-fmu)" if info["fmu_code_run"] else
                                "not run: read from modelDescription.xml alone "
                                "(--run-fmu runs it)"))
+    return 0
+
+
+def _print_variants(info: dict) -> None:
+    """The scene's variants, one line each with the keys it sets."""
+    from cosim.io.tomlwrite import value_text
+
+    variants = info["variants"]
+    if not variants:
+        return
+    default = info["default_variant"]
+    print(f"  variants ({len(variants)}; --variant NAME"
+          + (f", default {default}" if default else "") + "):")
+    for name, sets in variants.items():
+        what = "; ".join(f"{k} = {value_text(v)}" for k, v in sets.items()) or "the scene as written"
+        print(f"    {name}{' (run here)' if name == info['variant'] else ''}: {what}")
+
+
+def _list_scenes(args) -> int:
+    """`cosim info` without a scene, or `--list`: the scenes cosim ships."""
+    import json
+
+    from cosim.scene.shipped import shipped_list
+
+    if args.variant or args.set or args.run_fmu:
+        print("error: --variant, --set and --run-fmu need a SCENE", file=sys.stderr)
+        return 2
+    scenes = shipped_list()
+    if args.json:
+        print(json.dumps(scenes, indent=2))
+        return 0
+    width = max((len(s["name"]) for s in scenes), default=0)
+    print(f"{len(scenes)} scenes ship with cosim (`cosim run NAME`, `cosim info NAME` for "
+          f"one; the variants in brackets, the default first):")
+    for s in scenes:
+        names = s["variants"]
+        if s["default_variant"] in names:
+            names = [s["default_variant"]] + [v for v in names if v != s["default_variant"]]
+        print(f"  {s['name']:<{width}}  {s['description']}"
+              + (f" [{', '.join(names)}]" if names else ""))
     return 0
 
 

@@ -82,11 +82,17 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--quiet", action="store_true",
                    help="no progress line (it shows only on a terminal, after a second)")
     r.set_defaults(func=_cmd_run)
-    i = sub.add_parser("info", help="what a run will meet: DOFs, frequencies, stable steps")
-    i.add_argument("scene", help="scene file (TOML)")
-    i.add_argument("--variant")
-    i.add_argument("--set", action="append", metavar="KEY=VALUE")
-    i.add_argument("--json", action="store_true", help="print JSON")
+    i = sub.add_parser("info", help="what a run will meet: DOFs, frequencies, stable steps, "
+                                    "variants; without a scene, the scenes cosim ships")
+    i.add_argument("scene", nargs="?", help=_SCENE_HELP + "; left out, the shipped scenes "
+                                                         "are listed")
+    i.add_argument("--list", action="store_true",
+                   help="list the scenes cosim ships, one line each (as without a scene)")
+    i.add_argument("--variant", help="apply the scene's [variants.NAME] table (default: the "
+                                     "scene's default_variant)")
+    i.add_argument("--set", action="append", metavar="KEY=VALUE",
+                   help="override a scene value (after the variant); repeatable")
+    i.add_argument("--json", action="store_true", help="print JSON instead of text")
     i.add_argument("--run-fmu", action="store_true",
                    help="load and run the scene's FMUs (their native code, as `cosim run` "
                         "does) to evaluate what only they tell: a port mass they report "

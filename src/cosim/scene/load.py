@@ -51,8 +51,9 @@ def load_scene(path, variant: str | None = None, overrides=(), scheme: str | Non
     overrides : iterable of str or (path list, value)
         ``key.path=value`` overrides, applied after the variant.
     scheme : str, optional
-        Replace the scene's coupling scheme; options the new scheme does not
-        take are dropped with one warning naming them.
+        Replace the scene's coupling scheme; the scene's options the new
+        scheme does not take (those for other schemes) are dropped, no fault
+        of the scene: one line at the log's info level names them.
 
     Returns
     -------
@@ -64,13 +65,13 @@ def load_scene(path, variant: str | None = None, overrides=(), scheme: str | Non
     SceneError
     """
     file = find_scene(path)
-    if not os.path.lexists(file):
+    if not os.path.lexists(file):       # the shipped names, when it reads as a name
         raise SceneError(file, "", f"cannot be read: {not_found(path)}")
     data, chosen = read_scene(file, variant, overrides, scheme)
-    return _validate(data, file, chosen)
+    return _validate(data, file, chosen, scheme is not None)
 
 
-def _validate(data: dict, file, variant) -> Scene:
+def _validate(data: dict, file, variant, scheme_chosen: bool = False) -> Scene:
     top = Table(data, (), file, "top")
     name = top.string("name", file.stem)
     check_name(file, "name", name, "(a run folder's default name; the file's name when the "
@@ -133,7 +134,8 @@ def _validate(data: dict, file, variant) -> Scene:
     top.finish()
     # the work a run will do (macro steps, iterations, each side's steps), bounded
     spec = resolve_scheme(scheme_name, given, tables, file=file, t_end=t_end, stacklevel=3,
-                          subsystems=subs, contacts=contacts, max_steps=max_steps)
+                          subsystems=subs, contacts=contacts, max_steps=max_steps,
+                          chosen=scheme_chosen)
     return Scene(name=name, path=str(file), variant=variant, t_end=t_end, scheme=spec.name,
                  scheme_options=spec.options, output_every=every, subsystems=tuple(subs),
                  contacts=tuple(contacts), gravity=gravity, data=data,

@@ -19,7 +19,7 @@ import os
 from pathlib import Path
 
 __all__ = ["shipped_folder", "shipped_scenes", "find_scene", "find_study", "describe",
-           "not_found"]
+           "not_found", "scene_variants", "shipped_list"]
 
 #: the folders shipped, as the repository and the package name them
 KINDS = ("cases", "studies")
@@ -114,7 +114,56 @@ def not_found(text, kind: str = "cases") -> str:
     listed)."""
     names = ", ".join(_named(kind))
     if _as_name(str(text), kind) is None or not names:
-        return "no such file"
+        return "No such file or directory"
     what = "scene" if kind == "cases" else "study"
-    return (f"no such file, and no shipped {what} has that name (shipped: {names}"
+    return (f"No such file or directory, and no shipped {what} has that name (shipped: {names}"
             + ("; `cosim info --list` describes them)" if kind == "cases" else ")"))
+
+
+def _flat(table: dict, prefix: str = "") -> dict:
+    """A variant's table as ``{dotted.key: value}``; a table naming a ``type``
+    (a law, a drive) replaces the one it overrides whole, so it stays one value."""
+    out = {}
+    for k, v in table.items():
+        key = f"{prefix}{k}"
+        if isinstance(v, dict) and v and "type" not in v:
+            out.update(_flat(v, key + "."))
+        else:
+            out[key] = v
+    return out
+
+
+def scene_variants(path) -> tuple[dict, str | None]:
+    """The variants of the scene file ``path`` and its default.
+
+    Returns
+    -------
+    variants : dict
+        Variant name -> ``{dotted.key: value}`` it sets, in the file's order
+        (empty for a scene without variants, or a file that cannot be read).
+    default : str or None
+        Its ``default_variant``.
+    """
+    from cosim.scene.checks import SceneError
+    from cosim.scene.read import read_toml_file
+    try:
+        data = read_toml_file(path)
+    except SceneError:
+        return {}, None
+    variants = data.get("variants")
+    default = data.get("default_variant")
+    if not isinstance(variants, dict):
+        return {}, None
+    return ({name: _flat(v) for name, v in variants.items() if isinstance(v, dict)},
+            default if isinstance(default, str) else None)
+
+
+def shipped_list() -> list[dict]:
+    """One entry per shipped scene: ``name``, ``file``, ``description``,
+    ``variants`` (their names) and ``default_variant``."""
+    out = []
+    for name, path in shipped_scenes().items():
+        variants, default = scene_variants(path)
+        out.append({"name": name, "file": str(path), "description": describe(path),
+                    "variants": list(variants), "default_variant": default})
+    return out
