@@ -275,3 +275,73 @@ def test_the_energy_line_balances_on_screen(tmp_path):
         e["expected"], abs=2e-5 * scale)
     assert e["final"] - e["expected"] == pytest.approx(e["drift"], abs=2e-5 * scale)
     assert abs(e["drift"]) <= e["max_drift"] * (1 + 1e-2)
+
+
+# ------------------------------------------------------ the pages' output
+#: pages whose ```console blocks show `$ cosim ...` commands with their output
+SHOWN = ("docs/getting-started.md", "docs/commands.md")
+_NUMBER = re.compile(r"-?\d+(?:\.\d+)?(?:e[+-]?\d+)?")
+
+
+def _sessions(page: str) -> list[list[tuple[str, list[str]]]]:
+    """Each ```console block of ``page`` that runs cosim: its commands and the
+    output lines shown under each."""
+    text = (ROOT / page).read_text(encoding="utf-8")
+    out = []
+    for block in re.findall(r"^```console\n(.*?)^```", text, flags=re.M | re.S):
+        if not block.startswith("$ cosim "):
+            continue
+        steps = []
+        for line in block.splitlines():
+            if line.startswith("$ "):
+                steps.append((line[2:], []))
+            else:
+                steps[-1][1].append(line)
+        out.append(steps)
+    return out
+
+
+def _same(shown: str, got: str) -> bool:
+    """The line as shown and as printed: the same words, the same numbers to
+    the digits shown (relative 1e-4), round-off (below 1e-9) as round-off;
+    the CPU time is the machine's."""
+    shown, got = (re.sub(r"cpu \S+ s", "cpu - s", x) for x in (shown, got))
+    if _NUMBER.sub("#", shown) != _NUMBER.sub("#", got):
+        return False
+    return all(float(a) == pytest.approx(float(b), rel=1e-4, abs=1e-9)
+               for a, b in zip(_NUMBER.findall(shown), _NUMBER.findall(got)))
+
+
+@pytest.mark.parametrize("page", SHOWN)
+def test_the_pages_show_the_commands_real_output(page, tmp_path):
+    """Each `$ cosim ...` of the page, run in order in a fresh folder, prints
+    what the page shows (all of it, or the lines after or before `...`)."""
+    sessions = _sessions(page)
+    assert sessions, page
+    for k, steps in enumerate(sessions):
+        here = tmp_path / str(k)
+        here.mkdir()
+        for command, shown in steps:
+            p = cosim(*command.split()[1:], cwd=here)
+            assert p.returncode == 0, (command, p.stderr)
+            got = p.stdout.rstrip("\n").splitlines()
+            if shown and shown[0] == "...":         # the last lines
+                shown = shown[1:]
+                got = got[len(got) - len(shown):]
+            elif shown and shown[-1] == "...":      # the first lines
+                shown = shown[:-1]
+                got = got[:len(shown)]
+            assert len(got) == len(shown) and all(map(_same, shown, got)), \
+                f"{page}: `{command}` prints\n" + "\n".join(got)
+
+
+def test_no_shipped_scene_cites_a_file_outside_the_repository():
+    for path in [*CASES.glob("*.toml"), *(ROOT / "studies").glob("*.toml"),
+                 *(ROOT / "examples").rglob("*.toml")]:
+        assert "CASES.md" not in path.read_text(), path.name
+
+
+def test_the_examples_page_lists_every_example_script():
+    page = (ROOT / "docs" / "examples.md").read_text(encoding="utf-8")
+    for script in (ROOT / "examples").glob("*.py"):
+        assert f"../examples/{script.name}" in page, script.name
