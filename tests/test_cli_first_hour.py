@@ -312,6 +312,33 @@ def _same(shown: str, got: str) -> bool:
                for a, b in zip(_NUMBER.findall(shown), _NUMBER.findall(got)))
 
 
+def _shows(shown: list[str], got: list[str]) -> bool:
+    """Whether the lines ``got`` are those ``shown``, where a line `...`
+    stands for any number of lines: each run of shown lines is found, in
+    order, as consecutive lines of ``got`` (the first at its start and the
+    last at its end, unless `...` stands before or after them)."""
+    runs, run = [], []
+    for line in shown:
+        if line == "...":
+            runs.append(run)
+            run = []
+        else:
+            run.append(line)
+    runs.append(run)
+    at = 0
+    for k, run in enumerate(runs):
+        first, last = k == 0, k == len(runs) - 1
+        starts = ([0] if first else range(at, len(got) - len(run) + 1))
+        if last:
+            starts = [s for s in starts if s == len(got) - len(run)]
+        hit = next((s for s in starts if s >= at and len(got) - s >= len(run)
+                    and all(map(_same, run, got[s:s + len(run)]))), None)
+        if hit is None:
+            return False
+        at = hit + len(run)
+    return True
+
+
 @pytest.mark.parametrize("page", SHOWN)
 def test_the_pages_show_the_commands_real_output(page, tmp_path):
     """Each `$ cosim ...` of the page, run in order in a fresh folder, prints
@@ -325,14 +352,7 @@ def test_the_pages_show_the_commands_real_output(page, tmp_path):
             p = cosim(*command.split()[1:], cwd=here)
             assert p.returncode == 0, (command, p.stderr)
             got = p.stdout.rstrip("\n").splitlines()
-            if shown and shown[0] == "...":         # the last lines
-                shown = shown[1:]
-                got = got[len(got) - len(shown):]
-            elif shown and shown[-1] == "...":      # the first lines
-                shown = shown[:-1]
-                got = got[:len(shown)]
-            assert len(got) == len(shown) and all(map(_same, shown, got)), \
-                f"{page}: `{command}` prints\n" + "\n".join(got)
+            assert _shows(shown, got), f"{page}: `{command}` prints\n" + "\n".join(got)
 
 
 def test_no_shipped_scene_cites_a_file_outside_the_repository():
