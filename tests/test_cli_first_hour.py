@@ -365,3 +365,18 @@ def test_the_examples_page_lists_every_example_script():
     page = (ROOT / "docs" / "examples.md").read_text(encoding="utf-8")
     for script in (ROOT / "examples").glob("*.py"):
         assert f"../examples/{script.name}" in page, script.name
+
+
+def test_the_sweep_header_names_the_scene_by_a_plain_path(tmp_path):
+    (tmp_path / "cases").mkdir()
+    (tmp_path / "studies").mkdir()
+    shutil.copy(CASES / "spring_drop.toml", tmp_path / "cases")
+    (tmp_path / "studies" / "tiny.toml").write_text(
+        'title = "tiny"\nscene = "../cases/spring_drop.toml"\nvariants = ["undamped"]\n'
+        '[set]\nt_end = [0.001]\n[x]\nkey = "t_end"\n')
+    p = cosim("sweep", "--study", "tiny", "--workers", "1", "--no-plot", "--quiet",
+              cwd=tmp_path)
+    assert p.returncode == 0, p.stdout + p.stderr
+    # the study names its scene as studies/../cases/spring_drop.toml: said plainly
+    assert p.stdout.splitlines()[0] == ("sweep cases/spring_drop.toml: 1 point(s) on this "
+                                        "process, into runs/tiny")
