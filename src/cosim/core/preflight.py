@@ -42,10 +42,9 @@ def stiffest_mode(system) -> tuple[float, str]:
     out).  ``(0.0, "")`` without a structure."""
     best = (0.0, "")
     for sub in system.subsystems:
-        omega = getattr(sub, "omega", None)
-        if omega is None or not np.size(omega):
+        if "modes" not in sub.capabilities or not np.size(sub.omega):
             continue
-        w = float(np.max(omega))
+        w = float(np.max(sub.omega))
         if w > best[0]:
             best = (w, f"the highest kept mode of `{sub.name}`, {w / (2 * math.pi):.4g} Hz")
     return best

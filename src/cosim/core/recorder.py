@@ -298,7 +298,7 @@ class Recorder:
                     names.append(f"mode/{sysm.contact_names[c]}")
                     dtypes.append(np.int64)
         for sub in sysm.subsystems:
-            if hasattr(sub, "named_values"):
+            if "modes" in sub.capabilities:
                 dof_names = sub.named_values(sub.x)[0]
             else:
                 dof_names = list(sub.coordinates())
@@ -333,7 +333,7 @@ class Recorder:
                     cols.append(modes[:, c])
         offsets = sysm.stacked()
         for s, sub in enumerate(sysm.subsystems):
-            if hasattr(sub, "named_values"):      # a structure: physical DOFs of its modes
+            if "modes" in sub.capabilities:      # a structure: physical DOFs of its modes
                 _, U, V = sub.named_values(X[:, offsets[s]:offsets[s + 1]])
                 for i in range(U.shape[1]):
                     cols += [U[:, i], V[:, i]]
@@ -410,7 +410,7 @@ class Recorder:
         final_state = {}
         for s, sub in enumerate(sysm.subsystems):
             xs = x_end[offsets[s]:offsets[s + 1]]
-            if hasattr(sub, "named_values"):      # a structure: physical DOFs of its modes
+            if "modes" in sub.capabilities:      # a structure: physical DOFs of its modes
                 names, uf, vf = sub.named_values(xs)
                 final_state[sub.name] = {name: {"q": float(uf[i]), "dq": float(vf[i])}
                                          for i, name in enumerate(names)}

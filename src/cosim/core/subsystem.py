@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
+from typing import ClassVar
 
 import numpy as np
 
@@ -19,7 +20,7 @@ from couplers.contact import penetration_c
 
 from cosim.core.hermite import hermite_coefficients
 
-__all__ = ["QUADRATURES", "IMPULSE", "DISSIPATED", "MOMENT", "WORK", "StepInput", "Subsystem", "RigidReference", "SubsystemState", "EmbeddedContact",
+__all__ = ["QUADRATURES", "IMPULSE", "DISSIPATED", "MOMENT", "WORK", "CAPABILITIES", "StepInput", "Subsystem", "RigidReference", "SubsystemState", "EmbeddedContact",
            "reparametrised", "hermite_coefficients"]
 
 
@@ -153,6 +154,32 @@ class SubsystemState:
         self.peak = peak
 
 
+#: The optional faces a side may declare in ``Subsystem.capabilities``, with
+#: the members of the class each one promises (checked when the class is
+#: made, so a declaration cannot be false):
+#:
+#: - ``rigid_impacts``: resolves rigid impacts inside its integrator; its
+#:   ``impact_log`` lists those of its last step (set in ``__init__``).
+#: - ``impact_watch``: its ``impact_watch(t)``, when set, is told of each
+#:   rigid impact as the integrator resolves it (set in ``__init__``).
+#: - ``connections``: carries embedded grasps or friction (``attach_connection``).
+#: - ``moving_ports``: a surface whose ports move to a material coordinate
+#:   (``move_port``, ``material_coordinate``, ``surface_tangent``).
+#: - ``modes``: a modal structure (``natural_frequencies_hz``, ``named_values``;
+#:   ``omega``, ``basis`` and ``structure`` set in ``__init__``).
+#: - ``skeleton``: a multibody tree that can draw itself (``skeleton``; ``model``).
+#: - ``fmi``: a side made from an FMU (``model_description`` set in ``__init__``).
+CAPABILITIES = {
+    "rigid_impacts": (),
+    "impact_watch": (),
+    "connections": ("attach_connection",),
+    "moving_ports": ("move_port", "material_coordinate", "surface_tangent"),
+    "modes": ("natural_frequencies_hz", "named_values"),
+    "skeleton": ("skeleton",),
+    "fmi": (),
+}
+
+
 class Subsystem(ABC):
     """Base class of subsystems, with a template :meth:`~cosim.Subsystem.step`.
 
@@ -167,6 +194,21 @@ class Subsystem(ABC):
 
     #: True for a subsystem without dynamics (wall, ground).
     rigid: bool = False
+    #: The optional faces this side has, by name (see :data:`CAPABILITIES`);
+    #: code that uses a face asks ``"NAME" in sub.capabilities`` instead of
+    #: probing for a member.
+    capabilities: ClassVar[frozenset] = frozenset()
+
+    def __init_subclass__(cls, **kw):
+        super().__init_subclass__(**kw)
+        unknown = set(cls.capabilities) - set(CAPABILITIES)
+        if unknown:
+            raise TypeError(f"{cls.__name__} declares unknown capabilities {sorted(unknown)}; "
+                            f"known are {sorted(CAPABILITIES)}")
+        missing = [m for c in cls.capabilities for m in CAPABILITIES[c] if not hasattr(cls, m)]
+        if missing:
+            raise TypeError(f"{cls.__name__} declares capabilities {sorted(cls.capabilities)} "
+                            f"but has no {missing}")
 
     def __init__(self, name: str, port_names):
         self.name = name
@@ -251,6 +293,23 @@ class Subsystem(ABC):
     def coordinates(self) -> dict[str, tuple[int, int]]:
         """Named coordinates: name -> (index of q in x, index of dq in x)."""
         return {}
+
+    @property
+    def host_cpu_time(self) -> float:
+        """CPU time [s] spent by a process of the side's own (an FMU's host);
+        0 for a side that runs in the run's process."""
+        return 0.0
+
+    @property
+    def closed_form_contacts(self) -> bool:
+        """Whether the side steps its closed contacts in closed form (exactly),
+        so that a contact's stiffness sets no integrator step."""
+        return False
+
+    def unknown_port_mass(self, port: int) -> str | None:
+        """Why the mass behind ``port`` is unknown before the side runs (an
+        FMU known from its model description alone), or None."""
+        return None
 
     def take_peaks(self) -> np.ndarray:
         """Each embedded contact's largest penetration [m] since the last

@@ -73,7 +73,7 @@ class CoupledSystem:
                                      f"use placement `coupler`")
                 self.hosted[i] = HostedContact(own, slots[own], partner, partner_port, emb)
             if ln.connection is not None:
-                if not hasattr(self.subsystems[own], "attach_connection"):
+                if "connections" not in self.subsystems[own].capabilities:
                     raise ValueError(f"contact `{ln.contact.name}`: subsystem "
                                      f"`{self.subsystems[own].name}` cannot carry an embedded "
                                      f"grasp or friction; use placement `coupler`")
@@ -87,9 +87,11 @@ class CoupledSystem:
             (s, np.array([c for c, (h, _) in self.embedded.items() if h == s], dtype=int),
              np.array([k for h, k in self.embedded.values() if h == s], dtype=int))
             for s in hosts]
-        self._followers = [ln for ln in self.links if ln.follow]
-        for ln in self._followers:
-            if not hasattr(self.subsystems[ln.sub_b], "move_port"):
+        #: the contacts whose surface point follows the point above it
+        #: (:meth:`update_followers`)
+        self.followers = [ln for ln in self.links if ln.follow]
+        for ln in self.followers:
+            if "moving_ports" not in self.subsystems[ln.sub_b].capabilities:
                 raise ValueError(f"contact `{ln.contact.name}`: `follow` needs a structure as "
                                  f"side b")
             if ln.placement == "embedded" and ln.host == ln.sub_a:

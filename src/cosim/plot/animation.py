@@ -40,16 +40,16 @@ def _geometry(run: RunData, geo, idx: np.ndarray, magnify: float):
     for s, sub in enumerate(geo.subsystems):
         if sub is None:                                      # a side not built (an FMU)
             continue
-        if getattr(sub, "rigid", False):
+        if sub.rigid:
             fixed.append(sub.outputs(0.0, None)[0] @ np.array([1.0, 1j]))
-        elif hasattr(sub, "skeleton"):                      # a multibody tree
+        elif "skeleton" in sub.capabilities:                      # a multibody tree
             names = sub.model.joint_names
             X = np.column_stack([_column(run, f"q/{sub.name}/{j}")[idx] for j in names]
                                 + [_column(run, f"dq/{sub.name}/{j}")[idx] for j in names])
             states[s] = X
             frames = [sub.skeleton(x) for x in X]
             robots.append((sub.name, [f[0] for f in frames], [f[1] for f in frames]))
-        elif hasattr(sub, "structure"):
+        elif "modes" in sub.capabilities:
             st = sub.structure
             U = np.column_stack([_column(run, f"q/{sub.name}/{d}")[idx]
                                  for d in st.dof_names])
@@ -78,7 +78,7 @@ def _geometry(run: RunData, geo, idx: np.ndarray, magnify: float):
             pa = np.array([a.outputs(0.0, x)[0][ln.port_a] @ np.array([1.0, 1j])
                            for x in states[ln.sub_a]])
         surface = None
-        if getattr(b, "rigid", False):
+        if b is not None and b.rigid:
             pb = complex(*b.outputs(0.0, None)[0][ln.port_b])
             n = complex(*np.asarray(ln.normal, float))
             surface = (pb, 1j * n / abs(n))                   # a point and the tangent

@@ -145,8 +145,7 @@ def first_touch(scene, budget_s: float = FIRST_TOUCH_BUDGET_S) -> tuple[dict, st
     probe = Probe(system, scene.name, sch.name, scene.t_end, every=2**62, auto_edges=auto)
     why = None
     try:
-        if hasattr(sch, "preflight"):
-            sch.preflight(system)
+        sch.preflight(system)
         sch.run(system, scene.t_end, probe)
         why = f"the run to t_end = {scene.t_end:g} s did not close it"
     except _Touched:
@@ -234,7 +233,7 @@ def _contact_info(system, c, scene, touch=None, why_not=None) -> dict:
             out["host"] = system.names[host]
             own = ln.port_a if host == ln.sub_a else ln.port_b
             omega = math.sqrt(k * system.subsystems[host].port_mobility(own, n))
-        closed_form = getattr(system.subsystems[host], "_closed_form", False)
+        closed_form = system.subsystems[host].closed_form_contacts
         out["max_integrator_step_s"] = ({"closed_form": None} if closed_form
                                        else {"rk4": RK4_LIMIT / omega})
     return out
@@ -245,7 +244,7 @@ def _unknown_mass(system, c) -> str | None:
     (a side built from its model description alone), or None."""
     ln = system.links[c]
     for s, port in ((ln.sub_a, ln.port_a), (ln.sub_b, ln.port_b)):
-        why = getattr(system.subsystems[s], "unknown_port_mass", lambda p: None)(port)
+        why = system.subsystems[s].unknown_port_mass(port)
         if why is not None:
             return why
     return None
@@ -323,17 +322,16 @@ def scene_info(scene, *, budget_s: float = FIRST_TOUCH_BUDGET_S, run_fmu: bool =
         coords = sub.coordinates()
         if coords:
             entry["coordinates"] = list(coords)
-        if hasattr(sub, "model_description"):    # an FMU: cosim.sides.fmu(_description)
+        if "fmi" in sub.capabilities:            # an FMU: cosim.sides.fmu(_description)
             entry["type"] = "FMUSubsystem"       # as the run builds it
             entry["dofs"] = len(coords)
             entry["fmu"] = fmu_info(sub)
-        freqs = getattr(sub, "natural_frequencies_hz", None)
-        if freqs is not None:       # a structure: physical DOFs, kept and dropped modes
+        if "modes" in sub.capabilities:       # a structure: physical DOFs, kept and dropped modes
             entry["dofs"] = sub.structure.n_dof
             entry["modes_kept"] = int(sub.basis.kept)
             entry["modes_dropped"] = int(sub.basis.dropped)
             entry["mode_cutoff_hz"] = sub.basis.cutoff_hz
-            entry["natural_frequencies_hz"] = [float(f) for f in freqs]
+            entry["natural_frequencies_hz"] = [float(f) for f in sub.natural_frequencies_hz]
         subs[sub.name] = entry
     from cosim.scene.shipped import scene_variants
 

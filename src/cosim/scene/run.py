@@ -117,8 +117,7 @@ def _simulate(scene, scheme, progress, progress_interval, out, overwrite):
     system, sch = scene.build(scheme)
     warn_work(scene.path, scene.work(scheme, system))      # a long run says so first
     if out is not None:
-        if hasattr(sch, "preflight"):
-            sch.preflight(system, scene.t_end)     # a refusal writes nothing
+        sch.preflight(system, scene.t_end)     # a refusal writes nothing
         write_scene(scene, out)
     if _is_monolithic(sch):
         auto = False                       # it locates every switch itself
@@ -235,7 +234,7 @@ def _discard(rec: Recorder, out) -> None:
 
 def _host_cpu(system) -> float:
     """CPU time [s] that the subsystems' own processes (an FMU's host) have spent."""
-    return sum(getattr(sub, "host_cpu_time", 0.0) for sub in system.subsystems)
+    return sum(sub.host_cpu_time for sub in system.subsystems)
 
 
 def _reached(rec: Recorder) -> float:

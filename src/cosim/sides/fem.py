@@ -71,6 +71,8 @@ class StructureSubsystem(ClosedFormContacts, Subsystem):
         Options of that integrator (``beta``, ``gamma``, ``alpha``, ``rho_inf``).
     """
 
+    capabilities = frozenset({"rigid_impacts", "moving_ports", "modes"})
+
     def __init__(self, name, structure, basis, ports: dict, u0=None, v0=None, gravity=None,
                  contact_step: float = 1e-6, integrator: str = "exact",
                  integrator_options=None):

@@ -30,6 +30,11 @@ class ClosedFormContacts:
     """The closed-form stepping methods of a structure subsystem."""
 
     @property
+    def closed_form_contacts(self) -> bool:
+        """The subsystem protocol's name of :attr:`_closed_form`."""
+        return self._closed_form
+
+    @property
     def _closed_form(self) -> bool:
         """Undamped, stepped exactly, every embedded contact a linear spring:
         each set of closed contacts is again a linear system under a

@@ -104,6 +104,8 @@ class FMUSubsystem(FMUOutputs, Subsystem):
     positions and velocities at the step's ends.
     """
 
+    capabilities = frozenset({"fmi"})
+
     def __init__(self, name: str, path, ports: dict, parameters: dict | None = None,
                  coordinates: dict | None = None, energy: str | None = None):
         super().__init__(name, ports.keys())

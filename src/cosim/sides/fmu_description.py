@@ -249,6 +249,8 @@ class DescribedFMU(FMUOutputs, Subsystem):
         As for :class:`cosim.sides.fmu.FMUSubsystem`.
     """
 
+    capabilities = frozenset({"fmi"})
+
     def __init__(self, name: str, path, ports: dict, coordinates: dict | None = None,
                  energy: str | None = None):
         super().__init__(name, ports.keys())

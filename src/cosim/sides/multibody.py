@@ -58,6 +58,8 @@ class MultibodySubsystem(Subsystem):
     the integrator's sub-steps (:func:`cosim.core.ode.substep_peaks`).
     """
 
+    capabilities = frozenset({"rigid_impacts", "impact_watch", "connections", "skeleton"})
+
     def __init__(self, name: str, model: TreeModel, q0, dq0, ports: dict,
                  gravity=None, integrator: TimeStepper | None = None,
                  effects: JointEffects | None = None):
@@ -85,9 +87,8 @@ class MultibodySubsystem(Subsystem):
         self.switch_log: list[tuple[float, int, bool]] = []
         #: rigid impacts resolved during the last step (dicts for the summary)
         self.impact_log: list[dict] = []
-        #: ``impact_watch(t)``, told of each rigid impact as it is resolved,
-        #: within the step (a coupling scheme sets it so that the run guard
-        #: sees a train of impacts that would never end the step); None: none
+        #: ``impact_watch(t)``, told of each rigid impact as it is resolved (a
+        #: scheme sets it: the guard sees a train that never ends the step)
         self.impact_watch = None
         self._zero_u = np.zeros((self.n_ports, 2))
         self._t0, self._h = 0.0, 1.0

@@ -105,6 +105,12 @@ class CouplingScheme(ABC):
                                  f"got {value!r}")
             setattr(self, key, value)
 
+    def preflight(self, system, t_end: float = math.inf) -> None:
+        """Refuse, before anything is written, a scheme setting that cannot
+        work on ``system`` over a run to ``t_end`` [s]
+        (:class:`~cosim.errors.UnsafeStepError`).  Nothing to refuse here; the
+        co-simulation schemes check their steps against the contacts."""
+
     @abstractmethod
     def run(self, system, t_end: float, recorder) -> dict:
         """Advance the system to ``t_end``, recording as it goes."""
@@ -225,7 +231,7 @@ class CoSimulationScheme(MacroStepControl, InputExtrapolation, CouplingScheme):
                 h = min(H, t_end - t)
                 if h <= sliver:
                     break
-            if system._followers:
+            if system.followers:
                 system.update_followers(self._outs)
             predicted = self._predicted_end_forces(system, h / h_prev) if self.interface_tolerance \
                 and controlled else None
@@ -293,7 +299,9 @@ class CoSimulationScheme(MacroStepControl, InputExtrapolation, CouplingScheme):
                         recorder.edge(c, ts, True)
                         recorder.edge(c, ts, False)
             for s in self._moving(system):
-                recorder.impacts += getattr(system.subsystems[s], "impact_log", [])
+                sub = system.subsystems[s]
+                if "rigid_impacts" in sub.capabilities:
+                    recorder.impacts += sub.impact_log
             if not (np.isfinite(d).all() and np.isfinite(dd).all()):
                 cause = nonfinite_cause(system, d, dd, f)
                 raise GuardError(cause[0] if cause else "non-finite state", t + h,
@@ -381,7 +389,7 @@ class CoSimulationScheme(MacroStepControl, InputExtrapolation, CouplingScheme):
                 rigid.setdefault(s, {})[slot] = c
         for s, slots in rigid.items():
             sub = system.subsystems[s]
-            if not hasattr(sub, "impact_watch"):
+            if "impact_watch" not in sub.capabilities:
                 continue
             sub.impact_watch = None
             if guard is None:

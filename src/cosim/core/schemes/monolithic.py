@@ -71,7 +71,7 @@ class Monolithic(CouplingScheme):
         def contact_state(y):
             xs = split(y)
             outs = [sub.outputs(0.0, xs[s]) for s, sub in enumerate(subs)]
-            if system._followers:      # surface points move with the point above them
+            if system.followers:      # surface points move with the point above them
                 system.update_followers(outs, xs)
                 outs = [sub.outputs(0.0, xs[s]) for s, sub in enumerate(subs)]
             d, dd = system.penetrations(outs)
