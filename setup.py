@@ -4,9 +4,12 @@ Each side's step runs in compiled code built here by ``pip install .`` with the
 machine's C compiler; the numpy modules beside them stay the readable reference
 (``COSIM_KERNEL=numpy`` selects it, see ``cosim.sides.kernel``).
 """
+from pathlib import Path
+
 from Cython.Build import cythonize
 from setuptools import Extension, setup
 from setuptools.command.build_ext import build_ext
+from setuptools.command.build_py import build_py
 
 #: the face every side's compiled model-exchange face derives from (cimported)
 FACE = "src/cosim/core/_stacked.pxd"
@@ -50,7 +53,35 @@ class BuildKernels(build_ext):
         super().build_extensions()
 
 
-# include_path: the kernels cimport cosim.core._side_face from the sources
-setup(ext_modules=cythonize(KERNELS, language_level=3, include_path=["src"],
-                            compiler_directives={"embedsignature": True}),
-      cmdclass={"build_ext": BuildKernels})
+#: folders of the repository shipped inside the package, as ``cosim/_shipped/NAME``:
+#: the verification cases and the studies, so that `cosim run spring_drop`,
+#: `cosim verify` and `cosim sweep --study NAME` work from any folder.  The
+#: repository keeps the one copy at its root (the paths the docs use);
+#: ``cosim.scene.shipped`` finds them in either place.
+SHIPPED = {"cases": "*.toml", "studies": "*.toml"}
+
+
+def shipped_files(root="."):
+    """``(source, path inside the package)`` of each shipped file."""
+    root = Path(root)
+    for folder, pattern in SHIPPED.items():
+        for src in sorted((root / folder).glob(pattern)):
+            yield src, Path("cosim", "_shipped", folder, src.name)
+
+
+class BuildWithShipped(build_py):
+    """``build_py`` that also copies :data:`SHIPPED` into the built package."""
+
+    def run(self):
+        super().run()
+        for src, rel in shipped_files(Path(__file__).resolve().parent):
+            target = Path(self.build_lib) / rel
+            self.mkpath(str(target.parent))
+            self.copy_file(str(src), str(target))
+
+
+if __name__ == "__main__":
+    # include_path: the kernels cimport cosim.core._side_face from the sources
+    setup(ext_modules=cythonize(KERNELS, language_level=3, include_path=["src"],
+                                compiler_directives={"embedsignature": True}),
+          cmdclass={"build_ext": BuildKernels, "build_py": BuildWithShipped})

@@ -12,7 +12,6 @@ The figure ``docs/_static/examples/compare_schemes.png`` was made by::
 """
 import argparse
 import json
-import warnings
 from pathlib import Path
 
 from matplotlib.figure import Figure
@@ -33,9 +32,7 @@ def main(argv=None):
 
     rows = {}
     for name in SCHEMES:
-        with warnings.catch_warnings():     # "scheme X ignores the options [...]" is expected
-            warnings.simplefilter("ignore", UserWarning)
-            scene = cosim.load_scene(SCENE, "f100", [f"t_end={args.t_end}"], scheme=name)
+        scene = cosim.load_scene(SCENE, "f100", [f"t_end={args.t_end}"], scheme=name)
         result = cosim.simulate(scene)
         c = result.summary["contacts"]["C"]
         k = scene.data["contacts"]["C"]["law"]["contact_stiffness"]

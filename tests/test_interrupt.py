@@ -137,19 +137,28 @@ def test_an_output_directory_holding_a_run_is_refused(tmp_path, capsys):
     assert cli.main(args) == 2
     err = capsys.readouterr().err
     assert err == (f"error: {out} already holds a run (summary.json, series.npz); choose "
-                   f"another --out, or pass --overwrite (overwrite=True) to replace it\n")
+                   f"another --out, or pass --overwrite to replace it\n")
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before
     assert cli.main(args[:-2] + ["--set", "t_end=0.001", "--out", str(out), "--overwrite"]) == 0
     assert read(out)[0]["t_end"] == pytest.approx(0.001)
 
 
-def test_the_default_run_directory_is_protected_too(tmp_path, monkeypatch):
+def test_the_default_run_directory_is_never_replaced_unasked(tmp_path, monkeypatch):
+    """Run again without --out, a scene gets a new folder (`-2`), the first
+    run kept byte for byte; --overwrite without --out replaces the first."""
     monkeypatch.chdir(tmp_path)
     args = ["run", str(SPRING_DROP), "--set", "t_end=0.001"]
     assert cli.main(args) == 0
-    assert (tmp_path / "runs" / "spring_drop-undamped" / "summary.json").exists()
-    assert cli.main(args) == 2
-    assert cli.main(args + ["--overwrite"]) == 0
+    first = tmp_path / "runs" / "spring_drop-undamped"
+    before = {p.name: p.read_bytes() for p in first.iterdir()}
+    assert set(before) >= {"summary.json", "series.npz", "scene.toml"}
+    assert cli.main(args) == 0
+    assert (tmp_path / "runs" / "spring_drop-undamped-2" / "summary.json").exists()
+    assert {p.name: p.read_bytes() for p in first.iterdir()} == before
+    assert cli.main(args[:-1] + ["t_end=0.0005", "--overwrite"]) == 0
+    assert read(first)[0]["t_end"] == pytest.approx(0.0005)
+    assert sorted(p.name for p in (tmp_path / "runs").iterdir()) == [
+        "spring_drop-undamped", "spring_drop-undamped-2"]
 
 
 def test_write_outputs_refuses_unless_overwrite(tmp_path):

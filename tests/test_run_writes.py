@@ -131,7 +131,7 @@ def test_exports_stay_in_the_run_folder_and_replace_links_only_with_overwrite(tm
     assert proc.returncode == 2
     assert proc.stderr == (f"error: {out} already holds chain.xdmf, which this run would "
                            f"replace; choose another --out, or pass --overwrite "
-                           f"(overwrite=True) to replace it\n")
+                           f"to replace it\n")
     proc = cosim_cli(*args, "--overwrite", cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     assert f"wrote {out / 'chain.xdmf'} (open in ParaView)" in proc.stdout

@@ -10,6 +10,7 @@ import dataclasses
 import json
 import re
 import tomllib
+import warnings
 
 import pytest
 
@@ -133,13 +134,20 @@ def test_option_of_another_scheme_warns_and_is_dropped():
     assert s.scheme_options == {"macro_step": 1e-4}
 
 
-def test_scheme_argument_replaces_the_scheme():
+def test_scheme_argument_replaces_the_scheme(caplog):
+    """A scheme the caller chose runs without the scene's options for the
+    others: no warning (no fault of the scene), one line at info level."""
+    import logging
     s = load_scene(SPRING_DROP, scheme="implicit")
     assert s.scheme == "implicit" and s.scheme_options == {"macro_step": 1e-4}
-    with pytest.warns(UserWarning, match=re.escape("scheme `monolithic` ignores the options "
-                                                   "['macro_step']")):
-        s = load_scene(SPRING_DROP, scheme="monolithic")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with caplog.at_level(logging.INFO, logger="cosim.scene.specs"):
+            s = load_scene(SPRING_DROP, scheme="monolithic")
     assert s.scheme == "monolithic" and s.scheme_options == {}
+    assert [r.getMessage() for r in caplog.records] == [
+        f"{SPRING_DROP}: scheme `monolithic` runs without the scene's options ['macro_step'] "
+        f"(for other schemes)"]
 
 
 # ---------------------------------------------------- file-level and --set
@@ -456,13 +464,12 @@ def test_model_errors_at_build(overrides, match):
 
 
 def test_other_scheme_at_build_needs_macro_step():
-    with pytest.warns(UserWarning, match="ignores the options"):
+    with warnings.catch_warnings():         # another scheme chosen: no warning
+        warnings.simplefilter("error")
         s = load_scene(SPRING_DROP, scheme="monolithic")
-    with pytest.raises(SceneError, match=at("scheme.macro_step",
-                                            "is required by scheme `jacobi` [s]")):
-        s.build("jacobi")
-    with pytest.warns(UserWarning, match=re.escape("scheme `monolithic` ignores the options "
-                                                   "['macro_step']")):
+        with pytest.raises(SceneError, match=at("scheme.macro_step",
+                                                "is required by scheme `jacobi` [s]")):
+            s.build("jacobi")
         load_scene(SPRING_DROP).build("monolithic")
 
 

@@ -51,7 +51,22 @@ class UnsafeStepError(ValueError):
 
 
 class OutputExistsError(FileExistsError):
-    """The output directory already holds a run, and overwriting was not asked for."""
+    """The output directory already holds a run, and overwriting was not asked for.
+
+    Its text says what to do in Python's terms (``out=``, ``overwrite=True``);
+    :meth:`for_command_line` says it in the command line's (``--out``,
+    ``--overwrite``), so neither reader meets the other's spelling.
+    """
+
+    def __init__(self, what: str, remedy: str = "", command_line_remedy: str = ""):
+        super().__init__(what + (f"; {remedy}" if remedy else ""))
+        self.what, self.command_line_remedy = what, command_line_remedy
+
+    def for_command_line(self) -> str:
+        """The message as `cosim run` prints it."""
+        if not self.command_line_remedy:
+            return str(self)
+        return f"{self.what}; {self.command_line_remedy}"
 
 
 class OutputError(OSError):

@@ -52,7 +52,10 @@ def _main(argv) -> int:
                 code = args.func(args)
                 sys.stdout.flush()             # a closed pipe shows here, not at exit
                 return code
-            except (SceneError, UnsafeStepError, OutputExistsError, OutputError) as exc:
+            except OutputExistsError as exc:
+                print(f"error: {exc.for_command_line()}", file=sys.stderr)
+                return 2
+            except (SceneError, UnsafeStepError, OutputError) as exc:
                 print(f"error: {exc}", file=sys.stderr)
                 return 2
             except KeyboardInterrupt as exc:   # outside a run (a run's own is handled there)

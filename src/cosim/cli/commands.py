@@ -12,7 +12,34 @@ from cosim.cli.terminal import _progress_line
 __all__: list[str] = []
 
 
-def _print_summary(s: dict, out: Path | None) -> None:
+def _units(scene):
+    """``units(SUBSYSTEM, NAME) -> (" m", " m/s")``: the units of a final
+    state's q and dq, as the scene declares them: a prismatic joint's metres,
+    a revolute joint's radians; a structure's rotation DOFs (``t0``, ``t1``,
+    ... of a beam) in radians, its other DOFs (displacements) in metres; an
+    FMU's coordinates without (their units are the FMU's)."""
+    import re
+
+    kinds = {}
+    for spec in scene.subsystems:
+        if spec.type == "multibody":
+            kinds[spec.name] = {j.name: j.kind for j in spec.joints}
+        elif spec.type not in ("fmu", "rigid"):
+            kinds[spec.name] = "structure"
+
+    def units(sub, name):
+        kind = kinds.get(sub)
+        if kind == "structure":
+            kind = "revolute" if re.fullmatch(r"t\d+", name) else "prismatic"
+        elif isinstance(kind, dict):
+            kind = kind.get(name)
+        return {"revolute": (" rad", " rad/s"), "prismatic": (" m", " m/s")}.get(kind, ("", ""))
+    return units
+
+
+def _print_summary(s: dict, out: Path | None, units=None) -> None:
+    """The run's summary on the terminal.  ``units`` (:func:`_units`) puts
+    the units after the final state's values."""
     e = s["energy"]
     print(f"scene {s['scene']}  scheme {s['scheme']}  status {s['status']}")
     print(f"  t_end {s['t_end']:.6g} s  cpu {s['cpu_time_s']:.3g} s  macro steps "
@@ -26,8 +53,11 @@ def _print_summary(s: dict, out: Path | None) -> None:
             t0, t1 = c["intervals"][0][0], c["intervals"][-1][1]
             print(f"    first touch {t0:.6g} s, last release {t1:.6g} s (span {t1 - t0:.6g} s, "
                   f"in touch {c['in_touch_time']:.6g} s)")
-    print(f"  energy: initial {e['initial']:.6g} J, final {e['final']:.6g} J, dissipated "
-          f"{e['dissipated']:.4g} J, max drift {e['max_abs_drift']:.3g} J")
+    supplied = e.get("supplied", 0.0)
+    expected = e["initial"] + supplied - e["dissipated"]
+    print(f"  energy: initial {e['initial']:.6g} J + supplied {supplied:.6g} J - dissipated "
+          f"{e['dissipated']:.6g} J = {expected:.6g} J; final {e['final']:.6g} J (drift "
+          f"{e['final'] - expected:.3g} J at the end, at most {e['max_abs_drift']:.3g} J)")
     for w in s.get("warnings", []):
         print(f"  warning: {w['message']}")
     for imp in s["impacts"]:
@@ -43,16 +73,40 @@ def _print_summary(s: dict, out: Path | None) -> None:
         print(f"    joint velocities after [rad/s]: {after}")
     for sw in s.get("switches", []):
         print(f"  switch {sw['contact']} at t = {sw['time']:.6g} s: {sw['from']} -> {sw['to']}")
+    if s["final_state"]:
+        print("  final state (q, and its rate dq):")
     for sub, joints in s["final_state"].items():
         if len(joints) > 12:
-            print(f"  final {sub}: {len(joints)} DOFs (in summary.json)")
+            print(f"    {sub}: {len(joints)} DOFs (in summary.json)")
             continue
-        vals = ", ".join(f"{j} = {v['q']:.6g} ({v['dq']:.6g}/s)" for j, v in joints.items())
-        print(f"  final {sub}: {vals}")
+        for j, v in joints.items():
+            q, dq = units(sub, j) if units is not None else ("", "")
+            print(f"    {sub}/{j}: q = {v['q']:.6g}{q}, dq = {v['dq']:.6g}{dq}")
     if s["message"] and s["status"] == "finished":
         print(f"  message: {s['message']}")      # a run that did not finish says it once, below
     if out is not None:
         print(f"  wrote {out / 'summary.json'}, {out / 'series.npz'} and {out / 'scene.toml'}")
+
+
+def _default_name(scene) -> str:
+    """``SCENE[-VARIANT][-SCHEME]`` (:func:`cosim.io.rundir.run_folder_name`):
+    the scheme named when it is not the one the scene (with its variant)
+    gives, whether `--scheme` or `--set scheme.name=` chose it."""
+    import re
+
+    from cosim.core.result import written_by_a_run
+    from cosim.io.rundir import name_problem, run_folder_name
+    from cosim.scene.read import read_scene
+
+    own, _ = read_scene(scene.path, scene.variant)
+    table = own.get("scheme")
+    own_scheme = table.get("name") if isinstance(table, dict) else None
+    scheme = scene.scheme if scene.scheme != own_scheme else None
+    run = Path(scene.path).resolve().parent.name
+    if written_by_a_run(scene.path) and name_problem(run) is None:
+        # a run's scene.toml again: named after that run (its variant is in its name)
+        return run_folder_name(re.sub(r"-\d+$", "", run), None, scheme)
+    return run_folder_name(scene.name, scene.variant, scheme)
 
 
 def _cmd_run(args) -> int:
@@ -61,12 +115,18 @@ def _cmd_run(args) -> int:
 
 
 def _run(args) -> int:
+    from cosim.io.rundir import fresh_folder
     from cosim.scene.run import RunInterrupted, simulate
     from cosim.scene.load import load_scene
 
     scene = load_scene(args.scene, args.variant, args.set or (), args.scheme)
-    out = Path(args.out) if args.out else Path("runs") / (
-        scene.name + (f"-{scene.variant}" if scene.variant else ""))
+    made = None                 # a default folder, new: removed again if the run is refused
+    if args.out:
+        out = Path(args.out)
+    elif args.overwrite:                # the default folder itself, its run replaced
+        out = Path("runs") / _default_name(scene)
+    else:                               # a new folder: a run again never meets the one before
+        out = made = fresh_folder("runs", _default_name(scene))
     progress = _progress_line(args.quiet)
     code, crash = None, None
     try:
@@ -81,7 +141,9 @@ def _run(args) -> int:
     finally:
         if progress is not None:
             progress.close()
-    _print_summary(res.summary, out)
+        if made is not None and made.is_dir() and not any(made.iterdir()):
+            made.rmdir()
+    _print_summary(res.summary, out, _units(scene))
     for name in scene.export:
         print(f"  wrote {out / (name + '.xdmf')} (open in ParaView)")
     if res.status != "finished":
@@ -102,8 +164,12 @@ def _run(args) -> int:
 def _cmd_verify(args) -> int:
     from cosim.studies.verify import run_checks
 
+    cases = args.cases
+    if cases is None:                   # the scenes cosim ships, from any folder
+        from cosim.scene.shipped import shipped_folder
+        cases = shipped_folder("cases") or "cases"
     failed = 0
-    for check in run_checks(args.cases, hard=args.hard):
+    for check in run_checks(cases, hard=args.hard):
         failed += not check.passed
         print(f"{'PASS' if check.passed else 'FAIL'}  {check.name}: {check.detail}", flush=True)
     print(f"{'all checks passed' if not failed else f'{failed} check(s) failed'}")
@@ -122,13 +188,16 @@ def _cmd_info(args) -> int:
     from cosim.scene.info import scene_info
     from cosim.scene.load import load_scene
 
+    if args.list or args.scene is None:
+        return _list_scenes(args)
     info = scene_info(load_scene(args.scene, args.variant, args.set or ()),
                       run_fmu=args.run_fmu)
     if args.json:
         print(json.dumps(info, indent=2))
         return 0
-    print(f"scene {info['scene']}  variant {info['variant']}  scheme {info['scheme']}  "
-          f"t_end {info['t_end']:g} s")
+    print(f"scene {info['scene']}" + (f"  variant {info['variant']}" if info["variant"] else "")
+          + f"  scheme {info['scheme']}  t_end {info['t_end']:g} s")
+    _print_variants(info)
     work = info["work"]
     print(f"  work: {work['bound']} {work['steps']:.3g} integrator steps ({work['how']})")
     for name, s in info["subsystems"].items():
@@ -192,6 +261,46 @@ def _cmd_info(args) -> int:
     return 0
 
 
+def _print_variants(info: dict) -> None:
+    """The scene's variants, one line each with the keys it sets."""
+    from cosim.io.tomlwrite import value_text
+
+    variants = info["variants"]
+    if not variants:
+        return
+    default = info["default_variant"]
+    print(f"  variants ({len(variants)}; --variant NAME"
+          + (f", default {default}" if default else "") + "):")
+    for name, sets in variants.items():
+        what = "; ".join(f"{k} = {value_text(v)}" for k, v in sets.items()) or "the scene as written"
+        print(f"    {name}{' (run here)' if name == info['variant'] else ''}: {what}")
+
+
+def _list_scenes(args) -> int:
+    """`cosim info` without a scene, or `--list`: the scenes cosim ships."""
+    import json
+
+    from cosim.scene.shipped import shipped_list
+
+    if args.variant or args.set or args.run_fmu:
+        print("error: --variant, --set and --run-fmu need a SCENE", file=sys.stderr)
+        return 2
+    scenes = shipped_list()
+    if args.json:
+        print(json.dumps(scenes, indent=2))
+        return 0
+    width = max((len(s["name"]) for s in scenes), default=0)
+    print(f"{len(scenes)} scenes ship with cosim (`cosim run NAME`, `cosim info NAME` for "
+          f"one; the variants in brackets, the default first):")
+    for s in scenes:
+        names = s["variants"]
+        if s["default_variant"] in names:
+            names = [s["default_variant"]] + [v for v in names if v != s["default_variant"]]
+        print(f"  {s['name']:<{width}}  {s['description']}"
+              + (f" [{', '.join(names)}]" if names else ""))
+    return 0
+
+
 def _machine() -> str:
     import os
     import platform
@@ -202,7 +311,15 @@ def _machine() -> str:
 
 def _cmd_bench(args) -> int:
     from cosim.io.rundir import OutputFolder
+    from cosim.scene.shipped import find_scene
+    from cosim.studies.strike import find_strike
 
+    args.scene = find_scene(args.scene)     # a path, or the name of a shipped scene
+    # the contact and joint compared, as `cosim sweep` chooses them: checked
+    # (and a scene that leaves no single choice refused, naming its contacts)
+    # before a folder is made or anything runs
+    args.contact, args.joint = find_strike(args.scene, args.contact, args.joint,
+                                           variant=args.variant)
     out = Path(args.out) if args.out else Path("runs") / (
         Path(args.scene).stem + (f"-{args.variant}" if args.variant else "") + "-bench")
     # the folder is opened (a link or a file at its place refused) and locked
@@ -231,6 +348,7 @@ def _bench(args, folder) -> bool:
     spread = args.spread
     print(f"bench {args.scene}" + (f" --variant {args.variant}" if args.variant else "")
           + f" on {_machine()}")
+    print(f"contact {args.contact}, exit velocity of joint {args.joint}")
     print(f"each row: the scene and {spread - 1} round-off copies; errors median / worst, "
           f"contact counts min-max, CPU median" if spread > 1 else "each row: one run")
     print(f"{'scheme':<14}{'step [s]':>10}{'rtol':>9}{'CPU [s]':>9}{'peak':>20}{'contacts':>9}"

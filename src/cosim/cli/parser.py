@@ -55,6 +55,11 @@ def _magnify(text: str) -> float:
     return x
 
 
+#: what a SCENE argument may be
+_SCENE_HELP = ("scene file (TOML), or the name of a scene cosim ships (spring_drop, "
+               "three_mass, ...: `cosim info --list`); a file that exists wins")
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="cosim", description="Co-simulation of impacts between "
                                 "robots and vibrating structures.")
@@ -62,23 +67,32 @@ def build_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True)
     r = sub.add_parser("run", help="run a scene, print a summary, write summary.json and "
                                    "series.npz")
-    r.add_argument("scene", help="scene file (TOML)")
+    r.add_argument("scene", help=_SCENE_HELP)
     r.add_argument("--variant", help="apply the scene's [variants.NAME] table")
     r.add_argument("--scheme", help="coupling scheme (monolithic, jacobi, gauss_seidel, "
                                     "implicit)")
     r.add_argument("--set", action="append", metavar="KEY=VALUE",
                    help="override a scene value (after the variant); repeatable")
-    r.add_argument("--out", help="output directory (default runs/SCENE[-VARIANT])")
+    r.add_argument("--out", help="output directory (default: a new folder "
+                                 "runs/SCENE[-VARIANT][-SCHEME], SCHEME when it is not the "
+                                 "scene's own; runs/NAME-2, -3, ... when taken)")
     r.add_argument("--overwrite", action="store_true",
-                   help="replace a run that the output directory already holds")
+                   help="replace a run that the output directory already holds (without "
+                        "--out: the default folder itself, not a new one)")
     r.add_argument("--quiet", action="store_true",
                    help="no progress line (it shows only on a terminal, after a second)")
     r.set_defaults(func=_cmd_run)
-    i = sub.add_parser("info", help="what a run will meet: DOFs, frequencies, stable steps")
-    i.add_argument("scene", help="scene file (TOML)")
-    i.add_argument("--variant")
-    i.add_argument("--set", action="append", metavar="KEY=VALUE")
-    i.add_argument("--json", action="store_true", help="print JSON")
+    i = sub.add_parser("info", help="what a run will meet: DOFs, frequencies, stable steps, "
+                                    "variants; without a scene, the scenes cosim ships")
+    i.add_argument("scene", nargs="?", help=_SCENE_HELP + "; left out, the shipped scenes "
+                                                         "are listed")
+    i.add_argument("--list", action="store_true",
+                   help="list the scenes cosim ships, one line each (as without a scene)")
+    i.add_argument("--variant", help="apply the scene's [variants.NAME] table (default: the "
+                                     "scene's default_variant)")
+    i.add_argument("--set", action="append", metavar="KEY=VALUE",
+                   help="override a scene value (after the variant); repeatable")
+    i.add_argument("--json", action="store_true", help="print JSON instead of text")
     i.add_argument("--run-fmu", action="store_true",
                    help="load and run the scene's FMUs (their native code, as `cosim run` "
                         "does) to evaluate what only they tell: a port mass they report "
@@ -88,26 +102,34 @@ def build_parser() -> argparse.ArgumentParser:
     i.set_defaults(func=_cmd_info)
     bn = sub.add_parser("bench", help="work-precision: error against CPU time over schemes "
                                       "and steps, against a cached monolithic reference")
-    bn.add_argument("scene")
-    bn.add_argument("--variant")
+    bn.add_argument("scene", help=_SCENE_HELP)
+    bn.add_argument("--variant", help="apply the scene's [variants.NAME] table (default: the "
+                                      "scene's default_variant)")
     bn.add_argument("--schemes", type=lambda t: [x for x in t.split(",") if x],
-                    help="co-simulation schemes, comma separated")
-    bn.add_argument("--steps", type=_floats, help="step sizes [s], comma separated")
-    bn.add_argument("--contact", default="C", help="contact compared (default C)")
-    bn.add_argument("--joint", default="robot/arm",
-                    help="SUBSYSTEM/JOINT whose rate at the last release is compared")
-    bn.add_argument("--set", action="append", metavar="KEY=VALUE")
+                    help="co-simulation schemes, comma separated (default: the scene's "
+                         "own, if it is one, and implicit)")
+    bn.add_argument("--steps", type=_floats, help="step sizes [s], comma separated (default "
+                                                  "1e-4,5e-5,2e-5,1e-5)")
+    bn.add_argument("--contact", help="contact whose peak penetration and count are compared "
+                                      "(default: the scene's only contact, else its only "
+                                      "contact of a multibody on a structure)")
+    bn.add_argument("--joint", help="SUBSYSTEM/JOINT whose rate at the last release is "
+                                    "compared (default: the joint of the body that carries "
+                                    "the contact's point)")
+    bn.add_argument("--set", action="append", metavar="KEY=VALUE",
+                    help="override a scene value in every run (after the variant); "
+                         "repeatable")
     bn.add_argument("--spread", type=_spread, default=3, metavar="K",
                     help="run each row on the scene and K-1 copies whose initial state is "
                          "moved by a few ulps; report the median and worst error (default 3; "
                          "1: one run)")
-    bn.add_argument("--out")
+    bn.add_argument("--out", help="output directory (default runs/SCENE[-VARIANT]-bench)")
     bn.set_defaults(func=_cmd_bench)
     sw = sub.add_parser("sweep", help="a parameter study: every combination of variants "
                                       "and values, on a process pool or a Dask cluster; one "
                                       "table")
-    sw.add_argument("scene", nargs="?", help="scene file (TOML); not with --study")
-    sw.add_argument("--study", help="a study file, or the name of one in studies/ "
+    sw.add_argument("scene", nargs="?", help=_SCENE_HELP + "; not with --study")
+    sw.add_argument("--study", help="a study file, or the name of one cosim ships "
                                     "(fig8_stiffness, fig11_chain_mass)")
     sw.add_argument("--variants", help="variants, comma separated (default: the scene's)")
     sw.add_argument("--set", action="append", metavar="KEY=V1,V2,...",
@@ -152,7 +174,8 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--out", help="output directory (default RUN_DIR)")
     pl.set_defaults(func=_cmd_plot)
     v = sub.add_parser("verify", help="run the verification cases; exit 1 if any fails")
-    v.add_argument("--cases", default="cases", help="folder of the scene files (default cases)")
+    v.add_argument("--cases", help="folder of the scene files (default: the cases cosim "
+                                   "ships, from any folder)")
     v.add_argument("--hard", action="store_true",
                    help="also run the hard-case matrix (three_mass f1000 and ms0.01, every "
                         "scheme and placement of C, steps up to ten times the stability limit)")

@@ -4,6 +4,7 @@ on SIGTERM and SIGHUP (:mod:`cosim.studies.sweep` does the work)."""
 from __future__ import annotations
 
 import contextlib
+import os
 import signal
 import sys
 from pathlib import Path
@@ -17,10 +18,14 @@ def _cmd_sweep(args) -> int:
     from cosim.studies import sweep as sw
     from cosim.studies.sweep.driver import _check_options
 
+    from cosim.scene.shipped import find_scene, find_study, not_found
+
     if args.study:
-        path = Path(args.study)
+        path = find_study(args.study)
         if not path.exists():
-            path = Path("studies") / f"{args.study}.toml"
+            print(f"error: {args.study}: cannot be read: {not_found(args.study, 'studies')}",
+                  file=sys.stderr)
+            return 2
         study = sw.load_study(path)
         if args.scene or args.variants or args.set:
             print("error: --study fixes the scene, its variants and its values; give "
@@ -32,7 +37,8 @@ def _cmd_sweep(args) -> int:
         default_out = Path("runs") / study.name
     elif args.scene:
         study = None
-        scene, variants = args.scene, [v for v in (args.variants or "").split(",") if v]
+        scene = find_scene(args.scene)        # a path, or the name of a shipped scene
+        variants = [v for v in (args.variants or "").split(",") if v]
         grid = {}
         try:
             for text in args.set or ():
@@ -65,7 +71,7 @@ def _cmd_sweep(args) -> int:
     out = Path(args.out) if args.out else default_out
     where = (f"Dask scheduler {args.scheduler}" if args.scheduler
              else f"{workers} process(es)" if workers > 1 else "this process")
-    print(f"sweep {scene}: {n} point(s) on {where}, into {out}", flush=True)
+    print(f"sweep {os.path.normpath(scene)}: {n} point(s) on {where}, into {out}", flush=True)
     with sw.sweep_folder(out) as folder:        # held from the first point to the figure
         return _sweep_into(folder, args, study, scene, variants, grid, contact, joint,
                            workers, timeout, n)

@@ -87,6 +87,11 @@ def written_by_a_run(path) -> bool:
         return False
 
 
+#: what to do about an output folder that holds a run: from Python, and from the command line
+_REMEDIES = ("choose another `out`, or pass overwrite=True to replace it",
+             "choose another --out, or pass --overwrite to replace it")
+
+
 def check_output_dir(out_dir, overwrite: bool = False, exports=()) -> Path:
     """Refuse an output directory where a run would replace what it must not.
 
@@ -116,9 +121,7 @@ def check_output_dir(out_dir, overwrite: bool = False, exports=()) -> Path:
     out = Path(out_dir)
     found = [name for name in RUN_FILES if os.path.lexists(out / name)]
     if found and not overwrite:
-        raise OutputExistsError(
-            f"{out} already holds a run ({', '.join(found)}); choose another --out, "
-            f"or pass --overwrite (overwrite=True) to replace it")
+        raise OutputExistsError(f"{out} already holds a run ({', '.join(found)})", *_REMEDIES)
     scene = out / "scene.toml"
     if os.path.lexists(scene) and not written_by_a_run(scene):
         raise OutputExistsError(
@@ -127,9 +130,8 @@ def check_output_dir(out_dir, overwrite: bool = False, exports=()) -> Path:
             f"replace it)")
     other = [f"{name}.xdmf" for name in exports if os.path.lexists(out / f"{name}.xdmf")]
     if other and not overwrite:
-        raise OutputExistsError(
-            f"{out} already holds {', '.join(other)}, which this run would replace; choose "
-            f"another --out, or pass --overwrite (overwrite=True) to replace it")
+        raise OutputExistsError(f"{out} already holds {', '.join(other)}, which this run "
+                                f"would replace", *_REMEDIES)
     return out
 
 

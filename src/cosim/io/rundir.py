@@ -35,7 +35,8 @@ from pathlib import Path
 from cosim.errors import OutputBusyError, OutputError
 
 __all__ = ["NAME_RULE", "NAME_MAX", "LOCK_NAME", "name_problem", "inside", "RunLock",
-           "output_error", "check_name", "OutputFolder", "atomic_write"]
+           "output_error", "check_name", "OutputFolder", "atomic_write", "run_folder_name",
+           "fresh_folder", "MAX_RERUNS"]
 
 #: longest name a scene may give [characters]
 NAME_MAX = 64
@@ -561,6 +562,51 @@ def atomic_write(path, writer, mode: str) -> Path:
     path = Path(path)
     with OutputFolder(path.parent, lock=False) as folder:
         return folder.write(path.name, writer, mode)
+
+
+def run_folder_name(scene: str, variant: str | None = None, scheme: str | None = None) -> str:
+    """The default name of a run's folder, ``SCENE[-VARIANT][-SCHEME]``:
+    what tells the run apart.  ``variant`` is the variant run (None: the
+    scene has none), ``scheme`` the scheme when it is not the scene's own
+    (None otherwise), so that the runs of one scene under two schemes, or
+    two variants, never meet in one folder."""
+    return "-".join(part for part in (scene, variant, scheme) if part)
+
+
+#: most folders :func:`fresh_folder` tries (``NAME``, ``NAME-2``, ...) before it gives up
+MAX_RERUNS = 10000
+
+
+def fresh_folder(parent, name: str) -> Path:
+    """Make and return a new, empty folder ``parent/name``, or, when that
+    exists, the first of ``name-2``, ``name-3``, ... that does not: a run
+    asked again gets a folder of its own and never meets the one before.
+    Each folder is made exclusively (``mkdir``), so two runs started at
+    once get two folders.  ``parent`` is made when missing.
+
+    Raises
+    ------
+    OutputError
+        If ``parent`` cannot be made or written, or the first
+        :data:`MAX_RERUNS` names are all taken.
+    """
+    parent = Path(parent)
+    check_name(name, parent)
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise output_error(exc, parent, "cannot make the output folder") from None
+    for k in range(1, MAX_RERUNS + 1):
+        path = parent / (name if k == 1 else f"{name}-{k}")
+        try:
+            path.mkdir()
+        except FileExistsError:
+            continue
+        except OSError as exc:
+            raise output_error(exc, path, "cannot make the output folder") from None
+        return path
+    raise OutputError(f"cannot make a new folder {parent / name}-N: the first {MAX_RERUNS} "
+                      f"names are taken; give --out")
 
 
 def _read_owner(fd: int) -> str:

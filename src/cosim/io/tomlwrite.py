@@ -11,7 +11,7 @@ import json
 import math
 import re
 
-__all__ = ["dumps"]
+__all__ = ["dumps", "value_text"]
 
 _BARE = re.compile(r"[A-Za-z0-9_-]+")
 
@@ -47,6 +47,27 @@ def _value(v) -> str:
     if isinstance(v, dict):
         return "{" + ", ".join(f"{_key(k)} = {_value(x)}" for k, x in v.items()) + "}"
     raise TypeError(f"cannot write {type(v).__name__} {v!r} as TOML")
+
+
+def value_text(v) -> str:
+    """``v`` as a TOML value (``1.6e7``, ``"coupler"``, ``{type = "linear", ...}``): how
+    a scene file would spell it, for messages and listings.  A float takes the
+    shorter of its plain and its exponent form that reads back as the same
+    float (``1.6e7``, not ``16000000.0``)."""
+    if isinstance(v, float) and math.isfinite(v):
+        plain = repr(v)
+        for digits in range(17):
+            sci = f"{v:.{digits}e}"
+            if float(sci) == v:
+                mantissa, exp = sci.split("e")
+                sci = f"{mantissa}e{int(exp)}"
+                break
+        return sci if len(sci) + 2 < len(plain) else plain     # 200.0, not 2e2
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(value_text(x) for x in v) + "]"
+    if isinstance(v, dict):
+        return "{" + ", ".join(f"{_key(k)} = {value_text(x)}" for k, x in v.items()) + "}"
+    return _value(v)
 
 
 def dumps(data: dict) -> str:

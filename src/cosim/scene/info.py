@@ -306,6 +306,11 @@ def scene_info(scene, *, budget_s: float = FIRST_TOUCH_BUDGET_S, run_fmu: bool =
     made before it starts (:func:`cosim.scene.work.estimate_work`:
     ``steps``, ``bound``, ``how`` and the ``key`` that makes most of it).
 
+    ``variant`` is the variant applied (None: the scene has none),
+    ``variants`` each variant of the scene's file with the keys it sets
+    (``{dotted.key: value}``) and ``default_variant`` the one applied when
+    none is named.
+
     A scene with an FMU side is built from its model descriptions alone and
     not run, unless ``run_fmu``: ``fmu_code_run`` says which, and a
     contact's ``not_evaluated`` what the FMU's code would have told."""
@@ -333,8 +338,12 @@ def scene_info(scene, *, budget_s: float = FIRST_TOUCH_BUDGET_S, run_fmu: bool =
             entry["mode_cutoff_hz"] = sub.basis.cutoff_hz
             entry["natural_frequencies_hz"] = [float(f) for f in sub.natural_frequencies_hz]
         subs[sub.name] = entry
+    from cosim.scene.shipped import scene_variants
+
+    variants, default = scene_variants(scene.path)
     return {
-        "scene": scene.name, "variant": scene.variant, "scheme": scene.scheme,
+        "scene": scene.name, "variant": scene.variant, "default_variant": default,
+        "variants": variants, "scheme": scene.scheme,
         "scheme_options": dict(scene.scheme_options), "t_end": scene.t_end,
         "fmu_code_run": bool(has_fmu and run_fmu),
         "subsystems": subs,

@@ -14,13 +14,14 @@ typed specs (:mod:`cosim.scene.specs`).  It never imports the builder.
 """
 from __future__ import annotations
 
-from pathlib import Path
+import os
 
 from cosim.core.guard import GuardOptions
 from cosim.scene.checks import (MAX_ELEMENTS, MAX_STEPS, SceneError, Table, check_name,
                                  echo)
 from cosim.scene.contacts import check_conditions, contact_spec
 from cosim.scene.read import parse_override, read_scene, read_toml_file
+from cosim.scene.shipped import find_scene, not_found
 from cosim.scene.specs import STRUCTURE_TYPES, SUBSYSTEM_TYPES, Scene, resolve_scheme
 from cosim.scene.subsystems import subsystem_spec
 
@@ -42,14 +43,17 @@ def load_scene(path, variant: str | None = None, overrides=(), scheme: str | Non
     Parameters
     ----------
     path : path-like
+        The scene file, or the name of a scene cosim ships (``spring_drop``;
+        :func:`cosim.scene.shipped.find_scene`): a file that exists wins.
     variant : str, optional
         Name of a ``[variants.NAME]`` table; the scene's ``default_variant``
         when omitted.
     overrides : iterable of str or (path list, value)
         ``key.path=value`` overrides, applied after the variant.
     scheme : str, optional
-        Replace the scene's coupling scheme; options the new scheme does not
-        take are dropped with one warning naming them.
+        Replace the scene's coupling scheme; the scene's options the new
+        scheme does not take (those for other schemes) are dropped, no fault
+        of the scene: one line at the log's info level names them.
 
     Returns
     -------
@@ -60,12 +64,14 @@ def load_scene(path, variant: str | None = None, overrides=(), scheme: str | Non
     ------
     SceneError
     """
-    file = Path(path)
+    file = find_scene(path)
+    if not os.path.lexists(file):       # the shipped names, when it reads as a name
+        raise SceneError(file, "", f"cannot be read: {not_found(path)}")
     data, chosen = read_scene(file, variant, overrides, scheme)
-    return _validate(data, file, chosen)
+    return _validate(data, file, chosen, scheme is not None)
 
 
-def _validate(data: dict, file, variant) -> Scene:
+def _validate(data: dict, file, variant, scheme_chosen: bool = False) -> Scene:
     top = Table(data, (), file, "top")
     name = top.string("name", file.stem)
     check_name(file, "name", name, "(a run folder's default name; the file's name when the "
@@ -128,7 +134,8 @@ def _validate(data: dict, file, variant) -> Scene:
     top.finish()
     # the work a run will do (macro steps, iterations, each side's steps), bounded
     spec = resolve_scheme(scheme_name, given, tables, file=file, t_end=t_end, stacklevel=3,
-                          subsystems=subs, contacts=contacts, max_steps=max_steps)
+                          subsystems=subs, contacts=contacts, max_steps=max_steps,
+                          chosen=scheme_chosen)
     return Scene(name=name, path=str(file), variant=variant, t_end=t_end, scheme=spec.name,
                  scheme_options=spec.options, output_every=every, subsystems=tuple(subs),
                  contacts=tuple(contacts), gravity=gravity, data=data,

@@ -15,6 +15,7 @@ that the loader handed out before these classes were.
 """
 from __future__ import annotations
 
+import logging
 import warnings
 from dataclasses import dataclass, field
 from typing import ClassVar
@@ -24,6 +25,8 @@ from cosim.scene.checks import MAX_STEPS, SceneError
 from cosim.scene.keys import DEFAULT_CONTACT_STEP, DEFAULT_MULTIBODY_STEP
 # the subsystem types live beside the table of keys, which names them in the reference
 from cosim.scene.keytable import STRUCTURE_TYPES, SUBSYSTEM_TYPES
+
+log = logging.getLogger(__name__)
 
 __all__ = ["Scene", "SchemeSpec", "MultibodySpec", "BodySpec", "JointSpec", "RigidSpec",
            "FMUSpec", "StructureSpec", "ContactSpec", "resolve_scheme", "STRUCTURE_TYPES",
@@ -309,11 +312,14 @@ class SchemeSpec:
 
 def resolve_scheme(name: str, options: dict, tables: dict, *, file, t_end: float,
                    stacklevel: int = 2, subsystems=(), contacts=(),
-                   max_steps: float = MAX_STEPS) -> SchemeSpec:
+                   max_steps: float = MAX_STEPS, chosen: bool = False) -> SchemeSpec:
     """Choose the scheme ``name`` and the options it runs with.
 
     The one place that drops the options the scheme ignores (with one
-    warning naming them), merges the ``[scheme.NAME]`` table of that scheme,
+    warning naming them, when the scene chose the scheme; when the caller
+    chose another, ``chosen``, the scene's options for the schemes it did
+    not choose are no fault of the scene: one line at the log's info level
+    says what was left out), merges the ``[scheme.NAME]`` table of that scheme,
     requires a macro step of the schemes that take one and bounds the work
     of a run (:func:`cosim.scene.work.estimate_work`: macro steps, their
     iterations and the steps of each side in them).
@@ -337,6 +343,9 @@ def resolve_scheme(name: str, options: dict, tables: dict, *, file, t_end: float
         The scene's, whose steps the work counts.
     max_steps : float
         Most integrator steps a run may take (the scene's ``guard.max_steps``).
+    chosen : bool
+        Whether the caller chose the scheme (``--scheme``, ``scheme=``) rather
+        than the scene.
 
     Returns
     -------
@@ -356,7 +365,10 @@ def resolve_scheme(name: str, options: dict, tables: dict, *, file, t_end: float
     except ValueError as exc:
         raise SceneError(file, "scheme.name", str(exc)) from None
     ignored = sorted(k for k in options if k not in cls.options)
-    if ignored:
+    if ignored and chosen:
+        log.info("%s: scheme `%s` runs without the scene's options %s (for other schemes)",
+                 file, name, ignored)
+    elif ignored:
         warnings.warn(f"{file}: scheme `{name}` ignores the options {ignored}",
                       stacklevel=stacklevel + 1)
     opts = {k: v for k, v in options.items() if k in cls.options}
@@ -431,7 +443,8 @@ class Scene:
         return resolve_scheme(scheme or self.scheme, self.scheme_options, self.scheme_tables,
                               file=self.path, t_end=self.t_end, stacklevel=3,
                               subsystems=self.subsystems, contacts=self.contacts,
-                              max_steps=self.max_steps)
+                              max_steps=self.max_steps,
+                              chosen=scheme is not None and scheme != self.scheme)
 
     def work(self, scheme: str | None = None, system=None):
         """The work a run of ``scheme`` (the scene's by default) will do,
