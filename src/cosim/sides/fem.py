@@ -366,10 +366,11 @@ class StructureSubsystem(ClosedFormContacts, Subsystem):
                     raise
                 # a known defect of the compiled step: it can find one switch
                 # again and again (three_mass f100 at contact_step 1e-4, t =
-                # 0.1112 s); this step is redone by the reference, said once
+                # 0.1112 s); this step is redone by the reference, with the
+                # same result: an internal matter, logged once at debug level
                 if not self._stall_said:
                     self._stall_said = True
-                    logger.warning("subsystem `%s`: %s; this step and any other where it "
+                    logger.debug("subsystem `%s`: %s; this step and any other where it "
                                    "stalls are taken by the numpy reference", self.name, exc)
                 self.aux[:], self._closed_end[:], self.peak[:] = saved
                 self.switch_log = []
