@@ -40,7 +40,7 @@ def _main(argv) -> int:
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    from cosim.errors import OutputError, OutputExistsError
+    from cosim.errors import OutputError, OutputExistsError, PluginError
     from cosim.scene.load import SceneError
     from cosim.core.schemes import UnsafeStepError
 
@@ -52,7 +52,8 @@ def _main(argv) -> int:
                 code = args.func(args)
                 sys.stdout.flush()             # a closed pipe shows here, not at exit
                 return code
-            except (SceneError, UnsafeStepError, OutputExistsError, OutputError) as exc:
+            except (SceneError, UnsafeStepError, OutputExistsError, OutputError,
+                    PluginError) as exc:
                 print(f"error: {exc}", file=sys.stderr)
                 return 2
             except KeyboardInterrupt as exc:   # outside a run (a run's own is handled there)
