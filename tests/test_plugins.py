@@ -211,3 +211,24 @@ def test_built_in_names_read_no_plugin_metadata(tmp_path):
                           env=_env(site), cwd=tmp_path, timeout=300)
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.strip().splitlines()[-1] == "[]"
+
+
+def test_the_plugins_page_shows_what_the_commands_print(installed, tmp_path):
+    """docs/plugins.md: the run's output as printed (its CPU time aside, the
+    machine's), the info line, and the contact time it quotes."""
+    import re
+
+    page = (ROOT / "docs" / "plugins.md").read_text(encoding="utf-8")
+    shown = page.split("$ cosim run examples/custom_law/scene.toml --out runs/sphere_drop\n")[1]
+    shown = shown.split("$ cosim info")[0].splitlines()
+    proc = _cosim(["run", SCENE, "--out", "runs/sphere_drop"], _env(installed), tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    cpu = re.compile(r"cpu \S+ s")
+    assert [cpu.sub("cpu _ s", ln) for ln in proc.stdout.splitlines()] == \
+        [cpu.sub("cpu _ s", ln) for ln in shown]
+    info = _cosim(["info", SCENE], _env(installed), tmp_path).stdout
+    assert "  contact wall: sphere_on_flat (embedded) between body and wall\n" in info
+    assert "  contact wall: sphere_on_flat (embedded) between body and wall" in page
+    summary = json.loads((tmp_path / "runs" / "sphere_drop" / "summary.json").read_text())
+    assert "The contact lasts 7.4153 ms" in page
+    assert f"{summary['contacts']['wall']['in_touch_time'] * 1e3:.5g}" == "7.4153"
