@@ -95,6 +95,24 @@ def test_cosim_sweep_workers_find_the_installed_law(installed, tmp_path):
     assert times[1] / times[0] == pytest.approx(4 ** 0.2, rel=1e-5)
 
 
+def test_cosim_sweep_dask_workers_find_the_installed_law(installed, tmp_path):
+    """The same on a local Dask cluster: its worker processes find the plug-in."""
+    pytest.importorskip("distributed")
+    pytest.importorskip("cryptography")            # else the local workers are threads
+    env = _env(installed)
+    env["TMPDIR"] = str(tmp_path / "tmp")
+    (tmp_path / "tmp").mkdir()
+    proc = _cosim(["sweep", SCENE, "--set", "contacts.wall.law.radius=0.05,0.2",
+                   "--scheduler", "local", "--workers", "1", "--out", tmp_path / "sweep",
+                   "--no-plot", "--quiet"], env, tmp_path, timeout=600)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "2 of 2 point(s) finished" in proc.stdout + proc.stderr
+    points = sorted((tmp_path / "sweep").rglob("summary.json"))
+    times = sorted(json.loads(p.read_text())["contacts"]["wall"]["in_touch_time"]
+                   for p in points)
+    assert times[1] / times[0] == pytest.approx(4 ** 0.2, rel=1e-5)
+
+
 def test_without_the_package_the_name_is_unknown(tmp_path):
     proc = _cosim(["run", SCENE, "--out", tmp_path / "run"], _env(), tmp_path)
     assert proc.returncode == 2
@@ -195,6 +213,35 @@ def test_plugin_scheme_and_integrator_by_name(tmp_path):
     proc = _cosim(["run", ROOT / "cases" / "spring_drop.toml", "--scheme", "my_gauss_seidel",
                    "--out", tmp_path / "run2", "--quiet"], _env(site), tmp_path)
     assert proc.returncode == 0, proc.stderr
+    # a sweep's spawned workers build the scene's scheme and integrator by name: they
+    # find the plug-ins themselves
+    proc = _cosim(["sweep", scene, "--set", "t_end=0.015,0.02", "--workers", "2",
+                   "--out", tmp_path / "sweep", "--no-plot", "--quiet"], _env(site), tmp_path,
+                  timeout=600)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "2 of 2 point(s) finished" in proc.stdout + proc.stderr
+
+
+def test_plugin_structure_integrator_by_name(tmp_path):
+    """A structure's integrator from a plug-in (Newmark's average acceleration
+    under another name) steps three_mass's chain as the built-in does."""
+    code = """
+        from fem.newmark import Newmark
+        class MyNewmark(Newmark):
+            name = "my_newmark"
+        """
+    site = _dist(tmp_path / "site", "my-newmark", "cosim.integrators",
+                 {"my_newmark": "mine_fem:MyNewmark"}, "mine_fem", code)
+    runs = {}
+    for method in ("newmark", "my_newmark"):
+        over = ["--set", f'subsystems.chain.integrator.method="{method}"', "--set", "t_end=0.12"]
+        out = tmp_path / method
+        proc = _cosim(["run", ROOT / "cases" / "three_mass.toml", "--variant", "f100", *over,
+                       "--out", out, "--quiet"], _env(site), tmp_path)
+        assert proc.returncode == 0, proc.stderr
+        runs[method] = json.loads((out / "summary.json").read_text())
+    # the same class under two names: the same steps, bit for bit
+    assert runs["my_newmark"]["contacts"] == runs["newmark"]["contacts"]
 
 
 def test_built_in_names_read_no_plugin_metadata(tmp_path):

@@ -105,7 +105,10 @@ class StructureSubsystem(ClosedFormContacts, Subsystem):
         self.integrator = integrator
         self._ts = None
         if integrator != "exact":
-            from fem import get_structural_integrator
+            from cosim.core.plugins import provide
+            from fem import STRUCTURAL_INTEGRATORS, get_structural_integrator
+            # a plug-in's name, in a process that has not read the scene (a sweep's worker)
+            provide(STRUCTURAL_INTEGRATORS, "cosim.integrators", integrator)
             cls = get_structural_integrator(integrator)
             self._ts = cls(np.eye(m), np.diag(self.modal_damping) if np.any(
                 self.modal_damping) else None, np.diag(self.omega ** 2),
