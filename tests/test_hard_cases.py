@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import cosim
-from conftest import CASES
+from conftest import CASES, ROOT
 from cosim.core.guard import Guard, GuardError, GuardOptions
 from cosim.core.schemes import COUPLING_SCHEMES
 from cosim.studies.verify import (HARD_COPIES, HardCase, hard_matrix, reference_step,
@@ -272,6 +272,20 @@ def test_verify_hard_prints_one_line_per_check(monkeypatch, capsys):
     assert m, stopped
     t, created, bound = map(float, m.groups())
     assert created > bound and 0.1 < t < 0.125
+
+
+def test_the_verification_page_shows_three_lines_as_printed():
+    """docs/verification.md quotes three lines of `cosim verify --hard`: these
+    points of the matrix print them."""
+    from cosim.studies.verify import hard_checks
+
+    page = (ROOT / "docs" / "verification.md").read_text(encoding="utf-8")
+    shown = page.split("Each check is one\nline; three of them:\n\n```text\n")[1].split("```")[0]
+    matrix = hard_matrix(CASES, factors=(1.0, 10.0), variants=("f1000",), schemes=("jacobi",),
+                         placements=("coupler",))
+    lines = [f"{'PASS' if c.passed else 'FAIL'}  {c.name}: {c.detail}"
+             for c in hard_checks(CASES, None, matrix)]
+    assert lines == shown.strip().splitlines()
 
 
 def test_hard_line_of_a_bounded_and_a_failed_point():
