@@ -194,11 +194,11 @@ def _encoder(video):
                             "(install it, or set matplotlib's `animation.ffmpeg_path`); "
                             "a GIF needs only Pillow")
         return _write_mp4, "mp4"
-    try:
-        import PIL  # noqa: F401  (matplotlib depends on it: missing only in a broken install)
-    except ImportError:
+    from importlib.util import find_spec
+
+    if find_spec("PIL") is None:       # matplotlib depends on it: missing only in a broken install
         raise PlotError("a GIF animation needs Pillow, which is not installed: "
-                        "pip install pillow") from None
+                        "pip install pillow")
     return _write_gif, "gif"
 
 
