@@ -6,13 +6,14 @@ contact and the time: never NaN, never silent energy growth.  Each point runs
 with its round-off copies (``cosim.studies.roundoff.spread``): that property
 must hold for all of them, and a verdict is asserted only where it is robust."""
 import math
+import re
 import warnings
 
 import numpy as np
 import pytest
 
 import cosim
-from conftest import CASES
+from conftest import CASES, ROOT
 from cosim.core.guard import Guard, GuardError, GuardOptions
 from cosim.core.schemes import COUPLING_SCHEMES
 from cosim.studies.verify import (HARD_COPIES, HardCase, hard_matrix, reference_step,
@@ -242,8 +243,63 @@ def test_a_verdict_that_differs_among_copies_is_said_so():
                                                      "bounded"]}) == \
         "not robust (verdicts: bounded; stopped (chatter, A); bounded)"
     (check,) = hard_checks(CASES, 0.125, [CI_POINTS[3][0]])
-    assert check.passed and check.detail.startswith("refused, robust: contact `C`: macro step")
-    assert "\n" not in check.detail
+    assert check.passed and check.detail.startswith("refused by the pre-flight check")
+    assert check.detail.endswith("; robust") and "\n" not in check.detail
+
+
+def test_verify_hard_prints_one_line_per_check(monkeypatch, capsys):
+    """`cosim verify --hard`: a PASS or FAIL line per check and nothing else,
+    nothing on stderr (no log line, no bare message); a stopped run shows the
+    guard's own figures (the energy created at the sample it refused, and its
+    bound: created above the bound, as a stop needs), a refused one the
+    pre-flight check's largest safe step."""
+    from cosim import cli
+    from cosim.studies import verify
+
+    points = [CI_POINTS[3][0], CI_POINTS[4][0]]        # refused; forced, then stopped
+    monkeypatch.setattr(verify, "hard_matrix", lambda cases: points)
+    assert cli.main(["verify", "--cases", str(CASES), "--hard"]) == 0
+    out, err = capsys.readouterr()
+    assert err == ""
+    lines = out.splitlines()
+    assert lines[-1] == "all checks passed" and len(lines) == len(verify.CHECKS) * 3 + 3
+    assert all(re.fullmatch(r"PASS  \S[^:]*: \S.*", ln) for ln in lines[:-1]), lines
+    refused, stopped = lines[-3:-1]
+    safe = reference_step(CASES, "f1000", "jacobi", "coupler")
+    assert refused == (f"PASS  {points[0].label}: refused by the pre-flight check (largest "
+                       f"safe step {safe:.3g} s); robust")
+    m = re.fullmatch(rf"PASS  {re.escape(points[1].label)}: stopped by the guard at "
+                     r"t = (\S+) s \(energy growth, C\): created (\S+) J, bound (\S+) J; robust",
+                     stopped)
+    assert m, stopped
+    t, created, bound = map(float, m.groups())
+    assert created > bound and 0.1 < t < 0.125
+
+
+def test_the_verification_page_shows_three_lines_as_printed():
+    """docs/verification.md quotes three lines of `cosim verify --hard`: these
+    points of the matrix print them."""
+    from cosim.studies.verify import hard_checks
+
+    page = (ROOT / "docs" / "verification.md").read_text(encoding="utf-8")
+    shown = page.split("Each check is one\nline; three of them:\n\n```text\n")[1].split("```")[0]
+    matrix = hard_matrix(CASES, factors=(1.0, 10.0), variants=("f1000",), schemes=("jacobi",),
+                         placements=("coupler",))
+    lines = [f"{'PASS' if c.passed else 'FAIL'}  {c.name}: {c.detail}"
+             for c in hard_checks(CASES, None, matrix)]
+    assert lines == shown.strip().splitlines()
+
+
+def test_hard_line_of_a_bounded_and_a_failed_point():
+    from cosim.studies.verify import hard_line
+
+    r = {"ok": True, "outcome": "bounded", "detail": "created 0.272 J of 4.51 J allowed",
+         "verdicts": ["bounded"] * 3, "robust": True, "created": 0.2723, "bound": 4.5111}
+    assert hard_line(r) == "bounded: created 0.272 J, bound 4.51 J; robust"
+    r = {**r, "ok": False, "outcome": "stopped", "detail": "a copy: stopped: run stopped\nat t",
+         "verdicts": ["bounded", "stopped (failed, no contact)", "bounded"], "robust": False}
+    assert hard_line(r) == ("stopped, not robust (verdicts: bounded; stopped (failed, no "
+                            "contact); bounded): a copy: stopped: run stopped at t")
 
 
 @pytest.mark.slow

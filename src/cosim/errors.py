@@ -1,7 +1,7 @@
 """Errors of a run (the scene loader's SceneError lives in cosim.scene.checks)."""
 
 __all__ = ["SimulationError", "CouplingError", "FMUError", "UnsafeStepError", "OutputExistsError",
-           "shown", "OutputError", "OutputBusyError", "SignalStop"]
+           "shown", "OutputError", "OutputBusyError", "SignalStop", "PluginError"]
 
 
 class SimulationError(RuntimeError):
@@ -48,6 +48,13 @@ class FMUError(SimulationError):
 
 class UnsafeStepError(ValueError):
     """The macro step is too large for a contact's stiffness."""
+
+
+class PluginError(ValueError):
+    """An installed plug-in (a class a package declares under an entry point
+    of cosim's) that cannot be used: it fails to import, is not a class of
+    its group, or its name clashes; the message names the distribution and
+    the entry point (:mod:`cosim.core.plugins`)."""
 
 
 class OutputExistsError(FileExistsError):

@@ -40,7 +40,7 @@ def _main(argv) -> int:
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    from cosim.errors import OutputError, OutputExistsError
+    from cosim.errors import OutputError, OutputExistsError, PluginError
     from cosim.scene.load import SceneError
     from cosim.core.schemes import UnsafeStepError
 
@@ -55,7 +55,7 @@ def _main(argv) -> int:
             except OutputExistsError as exc:
                 print(f"error: {exc.for_command_line()}", file=sys.stderr)
                 return 2
-            except (SceneError, UnsafeStepError, OutputError) as exc:
+            except (SceneError, UnsafeStepError, OutputError, PluginError) as exc:
                 print(f"error: {exc}", file=sys.stderr)
                 return 2
             except KeyboardInterrupt as exc:   # outside a run (a run's own is handled there)

@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 from cosim.cli.signals import _StopOnSignals, _stop_code
-from cosim.cli.terminal import _progress_line
+from cosim.cli.terminal import _frame_progress, _progress_line
 
 __all__: list[str] = []
 
@@ -413,8 +413,13 @@ def _cmd_plot(args) -> int:
         run = plot.load_run(args.run_dir)
         paths = plot.plot_run(run, args.out, args.format)
         if args.animate:
-            paths.append(plot.animate_run(run, args.out, max_frames=args.frames,
-                                          magnify=args.magnify))
+            bar = _frame_progress(args.quiet)
+            try:
+                paths.append(plot.animate_run(run, args.out, max_frames=args.frames,
+                                              magnify=args.magnify, progress=bar))
+            finally:
+                if bar is not None:
+                    bar.close()
     except plot.PlotError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -172,6 +172,8 @@ def build_parser() -> argparse.ArgumentParser:
                     help="scale of the structures' deflection in the animation, a finite "
                          "number > 0 (default 1)")
     pl.add_argument("--out", help="output directory (default RUN_DIR)")
+    pl.add_argument("--quiet", action="store_true",
+                    help="no progress bar for the animation (it shows only on a terminal)")
     pl.set_defaults(func=_cmd_plot)
     v = sub.add_parser("verify", help="run the verification cases; exit 1 if any fails")
     v.add_argument("--cases", help="folder of the scene files (default: the cases cosim "

@@ -41,6 +41,43 @@ class _ProgressLine:
             self.stream.flush()
 
 
+class _FrameProgress:
+    """An animation's progress, ``progress(done, total)`` frames: a tqdm bar
+    on stderr as a sweep shows its points, else a carriage-return line."""
+
+    def __init__(self, stream):
+        self.stream, self._bar, self._shown = stream, None, False
+
+    def __call__(self, done: int, total: int) -> None:
+        if self._bar is None and not self._shown:
+            try:
+                from tqdm import tqdm
+                self._bar = tqdm(total=total, unit="frame", desc="animation", file=self.stream)
+            except ImportError:
+                pass
+        self._shown = True
+        if self._bar is not None:
+            self._bar.update(done - self._bar.n)
+        else:
+            self.stream.write(f"\ranimation: {done}/{total} frames")
+            self.stream.flush()
+
+    def close(self) -> None:
+        if self._bar is not None:
+            self._bar.close()
+        elif self._shown:
+            self.stream.write("\n")
+            self.stream.flush()
+
+
+def _frame_progress(quiet: bool):
+    """An animation's progress renderer, or None when quiet or not talking to
+    a terminal."""
+    if quiet or not _on_terminal():
+        return None
+    return _FrameProgress(_raw(sys.stderr))
+
+
 def _on_terminal() -> bool:
     return sys.stdout.isatty() and sys.stderr.isatty()
 

@@ -15,6 +15,7 @@ from typing import Callable, ClassVar
 import numpy as np
 
 from cosim.core.hermite import hermite_value, substep_peaks
+from cosim.core.registry import Registry
 
 __all__ = ["TimeStepper", "RK4", "ScipyStepper", "INTEGRATORS", "get_integrator",
            "substep_peaks"]
@@ -410,8 +411,10 @@ DOP853 = _scipy("dop853", "DOP853", "Adaptive explicit Dormand-Prince 8(5,3) (sc
 Radau = _scipy("radau", "Radau", "Implicit Radau IIA of order 5 (scipy), for stiff contacts.")
 BDF = _scipy("bdf", "BDF", "Implicit backward differentiation, orders 1-5 (scipy).")
 
-INTEGRATORS: dict[str, type[TimeStepper]] = {
-    cls.name: cls for cls in (RK4, RK45, DOP853, Radau, BDF)}
+#: the robots' integrators by name; a name not here is looked for among
+#: installed plug-ins (group ``cosim.integrators``, :mod:`cosim.core.plugins`)
+INTEGRATORS: Registry = Registry({cls.name: cls for cls in (RK4, RK45, DOP853, Radau, BDF)},
+                                 group="cosim.integrators")
 
 
 def lookup(registry: dict, name, base: type, kind: str):

@@ -6,6 +6,13 @@ costly to import, and that most runs do not use, is registered as the string
 class in its place.  Listing the names (``in``, ``sorted``, ``len``) imports
 nothing; iterating over the classes (``values()``, ``items()``) imports them
 all.
+
+A registry given an entry-point ``group`` also finds, when looked up
+(``registry[name]``) for a name it does not hold, a class an installed
+package declares under that name (:mod:`cosim.core.plugins`); ``in`` does
+not look (the scene loader asks :func:`cosim.core.plugins.provide` first
+where a scene names a class), and a name it holds never reads package
+metadata.
 """
 from __future__ import annotations
 
@@ -18,13 +25,25 @@ class Registry(MutableMapping):
     """A mapping of names to classes, some given as ``"module:Class"``.
 
     It behaves as the dict it replaces: a user registers a class of their own
-    with ``registry[name] = cls``.
+    with ``registry[name] = cls``.  With ``group`` (``"cosim.schemes"``), a
+    name it lacks is looked up among installed plug-ins
+    (:func:`cosim.core.plugins.find`, which raises
+    :class:`~cosim.errors.PluginError` for a plug-in that cannot be used).
     """
 
-    def __init__(self, entries: dict):
+    def __init__(self, entries: dict, group: str | None = None):
         self._entries = dict(entries)
+        self._group = group
+
+    def _plugin(self, name) -> bool:
+        if self._group is None:
+            return False
+        from cosim.core.plugins import find
+        return find(self._group, name) and name in self._entries
 
     def __getitem__(self, name):
+        if name not in self._entries:
+            self._plugin(name)
         value = self._entries[name]
         if isinstance(value, str):
             module, _, attr = value.partition(":")

@@ -16,7 +16,7 @@ from matplotlib.figure import Figure
 from cosim.errors import shown
 from cosim.plot.run_data import RunData, load_run
 
-__all__ = ["FORMATS", "plot_run"]
+__all__ = ["FORMATS", "plot_run", "wrapped"]
 
 #: Output formats of :func:`plot_run`.
 FORMATS = ("png", "svg", "pdf")
@@ -27,6 +27,40 @@ _MAX_STRUCTURE_LINES = 8
 #: may name thousands (the rest are left out, and the title says so)
 _MAX_ROWS = 12
 _MAX_LINES = 16
+
+
+def wrapped(fig, text: str, fontsize: float, width: float) -> str:
+    """``text`` with each of its lines broken at spaces so that none is wider
+    than ``width`` [pixels] on ``fig``'s canvas in the default font at
+    ``fontsize`` [pt]; a word wider than ``width`` on its own is broken
+    inside.  A title that names a long reason (an incomplete run's message)
+    then stays inside the figure instead of running off both its edges."""
+    from matplotlib.font_manager import FontProperties
+
+    renderer = fig.canvas.get_renderer()
+    font = FontProperties(size=fontsize)
+
+    def fits(s: str) -> bool:
+        return renderer.get_text_width_height_descent(s, font, ismath=False)[0] <= width
+
+    lines = []
+    for line in text.split("\n"):
+        cur = ""
+        for word in line.split(" "):
+            if fits(f"{cur} {word}" if cur else word):
+                cur = f"{cur} {word}" if cur else word
+                continue
+            if cur:
+                lines.append(cur)
+            while len(word) > 1 and not fits(word):       # a word wider than a line
+                k = len(word) - 1
+                while k > 1 and not fits(word[:k]):
+                    k -= 1
+                lines.append(word[:k])
+                word = word[k:]
+            cur = word
+        lines.append(cur)
+    return "\n".join(lines)
 
 
 # ------------------------------------------------------------------ units
@@ -96,8 +130,8 @@ def _figure(run: RunData, rows: int, what: str):
     fig = Figure(figsize=(7.5, 1.2 + 1.9 * rows), layout="constrained")
     FigureCanvasAgg(fig)
     axes = fig.subplots(rows, 1, sharex=True, squeeze=False)[:, 0]
-    fig.suptitle(f"{what}: {run.title()}", fontsize=10,
-                 color="firebrick" if run.incomplete else "black")
+    fig.suptitle(wrapped(fig, f"{what}: {run.title()}", 10, 0.95 * fig.bbox.width),
+                 fontsize=10, color="firebrick" if run.incomplete else "black")
     t0 = float(run.t[0]) if len(run.t) else 0.0
     for ax in axes:
         ax.grid(True, lw=0.4, alpha=0.5)

@@ -21,6 +21,7 @@ _RELEASE_FORMS = '{ time = T } or { after = "CONTACT.grasp" (or ".release"), del
 def contact_spec(name: str, t: Table, subs: list) -> ContactSpec:
     """The spec of contact ``name`` from its table (section ``contact``),
     between points of the subsystems ``subs`` (their specs)."""
+    from cosim.core.plugins import provide
     from couplers import CONTACT_LAWS
 
     def port(k):
@@ -40,6 +41,7 @@ def contact_spec(name: str, t: Table, subs: list) -> ContactSpec:
     if a[0] == b[0]:
         t.error("b", f"must be on another subsystem than `a`, got {echo(a[0])} twice")
     law_t = t.table("law", section="law.linear")
+    provide(CONTACT_LAWS, "cosim.laws", law_t.data.get("type"))
     law_name = law_t.string("type", choices=CONTACT_LAWS)
     law_t.use(f"law.{law_name}")
     law_cls = CONTACT_LAWS[law_name]

@@ -152,9 +152,11 @@ def _scheme_table(sch: Table) -> tuple[str, dict, dict]:
     Its keys are the registry's (:data:`cosim.core.schemes.COUPLING_SCHEMES`):
     ``name``, the schemes' options and tables named after a scheme.
     """
+    from cosim.core.plugins import provide
     from cosim.core.schemes import COUPLING_SCHEMES
 
     free = Table(sch.data, sch.path, sch.file)      # keys from the registry, not SECTIONS
+    provide(COUPLING_SCHEMES, "cosim.schemes", free.data.get("name"))   # an installed plug-in
     name = free.string("name", choices=COUPLING_SCHEMES)
     cls = COUPLING_SCHEMES[name]
     given, tables = {}, {}

@@ -41,8 +41,10 @@ def subsystem_spec(name: str, t: Table):
 
 def _multibody_spec(name: str, t: Table) -> MultibodySpec:
     from cosim.core.ode import INTEGRATORS
+    from cosim.core.plugins import provide
 
     integ = t.table("integrator", section="multibody.integrator")
+    provide(INTEGRATORS, "cosim.integrators", integ.data.get("method"))
     method = integ.string("method", choices=INTEGRATORS)
     max_step = integ.number("max_step", None, rule=">0", unit="s")
     opts = {k: integ.number(k, rule=">0") for k in ("rtol", "atol") if integ.has(k)}
@@ -105,6 +107,7 @@ def _structure_spec(name: str, t: Table, kind: str) -> StructureSpec:
     """Model, ports, modes and initial state of a structure (a chain, beam,
     cable, string or rod)."""
     import fem
+    from cosim.core.plugins import provide
     kw = {}
     if kind == "chain":
         kw["masses"] = floats(t, "masses")
@@ -182,6 +185,7 @@ def _structure_spec(name: str, t: Table, kind: str) -> StructureSpec:
     cutoff_hz = md.number("cutoff_hz", rule=">0", unit="Hz")
     md.finish()
     integ = t.table("integrator", section="structure.integrator")
+    provide(fem.STRUCTURAL_INTEGRATORS, "cosim.integrators", integ.data.get("method"))
     method = integ.string("method", choices=fem.STRUCTURAL_INTEGRATORS)
     contact_step = integ.number("contact_step", rule=">0", unit="s")
     options = {k: integ.number(k) for k in ("beta", "gamma", "alpha", "rho_inf")

@@ -107,7 +107,10 @@ class StructureSubsystem(ClosedFormContacts, Subsystem):
         self.integrator = integrator
         self._ts = None
         if integrator != "exact":
-            from fem import get_structural_integrator
+            from cosim.core.plugins import provide
+            from fem import STRUCTURAL_INTEGRATORS, get_structural_integrator
+            # a plug-in's name, in a process that has not read the scene (a sweep's worker)
+            provide(STRUCTURAL_INTEGRATORS, "cosim.integrators", integrator)
             cls = get_structural_integrator(integrator)
             self._ts = cls(np.eye(m), np.diag(self.modal_damping) if np.any(
                 self.modal_damping) else None, np.diag(self.omega ** 2),
@@ -397,10 +400,11 @@ class StructureSubsystem(ClosedFormContacts, Subsystem):
                     raise
                 # a known defect of the compiled step: it can find one switch
                 # again and again (three_mass f100 at contact_step 1e-4, t =
-                # 0.1112 s); this step is redone by the reference, said once
+                # 0.1112 s); this step is redone by the reference, with the
+                # same result: an internal matter, logged once at debug level
                 if not self._stall_said:
                     self._stall_said = True
-                    logger.warning("subsystem `%s`: %s; this step and any other where it "
+                    logger.debug("subsystem `%s`: %s; this step and any other where it "
                                    "stalls are taken by the numpy reference", self.name, exc)
                 self.aux[:], self._closed_end[:], self.peak[:] = saved
                 self.switch_log = []

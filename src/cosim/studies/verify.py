@@ -14,7 +14,7 @@ from cosim.scene.run import simulate
 from cosim.scene.load import SceneError, load_scene
 
 __all__ = ["Check", "run_checks", "CHECKS", "HardCase", "hard_matrix", "run_hard_case",
-           "hard_checks", "robustness", "HARD_COPIES"]
+           "hard_checks", "hard_line", "robustness", "HARD_COPIES"]
 
 
 @dataclass(frozen=True)
@@ -268,15 +268,47 @@ def robustness(r: dict) -> str:
 
 def hard_checks(cases="cases", t_end: float | None = None, matrix=None,
                 copies: int = HARD_COPIES):
-    """Yield a :class:`Check` per point of the hard-case matrix; its detail
-    starts with the outcome and says whether the verdict is robust to
-    round-off (``copies`` runs each, :func:`run_hard_case`)."""
+    """Yield a :class:`Check` per point of the hard-case matrix; its detail,
+    one line, is :func:`hard_line` of the point's :func:`run_hard_case`
+    (``copies`` runs each)."""
     for case in (matrix if matrix is not None else hard_matrix(cases)):
         r = run_hard_case(case, cases, t_end, copies)
-        created = "" if math.isnan(r["created"]) else \
-            f" (created {r['created']:.3g} J, bound {r['bound']:.3g} J)"
-        detail = " ".join(r["detail"].split())          # one line per check
-        yield Check(case.label, r["ok"], f"{r['outcome']}{created}, {robustness(r)}: {detail}")
+        yield Check(case.label, r["ok"], hard_line(r))
+
+
+#: the guard's figures in its message (cosim.core.guard), and the pre-flight
+#: check's largest safe step (cosim.core.schemes.base)
+_GREW = re.compile(rf"the energy grew by ({_NUM}) J .*?\(bound ({_NUM}) J")
+_TRIPPED = re.compile(rf"the guard tripped at t = ({_NUM}) s")
+_STOPPED = re.compile(rf"^run stopped at t = ({_NUM}) s")
+_SAFE = re.compile(rf"largest safe macro step is ({_NUM}) s")
+
+
+def hard_line(r: dict) -> str:
+    """One line for a :func:`run_hard_case` result: the outcome, the figures
+    that judge it, and whether the copies agree.
+
+    The energy figures are one quantity, the energy created (total +
+    dissipated - supplied - initial) against its bound: for a bounded run
+    its largest value over the samples kept; for a run the guard stopped, the
+    guard's own figures at the sample it refused (the samples kept before it
+    are within the bound by construction).  A point that fails shows its
+    failing copy's message, flattened to one line."""
+    tail = robustness(r)
+    if not r["ok"]:
+        return f"{r['outcome']}, {tail}: {' '.join(r['detail'].split())}"
+    detail, verdict = r["detail"], r["verdicts"][0]
+    if r["outcome"] == "bounded":
+        return f"bounded: created {r['created']:.3g} J, bound {r['bound']:.3g} J; {tail}"
+    if r["outcome"] == "refused":
+        safe = _SAFE.search(detail)
+        why = f" (largest safe step {safe.group(1)} s)" if safe else ""
+        return f"refused by the pre-flight check{why}; {tail}"
+    when = _TRIPPED.search(detail) or _STOPPED.search(detail)
+    at = f" at t = {when.group(1)} s" if when else ""
+    grew = _GREW.search(detail)
+    figures = f": created {grew.group(1)} J, bound {grew.group(2)} J" if grew else ""
+    return f"{verdict.replace('stopped', 'stopped by the guard' + at, 1)}{figures}; {tail}"
 
 
 def run_checks(cases_dir="cases", hard: bool = False):

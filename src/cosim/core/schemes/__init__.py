@@ -12,7 +12,8 @@ from .explicit import GaussSeidel, Jacobi
 
 COUPLING_SCHEMES: Registry = Registry({
     "monolithic": f"{__name__}.monolithic:Monolithic", Jacobi.name: Jacobi,
-    GaussSeidel.name: GaussSeidel, "implicit": f"{__name__}.implicit:Implicit"})
+    GaussSeidel.name: GaussSeidel, "implicit": f"{__name__}.implicit:Implicit"},
+    group="cosim.schemes")
 
 #: public name -> the submodule that defines it, imported on first use
 _LAZY = {"Monolithic": "monolithic", "Implicit": "implicit"}
