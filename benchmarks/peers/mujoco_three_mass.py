@@ -15,8 +15,9 @@ the structure is the one CASES.md sections 4-5 describe, in MuJoCo's terms
   spring the bottom slide's joint stiffness, the two between masses fixed
   tendons (length = the difference of the two slides) with a stiffness;
 - MuJoCo's own contacts are switched off (``<flag contact="disable">``): its
-  soft constraints reproduce a linear penalty spring only with the
-  impedance ``solimp`` pushed to its lower bound.  Each contact is instead an
+  soft constraints are not a penalty spring of a given stiffness (their
+  force goes through the impedance ``solimp`` and the constraint's effective
+  mass), so the scene's law would only be approximated.  Each contact is instead an
   actuator that is a linear spring by construction: a ``<general>`` actuator
   on the contact point's site with a ``refsite`` (the ground's origin for A
   and B, the top mass for C) and gear (0, 1, 0), so that its length is the
