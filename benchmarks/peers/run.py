@@ -14,7 +14,8 @@ It prints the machine, then one row per peer on three_mass f100 (m_s =
   (``resource.getrusage(RUSAGE_CHILDREN)`` before and after), interpreter
   start, imports, model building and writing the series included;
 
-each the best of ``--repeat`` runs (default 5), and the three errors of C
+each the best of ``--repeat`` runs (default 5; bytecode is cached as users
+have it, the first run writing the caches), and the three errors of C
 against the bench's reference (:func:`cosim.studies.bench.reference`, the fine
 monolithic DOP853 run, cached in ``runs/.bench-cache``): the count of C's
 contacts (absolute difference), C's peak penetration (relative; at the
@@ -221,7 +222,11 @@ def command(peer: str, out: Path, t_end: float | None, extra=()) -> list[str]:
 def run_once(cmd: list[str]) -> tuple[dict, float]:
     """Run a peer; its JSON line and the CPU (user + sys) of its process."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
-    proc = subprocess.run(cmd, capture_output=True, text=True, env=os.environ.copy())
+    # bytecode cached as users have it (as benchmarks/startup.py runs): with
+    # PYTHONDONTWRITEBYTECODE set, a peer whose cache is stale would compile its
+    # modules again in every run and be charged for it; the first run writes the caches
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+    proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("{")]
