@@ -46,8 +46,9 @@ how far the errors move with it.
 ``--mujoco-steps H1,H2,...`` runs the MuJoCo model once at each fixed step
 h of the list with each integrator of ``--mujoco-integrators`` (default
 Euler and RK4) and tabulates its errors and solve CPU (the best of
-``--repeat`` runs), the cheapest setting within 1 % marked: how the
-MuJoCo row's setting was chosen.
+``--repeat`` runs), and marks the cheapest setting that meets 1 % with
+every smaller step of its integrator too (:func:`cheapest`): how the MuJoCo
+row's setting was chosen.
 
 ``--quick`` ends every run and the reference at 0.106 s (C's first two
 contacts) and repeats once: a check that everything runs, not a benchmark.
