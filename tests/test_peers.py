@@ -45,9 +45,9 @@ def cache(tmp_path_factory):
     return tmp_path_factory.mktemp("bench-cache")
 
 
-def _quick(peers, out, cache):
+def _quick(peers, out, cache, extra=()):
     proc = subprocess.run([sys.executable, str(PEERS / "run.py"), "--quick", "--peers", peers,
-                           "--out", str(out), "--cache-dir", str(cache)],
+                           "--out", str(out), "--cache-dir", str(cache), *extra],
                           capture_output=True, text=True, cwd=ROOT, timeout=600)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert proc.stdout.startswith("machine: "), proc.stdout[:200]
@@ -429,11 +429,24 @@ def test_mujoco_model_flies_as_cosim_before_c_strikes():
 
 def test_mujoco_quick(tmp_path, cache):
     pytest.importorskip("mujoco", reason="the MuJoCo peer needs the `peers` extra")
-    report = _quick("mujoco", tmp_path, cache)
+    report = _quick("mujoco", tmp_path, cache,
+                    ["--mujoco-steps", "2.5e-5,1.25e-5", "--mujoco-integrators", "Euler,RK4"])
     (row,) = report["rows"]
     assert row["method"] == "MuJoCo 4.0.0 Euler, h = 2.5e-05 s"
     assert row["steps"] == 4240                     # 0.106 s / 2.5e-5 s
     _check_row(row, report["reference"])
+    sweep = report["mujoco_steps"]
+    # the steps that end exactly at 0.106 s: h = 0.106 / n, equal to h to round-off
+    assert [(r["integrator"], r["steps"]) for r in sweep] == [
+        ("Euler", 4240), ("Euler", 8480), ("RK4", 4240), ("RK4", 8480)]
+    assert [r["step"] for r in sweep] == pytest.approx([2.5e-5, 1.25e-5] * 2, rel=1e-12)
+    # the same run as the row's, repeated: the same errors
+    for k in ("err_count", "err_peak_steps", "err_peak_interp", "err_exit_velocity"):
+        assert sweep[0][k] == row[k]
+    assert all(r["meets_1pc"] for r in sweep)
+    assert [r["cheapest"] for r in sweep].count(True) == 1
+    md = (tmp_path / "peers.md").read_text()
+    assert "| integrator | h [s] | steps | solve CPU [s] |" in md
 
 
 @pytest.mark.parametrize("t_end, count", [(0.106, 2), (0.25, 9)])
@@ -448,3 +461,26 @@ def test_mujoco_count_holds_under_round_off(driver, t_end, count):
     for lift in (0.0, 2e-17, -4e-17, 1e-15):
         r = mj.solve(mujoco, n, t_end, lift=lift)
         assert driver.series_metrics(mj.series(n, r["t"], r["qpos"], r["qvel"]))["count"] == count
+
+
+def test_a_peer_package_not_installed_is_left_out_with_a_note(driver, tmp_path, cache,
+                                                              monkeypatch, capsys):
+    """Without mujoco (or exudyn) its row and its sweep are left out, said in
+    one line, and the rest of the table is written."""
+    real = driver.machine
+
+    def without(*packages):
+        def machine():
+            m = real()
+            m["versions"] = {k: v for k, v in m["versions"].items() if k not in packages}
+            return m
+        return machine
+
+    monkeypatch.setattr(driver, "machine", without("mujoco", "exudyn"))
+    assert driver.main(["--quick", "--peers", "mujoco,exudyn", "--mujoco-steps", "2.5e-5",
+                        "--out", str(tmp_path), "--cache-dir", str(cache)]) == 0
+    out = capsys.readouterr().out
+    assert 'mujoco is not installed (pip install ".[peers]"): its row is left out' in out
+    assert 'exudyn is not installed (pip install ".[peers]"): its row is left out' in out
+    report = json.loads((tmp_path / "peers.json").read_text())
+    assert report["rows"] == [] and report["mujoco_steps"] == []
