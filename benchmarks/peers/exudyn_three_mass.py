@@ -234,10 +234,10 @@ def main(argv=None) -> int:
     s = series(mbs, sensors, geometry)
     path = None
     if a.out:
-        out = Path(a.out)
-        out.mkdir(parents=True, exist_ok=True)
-        path = out / "series.npz"
-        np.savez(path, **s)
+        from cosim.io.rundir import OutputFolder
+
+        with OutputFolder(a.out) as folder:     # the checked writer every cosim output uses
+            path = folder.write("series.npz", lambda fh: np.savez(fh, **s))
     print(json.dumps({"peer": "exudyn", "version": exu.__version__, "success": bool(ok),
                       "solve_cpu_s": cpu, "steps": int(len(s["t"]) - 1), "t_end": t_end,
                       "step": a.step, "lift": a.lift,

@@ -247,10 +247,10 @@ def main(argv=None) -> int:
               and math.isclose(r["t"][-1], t_end, rel_tol=1e-9))
     path = None
     if a.out:
-        out = Path(a.out)
-        out.mkdir(parents=True, exist_ok=True)
-        path = out / "series.npz"
-        np.savez(path, **s)
+        from cosim.io.rundir import OutputFolder
+
+        with OutputFolder(a.out) as folder:     # the checked writer every cosim output uses
+            path = folder.write("series.npz", lambda fh: np.savez(fh, **s))
     print(json.dumps({"peer": "mujoco", "version": mujoco.__version__, "success": ok,
                       "solve_cpu_s": r["solve_cpu_s"], "steps": r["steps"], "t_end": t_end,
                       "step": r["step"], "integrator": a.integrator, "lift": a.lift,
