@@ -1,9 +1,9 @@
 """The `cosim` command line.  The only package that talks to the terminal.
 
 :func:`main` runs the command line in a caller's process; :func:`console`
-is the console script (``cosim = "cosim.cli:console"``) and
-``python -m cosim.cli``: :func:`main`, then the process ends cheaper.  The parser is in :mod:`cosim.cli.parser`,
-the sub-commands in :mod:`cosim.cli.commands` (``sweep`` in
+is the console script (``cosim = "cosim.cli:console"``) and ``python -m
+cosim.cli``: :func:`main`, then the process ends cheaper.  The parser is in
+:mod:`cosim.cli.parser`, the sub-commands in :mod:`cosim.cli.commands` (``sweep`` in
 :mod:`cosim.cli.sweep_command`), the progress line and the
 escaping of control characters in :mod:`cosim.cli.terminal`, the stop on
 SIGTERM and SIGHUP in :mod:`cosim.cli.signals`.
