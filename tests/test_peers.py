@@ -303,7 +303,8 @@ def test_mujoco_initial_state_and_gap(mj):
     assert not qpos[[0, 2]].any() and not qvel[[0, 1, 2, 4, 5, 6]].any()
     u = qpos[4:]
     m, k, g = 0.15, 1.6e5, 9.81
-    # each spring carries the weight above it: k (u1 - u2) = -m g, k (u2 - u3) = -2 m g, k u3 = -3 m g
+    # each spring carries the weight above it:
+    # k (u1 - u2) = -m g, k (u2 - u3) = -2 m g, k u3 = -3 m g
     assert k * (u[0] - u[1]) == pytest.approx(-m * g, rel=1e-12)
     assert k * (u[1] - u[2]) == pytest.approx(-2 * m * g, rel=1e-12)
     assert k * u[2] == pytest.approx(-3 * m * g, rel=1e-12)
