@@ -30,8 +30,10 @@ def test_no_module_over_about_500_lines(path):
 
 
 def test_the_console_script_is_the_command_lines_main():
+    """The console script and ``python -m cosim.cli`` are :func:`cosim.cli.console`,
+    :func:`cosim.cli.main` in a process of its own (``tests/test_console.py``)."""
     scripts = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["scripts"]
     module, _, name = scripts["cosim"].partition(":")
     cli = importlib.import_module("cosim.cli")
-    assert getattr(importlib.import_module(module), name) is cli.main
-    assert importlib.import_module("cosim.cli.__main__").main is cli.main
+    assert getattr(importlib.import_module(module), name) is cli.console
+    assert importlib.import_module("cosim.cli.__main__").console is cli.console

@@ -309,3 +309,13 @@ def test_the_startup_benchmark_runs_and_reports_every_group(tmp_path):
         assert label in rows, (label, proc.stdout)
     assert rows["cosim"][0] > 0 and rows["numpy"][1] == 1.0
     assert rows["import numpy"][1] == 1.0 and rows["load_scene alone"][0] > 0
+
+
+def test_a_run_imports_no_cryptographic_modules(tmp_path):
+    """The run folder's temporary names are random bytes from ``os.urandom``
+    (what ``secrets.token_hex`` reads): ``secrets`` would load ``hmac`` and
+    OpenSSL's hashes into every run."""
+    mods = loaded(tmp_path, "run", str(CASES / "three_mass.toml"), "--variant", "f100", "--out",
+                  str(tmp_path / "run"), "--quiet", "--set", "t_end=0.01")
+    assert "cosim.io.rundir" in mods
+    assert not {"secrets", "hmac"} & mods

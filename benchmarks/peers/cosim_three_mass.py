@@ -30,12 +30,13 @@ def main(argv=None) -> int:
     ap.add_argument("--out", required=True)
     a = ap.parse_args(argv)
 
-    from cosim.cli import main as cosim_main
+    from cosim.cli import console
 
     args = ["run", a.scene, "--variant", a.variant, "--out", a.out, "--quiet", "--overwrite"]
     if a.t_end:
         args += ["--set", f"t_end={a.t_end!r}"]
-    code = cosim_main(args + extra)
+    # the `cosim` command's own entry, which ends the process as the command does
+    code = console(args + extra)
     summary = Path(a.out) / "summary.json"
     s = json.loads(summary.read_text()) if summary.exists() else {}
     print(json.dumps({"peer": "cosim", "success": code == 0 and s.get("status") == "finished",

@@ -43,93 +43,20 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 import time
-import tomllib
 from pathlib import Path
 
 import numpy as np
 
-#: the step and settings of the comparison (issue 12)
+# the scene's numbers, shared with the MuJoCo model (this directory is on the
+# path when the script runs, and the tests put it there)
+from three_mass_scene import chain_equilibrium, rot, scene_numbers  # noqa: F401
+
+#: the step and settings of the comparison
 STEP = 5e-4                 # [s] largest step
 MIN_STEP = 1e-12            # [s] smallest step the adaptive control may take
 DISCONTINUOUS_TOLERANCE = 1.0
-
-
-def _merge(base: dict, over: dict) -> dict:
-    out = dict(base)
-    for k, v in over.items():
-        out[k] = _merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
-    return out
-
-
-def scene_numbers(path, variant: str | None = None) -> dict:
-    """The numbers of scene 5 that the Exudyn model needs, read from its file.
-
-    Parameters
-    ----------
-    path : str or Path
-        ``cases/three_mass.toml``.
-    variant : str, optional
-        A variant's overrides are applied first (default: the file's own).
-
-    Returns
-    -------
-    dict
-        ``gravity`` [m/s^2], ``t_end`` [s], ``y0`` (the body's height) [m],
-        ``body`` and ``arm`` (``mass`` [kg], ``inertia`` [kg m^2]),
-        ``A``, ``B`` (body frame) and ``joint`` (body frame), ``com`` and
-        ``C`` (arm frame, from the joint) [m], ``q_arm``, ``dq_arm``
-        [rad, rad/s], ``chain_masses`` [kg], ``chain_stiffnesses`` [N/m],
-        ``chain_origin_y`` [m], ``k`` {contact: stiffness [N/m]}.
-    """
-    data = tomllib.loads(Path(path).read_text())
-    variant = variant or data.get("default_variant")
-    if variant:
-        data = _merge(data, data["variants"][variant])
-    b = data["subsystems"]["robot"]["bodies"]
-    main, arm = b["main"], b["arm"]
-    chain = data["subsystems"]["chain"]
-    for name, body in (("x", b["slider_x"]), ("body", main)):
-        j = body["joint"]
-        if j.get("q0", 0.0) or j.get("dq0", 0.0):
-            raise ValueError(f"the Exudyn model starts joint `{name}` at rest at 0, the scene "
-                             f"gives q0 = {j.get('q0', 0.0)}, dq0 = {j.get('dq0', 0.0)}")
-    return {
-        "gravity": float(data["effects"]["gravity"]),
-        "t_end": float(data["t_end"]),
-        "y0": float(b["slider_y"]["joint"]["q0"]),
-        "body": {"mass": float(main["mass"]), "inertia": float(main["inertia"])},
-        "arm": {"mass": float(arm["mass"]), "inertia": float(arm["inertia"])},
-        "A": [float(v) for v in main["points"]["A"]],
-        "B": [float(v) for v in main["points"]["B"]],
-        "joint": [float(v) for v in arm["joint"]["offset"]],
-        "com": [float(v) for v in arm["com"]],
-        "C": [float(v) for v in arm["points"]["C"]],
-        "q_arm": float(arm["joint"].get("q0", 0.0)),
-        "dq_arm": float(arm["joint"].get("dq0", 0.0)),
-        "chain_masses": [float(v) for v in chain["masses"]],
-        "chain_stiffnesses": [float(v) for v in chain["stiffnesses"]],
-        "chain_origin_y": float(chain["origin"][1]),
-        "k": {c: float(data["contacts"][c]["law"]["contact_stiffness"]) for c in "ABC"},
-    }
-
-
-def _rot(phi: float, v) -> np.ndarray:
-    c, s = math.cos(phi), math.sin(phi)
-    return np.array([c * v[0] - s * v[1], s * v[0] + c * v[1]])
-
-
-def chain_equilibrium(masses, stiffnesses, gravity: float) -> list[float]:
-    """Static displacements [m] (top first) of a hanging chain of masses on
-    springs, the last spring to the ground, under gravity along -y: spring i
-    carries the weight of masses 0..i."""
-    u, below = [], 0.0
-    for i in reversed(range(len(masses))):
-        below -= gravity * sum(masses[:i + 1]) / stiffnesses[i]
-        u.append(below)
-    return u[::-1]
 
 
 def build(exu, n: dict, t_end: float, step: float = STEP, lift: float = 0.0):
@@ -162,6 +89,9 @@ def build(exu, n: dict, t_end: float, step: float = STEP, lift: float = 0.0):
                                       NodeRigidBody2D, ObjectContactCoordinate, ObjectGround,
                                       ObjectJointRevolute2D, ObjectRigidBody2D, SensorNode)
 
+    if any(n["damping"].values()):
+        raise ValueError(f"the Exudyn model's contacts are undamped, the scene gives "
+                         f"{n['damping']} N s/m")
     g = n["gravity"]
     n = {**n, "y0": n["y0"] + lift}
     sc = exu.SystemContainer()
@@ -171,7 +101,7 @@ def build(exu, n: dict, t_end: float, step: float = STEP, lift: float = 0.0):
     body = mbs.AddObject(ObjectRigidBody2D(nodeNumber=body_node, **n["body"]))
     # arm: its node at its mass centre, rotated by q_arm, turning at dq_arm
     joint_point = np.array([0.0, n["y0"]]) + np.array(n["joint"])
-    r_com = _rot(n["q_arm"], n["com"])
+    r_com = rot(n["q_arm"], n["com"])
     com = joint_point + r_com
     w = n["dq_arm"]
     arm_node = mbs.AddNode(NodeRigidBody2D(
@@ -223,7 +153,7 @@ def build(exu, n: dict, t_end: float, step: float = STEP, lift: float = 0.0):
         mbs.AddObject(CoordinateSpringDamper(markerNumbers=[below, chain_coords[i]],
                                              stiffness=k, damping=0.0))
     # the top mass's height is origin_y + its displacement
-    y_c0 = com[1] + _rot(n["q_arm"], c_local)[1]
+    y_c0 = com[1] + rot(n["q_arm"], c_local)[1]
     contact(chain_coords[0], height(arm, c_local), n["k"]["C"], n["chain_origin_y"],
             y_c0 - n["chain_origin_y"] - u0[0])
 
@@ -304,10 +234,10 @@ def main(argv=None) -> int:
     s = series(mbs, sensors, geometry)
     path = None
     if a.out:
-        out = Path(a.out)
-        out.mkdir(parents=True, exist_ok=True)
-        path = out / "series.npz"
-        np.savez(path, **s)
+        from cosim.io.rundir import OutputFolder
+
+        with OutputFolder(a.out) as folder:     # the checked writer every cosim output uses
+            path = folder.write("series.npz", lambda fh: np.savez(fh, **s))
     print(json.dumps({"peer": "exudyn", "version": exu.__version__, "success": bool(ok),
                       "solve_cpu_s": cpu, "steps": int(len(s["t"]) - 1), "t_end": t_end,
                       "step": a.step, "lift": a.lift,

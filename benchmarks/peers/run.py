@@ -1,9 +1,9 @@
-"""Scene 5 side by side: cosim, Exudyn and the paper's RK45, from one run.
+"""Scene 5 side by side: cosim, Exudyn, MuJoCo and the paper's RK45, from one run.
 
 Run from the project root::
 
-    python benchmarks/peers/run.py [--repeat N] [--quick] [--peers cosim,exudyn,paper_rk45]
-                                   [--out DIR]
+    python benchmarks/peers/run.py [--repeat N] [--quick]
+                                   [--peers cosim,exudyn,mujoco,paper_rk45] [--out DIR]
 
 It prints the machine, then one row per peer on three_mass f100 (m_s =
 0.15 kg, 0.25 s):
@@ -14,7 +14,8 @@ It prints the machine, then one row per peer on three_mass f100 (m_s =
   (``resource.getrusage(RUSAGE_CHILDREN)`` before and after), interpreter
   start, imports, model building and writing the series included;
 
-each the best of ``--repeat`` runs (default 5), and the three errors of C
+each the best of ``--repeat`` runs (default 5; bytecode is cached as users
+have it, the first run writing the caches), and the three errors of C
 against the bench's reference (:func:`cosim.studies.bench.reference`, the fine
 monolithic DOP853 run, cached in ``runs/.bench-cache``): the count of C's
 contacts (absolute difference), C's peak penetration (relative; at the
@@ -32,17 +33,27 @@ The peers are small scripts run as subprocesses, each printing a JSON line:
   row, :data:`cosim.studies.bench.PAPER_RK45`);
 - ``exudyn``: this directory's own Exudyn model (``exudyn_three_mass.py``),
   which needs ``pip install ".[peers]"``; it is left out, with a note, when
-  exudyn is not installed.
+  exudyn is not installed;
+- ``mujoco``: this directory's own MuJoCo model (``mujoco_three_mass.py``),
+  semi-implicit Euler at 2.5e-5 s by MuJoCo's rollout; the same extra, the
+  same note when mujoco is not installed.
 
 ``--spread N`` adds N runs of the Exudyn model per largest step of
 ``--exudyn-steps``, the robot lifted by k x 1e-15 m (k = 0 .. N-1): the
 physics is the same, the adaptive step sequence is not, and the table shows
 how far the errors move with it.
 
+``--mujoco-steps H1,H2,...`` runs the MuJoCo model once at each fixed step
+h of the list with each integrator of ``--mujoco-integrators`` (default
+Euler and RK4) and tabulates its errors and solve CPU (the best of
+``--repeat`` runs), and marks the cheapest setting that meets 1 % with
+every smaller step of its integrator too (:func:`cheapest`): how the MuJoCo
+row's setting was chosen.
+
 ``--quick`` ends every run and the reference at 0.106 s (C's first two
 contacts) and repeats once: a check that everything runs, not a benchmark.
-The table goes to ``DIR/peers.csv`` and ``DIR/peers.md`` (default
-``runs/peers``).
+The table goes to ``DIR/peers.csv``, ``DIR/peers.md`` and ``DIR/peers.json``
+(default ``runs/peers``).
 """
 from __future__ import annotations
 
@@ -71,7 +82,9 @@ CONTACT = "C"
 JOINT = "robot/arm"
 #: end time of ``--quick`` [s]: C's first two contacts, both released
 QUICK_T_END = 0.106
-PEERS = ("cosim", "exudyn", "paper_rk45")
+PEERS = ("cosim", "exudyn", "mujoco", "paper_rk45")
+#: the peers that are our own models in another package, the package's name
+PACKAGES = {"exudyn": "exudyn", "mujoco": "mujoco"}
 #: the round-off-sized lift of the robot between the Exudyn runs of ``--spread`` [m]
 LIFT = 1e-15
 COLUMNS = ("peer", "method", "solve_cpu_s", "process_cpu_s", "repeat", "steps", "count",
@@ -176,7 +189,7 @@ def machine() -> dict:
     except OSError:
         pass
     versions = {}
-    for mod in ("numpy", "scipy", "exudyn"):
+    for mod in ("numpy", "scipy", "exudyn", "mujoco"):
         try:
             versions[mod] = __import__(mod).__version__
         except ImportError:
@@ -199,8 +212,8 @@ def paper_args() -> list[str]:
 
 def command(peer: str, out: Path, t_end: float | None, extra=()) -> list[str]:
     end = ["--t-end", repr(t_end)] if t_end else []
-    if peer == "exudyn":
-        return [sys.executable, str(HERE / "exudyn_three_mass.py"), "--scene", str(SCENE),
+    if peer in PACKAGES:
+        return [sys.executable, str(HERE / f"{peer}_three_mass.py"), "--scene", str(SCENE),
                 "--variant", VARIANT, "--out", str(out)] + end + list(extra)
     cmd = [sys.executable, str(HERE / "cosim_three_mass.py"), "--scene", str(SCENE),
            "--variant", VARIANT, "--out", str(out)] + end
@@ -210,7 +223,11 @@ def command(peer: str, out: Path, t_end: float | None, extra=()) -> list[str]:
 def run_once(cmd: list[str]) -> tuple[dict, float]:
     """Run a peer; its JSON line and the CPU (user + sys) of its process."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
-    proc = subprocess.run(cmd, capture_output=True, text=True, env=os.environ.copy())
+    # bytecode cached as users have it (as benchmarks/startup.py runs): with
+    # PYTHONDONTWRITEBYTECODE set, a peer whose cache is stale would compile its
+    # modules again in every run and be charged for it; the first run writes the caches
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+    proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("{")]
@@ -218,6 +235,19 @@ def run_once(cmd: list[str]) -> tuple[dict, float]:
         raise RuntimeError(f"`{' '.join(cmd)}` printed no JSON line (exit {proc.returncode}):\n"
                            f"{proc.stderr[-2000:]}")
     return json.loads(lines[-1]), cpu
+
+
+def method(peer: str, info: dict) -> str:
+    """A row's method, from its peer's JSON line."""
+    if peer == "cosim":
+        return f"cosim run ({info.get('scheme')})"
+    if peer == "exudyn":
+        return f"Exudyn {info.get('version')} TrapezoidalIndex2"
+    if peer == "mujoco":
+        h = info.get("step")
+        return (f"MuJoCo {info.get('version')} {info.get('integrator')}"
+                + ("" if h is None else f", h = {h:g} s"))
+    return "cosim monolithic, scipy RK45"
 
 
 def measure(peer: str, work: Path, repeat: int, t_end: float | None, ref: dict) -> dict:
@@ -229,9 +259,7 @@ def measure(peer: str, work: Path, repeat: int, t_end: float | None, ref: dict) 
         whole.append(cpu)
         if info.get("solve_cpu_s") is not None:
             solve.append(float(info["solve_cpu_s"]))
-    row = {"peer": peer, "method": {"cosim": f"cosim run ({info.get('scheme')})",
-                                    "exudyn": f"Exudyn {info.get('version')} TrapezoidalIndex2",
-                                    "paper_rk45": "cosim monolithic, scipy RK45"}[peer],
+    row = {"peer": peer, "method": method(peer, info),
            "solve_cpu_s": min(solve) if solve else math.nan, "process_cpu_s": min(whole),
            "repeat": repeat,
            # the monolithic scheme reports its segments between events, not RK45's steps
@@ -241,7 +269,7 @@ def measure(peer: str, work: Path, repeat: int, t_end: float | None, ref: dict) 
                                  "err_exit_velocity")}
     if not info.get("success"):
         return {**row, "count": math.nan, **nan, "meets_1pc": False}
-    if peer == "exudyn":
+    if peer in PACKAGES:
         with np.load(info["series"]) as z:
             m = series_metrics({k: z[k] for k in z.files})
     else:
@@ -283,6 +311,52 @@ def spread(work: Path, steps, n: int, t_end: float | None, ref: dict,
     return out
 
 
+def mujoco_sweep(work: Path, steps, integrators, repeat: int, t_end: float | None,
+                 ref: dict) -> list[dict]:
+    """The MuJoCo model at each fixed step h of ``steps`` with each of
+    ``integrators``: its errors and solve CPU (the best of ``repeat`` runs),
+    the setting :func:`cheapest` picks marked ``cheapest``."""
+    out = []
+    for integrator in integrators:
+        for h in steps:
+            cpu, info = [], {}
+            for _ in range(repeat):
+                info, _ = run_once(command("mujoco", work / "sweep", t_end,
+                                           ["--step", repr(h), "--integrator", integrator]))
+                cpu.append(float(info["solve_cpu_s"]))
+            row = {"integrator": integrator, "step": info["step"], "steps": info["steps"],
+                   "solve_cpu_s": min(cpu), "repeat": repeat, "cheapest": False}
+            if info.get("success"):
+                with np.load(info["series"]) as z:
+                    m = series_metrics({k: z[k] for k in z.files})
+                row.update(count=m["count"], **errors(m, ref))
+            else:
+                row.update(count=math.nan, err_count=math.nan, err_peak_steps=math.nan,
+                           err_peak_interp=math.nan, err_exit_velocity=math.nan,
+                           meets_1pc=False)
+            out.append(row)
+    best = cheapest(out)
+    if best is not None:
+        best["cheapest"] = True
+    return out
+
+
+def cheapest(rows: list[dict]) -> dict | None:
+    """The cheapest (least solve CPU) of the settings that meet 1 % with
+    every smaller step of their integrator too: C's count hangs on grazing
+    re-contacts, so a step that meets 1 % while a smaller one misses it got
+    there by luck and would not survive a change of the scene or the step
+    list (None if no setting qualifies)."""
+    safe = []
+    for integrator in dict.fromkeys(r["integrator"] for r in rows):
+        for r in sorted((r for r in rows if r["integrator"] == integrator),
+                        key=lambda r: r["step"]):
+            if not r["meets_1pc"]:
+                break
+            safe.append(r)
+    return min(safe, key=lambda r: r["solve_cpu_s"], default=None)
+
+
 def _fmt(v, pct=False) -> str:
     if isinstance(v, bool):
         return "yes" if v else "no"
@@ -293,7 +367,8 @@ def _fmt(v, pct=False) -> str:
     return "" if v is None else str(v)
 
 
-def markdown(rows: list[dict], mach: dict, ref: dict, t_end: float, spreads=()) -> str:
+def markdown(rows: list[dict], mach: dict, ref: dict, t_end: float, spreads=(),
+             sweep=()) -> str:
     """The table as markdown, with the machine and the reference."""
     head = (f"three_mass {VARIANT}, {t_end:g} s; machine: {mach['cpu']}, {mach['cores']} cores, "
             f"Python {mach['python']}, " + ", ".join(f"{k} {v}" for k, v in
@@ -325,6 +400,19 @@ def markdown(rows: list[dict], mach: dict, ref: dict, t_end: float, spreads=()) 
                          f"{_fmt(r['err_exit_velocity_max'], True)} | "
                          f"{_fmt(r['err_peak_max'], True)} | {_fmt(r['solve_cpu_s_median'])} | "
                          f"{r['steps_median']:.0f} |")
+    if sweep:
+        lines += ["", "MuJoCo's integrators and fixed steps h (solve CPU: best of "
+                  f"{sweep[0]['repeat']} runs; * the cheapest within 1 % with every smaller "
+                  "step of its integrator):", "",
+                  "| integrator | h [s] | steps | solve CPU [s] | C's contacts | peak error "
+                  "(samples / interpolated) | exit velocity error | within 1 % |",
+                  "|---|---|---|---|---|---|---|---|"]
+        for r in sweep:
+            lines.append(f"| {r['integrator']} | {r['step']:g} | {r['steps']} | "
+                         f"{_fmt(r['solve_cpu_s'])}{' *' if r['cheapest'] else ''} | "
+                         f"{_fmt(r['count'])} | {_fmt(r['err_peak_steps'], True)} / "
+                         f"{_fmt(r['err_peak_interp'], True)} | "
+                         f"{_fmt(r['err_exit_velocity'], True)} | {_fmt(r['meets_1pc'])} |")
     return "\n".join(lines) + "\n"
 
 
@@ -341,6 +429,12 @@ def main(argv=None) -> int:
                     f"robot lifted by k x {LIFT:g} m: how much its errors owe to its steps")
     ap.add_argument("--exudyn-steps", default="5e-4",
                     help="largest steps h [s] of --spread, comma-separated (default 5e-4)")
+    ap.add_argument("--mujoco-steps", default="",
+                    help="fixed steps h [s], comma-separated: also run the MuJoCo model at each "
+                    "with each integrator of --mujoco-integrators and tabulate its errors")
+    ap.add_argument("--mujoco-integrators", default="Euler,RK4",
+                    help="MuJoCo integrators of --mujoco-steps, comma-separated "
+                    "(default Euler,RK4)")
     ap.add_argument("--cache-dir", default=str(ROOT / "runs" / ".bench-cache"),
                     help="where the reference is cached")
     a = ap.parse_args(argv)
@@ -352,9 +446,12 @@ def main(argv=None) -> int:
         ap.error(f"`--repeat` must be >= 1, got {a.repeat}")
     mach = machine()
     print("machine: " + json.dumps(mach))
-    if "exudyn" in peers and "exudyn" not in mach["versions"]:
-        print("exudyn is not installed (pip install \".[peers]\"): its row is left out")
-        peers.remove("exudyn")
+    for peer, package in PACKAGES.items():
+        if package not in mach["versions"] and (peer in peers or (peer == "mujoco"
+                                                                  and a.mujoco_steps)):
+            print(f"{package} is not installed (pip install \".[peers]\"): its row is left out")
+            if peer in peers:
+                peers.remove(peer)
     t_end = QUICK_T_END if a.quick else None
     repeat = 1 if a.quick else a.repeat
 
@@ -377,6 +474,14 @@ def main(argv=None) -> int:
             spreads = spread(Path(tmp), steps, a.spread, t_end, ref)
             for r in spreads:
                 print(json.dumps(r))
+        sweep = []
+        if a.mujoco_steps and "mujoco" in mach["versions"]:
+            sweep = mujoco_sweep(Path(tmp), [float(v) for v in a.mujoco_steps.split(",")
+                                             if v.strip()],
+                                 [v.strip() for v in a.mujoco_integrators.split(",") if v.strip()],
+                                 repeat, t_end, ref)
+            for r in sweep:
+                print(json.dumps(r))
     out = Path(a.out)
 
     def write_rows(fh):
@@ -384,9 +489,9 @@ def main(argv=None) -> int:
         w.writeheader()
         for r in rows:
             w.writerow({k: r.get(k) for k in COLUMNS})
-    md = markdown(rows, mach, ref, t_show, spreads)
+    md = markdown(rows, mach, ref, t_show, spreads, sweep)
     report = {"machine": mach, "reference": ref, "t_end": t_show, "rows": rows,
-              "exudyn_spread": spreads}
+              "exudyn_spread": spreads, "mujoco_steps": sweep}
     with OutputFolder(out) as folder:       # the checked writer every cosim output uses
         folder.write("peers.csv", write_rows, "w")
         folder.write("peers.md", lambda fh: fh.write(md), "w")

@@ -28,7 +28,6 @@ from __future__ import annotations
 import errno
 import os
 import re
-import secrets
 import stat
 from pathlib import Path
 
@@ -421,7 +420,9 @@ class OutputFolder:
 
     # ----------------------------------------------------------- writing
     def _temp_name(self, name: str) -> str:
-        return f".{name}.{secrets.token_hex(6)}.tmp"
+        # os.urandom is what secrets.token_hex reads; the secrets module would
+        # import hmac and hashlib (OpenSSL) into every run for these 6 bytes
+        return f".{name}.{os.urandom(6).hex()}.tmp"
 
     def write(self, name: str, writer, mode: str = "wb") -> Path:
         """Write the file ``name`` whole: ``writer(fh)`` fills a new
