@@ -276,7 +276,7 @@ class Implicit(CoSimulationScheme):
         reference chosen, a contact embedded in it, another integrator), a
         rigid side other than :class:`RigidReference`, or a coupler contact
         whose law is not linear or Kelvin-Voigt, or with friction."""
-        if system.hosted or system._followers or not len(system.coupler_rows):
+        if system.hosted or system.followers or not len(system.coupler_rows):
             return None
         try:
             from cosim.core.schemes import _implicit_step
