@@ -19,15 +19,15 @@ import warnings
 import cosim
 
 #: (scene, variant, scheme, overrides, target CPU [s] or None)
-RUNS = [("spring_drop", None, None, (), 0.05),
+RUNS = [("spring_drop", None, None, (), 0.02),
         ("manipulator_wall", "mu0.03", None, (), None),
         ("manipulator_wall", "mu0.03", "monolithic", (), None),
         ("rod_impact", None, None, (), None),
-        ("ground_multicontact", None, None, (), 0.3),
+        ("ground_multicontact", None, None, (), 0.15),
         ("three_mass", "f100", None, (), None),
-        ("three_mass", "f100", "monolithic", (), None),
+        ("three_mass", "f100", "monolithic", (), 1.0),
         ("beam_impact", None, None, (), None),
-        ("beam_impact", None, None, ("t_end=10",), 3.0),
+        ("beam_impact", None, None, ("t_end=10",), 2.0),
         ("brachiation", None, None, (), 0.3)]
 
 
