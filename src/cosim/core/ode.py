@@ -201,6 +201,23 @@ class RK4(TimeStepper):
         return y + (h / 6.0) * (k1 + 2.0 * (k2 + k3) + k4)
 
 
+def _switched(sol, sign, t, y, switch, on_switch):
+    """The switch signs and state after the earliest event of ``sol``
+    (a ``solve_ivp`` result that stopped on one) at ``t``: its sign flipped,
+    and ``on_switch(t, j, on, y)`` told, whose returned state (a jump)
+    replaces ``y`` and sets every sign anew from ``switch(t, y)``."""
+    j = min((i for i in range(len(sign)) if len(sol.t_events[i])),
+            key=lambda i: sol.t_events[i][0])
+    sign = sign.copy()
+    sign[j] = not sign[j]
+    if on_switch is not None:
+        jumped = on_switch(t, j, bool(sign[j]), y)
+        if jumped is not None:
+            y = jumped
+            sign = switch(t, y) > 0
+    return sign, y
+
+
 @dataclass(frozen=True)
 class ScipyStepper(TimeStepper):
     """Adaptive integration with :func:`scipy.integrate.solve_ivp` over each
@@ -269,15 +286,7 @@ class ScipyStepper(TimeStepper):
                     peak[j] = max(peak[j], float(d_end[j]))
             if sol.status != 1:
                 break
-            j = min((i for i in range(n_sw) if len(sol.t_events[i])),
-                    key=lambda i: sol.t_events[i][0])
-            sign = sign.copy()
-            sign[j] = not sign[j]
-            if on_switch is not None:
-                jumped = on_switch(t, j, bool(sign[j]), y)
-                if jumped is not None:
-                    y = jumped
-                    sign = switch(t, y) > 0
+            sign, y = _switched(sol, sign, t, y, switch, on_switch)
         return y
 
     def sample(self, f, t0: float, y0: np.ndarray, t_out: np.ndarray, switch, on_switch,
@@ -371,15 +380,7 @@ class ScipyStepper(TimeStepper):
                 d_end = probe(t, y)[0]
                 for q in range(n_peaks):
                     pk[q] = max(pk[q], float(d_end[q]))
-            jn = min((k for k in range(n_sw) if len(sol.t_events[k])),
-                     key=lambda k: sol.t_events[k][0])
-            sign = sign.copy()
-            sign[jn] = not sign[jn]
-            if on_switch is not None:
-                jumped = on_switch(t, jn, bool(sign[jn]), y)
-                if jumped is not None:
-                    y = jumped
-                    sign = switch(t, y) > 0
+            sign, y = _switched(sol, sign, t, y, switch, on_switch)
 
     @staticmethod
     def _rate_event(probe, j):
