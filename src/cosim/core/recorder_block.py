@@ -73,12 +73,18 @@ def record_block(rec, t, d, dd, f, impulse, dissipated, internal, work, x, energ
     hands the states at each sample in ``x``.  Connection modes must not
     change inside the block: switches logged since the last sample
     belong to its first sample, as :meth:`record` would take them.  The
-    progress callback is told once, at the block's end.
+    progress callback is told at the block's end, throttled as
+    :meth:`record` throttles it; with ``progress_interval`` 0 (a caller that
+    asks for every sample) it is told of each sample, the contacts begun
+    counted as before the block for all but its last (a block ends at a
+    switch).
     """
     t = np.asarray(t, float)
     m = t.shape[0]
     if m == 0:
         return
+    rec._begun_before_block = (sum(map(len, rec.intervals))
+                               + sum(o is not None for o in rec._open))
     sysm = rec.system
     nc = sysm.n_contacts
     d, dd, f = (np.asarray(a, float).reshape(m, -1) for a in (d, dd, f))
@@ -206,6 +212,10 @@ def _commit(rec, t, d, dd, f, impulse, dissipated, work, x, energy, diss_total, 
             rec._next_progress = now + rec._progress_interval
             begun = sum(map(len, rec.intervals)) + sum(o is not None for o in rec._open)
             from cosim.core.recorder import Progress      # the recorder imports this module
+            if rec._progress_interval <= 0:               # every sample was asked for
+                for j in range(k - 1):
+                    rec._progress(Progress(float(t[j]), float(rec.t_end),
+                                           int(rec._begun_before_block), now - rec._wall0))
             rec._progress(Progress(float(t[k - 1]), float(rec.t_end), int(begun),
                                     now - rec._wall0))
 
