@@ -82,6 +82,9 @@ def build(exu, n: dict, t_end: float, step: float = STEP, lift: float = 0.0):
         ``(mbs, settings, sensors, geometry)``; ``sensors`` maps names to
         sensor numbers that store coordinates and their rates at every step.
     """
+    if any(n["damping"].values()):
+        raise ValueError(f"the Exudyn model's contacts are undamped, the scene gives "
+                         f"{n['damping']} N s/m")
     from exudyn.itemInterface import (CoordinateSpringDamper, LoadCoordinate, LoadForceVector,
                                       MarkerBodiesRelativeTranslationCoordinate,
                                       MarkerBodyPosition, MarkerNodeCoordinate, Mass1D,
@@ -89,9 +92,6 @@ def build(exu, n: dict, t_end: float, step: float = STEP, lift: float = 0.0):
                                       NodeRigidBody2D, ObjectContactCoordinate, ObjectGround,
                                       ObjectJointRevolute2D, ObjectRigidBody2D, SensorNode)
 
-    if any(n["damping"].values()):
-        raise ValueError(f"the Exudyn model's contacts are undamped, the scene gives "
-                         f"{n['damping']} N s/m")
     g = n["gravity"]
     n = {**n, "y0": n["y0"] + lift}
     sc = exu.SystemContainer()
