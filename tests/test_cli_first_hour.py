@@ -380,3 +380,19 @@ def test_the_sweep_header_names_the_scene_by_a_plain_path(tmp_path):
     # the study names its scene as studies/../cases/spring_drop.toml: said plainly
     assert p.stdout.splitlines()[0] == ("sweep cases/spring_drop.toml: 1 point(s) on this "
                                         "process, into runs/tiny")
+
+
+def test_python_runs_and_sweeps_take_a_shipped_scene_by_name(tmp_path, monkeypatch):
+    """run_scene and sweep resolve a name as the command line does, from a
+    folder without cases/; a file of that name there wins."""
+    from cosim.scene.run import run_scene
+    from cosim.studies.sweep import sweep
+    monkeypatch.chdir(tmp_path)
+    res = run_scene("spring_drop", overrides=["t_end=0.005"])
+    assert res.summary["scene"] == "spring_drop" and res.summary["status"] == "finished"
+    rows = sweep("three_mass", variants=["f1"], grid={"t_end": [0.01]})
+    assert [(r["variant"], r["status"]) for r in rows] == [("f1", "finished")]
+    (tmp_path / "spring_drop").write_text('name = "mine"\n')       # a file wins: not a scene
+    from cosim.scene.checks import SceneError
+    with pytest.raises(SceneError, match="^spring_drop: "):
+        run_scene("spring_drop")

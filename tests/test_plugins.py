@@ -9,55 +9,27 @@ plug-ins (a name clash, an import that fails, the wrong class) are made as
 bare ``.dist-info`` folders, which is all that Python's metadata reads.
 """
 import json
-import os
-import shutil
 import subprocess
 import sys
-import textwrap
 
 import pytest
 
 from conftest import ROOT
+from plugin_tools import bare_dist, child_env, pip_install, run_cosim
 from cosim.studies.analytic import hertz_contact
 
 PACKAGE = ROOT / "examples" / "custom_law"
 SCENE = PACKAGE / "scene.toml"
 
 
-def _env(*paths):
-    """The environment of a child `cosim`: ``paths``, then this tree's src."""
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join([*map(str, paths), str(ROOT / "src")])
-    return env
-
-
-def _cosim(args, env, cwd, timeout=300):
-    return subprocess.run([sys.executable, "-m", "cosim.cli", *map(str, args)],
-                          capture_output=True, text=True, env=env, cwd=cwd, timeout=timeout)
-
-
 @pytest.fixture(scope="module")
 def installed(tmp_path_factory):
     """examples/custom_law installed by pip into a folder of its own."""
-    import setuptools
-    if tuple(map(int, setuptools.__version__.split(".")[:2])) < (70, 1):
-        pytest.importorskip("wheel", reason="setuptools < 70.1 builds a wheel only with the "
-                                            "`wheel` package, which the test extra installs")
-    tmp = tmp_path_factory.mktemp("plugin")
-    src = tmp / "src"
-    shutil.copytree(PACKAGE, src)              # pip builds in the tree: not in ours
-    target = tmp / "site"
-    proc = subprocess.run([sys.executable, "-m", "pip", "install", "--no-deps",
-                           "--no-build-isolation", "--no-index", "--quiet", "--target",
-                           str(target), str(src)], capture_output=True, text=True,
-                          timeout=600, env=_env())
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    assert (target / "sphere_law.py").exists()
-    return target
+    return pip_install(PACKAGE, tmp_path_factory.mktemp("plugin"), "sphere_law.py")
 
 
 def test_cosim_run_finds_the_installed_law(installed, tmp_path):
-    proc = _cosim(["run", SCENE, "--out", tmp_path / "run", "--quiet"], _env(installed), tmp_path)
+    proc = run_cosim(["run", SCENE, "--out", tmp_path / "run", "--quiet"], child_env(installed), tmp_path)
     assert proc.returncode == 0, proc.stderr
     summary = json.loads((tmp_path / "run" / "summary.json").read_text())
     wall = summary["contacts"]["wall"]
@@ -72,19 +44,19 @@ def test_cosim_run_finds_the_installed_law(installed, tmp_path):
 
 
 def test_cosim_info_names_the_installed_law(installed, tmp_path):
-    proc = _cosim(["info", SCENE], _env(installed), tmp_path)
+    proc = run_cosim(["info", SCENE], child_env(installed), tmp_path)
     assert proc.returncode == 0, proc.stderr
     assert "contact wall: sphere_on_flat (" in proc.stdout
-    proc = _cosim(["info", SCENE, "--json"], _env(installed), tmp_path)
+    proc = run_cosim(["info", SCENE, "--json"], child_env(installed), tmp_path)
     assert json.loads(proc.stdout)["contacts"]["wall"]["law"] == "sphere_on_flat"
 
 
 def test_cosim_sweep_workers_find_the_installed_law(installed, tmp_path):
     """Two points on a pool of two spawned processes: each worker reads the
     scene and finds the plug-in on its own."""
-    proc = _cosim(["sweep", SCENE, "--set", "contacts.wall.law.radius=0.05,0.2",
+    proc = run_cosim(["sweep", SCENE, "--set", "contacts.wall.law.radius=0.05,0.2",
                    "--workers", "2", "--out", tmp_path / "sweep", "--no-plot", "--quiet"],
-                  _env(installed), tmp_path, timeout=600)
+                  child_env(installed), tmp_path, timeout=600)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "2 of 2 point(s) finished" in proc.stdout + proc.stderr
     points = sorted((tmp_path / "sweep").rglob("summary.json"))
@@ -99,10 +71,10 @@ def test_cosim_sweep_dask_workers_find_the_installed_law(installed, tmp_path):
     """The same on a local Dask cluster: its worker processes find the plug-in."""
     pytest.importorskip("distributed")
     pytest.importorskip("cryptography")            # else the local workers are threads
-    env = _env(installed)
+    env = child_env(installed)
     env["TMPDIR"] = str(tmp_path / "tmp")
     (tmp_path / "tmp").mkdir()
-    proc = _cosim(["sweep", SCENE, "--set", "contacts.wall.law.radius=0.05,0.2",
+    proc = run_cosim(["sweep", SCENE, "--set", "contacts.wall.law.radius=0.05,0.2",
                    "--scheduler", "local", "--workers", "1", "--out", tmp_path / "sweep",
                    "--no-plot", "--quiet"], env, tmp_path, timeout=600)
     assert proc.returncode == 0, proc.stdout + proc.stderr
@@ -114,32 +86,19 @@ def test_cosim_sweep_dask_workers_find_the_installed_law(installed, tmp_path):
 
 
 def test_without_the_package_the_name_is_unknown(tmp_path):
-    proc = _cosim(["run", SCENE, "--out", tmp_path / "run"], _env(), tmp_path)
+    proc = run_cosim(["run", SCENE, "--out", tmp_path / "run"], child_env(), tmp_path)
     assert proc.returncode == 2
     assert "`contacts.wall.law.type` must be one of" in proc.stderr
     assert "got 'sphere_on_flat'" in proc.stderr
 
 
-def _dist(site, name, group, entries, module=None, code=""):
-    """A bare installed distribution: its metadata and entry points, and
-    optionally a module of its own."""
-    info = site / f"{name.replace('-', '_')}-1.0.dist-info"       # as installers name it
-    info.mkdir(parents=True)
-    (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {name}\nVersion: 1.0\n")
-    lines = "".join(f"{k} = {v}\n" for k, v in entries.items())
-    (info / "entry_points.txt").write_text(f"[{group}]\n{lines}")
-    if module:
-        (site / f"{module}.py").write_text(textwrap.dedent(code))
-    return site
-
-
 def test_a_plugin_named_like_a_built_in_is_refused(tmp_path):
-    site = _dist(tmp_path / "site", "shadow-hertz", "cosim.laws", {"hertz": "shadow:Law"},
+    site = bare_dist(tmp_path / "site", "shadow-hertz", "cosim.laws", {"hertz": "shadow:Law"},
                  "shadow", "raise SystemExit('imported')\n")
     scene = tmp_path / "scene.toml"
     scene.write_text(SCENE.read_text().replace('law = { type = "sphere_on_flat"',
                                                'law = { type = "flat_sphere"'))
-    proc = _cosim(["run", scene, "--out", tmp_path / "run"], _env(site), tmp_path)
+    proc = run_cosim(["run", scene, "--out", tmp_path / "run"], child_env(site), tmp_path)
     assert proc.returncode == 2, proc.stderr
     assert proc.stderr.startswith("error: the plug-in distribution `shadow-hertz` 1.0, entry "
                                   "point `hertz = shadow:Law` in group `cosim.laws` is named "
@@ -148,10 +107,10 @@ def test_a_plugin_named_like_a_built_in_is_refused(tmp_path):
 
 
 def test_a_plugin_that_fails_to_import_names_its_distribution(tmp_path):
-    site = _dist(tmp_path / "site", "broken-law", "cosim.laws",
+    site = bare_dist(tmp_path / "site", "broken-law", "cosim.laws",
                  {"sphere_on_flat": "broken_law:SphereOnFlat"}, "broken_law",
                  "import a_module_that_is_not_there\n")
-    proc = _cosim(["run", SCENE, "--out", tmp_path / "run"], _env(site), tmp_path)
+    proc = run_cosim(["run", SCENE, "--out", tmp_path / "run"], child_env(site), tmp_path)
     assert proc.returncode == 2, proc.stderr
     assert proc.stderr == ("error: the plug-in distribution `broken-law` 1.0, entry point "
                            "`sphere_on_flat = broken_law:SphereOnFlat` in group `cosim.laws` "
@@ -168,17 +127,17 @@ def test_a_plugin_of_the_wrong_kind_or_name_is_refused(tmp_path):
         class Stepper(RK4):
             name = "other_name"
         """
-    site = _dist(tmp_path / "site", "odd-plugins", "cosim.laws",
+    site = bare_dist(tmp_path / "site", "odd-plugins", "cosim.laws",
                  {"sphere_on_flat": "odd:NotALaw"}, "odd", code)
-    proc = _cosim(["run", SCENE, "--out", tmp_path / "a"], _env(site), tmp_path)
+    proc = run_cosim(["run", SCENE, "--out", tmp_path / "a"], child_env(site), tmp_path)
     assert proc.returncode == 2
     assert "loads <class 'odd.NotALaw'>, which is not a subclass of couplers.law_base." \
            "ContactLaw" in proc.stderr, proc.stderr
-    site2 = _dist(tmp_path / "site2", "odd-stepper", "cosim.integrators",
+    site2 = bare_dist(tmp_path / "site2", "odd-stepper", "cosim.integrators",
                   {"my_rk4": "odd:Stepper"})
     scene = tmp_path / "scene.toml"
     scene.write_text(SCENE.read_text().replace('method = "rk4"', 'method = "my_rk4"'))
-    proc = _cosim(["run", scene, "--out", tmp_path / "b"], _env(site2, site), tmp_path)
+    proc = run_cosim(["run", scene, "--out", tmp_path / "b"], child_env(site2, site), tmp_path)
     assert proc.returncode == 2
     assert "loads Stepper, whose `name` is 'other_name', not 'my_rk4'" in proc.stderr, \
         proc.stderr
@@ -194,15 +153,15 @@ def test_plugin_scheme_and_integrator_by_name(tmp_path):
         class MyGaussSeidel(GaussSeidel):
             name = "my_gauss_seidel"
         """
-    site = _dist(tmp_path / "site", "my-steppers", "cosim.integrators",
+    site = bare_dist(tmp_path / "site", "my-steppers", "cosim.integrators",
                  {"my_rk4": "mine:MyRK4"}, "mine", code)
-    _dist(tmp_path / "site", "my-schemes", "cosim.schemes",
+    bare_dist(tmp_path / "site", "my-schemes", "cosim.schemes",
           {"my_gauss_seidel": "mine:MyGaussSeidel"})
     scene = tmp_path / "scene.toml"
     text = (ROOT / "cases" / "spring_drop.toml").read_text()
     scene.write_text(text.replace('method = "rk4"', 'method = "my_rk4"')
                      .replace('name = "gauss_seidel"', 'name = "my_gauss_seidel"'))
-    proc = _cosim(["run", scene, "--out", tmp_path / "run", "--quiet"], _env(site), tmp_path)
+    proc = run_cosim(["run", scene, "--out", tmp_path / "run", "--quiet"], child_env(site), tmp_path)
     assert proc.returncode == 0, proc.stderr
     summary = json.loads((tmp_path / "run" / "summary.json").read_text())
     assert summary["scheme"] == "my_gauss_seidel"
@@ -210,13 +169,13 @@ def test_plugin_scheme_and_integrator_by_name(tmp_path):
     assert summary["contacts"]["wall"]["in_touch_time"] == pytest.approx(3.14159265e-3,
                                                                          rel=1e-6)
     # and `--scheme` names one on the command line too
-    proc = _cosim(["run", ROOT / "cases" / "spring_drop.toml", "--scheme", "my_gauss_seidel",
-                   "--out", tmp_path / "run2", "--quiet"], _env(site), tmp_path)
+    proc = run_cosim(["run", ROOT / "cases" / "spring_drop.toml", "--scheme", "my_gauss_seidel",
+                   "--out", tmp_path / "run2", "--quiet"], child_env(site), tmp_path)
     assert proc.returncode == 0, proc.stderr
     # a sweep's spawned workers build the scene's scheme and integrator by name: they
     # find the plug-ins themselves
-    proc = _cosim(["sweep", scene, "--set", "t_end=0.015,0.02", "--workers", "2",
-                   "--out", tmp_path / "sweep", "--no-plot", "--quiet"], _env(site), tmp_path,
+    proc = run_cosim(["sweep", scene, "--set", "t_end=0.015,0.02", "--workers", "2",
+                   "--out", tmp_path / "sweep", "--no-plot", "--quiet"], child_env(site), tmp_path,
                   timeout=600)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "2 of 2 point(s) finished" in proc.stdout + proc.stderr
@@ -230,14 +189,14 @@ def test_plugin_structure_integrator_by_name(tmp_path):
         class MyNewmark(Newmark):
             name = "my_newmark"
         """
-    site = _dist(tmp_path / "site", "my-newmark", "cosim.integrators",
+    site = bare_dist(tmp_path / "site", "my-newmark", "cosim.integrators",
                  {"my_newmark": "mine_fem:MyNewmark"}, "mine_fem", code)
     runs = {}
     for method in ("newmark", "my_newmark"):
         over = ["--set", f'subsystems.chain.integrator.method="{method}"', "--set", "t_end=0.12"]
         out = tmp_path / method
-        proc = _cosim(["run", ROOT / "cases" / "three_mass.toml", "--variant", "f100", *over,
-                       "--out", out, "--quiet"], _env(site), tmp_path)
+        proc = run_cosim(["run", ROOT / "cases" / "three_mass.toml", "--variant", "f100", *over,
+                       "--out", out, "--quiet"], child_env(site), tmp_path)
         assert proc.returncode == 0, proc.stderr
         runs[method] = json.loads((out / "summary.json").read_text())
     # the same class under two names: the same steps, bit for bit
@@ -247,7 +206,7 @@ def test_plugin_structure_integrator_by_name(tmp_path):
 def test_built_in_names_read_no_plugin_metadata(tmp_path):
     """A scene of built-in names imports no plug-in and reads no package
     metadata (start-up): a plug-in that would fail on import stays unread."""
-    site = _dist(tmp_path / "site", "loud", "cosim.laws", {"loud": "loud:Law"}, "loud",
+    site = bare_dist(tmp_path / "site", "loud", "cosim.laws", {"loud": "loud:Law"}, "loud",
                  "raise SystemExit('imported')\n")
     code = ("import sys; from cosim import cli; "
             f"rc = cli.main(['run', {str(ROOT / 'cases' / 'spring_drop.toml')!r}, "
@@ -255,7 +214,7 @@ def test_built_in_names_read_no_plugin_metadata(tmp_path):
             "print(sorted(m for m in sys.modules if m in ('importlib.metadata', 'loud'))); "
             "sys.exit(rc)")
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                          env=_env(site), cwd=tmp_path, timeout=300)
+                          env=child_env(site), cwd=tmp_path, timeout=300)
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.strip().splitlines()[-1] == "[]"
 
@@ -268,12 +227,12 @@ def test_the_plugins_page_shows_what_the_commands_print(installed, tmp_path):
     page = (ROOT / "docs" / "plugins.md").read_text(encoding="utf-8")
     shown = page.split("$ cosim run examples/custom_law/scene.toml --out runs/sphere_drop\n")[1]
     shown = shown.split("$ cosim info")[0].splitlines()
-    proc = _cosim(["run", SCENE, "--out", "runs/sphere_drop"], _env(installed), tmp_path)
+    proc = run_cosim(["run", SCENE, "--out", "runs/sphere_drop"], child_env(installed), tmp_path)
     assert proc.returncode == 0, proc.stderr
     cpu = re.compile(r"cpu \S+ s")
     assert [cpu.sub("cpu _ s", ln) for ln in proc.stdout.splitlines()] == \
         [cpu.sub("cpu _ s", ln) for ln in shown]
-    info = _cosim(["info", SCENE], _env(installed), tmp_path).stdout
+    info = run_cosim(["info", SCENE], child_env(installed), tmp_path).stdout
     assert "  contact wall: sphere_on_flat (embedded) between body and wall\n" in info
     assert "  contact wall: sphere_on_flat (embedded) between body and wall" in page
     summary = json.loads((tmp_path / "runs" / "sphere_drop" / "summary.json").read_text())

@@ -15,6 +15,7 @@ from .linear_structure import LinearStructure, LineStructure
 from .modal import DENSE_LIMIT, ModalBasis, modes, natural_frequencies, residual_compliance
 from .rank_one import rank_one_eigh
 from .response import undamped_envelope, undamped_moments, undamped_response
+from .structure_model import BUILT_IN_STRUCTURES, STRUCTURE_MODELS, StructureModel
 
 __all__ = ["Beam", "String", "Section", "rectangular_section", "circular_section", "Chain",
            "ChainStructure", "Rod", "LinearStructure", "LineStructure", "ModalBasis", "modes",
@@ -22,7 +23,7 @@ __all__ = ["Beam", "String", "Section", "rectangular_section", "circular_section
            "GeneralizedAlpha", "CentralDifference", "ExactModal", "STRUCTURAL_INTEGRATORS",
            "get_structural_integrator", "BEAM_ENDS", "ROD_ENDS", "DENSE_LIMIT",
            "residual_compliance", "undamped_response", "undamped_moments", "undamped_envelope",
-           "rank_one_eigh"]
+           "rank_one_eigh", "StructureModel", "STRUCTURE_MODELS", "BUILT_IN_STRUCTURES"]
 
 #: public name -> the submodule that defines it, imported on first use
 _LAZY = {**dict.fromkeys(("Beam", "String", "Section", "rectangular_section",

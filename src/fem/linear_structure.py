@@ -144,6 +144,28 @@ class LinearStructure(ABC):
         """Number of free degrees of freedom."""
         return self.mass.shape[0]
 
+    def with_stiffness(self, stiffness) -> "LinearStructure":
+        """A copy of this structure whose stiffness matrix is ``stiffness``
+        (same DOFs, points and mass; the Rayleigh damping made anew): how a
+        model adds a term (an elastic foundation, a spring to the ground) to
+        a structure it assembled from another.
+
+        Raises
+        ------
+        ValueError
+            If ``stiffness`` is not ``(n_dof, n_dof)``.
+        """
+        import copy
+        k = _as_matrix(stiffness)
+        if k.shape != self.mass.shape:
+            raise ValueError(f"`stiffness` must be {self.mass.shape}, got {k.shape}")
+        out = copy.copy(self)
+        out.stiffness = k
+        out.damping = (None if self.rayleigh is None else
+                       _as_matrix(self.rayleigh[0] * self.mass + self.rayleigh[1] * k))
+        out._lu = None
+        return out
+
     # -- point evaluation ----------------------------------------------------
     @abstractmethod
     def point_operator(self, s) -> tuple[np.ndarray, np.ndarray]:

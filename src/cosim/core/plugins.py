@@ -1,4 +1,4 @@
-"""Contact laws, coupling schemes and integrators that installed packages
+"""Contact laws, coupling schemes, integrators and structures that installed packages
 declare (entry points), found by the name a scene gives them.
 
 A distribution declares its classes in its ``pyproject.toml``::
@@ -17,7 +17,10 @@ worker process finds it the same way) and `cosim info` alike.  The groups:
 - ``cosim.integrators``: a :class:`cosim.core.ode.TimeStepper` subclass (a
   robot's integrator, into :data:`cosim.core.ode.INTEGRATORS`) or a
   :class:`fem.StructuralIntegrator` subclass (a structure's, into
-  :data:`fem.STRUCTURAL_INTEGRATORS`).
+  :data:`fem.STRUCTURAL_INTEGRATORS`);
+- ``cosim.structures``: a :class:`fem.StructureModel` subclass, a frozen
+  dataclass whose fields are the keys of its scene table
+  (:mod:`cosim.scene.plugin_structure`), into :data:`fem.STRUCTURE_MODELS`.
 
 The entry point's name is the name a scene writes, and must be the class's
 own ``name``.  Entry points are read only when a scene asks for a name that
@@ -39,7 +42,7 @@ __all__ = ["GROUPS", "find", "provide", "declared"]
 
 #: entry-point group -> what it holds, in words
 GROUPS = {"cosim.laws": "contact law", "cosim.schemes": "coupling scheme",
-          "cosim.integrators": "integrator"}
+          "cosim.integrators": "integrator", "cosim.structures": "structure"}
 
 #: the packages whose classes are built in
 _OURS = ("cosim", "couplers", "fem", "multibody")
@@ -58,6 +61,9 @@ def _targets(group: str):
         from fem.integrator_base import StructuralIntegrator
         from fem.integrators import STRUCTURAL_INTEGRATORS
         return [(TimeStepper, INTEGRATORS), (StructuralIntegrator, STRUCTURAL_INTEGRATORS)]
+    if group == "cosim.structures":
+        from fem import STRUCTURE_MODELS, StructureModel
+        return [(StructureModel, STRUCTURE_MODELS)]
     raise ValueError(f"unknown plug-in group {group!r}; the groups are {sorted(GROUPS)}")
 
 
@@ -131,6 +137,9 @@ def find(group: str, name) -> bool:
                 raise PluginError(f"the plug-in {_origin(ep)} loads {cls.__qualname__}, whose "
                                   f"`name` is {getattr(cls, 'name', None)!r}, not {name!r}: "
                                   f"the two must agree")
+            if group == "cosim.structures":         # its fields must be scene keys
+                from cosim.scene.plugin_structure import fields_of
+                fields_of(cls)
             registry[name] = cls
             return True
     bases = " or ".join(f"{b.__module__}.{b.__qualname__}" for b, _ in _targets(group))

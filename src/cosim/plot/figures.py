@@ -89,9 +89,12 @@ def _joint_kinds(run: RunData) -> dict:
 
 def _is_structure(run: RunData, sub: str, names) -> bool:
     types = _subsystem_types(run)
-    if sub in types:
-        return types[sub] in _STRUCTURE_TYPES
-    # a run without scene.toml: structures name their DOFs w0, t0, u0, m1, ...
+    if types.get(sub) in _STRUCTURE_TYPES:
+        return True
+    if types.get(sub) in ("multibody", "rigid", "fmu"):
+        return False
+    # a run without scene.toml, or a structure an installed package declares
+    # (plotting imports no plug-in): structures name their DOFs w0, t0, u0, m1, ...
     return all(re.fullmatch(r"[wtum]\d+", n) for n in names)
 
 

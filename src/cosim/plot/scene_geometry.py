@@ -139,14 +139,10 @@ def _check_memory(specs, file) -> None:
     """Refuse structures that would need more than the scene loader's
     :data:`~cosim.scene.load.MAX_MEMORY` to build."""
     from cosim.scene.checks import SceneError
-    from cosim.scene.load import MAX_MEMORY, STRUCTURE_TYPES, structure_memory
+    from cosim.scene.load import MAX_MEMORY, spec_memory
+    from cosim.scene.specs import StructureSpec
 
-    total = 0
-    for spec in specs:
-        if spec.type in STRUCTURE_TYPES:
-            model = spec.model
-            size = len(model.masses) if spec.type == "chain" else model.n_elements
-            total += structure_memory(spec.type, size, spec.n_modes, spec.cutoff_hz)[1]
+    total = sum(spec_memory(spec)[1] for spec in specs if isinstance(spec, StructureSpec))
     if total > MAX_MEMORY:
         raise SceneError(file, "subsystems", f"hold structures that need about "
                                              f"{math.ceil(total / 2**20)} MiB to build, more "

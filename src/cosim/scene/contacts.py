@@ -9,7 +9,7 @@ from __future__ import annotations
 import dataclasses
 
 from cosim.scene.checks import SceneError, Table, build_model, echo, type_name
-from cosim.scene.specs import STRUCTURE_TYPES, ContactSpec
+from cosim.scene.specs import ContactSpec, StructureSpec
 
 __all__ = ["contact_spec", "check_conditions"]
 
@@ -55,6 +55,7 @@ def contact_spec(name: str, t: Table, subs: list) -> ContactSpec:
     law_t.finish()
     law = build_model(law_t, law_cls, **params)
     kinds = {s.name: s.type for s in subs}
+    structures = {s.name for s in subs if isinstance(s, StructureSpec)}
     rigid_side = kinds[a[0]] == "rigid" or kinds[b[0]] == "rigid"
     if kinds[a[0]] == "rigid" and kinds[b[0]] == "rigid":
         t.error("b", "a contact between two rigid subsystems has nothing to simulate")
@@ -71,8 +72,10 @@ def contact_spec(name: str, t: Table, subs: list) -> ContactSpec:
                             "moving sides; here there is nothing to choose")
     follow = t.boolean("follow")
     if follow and kinds[b[0]] not in ("beam", "cable", "string", "rod"):
-        t.error("follow", f"moves side b's point along a line structure; `{b[0]}` is a "
-                          f"{kinds[b[0]]}")
+        what = (f"a {kinds[b[0]]}" if b[0] not in structures else
+                f"a `{kinds[b[0]]}`, which an installed package declares; a contact follows "
+                f"the built-in beam, cable, string or rod")
+        t.error("follow", f"moves side b's point along a line structure; `{b[0]}` is {what}")
     if follow and host == a[0]:
         # the surface point slides along b as a moves: only b's integrator
         # applies the force along the surface's slope that this brings
@@ -83,7 +86,7 @@ def contact_spec(name: str, t: Table, subs: list) -> ContactSpec:
                         f"`follow = false`")
     connection = _connection(t, law)
     if connection is not None and placement == "embedded" and (
-            kinds[a[0]] in STRUCTURE_TYPES or kinds[b[0]] in STRUCTURE_TYPES):
+            a[0] in structures or b[0] in structures):
         t.error("placement", "a grasp or friction against a rigid side is not evaluated inside "
                              "a structure; set placement `coupler`")
     if connection is not None and placement == "embedded" and not rigid_side:

@@ -21,11 +21,12 @@ from __future__ import annotations
 import dataclasses
 import math
 
-from cosim.scene.keytable import (DEFAULT_CONTACT_STEP, DEFAULT_MULTIBODY_STEP, REQUIRED,
-                                  SECTIONS, Key, Section, Varies)
+from cosim.scene.keytable import (_COMMON_STRUCTURE, _SUBSYSTEM_TYPE, DEFAULT_CONTACT_STEP,
+                                  DEFAULT_MULTIBODY_STEP, REQUIRED, SECTIONS, Key, Section,
+                                  Varies)
 
 __all__ = ["Key", "Section", "SECTIONS", "REQUIRED", "Varies", "section", "law_section",
-           "scheme_section", "reference_markdown", "DEFAULT_MULTIBODY_STEP",
+           "scheme_section", "structure_section", "reference_markdown", "DEFAULT_MULTIBODY_STEP",
            "DEFAULT_CONTACT_STEP", "LAW_PARAMETERS", "SCHEME_OPTIONS"]
 
 K = Key
@@ -73,7 +74,27 @@ def section(section_id: str) -> Section:
     """The section ``section_id`` of :data:`SECTIONS` (``"law.NAME"`` for a law)."""
     if section_id.startswith("law."):
         return law_section(section_id[4:])
+    if section_id.startswith("structure.") and section_id not in SECTIONS:
+        return structure_section(section_id[10:])
     return SECTIONS[section_id]
+
+
+def structure_section(name: str) -> Section:
+    """The keys of ``[subsystems.NAME]`` for a plug-in structure registered
+    as ``name`` (:class:`fem.StructureModel`): ``type``, the fields of its
+    dataclass (unit, check and meaning from each field's metadata), then the
+    keys every structure shares."""
+    from cosim.scene.plugin_structure import fields_of
+    from fem import STRUCTURE_MODELS
+    cls = STRUCTURE_MODELS[name]
+    keys = [_SUBSYSTEM_TYPE]
+    for f, check in fields_of(cls):
+        default = REQUIRED if f.default is dataclasses.MISSING else f.default
+        keys.append(K(f.name, f.metadata.get("unit", ""), default, check,
+                      f.metadata.get("doc", f"a parameter of `{cls.__name__}`")))
+    taken = {k.name for k in keys}
+    keys.extend(k for k in _COMMON_STRUCTURE if k.name not in taken)
+    return Section("subsystems.NAME", f'type = "{name}"', tuple(keys))
 
 
 def law_section(name: str) -> Section:

@@ -189,7 +189,8 @@ _GUARD = (
       "starts; a run counted above is refused"),
 )
 
-_SUBSYSTEM_TYPE = K("type", "", REQUIRED, "one of " + _types(*SUBSYSTEM_TYPES),
+_SUBSYSTEM_TYPE = K("type", "", REQUIRED, "one of " + _types(*SUBSYSTEM_TYPES)
+                    + ", or a structure an installed package declares (`cosim.structures`)",
                     "what the subsystem is")
 
 _MULTIBODY = (

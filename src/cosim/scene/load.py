@@ -22,11 +22,12 @@ from cosim.scene.checks import (MAX_ELEMENTS, MAX_STEPS, SceneError, Table, chec
 from cosim.scene.contacts import check_conditions, contact_spec
 from cosim.scene.read import parse_override, read_scene, read_toml_file
 from cosim.scene.shipped import find_scene, not_found
-from cosim.scene.specs import STRUCTURE_TYPES, SUBSYSTEM_TYPES, Scene, resolve_scheme
+from cosim.scene.specs import (STRUCTURE_TYPES, SUBSYSTEM_TYPES, Scene, StructureSpec,
+                               resolve_scheme)
 from cosim.scene.subsystems import subsystem_spec
 
 __all__ = ["SceneError", "Scene", "load_scene", "parse_override", "read_toml_file",
-           "SUBSYSTEM_TYPES", "STRUCTURE_TYPES", "structure_memory", "MAX_ELEMENTS",
+           "SUBSYSTEM_TYPES", "STRUCTURE_TYPES", "structure_memory", "spec_memory", "MAX_ELEMENTS",
            "MAX_STEPS", "MAX_MEMORY"]
 
 #: most memory the structures of a scene may need, as estimated before they
@@ -120,7 +121,7 @@ def _validate(data: dict, file, variant, scheme_chosen: bool = False) -> Scene:
     if not subs:
         top.error("subsystems", "must declare at least one subsystem")
     _check_memory(subs, file)
-    structures = [s.name for s in subs if s.type in STRUCTURE_TYPES]
+    structures = [s.name for s in subs if isinstance(s, StructureSpec)]
     for name_ in export:
         if name_ not in structures:
             raise SceneError(file, "output.export", f"names {echo(name_)}, which is not a "
@@ -208,9 +209,11 @@ def structure_memory(kind: str, size: int, n_modes: int | None, cutoff_hz: float
     Parameters
     ----------
     kind : str
-        ``chain``, ``beam``, ``cable``, ``string`` or ``rod``.
+        ``chain``, ``beam``, ``cable``, ``string`` or ``rod``; ``dofs`` for a
+        plug-in structure (:class:`fem.StructureModel`).
     size : int
-        Masses of a chain, elements of the others.
+        Masses of a chain, elements of the others, the DOFs of ``dofs``
+        (the model's :meth:`~fem.StructureModel.dof_bound`).
     n_modes, cutoff_hz
         The structure's ``modes`` table (``count`` and ``cutoff_hz``).
 
@@ -231,7 +234,8 @@ def structure_memory(kind: str, size: int, n_modes: int | None, cutoff_hz: float
     """
     from fem.modal import DENSE_LIMIT
 
-    n = {"chain": size, "beam": 2 * (size + 1), "cable": 2 * (size + 1)}.get(kind, size + 1)
+    n = {"chain": size, "dofs": size, "beam": 2 * (size + 1),
+         "cable": 2 * (size + 1)}.get(kind, size + 1)
     dense = (n <= DENSE_LIMIT or (n_modes is None and cutoff_hz is None)
              or (n_modes is not None and n_modes >= n - 3))
     if dense or kind == "chain":
@@ -248,17 +252,26 @@ def structure_memory(kind: str, size: int, n_modes: int | None, cutoff_hz: float
     return n, nbytes, f"{k} Lanczos vectors of {n} DOFs"
 
 
-def _check_memory(subs: list[dict], file) -> None:
+def spec_memory(spec) -> tuple[int, int, str, str]:
+    """:func:`structure_memory` of a :class:`~cosim.scene.specs.StructureSpec`,
+    and the key that sets its size: ``(n_dof, bytes, why, key)``."""
+    model = spec.model
+    if spec.type == "chain":
+        kind, size, key = "chain", len(model.masses), ".masses"
+    elif spec.type in STRUCTURE_TYPES:
+        kind, size, key = spec.type, model.n_elements, ".elements"
+    else:                                          # a plug-in's bound
+        kind, size, key = "dofs", int(model.dof_bound()), ""
+    return (*structure_memory(kind, size, spec.n_modes, spec.cutoff_hz), spec.key + key)
+
+
+def _check_memory(subs: list, file) -> None:
     """Refuse a scene whose structures would need more than :data:`MAX_MEMORY`."""
     found = []
     for spec in subs:
-        if spec.type not in STRUCTURE_TYPES:
-            continue
-        model = spec.model
-        size = (len(model.masses) if spec.type == "chain" else model.n_elements)
-        n, nbytes, why = structure_memory(spec.type, size, spec.n_modes, spec.cutoff_hz)
-        key = spec.key + (".masses" if spec.type == "chain" else ".elements")
-        found.append((nbytes, key, n, why))
+        if isinstance(spec, StructureSpec):
+            n, nbytes, why, key = spec_memory(spec)
+            found.append((nbytes, key, n, why))
     total = sum(f[0] for f in found)
     if total > MAX_MEMORY:
         nbytes, key, n, why = max(found)

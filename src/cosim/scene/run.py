@@ -244,5 +244,8 @@ def _reached(rec: Recorder) -> float:
 
 def run_scene(path, *, variant=None, scheme=None, overrides=(), out=None,
               overwrite: bool = False):
-    """Load and run a scene file in one call (see :func:`simulate`)."""
-    return simulate(load_scene(path, variant, overrides, scheme), out=out, overwrite=overwrite)
+    """Load and run a scene file in one call (see :func:`simulate`); ``path``
+    may name a shipped scene (``"spring_drop"``: a file of that name wins)."""
+    from cosim.scene.shipped import find_scene
+    return simulate(load_scene(find_scene(path), variant, overrides, scheme), out=out,
+                    overwrite=overwrite)

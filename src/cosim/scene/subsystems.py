@@ -1,6 +1,7 @@
 """Validation of a scene's ``[subsystems.NAME]`` tables into typed specs:
 multibody sides (bodies, joints, their springs, dampers and drives), rigid
-sides, structures (chain, beam, cable, string, rod) and FMUs.
+sides, structures (chain, beam, cable, string, rod, and those installed
+packages declare: :mod:`cosim.scene.plugin_structure`) and FMUs.
 
 The keys each table accepts, and their defaults, are those of
 :mod:`cosim.scene.keys`; the model packages load only for the subsystems a
@@ -19,9 +20,17 @@ __all__ = ["subsystem_spec"]
 
 def subsystem_spec(name: str, t: Table):
     """The spec of subsystem ``name`` from its table (section ``subsystem``)."""
-    kind = t.string("type", choices=SUBSYSTEM_TYPES)
-    t.use(kind)
-    if kind in STRUCTURE_TYPES:
+    kind = t.data.get("type")
+    if isinstance(kind, str) and kind not in SUBSYSTEM_TYPES:
+        from cosim.core.plugins import provide
+        from fem import STRUCTURE_MODELS
+        provide(STRUCTURE_MODELS, "cosim.structures", kind)    # an installed package's
+        plugins = tuple(n for n in STRUCTURE_MODELS if n not in SUBSYSTEM_TYPES)
+        kind = t.string("type", choices=SUBSYSTEM_TYPES + plugins)
+    else:
+        kind = t.string("type", choices=SUBSYSTEM_TYPES)
+    t.use(kind if kind in SUBSYSTEM_TYPES else f"structure.{kind}")
+    if kind in STRUCTURE_TYPES or kind not in SUBSYSTEM_TYPES:
         spec = _structure_spec(name, t, kind)
     elif kind == "fmu":                # a Functional Mock-up Unit: cosim.scene.fmu
         from cosim.scene.fmu import fmu_spec
@@ -105,11 +114,14 @@ def _multibody_spec(name: str, t: Table) -> MultibodySpec:
 
 def _structure_spec(name: str, t: Table, kind: str) -> StructureSpec:
     """Model, ports, modes and initial state of a structure (a chain, beam,
-    cable, string or rod)."""
+    cable, string or rod, or an installed package's)."""
     import fem
     from cosim.core.plugins import provide
     kw = {}
-    if kind == "chain":
+    if kind not in STRUCTURE_TYPES:          # an installed package's (fem.StructureModel)
+        model = _plugin_model(t, fem.STRUCTURE_MODELS[kind])
+        size = model.length
+    elif kind == "chain":
         kw["masses"] = floats(t, "masses")
         if len(kw["masses"]) > MAX_ELEMENTS:
             t.error("masses", f"must hold at most {MAX_ELEMENTS} masses, got "
@@ -161,12 +173,10 @@ def _structure_spec(name: str, t: Table, kind: str) -> StructureSpec:
             kw["right"] = t.string("right", choices=fem.ROD_ENDS)
             cls = fem.Rod
         size = kw["length"]
-    if t.has("rayleigh"):
-        r = floats(t, "rayleigh")
-        if len(r) != 2:
-            t.error("rayleigh", f"must be [a0, a1] ([1/s], [s]), got {list(r)}")
-        kw["rayleigh"] = r
-    model = build_model(t, cls, **kw)
+    if kind in STRUCTURE_TYPES:
+        if t.has("rayleigh"):
+            kw["rayleigh"] = _rayleigh(t)
+        model = build_model(t, cls, **kw)
     pts = t.table("points", section="structure.points")
     ports = {}
     for p in list(pts.data):
@@ -211,6 +221,25 @@ def _structure_spec(name: str, t: Table, kind: str) -> StructureSpec:
                          n_modes=n_modes, cutoff_hz=cutoff_hz, contact_step=contact_step,
                          integrator=method, integrator_options=options, initial_velocity=v0,
                          static_equilibrium=static, static_loads=loads)
+
+
+def _rayleigh(t: Table) -> tuple:
+    r = floats(t, "rayleigh")
+    if len(r) != 2:
+        t.error("rayleigh", f"must be [a0, a1] ([1/s], [s]), got {list(r)}")
+    return r
+
+
+def _plugin_model(t: Table, cls):
+    """The model of a plug-in structure, its length checked (the range of
+    its points)."""
+    from cosim.scene.plugin_structure import read_model
+    model = read_model(t, cls, _rayleigh(t) if t.has("rayleigh") else None)
+    length = getattr(model, "length", None)
+    if (isinstance(length, bool) or not isinstance(length, (int, float))
+            or not (math.isfinite(length) and length > 0)):
+        t.error("length", f"must be > 0 m, got {length!r}")
+    return model
 
 
 def _trajectory(t: Table):

@@ -27,6 +27,7 @@ import warnings
 from dataclasses import dataclass
 
 from cosim.scene.checks import SceneError
+from cosim.scene.specs import StructureSpec
 
 __all__ = ["WorkEstimate", "estimate_work", "check_work", "warn_work", "WARN_STEPS"]
 
@@ -69,8 +70,6 @@ class WorkEstimate:
         return {"steps": self.steps, "bound": self.bound, "how": self.how, "key": self.key}
 
 
-#: the structures' types: a closed contact they host is stepped at their ``contact_step``
-STRUCTURES = ("chain", "beam", "cable", "string", "rod")
 
 
 def _count(x: float) -> float:
@@ -99,7 +98,7 @@ def _side_steps(side, h: float, substeps: int, closed: bool, hosts: bool,
         if free is not None and free < step:
             step, key = free, f"{side.key}.integrator.free_step"
         return substeps * _count(hk / step), key, step
-    if kind in STRUCTURES and closed and hosts:
+    if isinstance(side, StructureSpec) and closed and hosts:
         return (substeps * _count(hk / side.contact_step), f"{side.key}.integrator.contact_step",
                 side.contact_step)
     return float(substeps), "", None       # a structure's exact step, an FMU's doStep
@@ -110,7 +109,7 @@ def _closed_form(side, contacts) -> bool:
     (:class:`cosim.sides.fem_closed_form.ClosedFormContacts`: stepped
     exactly, undamped, every embedded contact on it a linear spring), so
     that its ``contact_step`` is never used: one step per sub-step."""
-    if side.type not in STRUCTURES or getattr(side, "integrator", None) != "exact":
+    if not isinstance(side, StructureSpec) or side.integrator != "exact":
         return False
     if any(getattr(side.model, "rayleigh", None) or ()):
         return False

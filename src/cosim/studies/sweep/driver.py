@@ -88,7 +88,8 @@ def sweep(scene, *, variants=None, grid=None, scheme: str | None = None, workers
     Parameters
     ----------
     scene : path-like
-        The scene file.
+        The scene file, or the name of a shipped scene (``"three_mass"``:
+        :func:`cosim.scene.shipped.find_scene`; a file of that name wins).
     variants : sequence of str, optional
         Variants to run (default: the scene's default variant alone).
     grid : mapping of str to sequence, optional
@@ -180,13 +181,14 @@ def sweep(scene, *, variants=None, grid=None, scheme: str | None = None, workers
 
     Examples
     --------
-    >>> rows = sweep("cases/three_mass.toml", variants=["f1", "f100"],
+    >>> rows = sweep("three_mass", variants=["f1", "f100"],
     ...              grid={"t_end": [0.15]}, workers=2, out="runs/f")   # doctest: +SKIP
     >>> [(r["variant"], r["contacts.C.count"]) for r in rows]          # doctest: +SKIP
     [('f1', 1), ('f100', 9)]
     """
+    from cosim.scene.shipped import find_scene
     _check_options(workers, timeout)
-    scene_path = Path(scene)
+    scene_path = Path(find_scene(scene))
     table = read_toml_file(scene_path)      # a regular file within the limits, or refused
     hashes = FileDigests()
     try:
