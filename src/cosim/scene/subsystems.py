@@ -26,7 +26,11 @@ def subsystem_spec(name: str, t: Table):
         from fem import STRUCTURE_MODELS
         provide(STRUCTURE_MODELS, "cosim.structures", kind)    # an installed package's
         plugins = tuple(n for n in STRUCTURE_MODELS if n not in SUBSYSTEM_TYPES)
-        kind = t.string("type", choices=SUBSYSTEM_TYPES + plugins)
+        if kind not in plugins:
+            t.error("type", f"must be one of {sorted(SUBSYSTEM_TYPES + plugins)}, got "
+                            f"{echo(kind)}; nor does an installed package declare a "
+                            f"structure of that name (entry point `cosim.structures`)")
+        t.string("type")
     else:
         kind = t.string("type", choices=SUBSYSTEM_TYPES)
     t.use(kind if kind in SUBSYSTEM_TYPES else f"structure.{kind}")
