@@ -207,18 +207,16 @@ def test_bad_plugin_structures_are_refused(tmp_path):
         class NotAModel:
             name = "foundation_string"
         """
-    site = bare_dist(tmp_path / "b", "odd-structure", "cosim.structures",
-                     {"foundation_string": "odd:Odd"}, "odd", code)
-    proc = run_cosim(["run", SCENE, "--out", tmp_path / "r2"], child_env(site), tmp_path)
-    assert proc.returncode == 2
-    assert "has a field `table: <class 'dict'>` that no scene value gives" in proc.stderr, \
-        proc.stderr
-    site = bare_dist(tmp_path / "c", "odd-class", "cosim.structures",
-                     {"foundation_string": "odd:NotAModel"}, "odd", code)
-    proc = run_cosim(["run", SCENE, "--out", tmp_path / "r3"], child_env(site), tmp_path)
-    assert proc.returncode == 2
-    assert "which is not a subclass of fem.structure_model.StructureModel" in proc.stderr, \
-        proc.stderr
+    for folder, target, message in (
+            ("b", "odd:Odd", "has a field `table: <class 'dict'>` that no scene value gives"),
+            ("c", "odd:NotAModel", "which is not a subclass of fem.structure_model.StructureModel")):
+        site = bare_dist(tmp_path / folder, f"odd-{folder}", "cosim.structures",
+                         {"foundation_string": target}, "odd", code)
+        proc = run_cosim(["run", SCENE, "--out", tmp_path / folder / "run"], child_env(site),
+                         tmp_path)
+        assert proc.returncode == 2
+        assert message in proc.stderr, proc.stderr
+        assert not (tmp_path / folder / "run").exists()
 
 
 def test_the_plugins_page_shows_what_the_commands_print(installed, tmp_path):
