@@ -137,9 +137,6 @@ def find(group: str, name) -> bool:
                 raise PluginError(f"the plug-in {_origin(ep)} loads {cls.__qualname__}, whose "
                                   f"`name` is {getattr(cls, 'name', None)!r}, not {name!r}: "
                                   f"the two must agree")
-            if group == "cosim.structures":         # its fields must be scene keys
-                from cosim.scene.plugin_structure import fields_of
-                fields_of(cls)
             registry[name] = cls
             return True
     bases = " or ".join(f"{b.__module__}.{b.__qualname__}" for b, _ in _targets(group))
