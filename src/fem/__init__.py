@@ -15,7 +15,6 @@ from .linear_structure import LinearStructure, LineStructure
 from .modal import DENSE_LIMIT, ModalBasis, modes, natural_frequencies, residual_compliance
 from .rank_one import rank_one_eigh
 from .response import undamped_envelope, undamped_moments, undamped_response
-from .structure_model import BUILT_IN_STRUCTURES, STRUCTURE_MODELS, StructureModel
 
 __all__ = ["Beam", "String", "Section", "rectangular_section", "circular_section", "Chain",
            "ChainStructure", "Rod", "LinearStructure", "LineStructure", "ModalBasis", "modes",
@@ -29,6 +28,8 @@ __all__ = ["Beam", "String", "Section", "rectangular_section", "circular_section
 _LAZY = {**dict.fromkeys(("Beam", "String", "Section", "rectangular_section",
                           "circular_section", "BEAM_ENDS"), "beam"),
          **dict.fromkeys(("Rod", "ROD_ENDS"), "rod"),
+         **dict.fromkeys(("StructureModel", "STRUCTURE_MODELS", "BUILT_IN_STRUCTURES"),
+                         "structure_model"),
          **dict.fromkeys(("STRUCTURAL_INTEGRATORS", "StructuralIntegrator", "Newmark",
                           "HHTAlpha", "GeneralizedAlpha", "CentralDifference", "ExactModal",
                           "get_structural_integrator"), "integrators")}

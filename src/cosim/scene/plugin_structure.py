@@ -3,10 +3,10 @@ dataclass (:class:`fem.StructureModel`), read and checked as the built-in
 structures' are.
 
 :func:`fields_of` says which keys a class takes and what each must be (the
-reference of keys renders it, :func:`cosim.scene.keys.structure_section`);
-:func:`read_model` reads them from the table and builds the model, a
-``ValueError`` of the model's own checks becoming a scene error at the key
-it names.  A class whose fields cannot be read from a scene (an annotation
+reference of keys renders it, :func:`cosim.scene.keys.structure_section`),
+:func:`field_reader` how each is read; the loader reads them from the table
+and builds the model (:mod:`cosim.scene.subsystems`), a ``ValueError`` of
+the model's own checks becoming a scene error at the key it names.  A class whose fields cannot be read from a scene (an annotation
 outside the module notes of :mod:`fem.structure_model`, no ``length``) is
 refused as a plug-in, naming the field.
 """
@@ -16,9 +16,8 @@ import dataclasses
 import typing
 
 from cosim.errors import PluginError
-from cosim.scene.checks import Table, build_model, floats
 
-__all__ = ["fields_of", "read_model"]
+__all__ = ["fields_of", "field_reader"]
 
 #: annotation -> (how the field is read, the check its key's reference gives)
 _KINDS = {float: ("number", "a finite number"), int: ("integer", "an integer"),
@@ -79,41 +78,7 @@ def fields_of(cls) -> list:
     return out
 
 
-def read_model(t: Table, cls, rayleigh=None):
-    """The model of plug-in structure ``cls`` from its scene table ``t``
-    (whose section is the class's, :func:`cosim.scene.keys.structure_section`).
-
-    ``rayleigh`` (read by the caller, as every structure's) goes to the
-    model when given; a model without a ``rayleigh`` field refuses it at
-    its key.
-    """
-    hints = typing.get_type_hints(cls)
-    kw = {}
-    for f, _ in fields_of(cls):
-        if f.name == "rayleigh":
-            continue
-        meta = f.metadata
-        if not t.has(f.name) and f.default is not dataclasses.MISSING:
-            t.raw(f.name)                       # optional and not given: the class's default
-            continue
-        reader = _kind(hints[f.name])[0]
-        unit = meta.get("unit", "")
-        if reader == "number":
-            kw[f.name] = t.number(f.name, rule=meta.get("rule"), unit=unit)
-        elif reader == "integer":
-            kw[f.name] = t.integer(f.name, low=meta.get("low"), high=meta.get("high"))
-        elif reader == "boolean":
-            kw[f.name] = t.boolean(f.name)
-        elif reader == "string":
-            kw[f.name] = t.string(f.name, choices=meta.get("choices"))
-        elif reader == "vec2":
-            kw[f.name] = t.vec2(f.name, unit=unit or "1", nonzero=bool(meta.get("nonzero")))
-        else:
-            kw[f.name] = floats(t, f.name)
-    if rayleigh is not None:
-        if "rayleigh" not in {f.name for f in dataclasses.fields(cls)}:
-            t.error("rayleigh", f"is not taken by the structure `{cls.name}`, whose model has "
-                                f"no `rayleigh` field")
-        kw["rayleigh"] = rayleigh
-    return build_model(t, cls, **kw)
-
+def field_reader(cls, name: str) -> str:
+    """How field ``name`` of ``cls`` is read from a scene: ``number``,
+    ``integer``, ``boolean``, ``string``, ``vec2`` or ``numbers``."""
+    return _kind(typing.get_type_hints(cls)[name])[0]

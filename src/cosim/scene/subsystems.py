@@ -9,6 +9,7 @@ scene declares.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 
 from cosim.scene.checks import MAX_ELEMENTS, Table, build_model, check_name, echo, floats
@@ -234,11 +235,49 @@ def _rayleigh(t: Table) -> tuple:
     return r
 
 
+def _read_model(t: Table, cls, rayleigh=None):
+    """The model of plug-in structure ``cls`` from its scene table ``t``
+    (whose section is the class's, :func:`cosim.scene.keys.structure_section`).
+
+    ``rayleigh`` (read by the caller, as every structure's) goes to the
+    model when given; a model without a ``rayleigh`` field refuses it at
+    its key.
+    """
+    from cosim.scene.plugin_structure import field_reader, fields_of
+    kw = {}
+    for f, _ in fields_of(cls):
+        if f.name == "rayleigh":
+            continue
+        meta = f.metadata
+        if not t.has(f.name) and f.default is not dataclasses.MISSING:
+            t.raw(f.name)                       # optional and not given: the class's default
+            continue
+        reader = field_reader(cls, f.name)
+        unit = meta.get("unit", "")
+        if reader == "number":
+            kw[f.name] = t.number(f.name, rule=meta.get("rule"), unit=unit)
+        elif reader == "integer":
+            kw[f.name] = t.integer(f.name, low=meta.get("low"), high=meta.get("high"))
+        elif reader == "boolean":
+            kw[f.name] = t.boolean(f.name)
+        elif reader == "string":
+            kw[f.name] = t.string(f.name, choices=meta.get("choices"))
+        elif reader == "vec2":
+            kw[f.name] = t.vec2(f.name, unit=unit or "1", nonzero=bool(meta.get("nonzero")))
+        else:
+            kw[f.name] = floats(t, f.name)
+    if rayleigh is not None:
+        if "rayleigh" not in {f.name for f, _ in fields_of(cls)}:
+            t.error("rayleigh", f"is not taken by the structure `{cls.name}`, whose model has "
+                                f"no `rayleigh` field")
+        kw["rayleigh"] = rayleigh
+    return build_model(t, cls, **kw)
+
+
 def _plugin_model(t: Table, cls):
     """The model of a plug-in structure, its length checked (the range of
     its points)."""
-    from cosim.scene.plugin_structure import read_model
-    model = read_model(t, cls, _rayleigh(t) if t.has("rayleigh") else None)
+    model = _read_model(t, cls, _rayleigh(t) if t.has("rayleigh") else None)
     length = getattr(model, "length", None)
     if (isinstance(length, bool) or not isinstance(length, (int, float))
             or not (math.isfinite(length) and length > 0)):

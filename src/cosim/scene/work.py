@@ -27,7 +27,6 @@ import warnings
 from dataclasses import dataclass
 
 from cosim.scene.checks import SceneError
-from cosim.scene.specs import StructureSpec
 
 __all__ = ["WorkEstimate", "estimate_work", "check_work", "warn_work", "WARN_STEPS"]
 
@@ -98,7 +97,7 @@ def _side_steps(side, h: float, substeps: int, closed: bool, hosts: bool,
         if free is not None and free < step:
             step, key = free, f"{side.key}.integrator.free_step"
         return substeps * _count(hk / step), key, step
-    if isinstance(side, StructureSpec) and closed and hosts:
+    if kind != "fmu" and closed and hosts:          # a structure, built-in or a plug-in
         return (substeps * _count(hk / side.contact_step), f"{side.key}.integrator.contact_step",
                 side.contact_step)
     return float(substeps), "", None       # a structure's exact step, an FMU's doStep
@@ -109,7 +108,7 @@ def _closed_form(side, contacts) -> bool:
     (:class:`cosim.sides.fem_closed_form.ClosedFormContacts`: stepped
     exactly, undamped, every embedded contact on it a linear spring), so
     that its ``contact_step`` is never used: one step per sub-step."""
-    if not isinstance(side, StructureSpec) or side.integrator != "exact":
+    if side.type in ("multibody", "rigid", "fmu") or side.integrator != "exact":
         return False
     if any(getattr(side.model, "rayleigh", None) or ()):
         return False
