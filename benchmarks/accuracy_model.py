@@ -41,7 +41,8 @@ SCENES = [("three_mass", "f1", None), ("three_mass", "f10", None),
           ("spring_drop", "undamped", None), ("ground_multicontact", "kA1e6", "C")]
 
 #: dimensionless steps ``omega h`` per regime
-GRID = {"exchanged": (0.1, 0.2, 0.4, 0.8), "host_rk4": (0.15, 0.3, 0.6, 1.2)}
+GRID = {"exchanged": (0.1, 0.2, 0.4, 0.8),
+        "host_rk4": (0.1, 0.15, 0.2, 0.3, 0.4, 0.5, 0.6, 0.8, 1.0, 1.2)}
 
 #: schemes per regime (``host_rk4``: the scheme does not matter; the scene's runs)
 SCHEMES = {"exchanged": ("gauss_seidel", "jacobi", "implicit"), "host_rk4": (None,)}
@@ -222,6 +223,31 @@ def table(fitted: dict) -> str:
     return "\n".join(lines)
 
 
+def _up(x: float) -> str:
+    """``x`` rounded up to two significant digits (a bound stays a bound)."""
+    if x == 0:
+        return "0.0"
+    e = math.floor(math.log10(x)) - 1
+    return repr(float(f"{math.ceil(x / 10.0 ** e * (1 - 1e-12))}e{e}"))
+
+
+def constants(fitted: dict) -> dict:
+    """The fit as :mod:`cosim.studies.choose` holds it: ``MODEL``,
+    ``MONOLITHIC_MODEL`` and ``COST`` (``a`` and ``floor`` rounded up to two
+    digits, ``p`` to three)."""
+    def entry(e):
+        return {q: (float(_up(f["a"])), float(f"{f['p']:.3g}"), float(_up(f["floor"])))
+                for q, f in e.items()}
+    model = {}
+    for key, e in fitted["model"].items():
+        regime, scheme = key.split("/")
+        if regime != "monolithic":
+            model[(regime, None if scheme == "any" else scheme)] = entry(e)
+    return {"MODEL": model, "MONOLITHIC_MODEL": entry(fitted["model"]["monolithic/monolithic"]),
+            "COST": {s: (float(f"{c['c0']:.2g}"), float(f"{c['c1']:.2g}"))
+                     for s, c in fitted["cost"].items()}}
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", default="runs/accuracy-model")
@@ -239,6 +265,9 @@ def main(argv=None) -> int:
     fitted = fit(points)
     (Path(args.fit or args.out) / "model.json").write_text(json.dumps(fitted, indent=1))
     print(table(fitted))
+    print("\n# the constants of cosim.studies.choose")
+    for name, value in constants(fitted).items():
+        print(f"{name} = {value!r}")
     return 0
 
 
