@@ -17,8 +17,8 @@ Run from the project root::
     python benchmarks/accuracy_model.py [--out DIR] [--cache DIR] [--quick]
     python benchmarks/accuracy_model.py --fit DIR     # the fit of a finished run
 
-It writes ``DIR/points.json`` (every run) and ``DIR/model.json`` (the fit)
-and prints the table of docs/performance.md ("Accuracy on request").  The
+It writes ``DIR/points.json`` (every run) and ``DIR/model.json`` (the fit),
+through cosim's checked writer, and prints the tables of docs/performance.md ("Accuracy on request").  The
 published run is in ``benchmarks/results/accuracy_model``.
 """
 from __future__ import annotations
@@ -58,7 +58,10 @@ MONOLITHIC_COST_EXPONENT = 0.125
 FIT_RANGE = {"cosim": (1e-6, 0.3), "monolithic": (1e-10, 0.3)}
 
 
-def measure(out: Path, cache, quick: bool = False) -> list[dict]:
+def measure(folder, cache, quick: bool = False) -> list[dict]:
+    """Run every scene of :data:`SCENES` at the steps of :data:`GRID` and
+    the tolerances of :data:`RTOLS`; ``points.json`` in ``folder`` (an
+    open :class:`cosim.io.rundir.OutputFolder`) holds every run so far."""
     from cosim.errors import UnsafeStepError
     from cosim.scene.checks import SceneError
     from cosim.scene.load import load_scene
@@ -109,7 +112,7 @@ def measure(out: Path, cache, quick: bool = False) -> list[dict]:
             points.append(p)
             print(f"{name} {variant} {scheme} {h:.3g}: {p.get('err_peak')} "
                   f"{p.get('err_exit_velocity')} cpu {p['cpu_time_s']:.3g}", flush=True)
-            (out / "points.json").write_text(json.dumps(points, indent=1))
+            folder.write("points.json", lambda fh: json.dump(points, fh, indent=1), "w")
     return points
 
 
@@ -255,15 +258,15 @@ def main(argv=None) -> int:
     ap.add_argument("--fit", metavar="DIR", help="print the fit of a finished run")
     ap.add_argument("--quick", action="store_true", help="the first two scenes only")
     args = ap.parse_args(argv)
-    if args.fit:
-        points = json.loads((Path(args.fit) / "points.json").read_text())
-    else:
-        out = Path(args.out)
-        out.mkdir(parents=True, exist_ok=True)
-        print(f"# {platform.machine()}, Python {platform.python_version()}", flush=True)
-        points = measure(out, args.cache, args.quick)
-    fitted = fit(points)
-    (Path(args.fit or args.out) / "model.json").write_text(json.dumps(fitted, indent=1))
+    from cosim.io.rundir import OutputFolder
+    with OutputFolder(args.fit or args.out, lock=not args.fit) as folder:
+        if args.fit:
+            points = json.loads((Path(args.fit) / "points.json").read_text())
+        else:
+            print(f"# {platform.machine()}, Python {platform.python_version()}", flush=True)
+            points = measure(folder, args.cache, args.quick)
+        fitted = fit(points)
+        folder.write("model.json", lambda fh: json.dump(fitted, fh, indent=1), "w")
     print(table(fitted))
     print("\n# the constants of cosim.studies.choose")
     for name, value in constants(fitted).items():
