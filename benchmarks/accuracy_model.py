@@ -16,6 +16,7 @@ Run from the project root::
 
     python benchmarks/accuracy_model.py [--out DIR] [--cache DIR] [--quick]
     python benchmarks/accuracy_model.py --fit DIR     # the fit of a finished run
+    python benchmarks/accuracy_model.py --check       # predicted against measured
 
 It writes ``DIR/points.json`` (every run) and ``DIR/model.json`` (the fit),
 through cosim's checked writer, and prints the tables of docs/performance.md ("Accuracy on request").  The
@@ -203,6 +204,8 @@ def fit(points) -> dict:
 
 
 def _g(x: float) -> str:
+    if not math.isfinite(x):
+        return str(x)
     m, e = f"{x:.1e}".split("e")
     return f"{m}e{int(e)}"
 
@@ -223,6 +226,40 @@ def table(fitted: dict) -> str:
         lo, hi = c["predicted_over_measured"]
         lines.append(f"| {s} | {_g(c['c0'])} | {_g(c['c1'])} | {c['runs']} | "
                      f"{lo:.2f} to {hi:.2f} |")
+    return "\n".join(lines)
+
+
+def check(cache, accuracies=(0.01, 0.001)) -> str:
+    """Predicted against measured error at the step chosen for each scene of
+    :data:`SCENES` and each accuracy: a Markdown table."""
+    from cosim.scene.load import load_scene
+    from cosim.scene.run import simulate
+    from cosim.studies.bench import reference
+    from cosim.studies.choose import choose
+    from cosim.studies.metrics import impact_metrics, relative_errors
+    from cosim.studies.strike import find_strike
+
+    lines = ["| scene | accuracy | choice | peak: predicted / measured | exit velocity: "
+             "predicted / measured | count | CPU [s]: predicted / measured |",
+             "|---|---|---|---|---|---|---|"]
+    for name, variant, contact in SCENES:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            scene = load_scene(name, variant)
+            for acc in accuracies:
+                c = choose(scene, acc, contact)
+                contact_, joint = find_strike(scene, c.knob.contact)
+                ref = reference(name, variant, contact_, joint, cache_dir=cache)
+                res = simulate(load_scene(name, variant, list(c.overrides), c.scheme))
+                m = impact_metrics(res, contact_, joint)
+                e = relative_errors(m, ref)
+                pe = c.predicted_error
+                lines.append(
+                    f"| {name}{' ' + variant if variant else ''} | {acc:g} | {c.scheme} "
+                    f"{' '.join(c.overrides)} | {_g(pe['peak'])} / {_g(e['peak'])} | "
+                    f"{_g(pe['exit_velocity'])} / {_g(e['exit_velocity'])} | "
+                    f"{m['count']} of {ref['count']} | {c.predicted_cpu_s:.2g} / "
+                    f"{res.summary['cpu_time_s']:.2g} |")
     return "\n".join(lines)
 
 
@@ -257,7 +294,12 @@ def main(argv=None) -> int:
     ap.add_argument("--cache", default="runs/.bench-cache")
     ap.add_argument("--fit", metavar="DIR", help="print the fit of a finished run")
     ap.add_argument("--quick", action="store_true", help="the first two scenes only")
+    ap.add_argument("--check", action="store_true",
+                    help="run the choice at 1 %% and 0.1 %% on each scene against its reference")
     args = ap.parse_args(argv)
+    if args.check:
+        print(check(args.cache))
+        return 0
     from cosim.io.rundir import OutputFolder
     with OutputFolder(args.fit or args.out, lock=not args.fit) as folder:
         if args.fit:

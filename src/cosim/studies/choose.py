@@ -146,8 +146,8 @@ def knob(scene, contact: str | None = None) -> Knob:
         if math.isfinite(k) and math.isfinite(mob) and mob > 0:
             omegas[c] = math.sqrt(k * mob)
     if not omegas:
-        raise SceneError(scene.path, "contacts", "no contact has a penalty law whose "
-                         "frequency is known: the accuracy model needs one")
+        raise SceneError(scene.path, "contacts", "holds no contact whose penalty law has a "
+                         "known frequency: the accuracy model needs one")
     if contact is None:
         strike = find_strike(scene, required=False)
         contact = strike[0] if strike else None
@@ -156,8 +156,8 @@ def knob(scene, contact: str | None = None) -> Knob:
     else:
         c = system.contact_names.index(contact)
         if c not in omegas:
-            raise SceneError(scene.path, f"contacts.{contact}", "its law has no frequency: "
-                             "the accuracy model needs a linearisable penalty law")
+            raise SceneError(scene.path, f"contacts.{contact}", "has a law without a known "
+                             "frequency: the accuracy model needs a linearisable penalty law")
     ln = system.links[c]
     opts = scene.scheme_options
     H = opts.get("macro_step") or math.nan
@@ -168,8 +168,9 @@ def knob(scene, contact: str | None = None) -> Knob:
         spec = next(s for s in scene.subsystems if s.name == host.name)
         if spec.type != "multibody":
             raise SceneError(scene.path, f"contacts.{ln.contact.name}",
-                             "a structure steps this contact against a rigid partner: "
-                             "the accuracy model has no step for it")
+                             "is stepped by a structure against a rigid partner: the "
+                             "accuracy model has no step for it (it was measured where the "
+                             "sides exchange a contact and where a multibody's RK4 hosts one)")
         return Knob(ln.contact.name, "host_rk4", f"{spec.key}.integrator.max_step",
                     spec.max_step, omegas[c], H, grasp)
     key = "scheme.contact_step" if opts.get("contact_step") else "scheme.macro_step"
