@@ -4,7 +4,7 @@ the least CPU, chosen before the run.
 The model is a-priori.  An impact's errors (the peak penetration of the
 contact a study reads and the striker's exit velocity at its last release,
 relative to a fine monolithic reference) follow the dimensionless step in
-contact ``omega h``: ``e = a (omega h) ** p``, where ``omega`` is the
+contact ``omega h``: ``e = max(a (omega h) ** p, floor)``, where ``omega`` is the
 contact's frequency at its first touch (``cosim info``) and ``h`` the step
 that integrates it.  Which step that is depends on where the contact is
 evaluated (:func:`knob`):
@@ -15,17 +15,28 @@ evaluated (:func:`knob`):
   scene sets one, else its ``macro_step``; ``a`` and ``p`` depend on the
   scheme;
 - ``host_rk4``: a multibody side's RK4 integrates it against a rigid
-  partner: that side's ``integrator.max_step``, whatever the scheme.
+  partner: that side's ``integrator.max_step``, whatever the scheme (the
+  macro step, and with it the series' sampling, grows with it: the exit
+  velocity's error there is mostly that sampling's).
 
-``a`` and ``p`` (:data:`MODEL`) were measured on the shipped scenes by
-``benchmarks/accuracy_model.py``, which prints them again; ``a`` is the
-largest a scene needed (the fit bounds every measured point from above), so
-the prediction is conservative where the scenes scatter.  The step chosen
-meets :data:`SAFETY` times the requested accuracy by the model.  The cost
-is the run's counted work (:meth:`cosim.Scene.work`) times a CPU time per
-counted step measured per scheme (:data:`COST`).  The monolithic
-scheme is a candidate at the ``rtol`` its own error model asks.  Only a
-step that the scheme's pre-flight check accepts is chosen.
+``a``, ``p`` and ``floor`` (:data:`MODEL`) were measured on the shipped
+scenes by ``benchmarks/accuracy_model.py``, which prints them again; ``a``
+is the largest a scene needed (the fit bounds every measured point from
+above), so the prediction is conservative where the scenes scatter, and a
+scheme whose ``floor`` lies above the accuracy is refused.  The step chosen
+meets :data:`SAFETY` times the requested accuracy by the model.  The CPU
+time is ``c0 + c1 * steps`` (:data:`COST`, measured per scheme), the steps
+counted before the run (:meth:`cosim.Scene.work`): it ranks the schemes of
+a scene rather than timing them.  The monolithic scheme is a candidate at
+the ``rtol`` its own fit asks (:data:`MONOLITHIC_MODEL`).  Only a step that
+the scheme's pre-flight check (and the scene's build) accepts is chosen.
+
+A scene's contact the model does not cover (one a structure steps against
+a rigid partner, a law without a linearisation) is refused with a
+:class:`~cosim.scene.checks.SceneError`; a grasp is chosen for with a
+caveat (:attr:`Choice.caveat`).  Building the scene and finding where its
+contact first closes runs it briefly (as ``cosim info`` does), an FMU's
+code included.
 """
 from __future__ import annotations
 
@@ -153,6 +164,9 @@ def knob(scene, contact: str | None = None) -> Knob:
         contact = strike[0] if strike else None
     if contact is None:
         c = max(omegas, key=omegas.get)
+    elif contact not in system.contact_names:
+        raise SceneError(scene.path, "contacts", f"has no contact {contact!r}; its contacts "
+                         f"are {', '.join(system.contact_names)}")
     else:
         c = system.contact_names.index(contact)
         if c not in omegas:
@@ -166,11 +180,12 @@ def knob(scene, contact: str | None = None) -> Knob:
     if ln.placement == "embedded" and any(rigid):
         host = system.subsystems[system.embedded[c][0]]
         spec = next(s for s in scene.subsystems if s.name == host.name)
-        if spec.type != "multibody":
+        if spec.type != "multibody" or spec.integrator != "rk4":
             raise SceneError(scene.path, f"contacts.{ln.contact.name}",
-                             "is stepped by a structure against a rigid partner: the "
-                             "accuracy model has no step for it (it was measured where the "
-                             "sides exchange a contact and where a multibody's RK4 hosts one)")
+                             f"is stepped by `{host.name}`'s `{spec.integrator}` integrator against a "
+                             f"rigid partner: the accuracy model has no step for it (it was "
+                             f"measured where the sides exchange a contact and where a "
+                             f"multibody's rk4 hosts one)")
         return Knob(ln.contact.name, "host_rk4", f"{spec.key}.integrator.max_step",
                     spec.max_step, omegas[c], H, grasp)
     key = "scheme.contact_step" if opts.get("contact_step") else "scheme.macro_step"
