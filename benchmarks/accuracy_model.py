@@ -19,8 +19,9 @@ Run from the project root::
     python benchmarks/accuracy_model.py --check       # predicted against measured
 
 It writes ``DIR/points.json`` (every run) and ``DIR/model.json`` (the fit),
-through cosim's checked writer, and prints the tables of docs/performance.md ("Accuracy on request").  The
-published run is in ``benchmarks/results/accuracy_model``.
+through cosim's checked writer, and prints the tables of docs/performance.md
+("Accuracy on request") and the constants of :mod:`cosim.studies.choose`.
+The published run is in ``benchmarks/results/accuracy_model``.
 """
 from __future__ import annotations
 

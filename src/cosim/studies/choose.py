@@ -182,10 +182,10 @@ def knob(scene, contact: str | None = None) -> Knob:
         spec = next(s for s in scene.subsystems if s.name == host.name)
         if spec.type != "multibody" or spec.integrator != "rk4":
             raise SceneError(scene.path, f"contacts.{ln.contact.name}",
-                             f"is stepped by `{host.name}`'s `{spec.integrator}` integrator against a "
-                             f"rigid partner: the accuracy model has no step for it (it was "
-                             f"measured where the sides exchange a contact and where a "
-                             f"multibody's rk4 hosts one)")
+                             f"is stepped by `{host.name}`'s `{spec.integrator}` integrator "
+                             f"against a rigid partner: the accuracy model has no step for it "
+                             f"(it was measured where the sides exchange a contact and where "
+                             f"a multibody's rk4 hosts one)")
         return Knob(ln.contact.name, "host_rk4", f"{spec.key}.integrator.max_step",
                     spec.max_step, omegas[c], H, grasp)
     key = "scheme.contact_step" if opts.get("contact_step") else "scheme.macro_step"
