@@ -253,3 +253,10 @@ def test_predicted_errors_meet_the_target_at_the_chosen_step():
             e = math.floor(math.log10(h)) - 1
             up = ch.predicted_error(regime, scheme, 1000.0 * (h + 1.0001 * 10.0 ** e))
             assert max(up.values()) > ch.SAFETY * x, (regime, scheme, x, h)
+
+
+def test_the_key_table_lists_scheme_accuracy():
+    from cosim.scene import keys
+    row = keys.scheme_section().find("accuracy")
+    assert row.name == "accuracy" and "(0, 1)" in row.check and "cosim info" in row.meaning
+    assert "| `accuracy` |" in keys.reference_markdown()
