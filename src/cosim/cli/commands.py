@@ -190,8 +190,15 @@ def _cmd_info(args) -> int:
 
     if args.list or args.scene is None:
         return _list_scenes(args)
-    info = scene_info(load_scene(args.scene, args.variant, args.set or ()),
-                      run_fmu=args.run_fmu)
+    scene = load_scene(args.scene, args.variant, args.set or ())
+    info = scene_info(scene, run_fmu=args.run_fmu)
+    accuracy, source = args.accuracy, "--accuracy"
+    if accuracy is None and "accuracy" in scene.data.get("scheme", {}):
+        from cosim.scene.checks import parse_accuracy
+        accuracy, source = parse_accuracy(scene.data["scheme"]["accuracy"]), "scheme.accuracy"
+    if accuracy is not None:
+        from cosim.studies.choose import choose
+        info["accuracy"] = {"from": source, **choose(scene, accuracy).as_dict()}
     if args.json:
         print(json.dumps(info, indent=2))
         return 0
@@ -258,7 +265,22 @@ def _cmd_info(args) -> int:
         print("  FMU code " + ("run (--run-fmu)" if info["fmu_code_run"] else
                                "not run: read from modelDescription.xml alone "
                                "(--run-fmu runs it)"))
+    if "accuracy" in info:
+        _print_accuracy(info["accuracy"])
     return 0
+
+
+def _print_accuracy(a: dict) -> None:
+    """The choice of :func:`cosim.studies.choose.choose`, as ``cosim info`` prints it."""
+    print(f"  accuracy {a['accuracy'] * 100:.3g} % ({a['from']}): scheme {a['scheme']} "
+          + " ".join(f"--set {o}" for o in a["overrides"]))
+    err = a["predicted_error"]
+    print(f"    predicted error: peak {err['peak'] * 100:.2g} %, exit velocity "
+          f"{err['exit_velocity'] * 100:.2g} %; work {a['work_steps']:.3g} integrator steps, "
+          f"about {a['predicted_cpu_s']:.2g} s of CPU")
+    print(f"    why: {a['why']}")
+    if a.get("caveat"):
+        print(f"    note: {a['caveat']}")
 
 
 def _print_variants(info: dict) -> None:

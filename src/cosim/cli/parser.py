@@ -19,6 +19,14 @@ def _floats(text: str) -> list[float]:
         raise argparse.ArgumentTypeError(f"expected numbers separated by commas, got {text!r}")
 
 
+def _accuracy(text: str) -> float:
+    from cosim.scene.checks import parse_accuracy
+    try:
+        return parse_accuracy(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc))
+
+
 def _spread(text: str) -> int:
     from cosim.studies.roundoff import OFFSETS
     most = len(OFFSETS) + 1
@@ -93,6 +101,10 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("--set", action="append", metavar="KEY=VALUE",
                    help="override a scene value (after the variant); repeatable")
     i.add_argument("--json", action="store_true", help="print JSON instead of text")
+    i.add_argument("--accuracy", type=_accuracy, metavar="X",
+                   help="choose, without running, the scheme and steps that meet relative "
+                        "accuracy X (1%%, 0.5 %%, 0.01) of the strike's peak and exit velocity "
+                        "at the least predicted CPU (default: the scene's scheme.accuracy)")
     i.add_argument("--run-fmu", action="store_true",
                    help="load and run the scene's FMUs (their native code, as `cosim run` "
                         "does) to evaluate what only they tell: a port mass they report "

@@ -19,7 +19,7 @@ from cosim.scene import keys as _keys
 from cosim.scene.keytable import MAX_STEPS
 
 __all__ = ["SceneError", "Table", "check_name", "type_name", "build_model", "floats",
-           "record_keys", "echo", "MAX_ELEMENTS", "MAX_STEPS"]
+           "record_keys", "echo", "MAX_ELEMENTS", "MAX_STEPS", "parse_accuracy"]
 
 #: most elements (or masses) a structure may have: a mesh beyond it is refused
 #: when the scene is read, before anything is assembled
@@ -297,3 +297,33 @@ def floats(t: Table, k: str) -> tuple:
             t.error(f"{k}[{i}]", f"must be finite, got {echo(v[i])}")
         out.append(x)
     return tuple(out)
+
+
+def parse_accuracy(text, name: str = "--accuracy") -> float:
+    """A relative accuracy from ``"1%"``, ``"0.5 %"``, ``"0.01"`` or a number.
+
+    Raises
+    ------
+    ValueError
+        Naming ``name``, if it is no number, or not in (0, 1).
+    """
+    raw = text
+    scale = 1.0
+    if isinstance(text, str):
+        s = text.strip()
+        if s.endswith("%"):
+            s, scale = s[:-1].strip(), 0.01
+        try:
+            value = float(s) * scale
+        except ValueError:
+            raise ValueError(f"`{name}` must be a relative accuracy such as 1%, 0.5 % or 0.01, "
+                             f"got {raw!r}") from None
+    elif isinstance(text, (int, float)) and not isinstance(text, bool):
+        value = float(text)
+    else:
+        raise ValueError(f"`{name}` must be a relative accuracy such as 1%, 0.5 % or 0.01, "
+                         f"got {raw!r}")
+    if not (0.0 < value < 1.0):
+        raise ValueError(f"`{name}` must be a relative accuracy above 0 and below 1 (100 %), "
+                         f"got {raw!r}")
+    return value

@@ -126,7 +126,10 @@ def scheme_section() -> Section:
     from cosim.core.schemes import COUPLING_SCHEMES
     names = list(COUPLING_SCHEMES)
     keys = [K("name", "", REQUIRED, "one of " + ", ".join(f'"{n}"' for n in names),
-              "the coupling scheme")]
+              "the coupling scheme"),
+            K("accuracy", "", None, 'in (0, 1): a number or a percentage such as "1%"',
+              "the relative accuracy `cosim info` chooses a scheme and steps for "
+              "(`cosim info --accuracy` wins); a run does not read it")]
     seen = {}
     for n in names:
         for opt, spec in COUPLING_SCHEMES[n].options.items():

@@ -151,7 +151,8 @@ def _scheme_table(sch: Table) -> tuple[str, dict, dict]:
     :func:`~cosim.scene.specs.resolve_scheme`'s choice.
 
     Its keys are the registry's (:data:`cosim.core.schemes.COUPLING_SCHEMES`):
-    ``name``, the schemes' options and tables named after a scheme.
+    ``name``, the schemes' options and tables named after a scheme; and
+    ``accuracy``, which :mod:`cosim.studies.choose` reads (checked here).
     """
     from cosim.core.plugins import provide
     from cosim.core.schemes import COUPLING_SCHEMES
@@ -161,8 +162,14 @@ def _scheme_table(sch: Table) -> tuple[str, dict, dict]:
     name = free.string("name", choices=COUPLING_SCHEMES)
     cls = COUPLING_SCHEMES[name]
     given, tables = {}, {}
+    if "accuracy" in free.data:
+        from cosim.scene.checks import parse_accuracy
+        try:
+            parse_accuracy(free.raw("accuracy"), "accuracy")
+        except ValueError as exc:
+            free.error("accuracy", str(exc).replace("`accuracy` ", "", 1))
     for k in list(free.data):
-        if k == "name":
+        if k in ("name", "accuracy"):
             continue
         if k in COUPLING_SCHEMES and isinstance(free.data[k], dict):
             sub = free.table(k)

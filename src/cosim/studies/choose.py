@@ -1,0 +1,423 @@
+"""Accuracy on request: which scheme and steps meet a relative accuracy at
+the least CPU, chosen before the run.
+
+The model is a-priori.  An impact's errors (the peak penetration of the
+contact a study reads and the striker's exit velocity at its last release,
+relative to a fine monolithic reference) follow the dimensionless step in
+contact ``omega h``: ``e = max(a (omega h) ** p, floor)``, where ``omega`` is the
+contact's frequency at its first touch (``cosim info``) and ``h`` the step
+that integrates it.  Which step that is depends on where the contact is
+evaluated (:func:`knob`):
+
+- ``exchanged``: the two sides exchange it each macro step (a coupler
+  contact, or one embedded in a side against a moving partner, whose motion
+  is extrapolated over the step): the scheme's ``contact_step`` when the
+  scene sets one, else its ``macro_step``; ``a`` and ``p`` depend on the
+  scheme;
+- ``host_rk4``: a multibody side's RK4 integrates it against a rigid
+  partner: that side's ``integrator.max_step``, whatever the scheme (the
+  macro step, and with it the series' sampling, grows with it: the exit
+  velocity's error there is mostly that sampling's).
+
+``a``, ``p`` and ``floor`` (:data:`MODEL`) were measured on the shipped
+scenes by ``benchmarks/accuracy_model.py``, which prints them again; ``a``
+is the largest a scene needed (the fit bounds every measured point from
+above), so the prediction is conservative where the scenes scatter, and a
+scheme whose ``floor`` lies above the accuracy is refused.  The step chosen
+meets :data:`SAFETY` times the requested accuracy by the model.  The CPU
+time is ``c0 + c1 * steps`` (:data:`COST`, measured per scheme), the steps
+counted before the run (:meth:`cosim.Scene.work`): it ranks the schemes of
+a scene rather than timing them.  The monolithic scheme is a candidate at
+the ``rtol`` its own fit asks (:data:`MONOLITHIC_MODEL`).  Only a step that
+the scheme's pre-flight check (and the scene's build) accepts is chosen.
+
+A scene's contact the model does not cover (one a structure steps against
+a rigid partner, a law without a linearisation) is refused with a
+:class:`~cosim.scene.checks.SceneError`; a grasp is chosen for with a
+caveat (:attr:`Choice.caveat`).  Building the scene and finding where its
+contact first closes runs it briefly (as ``cosim info`` does), an FMU's
+code included.
+"""
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from cosim.errors import UnsafeStepError
+from cosim.scene.checks import parse_accuracy
+
+__all__ = ["Choice", "Knob", "MODEL", "MONOLITHIC_MODEL", "COST", "SAFETY",
+           "parse_accuracy", "knob", "predicted_error", "step_for", "choose"]
+
+#: (regime, scheme) -> quantity -> (a, p, floor) of
+#: ``e = max(a (omega h) ** p, floor)``, from ``python
+#: benchmarks/accuracy_model.py`` (the run in
+#: ``benchmarks/results/accuracy_model``: three_mass f1, f10, f100, f1000 and
+#: beam_impact for ``exchanged``, spring_drop and ground_multicontact for
+#: ``host_rk4``; brachiation was measured and left out, see
+#: docs/performance.md), ``a`` and ``floor`` rounded up to two digits.  The
+#: ``host_rk4`` regime does not depend on the scheme (key ``None``).
+MODEL: dict = {
+    ("exchanged", "gauss_seidel"): {"peak": (0.016, 2.23, 0.0),
+                                    "exit_velocity": (0.032, 2.46, 0.0)},
+    ("exchanged", "implicit"): {"peak": (0.00012, 1.18, 1.1e-05),
+                                "exit_velocity": (0.015, 2.45, 0.0028)},
+    ("exchanged", "jacobi"): {"peak": (0.12, 2.34, 0.0),
+                              "exit_velocity": (0.19, 2.19, 0.00026)},
+    ("host_rk4", None): {"peak": (0.012, 4.62, 0.0), "exit_velocity": (0.073, 1.84, 0.0)},
+}
+
+#: the monolithic scheme: quantity -> (a, p, floor) of ``e = max(a rtol ** p, floor)``,
+#: from the same run (every scene but brachiation); round-off moves its
+#: errors at rtol 1e-4 by orders of magnitude, so the bound is loose
+MONOLITHIC_MODEL: dict = {"peak": (4.0, 0.918, 0.0), "exit_velocity": (2600.0, 1.22, 0.0)}
+
+#: scheme -> (c0 [s], c1 [s per counted step]) of a run's CPU time
+#: ``c0 + c1 * steps`` (steps: :meth:`cosim.Scene.work`), from the same run;
+#: the monolithic scheme's at rtol 1e-6 (see :data:`MONOLITHIC_COST_EXPONENT`)
+COST: dict = {"gauss_seidel": (0.0019, 8.5e-07), "implicit": (0.11, 5.2e-08),
+              "jacobi": (0.018, 6.6e-07), "monolithic": (0.066, 0.00055)}
+
+#: the monolithic CPU time grows as ``rtol ** -MONOLITHIC_COST_EXPONENT``
+MONOLITHIC_COST_EXPONENT = 0.125
+
+#: the step chosen meets this fraction of the requested accuracy by the
+#: model.  ``a`` already bounds every measured point from above; the margin
+#: covers the curve between the measured steps
+SAFETY = 0.9
+
+#: the quantities predicted
+QUANTITIES = ("peak", "exit_velocity")
+
+
+@dataclass(frozen=True)
+class Knob:
+    """The step that integrates a contact, and the contact's frequency.
+
+    Attributes
+    ----------
+    contact : str
+    regime : str
+        ``exchanged`` or ``host_rk4`` (see the module).
+    key : str
+        The scene key of that step.
+    value : float
+        Its value in the scene [s].
+    omega : float
+        The contact's angular frequency at its first touch [rad/s].
+    macro_step : float
+        The scheme's ``macro_step`` [s].
+    """
+
+    contact: str
+    regime: str
+    key: str
+    value: float
+    omega: float
+    macro_step: float
+    grasp: bool = False
+
+    def overrides(self, h: float) -> list[str]:
+        """The ``--set`` strings that make the step ``h`` [s]: the macro
+        step grows with it where it would be shorter."""
+        out = [f"{self.key}={h!r}"]
+        if self.key != "scheme.macro_step" and self.macro_step < h:
+            out.append(f"scheme.macro_step={h!r}")
+        return out
+
+
+def knob(scene, contact: str | None = None) -> Knob:
+    """The step that integrates ``contact`` (the scene's strike by default,
+    :func:`cosim.studies.strike.find_strike`; else its contact of the
+    highest frequency) and its frequency at its first touch.
+
+    Raises
+    ------
+    SceneError
+        If no contact of the scene has a penalty law with a frequency.
+    """
+    from cosim.core.preflight import stiffest_normal
+    from cosim.scene.checks import SceneError
+    from cosim.scene.info import first_touch
+    from cosim.studies.strike import find_strike
+
+    system, _ = scene.build()
+    touches, _ = first_touch(scene)
+    omegas = {}
+    for c, ln in enumerate(system.links):
+        if ln.contact.law.rigid:
+            continue
+        k, _ = stiffest_normal(ln)
+        ab = system.subsystems[ln.sub_a], system.subsystems[ln.sub_b]
+        mob = (touches[c][1] if c in touches else
+               ab[0].port_mobility(ln.port_a, ln.contact.normal)
+               + ab[1].port_mobility(ln.port_b, ln.contact.normal))
+        if math.isfinite(k) and math.isfinite(mob) and mob > 0:
+            omegas[c] = math.sqrt(k * mob)
+    if not omegas:
+        raise SceneError(scene.path, "contacts", "holds no contact whose penalty law has a "
+                         "known frequency: the accuracy model needs one")
+    if contact is None:
+        strike = find_strike(scene, required=False)
+        contact = strike[0] if strike else None
+    if contact is None:
+        c = max(omegas, key=omegas.get)
+    elif contact not in system.contact_names:
+        raise SceneError(scene.path, "contacts", f"has no contact {contact!r}; its contacts "
+                         f"are {', '.join(system.contact_names)}")
+    else:
+        c = system.contact_names.index(contact)
+        if c not in omegas:
+            raise SceneError(scene.path, f"contacts.{contact}", "has a law without a known "
+                             "frequency: the accuracy model needs a linearisable penalty law")
+    ln = system.links[c]
+    opts = scene.scheme_options
+    H = opts.get("macro_step") or math.nan
+    rigid = [system.subsystems[s].rigid for s in (ln.sub_a, ln.sub_b)]
+    grasp = ln.connection is not None and ln.connection.grasp is not None
+    if ln.placement == "embedded" and any(rigid):
+        host = system.subsystems[system.embedded[c][0]]
+        spec = next(s for s in scene.subsystems if s.name == host.name)
+        if spec.type != "multibody" or spec.integrator != "rk4":
+            raise SceneError(scene.path, f"contacts.{ln.contact.name}",
+                             f"is stepped by `{host.name}`'s `{spec.integrator}` integrator "
+                             f"against a rigid partner: the accuracy model has no step for it "
+                             f"(it was measured where the sides exchange a contact and where "
+                             f"a multibody's rk4 hosts one)")
+        return Knob(ln.contact.name, "host_rk4", f"{spec.key}.integrator.max_step",
+                    spec.max_step, omegas[c], H, grasp)
+    key = "scheme.contact_step" if opts.get("contact_step") else "scheme.macro_step"
+    return Knob(ln.contact.name, "exchanged", key, opts.get(key.split(".")[1]), omegas[c], H,
+                grasp)
+
+
+def _params(regime: str, scheme: str, model=None) -> dict | None:
+    model = MODEL if model is None else model
+    return model.get((regime, None if regime == "host_rk4" else scheme))
+
+
+def _bound(par: tuple, x: float) -> float:
+    a, p, floor = par
+    return max(a * x ** p, floor)
+
+
+def predicted_error(regime: str, scheme: str, omega_h: float, model=None) -> dict | None:
+    """Each quantity's predicted relative error at ``omega_h`` (``omega h``,
+    dimensionless), or None where the model has no such scheme."""
+    par = _params(regime, scheme, model)
+    if par is None:
+        return None
+    return {q: _bound(v, omega_h) for q, v in par.items()}
+
+
+def _largest_x(par: dict, target: float) -> float | None:
+    """The largest ``x`` whose every bound in ``par`` is at most ``target``;
+    None where a floor lies above it."""
+    if any(floor > target for _, _, floor in par.values()):
+        return None
+    return min((target / a) ** (1.0 / p) for a, p, _ in par.values())
+
+
+def step_for(regime: str, scheme: str, omega: float, accuracy: float, model=None
+             ) -> float | None:
+    """The largest step [s] whose every predicted error is at most
+    ``SAFETY * accuracy``, rounded down to two significant digits; None
+    where the model has no such scheme or its floor lies above that."""
+    par = _params(regime, scheme, model)
+    x = None if par is None else _largest_x(par, SAFETY * accuracy)
+    return None if x is None else _floor2(x / omega)
+
+
+def _floor2(h: float) -> float:
+    """``h`` rounded down to two significant digits."""
+    e = math.floor(math.log10(h)) - 1
+    return float(f"{math.floor(h / 10.0 ** e * (1 + 1e-12))}e{e}")
+
+
+@dataclass(frozen=True)
+class Choice:
+    """What :func:`choose` chose.
+
+    Attributes
+    ----------
+    scheme : str
+    overrides : tuple of str
+        ``--set`` strings (``key.path=value``) for
+        :func:`cosim.scene.load.load_scene`.
+    accuracy : float
+        The relative accuracy asked.
+    predicted_error : dict
+        ``peak`` and ``exit_velocity``: relative errors the model predicts.
+    work_steps : float
+        The counted work of the run [integrator steps].
+    predicted_cpu_s : float
+        [s]
+    step : float
+        The step in contact chosen [s] (the monolithic scheme: its rtol).
+    knob : Knob
+    why : str
+        One sentence.
+    candidates : list of dict
+        Every scheme considered: its step, predicted errors and CPU, or why
+        it was left out.
+    """
+
+    scheme: str
+    overrides: tuple
+    accuracy: float
+    predicted_error: dict
+    work_steps: float
+    predicted_cpu_s: float
+    step: float
+    knob: Knob
+    why: str
+    candidates: list = field(default_factory=list)
+
+    @property
+    def caveat(self) -> str | None:
+        """What the model does not cover here, or None."""
+        if self.knob.grasp:
+            return (f"`{self.knob.contact}` is a grasp: the model was fitted on impacts, and "
+                    f"the one grasp measured (brachiation) kept a 2 % exit-velocity error "
+                    f"whatever the step; check the run against a finer one")
+        return None
+
+    def as_dict(self) -> dict:
+        return {"accuracy": self.accuracy, "caveat": self.caveat, "scheme": self.scheme,
+                "overrides": list(self.overrides), "step": self.step,
+                "contact": self.knob.contact, "regime": self.knob.regime,
+                "omega_rad_s": self.knob.omega, "predicted_error": dict(self.predicted_error),
+                "work_steps": self.work_steps, "predicted_cpu_s": self.predicted_cpu_s,
+                "why": self.why, "candidates": self.candidates}
+
+
+def _load(scene, overrides, scheme):
+    """``scene`` with ``overrides`` and ``scheme`` applied to its merged
+    table (which holds the variant and overrides it was loaded with)."""
+    import copy
+    from cosim.scene.load import _validate
+    from cosim.scene.read import apply_override, parse_override
+    data = copy.deepcopy(scene.data)
+    for ov in overrides:
+        apply_override(data, *parse_override(ov, scene.path), scene.path)
+    data.setdefault("scheme", {})["name"] = scheme
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return _validate(data, Path(scene.path), scene.variant, scheme != scene.scheme)
+
+
+def _candidate(scene, k: Knob, scheme: str, accuracy: float) -> dict:
+    """One scheme at the step the model asks: its overrides, errors, work
+    and CPU, or ``refused`` with the reason."""
+    from cosim.scene.checks import SceneError
+    out = {"scheme": scheme}
+    if scheme == "monolithic":
+        rtol = _rtol_for(accuracy)
+        if rtol is None:
+            return {**out, "refused": "no monolithic model"}
+        ov = [f"scheme.monolithic.rtol={rtol!r}", f"scheme.monolithic.atol={rtol * 1e-3:.3g}"]
+        s = _load(scene, ov, "monolithic")
+        system, _ = s.build()
+        steps = s.work(system=system).steps
+        c0, c1 = COST["monolithic"]
+        cpu = (c0 + c1 * steps) * (rtol / 1e-6) ** -MONOLITHIC_COST_EXPONENT
+        err = {q: _bound(v, rtol) for q, v in MONOLITHIC_MODEL.items()}
+        return {**out, "step": rtol, "overrides": ov, "predicted_error": err,
+                "work_steps": steps, "predicted_cpu_s": cpu}
+    h = step_for(k.regime, scheme, k.omega, accuracy)
+    if h is None:
+        why = ("not measured in this regime" if _params(k.regime, scheme) is None else
+               "its error floor lies above the accuracy asked")
+        return {**out, "refused": why}
+    if scheme not in COST:
+        return {**out, "refused": "its cost was not measured"}
+    ov = k.overrides(h)
+    try:
+        s = _load(scene, ov, scheme)
+        system, sch = s.build()
+        sch.preflight(system)
+    except (UnsafeStepError, SceneError) as exc:
+        return {**out, "step": h, "refused": f"the pre-flight check refuses it: {exc}"}
+    steps = s.work().steps
+    return {**out, "step": h, "overrides": ov,
+            "predicted_error": predicted_error(k.regime, scheme, k.omega * h),
+            "work_steps": steps, "predicted_cpu_s": COST[scheme][0] + COST[scheme][1] * steps}
+
+
+def _rtol_for(accuracy: float) -> float | None:
+    """The monolithic scheme's rtol for ``accuracy`` (at most 1e-3)."""
+    r = _largest_x(MONOLITHIC_MODEL, SAFETY * accuracy)
+    return None if r is None else _floor2(min(r, 1e-3))
+
+
+def choose(scene, accuracy: float, contact: str | None = None,
+           schemes=None) -> Choice:
+    """The scheme and steps that meet ``accuracy`` at the least predicted CPU.
+
+    Parameters
+    ----------
+    scene : Scene
+        The loaded scene (variant and overrides applied).
+    accuracy : float
+        Relative accuracy of the contact's peak penetration and the
+        striker's exit velocity, in (0, 1).
+    contact : str, optional
+        The contact the accuracy is asked of (see :func:`knob`).
+    schemes : sequence of str, optional
+        The candidates (default: every scheme with a model, and the
+        monolithic scheme).
+
+    Returns
+    -------
+    Choice
+
+    Raises
+    ------
+    ValueError
+        If ``accuracy`` is not in (0, 1).
+    SceneError
+        If no candidate meets it (every one refused), or the scene has no
+        contact the model knows.
+    """
+    from cosim.scene.checks import SceneError
+    accuracy = parse_accuracy(accuracy, "accuracy")
+    k = knob(scene, contact)
+    if schemes is None:         # host_rk4: the scheme does not matter, the scene's runs
+        schemes = ([] if k.regime == "host_rk4" else
+                   sorted({s for (r, s) in MODEL if r == k.regime} - {scene.scheme}))
+        schemes = [scene.scheme] + schemes + (["monolithic"] if scene.scheme != "monolithic"
+                                              else [])
+    cands = [_candidate(scene, k, s, accuracy) for s in schemes]
+    ok = [c for c in cands if "refused" not in c]
+    if not ok:
+        raise SceneError(scene.path, "scheme.accuracy",
+                         f"no scheme meets {accuracy:.3g} by the model: " + "; ".join(
+                             f"{c['scheme']}: {c['refused']}" for c in cands))
+    best = min(ok, key=lambda c: (c["predicted_cpu_s"], c["scheme"] != scene.scheme))
+    return Choice(best["scheme"], tuple(best["overrides"]), accuracy,
+                  best["predicted_error"], best["work_steps"], best["predicted_cpu_s"],
+                  best["step"], k, _why(best, ok, k), cands)
+
+
+def _at(c: dict, k: Knob) -> str:
+    if c["scheme"] == "monolithic":
+        return f"rtol {c['step']:.2g}"
+    if k.regime == "host_rk4":
+        return f"`{k.key}` = {c['step'] * 1e6:.3g} us"
+    return f"{c['step'] * 1e6:.3g} us in contact"
+
+
+def _why(best: dict, ok: list, k: Knob) -> str:
+    err = best["predicted_error"]
+    text = (f"{best['scheme']} at {_at(best, k)}: predicted {err['peak'] * 100:.2g} % peak and "
+            f"{err['exit_velocity'] * 100:.2g} % exit-velocity error on `{k.contact}` "
+            f"(omega h = {k.omega * best['step']:.2g})" if best["scheme"] != "monolithic" else
+            f"monolithic at {_at(best, k)}: predicted {max(err.values()) * 100:.2g} % error")
+    others = sorted((c for c in ok if c is not best), key=lambda c: c["predicted_cpu_s"])
+    if others:
+        o = others[0]
+        text += (f"; {o['scheme']} would meet it at {_at(o, k)} but costs "
+                 f"{o['predicted_cpu_s'] / best['predicted_cpu_s']:.2g}x")
+    return text
