@@ -82,10 +82,26 @@ def _print_summary(s: dict, out: Path | None, units=None) -> None:
         for j, v in joints.items():
             q, dq = units(sub, j) if units is not None else ("", "")
             print(f"    {sub}/{j}: q = {v['q']:.6g}{q}, dq = {v['dq']:.6g}{dq}")
+    if "accuracy" in s:
+        from cosim.studies.estimate import accuracy_text
+        print(f"  {accuracy_text(s['accuracy'])}")
     if s["message"] and s["status"] == "finished":
         print(f"  message: {s['message']}")      # a run that did not finish says it once, below
     if out is not None:
         print(f"  wrote {out / 'summary.json'}, {out / 'series.npz'} and {out / 'scene.toml'}")
+
+
+def _estimate(scene, res, out: Path) -> None:
+    """Add the run's error estimate (summary key ``accuracy``) to its
+    summary and rewrite ``summary.json`` through the checked writer."""
+    import json
+
+    from cosim.io.rundir import OutputFolder
+    from cosim.studies.estimate import estimate_errors
+
+    res.summary["accuracy"] = estimate_errors(scene, res)
+    with OutputFolder(out) as folder:
+        folder.write("summary.json", lambda fh: json.dump(res.summary, fh, indent=2), "w")
 
 
 def _default_name(scene) -> str:
@@ -143,6 +159,8 @@ def _run(args) -> int:
             progress.close()
         if made is not None and made.is_dir() and not any(made.iterdir()):
             made.rmdir()
+    if res.status == "finished" and scene.estimate and not args.no_estimate:
+        _estimate(scene, res, out)
     _print_summary(res.summary, out, _units(scene))
     for name in scene.export:
         print(f"  wrote {out / (name + '.xdmf')} (open in ParaView)")

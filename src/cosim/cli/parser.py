@@ -87,6 +87,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--overwrite", action="store_true",
                    help="replace a run that the output directory already holds (without "
                         "--out: the default folder itself, not a new one)")
+    r.add_argument("--no-estimate", action="store_true",
+                   help="skip the error estimate (a companion run at 4x the step, about a "
+                        "quarter of the run's cost; summary key `accuracy`)")
     r.add_argument("--quiet", action="store_true",
                    help="no progress line (it shows only on a terminal, after a second)")
     r.set_defaults(func=_cmd_run)

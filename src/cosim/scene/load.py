@@ -87,6 +87,7 @@ def _validate(data: dict, file, variant, scheme_chosen: bool = False) -> Scene:
     if not isinstance(export, list) or not all(isinstance(x, str) for x in export):
         out.error("export", f"must be a list of structure names, got {echo(export)}")
     export_every = out.integer("export_every", low=1)
+    estimate = out.boolean("estimate")
     out.finish()
 
     eff = top.table("effects", section="effects")
@@ -141,7 +142,7 @@ def _validate(data: dict, file, variant, scheme_chosen: bool = False) -> Scene:
                  scheme_options=spec.options, output_every=every, subsystems=tuple(subs),
                  contacts=tuple(contacts), gravity=gravity, data=data,
                  export=tuple(export), export_every=export_every, scheme_tables=tables,
-                 guard=guard, max_steps=max_steps)
+                 guard=guard, max_steps=max_steps, estimate=estimate)
 
 
 def _scheme_table(sch: Table) -> tuple[str, dict, dict]:

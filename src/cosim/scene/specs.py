@@ -407,6 +407,9 @@ class Scene:
     export : tuple of str
         Structures whose fields are written (``output.export``).
     export_every : int
+    estimate : bool
+        Whether ``cosim run`` estimates the run's error (``output.estimate``,
+        :func:`cosim.studies.estimate.estimate_errors`).
     scheme_tables : dict
         Scheme name -> options that apply only when that scheme runs
         (``[scheme.NAME]`` tables, e.g. the monolithic reference's tolerances
@@ -436,6 +439,7 @@ class Scene:
     scheme_tables: dict = field(default_factory=dict)
     guard: GuardOptions = GuardOptions()
     max_steps: float = MAX_STEPS
+    estimate: bool = True
 
     def scheme_spec(self, scheme: str | None = None) -> SchemeSpec:
         """The scheme a run uses: the scene's, or ``scheme`` with the scene's

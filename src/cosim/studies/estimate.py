@@ -1,0 +1,298 @@
+"""An estimate of a finished run's error, from one coarser companion run.
+
+:func:`estimate_errors` runs the same scene and scheme again with the steps
+that set its accuracy made ``factor`` times longer (the *companion*), and
+turns the difference of each quantity into a Richardson estimate of the
+run's own error::
+
+    err(Q_h) ~ |Q_h - Q_rh| / (r**p - 1)
+
+with ``r`` the factor and ``p`` the scheme's observed order (:data:`ORDERS`).
+
+Which steps: a co-simulation scheme's ``macro_step`` and, where the scene
+gives one, its ``contact_step`` (the step while a contact is closed), both
+times ``r``; the monolithic scheme's ``rtol`` and ``atol`` times ``r**p``
+(its solver chooses the steps, the tolerance is what sets the accuracy).
+A side's own integrator step is left as it is: it is most often set by a
+stiff contact's stability, not by accuracy (three_mass's robot fails at 3x
+its step), and a scene's embedded contact is then resolved as finely in the
+companion as in the run.
+
+Cost: the companion takes about ``1/r`` of the run's macro steps (r = 4:
+about a quarter; step control and aimed onsets add a few).  One companion
+and an order measured beforehand keep the cost under the 30 % that a third
+run (``r**2``) to measure ``p`` on every run would pass at r = 4
+(1/4 + 1/16).
+
+What is estimated: per contact, ``peak_penetration``, ``impulse``, the
+first interval's ``t_on`` and ``t_off``, and ``count`` (robust when both runs
+agree); the exit state: each multibody joint's rate at the last release of
+the last contact that releases (:func:`cosim.studies.metrics.exit_velocity`),
+or its final rate when no contact releases.
+
+Honest where it cannot: a quantity is ``reliable: false`` with a ``why``
+when the companion stopped or failed, when the two runs disagree on a
+contact's count (that contact's quantities and the exit state), when the
+scheme's order was not measured, or when the estimate exceeds the quantity
+itself; its ``relative_error`` is then None and ``difference`` keeps
+``|Q_h - Q_rh|``.
+"""
+from __future__ import annotations
+
+import copy
+import math
+import warnings
+from pathlib import Path
+
+__all__ = ["ORDERS", "DEFAULT_FACTOR", "coarsened", "estimate_errors", "accuracy_text",
+           "counted_share"]
+
+#: the factor by which the companion's steps are longer than the run's
+DEFAULT_FACTOR = 4
+
+#: observed orders of the schemes, and where they were measured.  The
+#: explicit schemes: the error of peak penetration and exit velocity of
+#: three_mass f100 falls as about ``h**2.7`` with the contact step
+#: (``cosim bench three_mass --variant f100``, contact steps 1e-4 to 1e-5 s).
+ORDERS = {
+    "gauss_seidel": (2.7, "three_mass f100, cosim bench, contact_step 1e-4 to 1e-5 s"),
+    "jacobi": (2.7, "as gauss_seidel: the same exchange, one side a step later"),
+}
+
+#: per contact, the summary's quantities that are estimated
+_CONTACT_QUANTITIES = ("peak_penetration", "impulse", "t_on", "t_off")
+
+
+def coarsened(scene, factor: float):
+    """A copy of ``scene`` whose accuracy-setting steps are ``factor`` times
+    longer (see the module), and the keys changed (key path -> new value).
+
+    Parameters
+    ----------
+    scene : Scene
+    factor : float
+        > 1.
+
+    Returns
+    -------
+    (Scene, dict)
+    """
+    from cosim.scene.load import _validate
+
+    if not (isinstance(factor, (int, float)) and factor > 1 and math.isfinite(factor)):
+        raise ValueError(f"`factor` must be a finite number > 1, got {factor!r}")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        spec = scene.scheme_spec()
+    data = copy.deepcopy(scene.data)
+    sch = data.setdefault("scheme", {})
+    sch["name"] = spec.name
+    own = sch.setdefault(spec.name, {})      # a [scheme.NAME] table wins over [scheme]
+    changed = {}
+    if spec.name == "monolithic":
+        p = _order(spec.name)[0] or 1.0
+        for key in ("rtol", "atol"):
+            own[key] = spec.options[key] * factor ** p
+            changed[f"scheme.{spec.name}.{key}"] = own[key]
+    else:
+        for key in ("macro_step", "contact_step"):
+            if spec.options.get(key):
+                own[key] = spec.options[key] * factor
+                changed[f"scheme.{spec.name}.{key}"] = own[key]
+    return _validate(data, Path(scene.path), scene.variant, True), changed
+
+
+def _order(scheme: str):
+    return ORDERS.get(scheme, (None, ""))
+
+
+def _first(c: dict, i: int) -> float:
+    return float(c["intervals"][0][i]) if c["intervals"] else math.nan
+
+
+def _contact_values(summary: dict) -> dict:
+    out = {}
+    for name, c in summary["contacts"].items():
+        out[name] = {"count": int(c["count"]),
+                     "peak_penetration": float(c["peak_penetration"]),
+                     "impulse": float(c["impulse"]), "t_on": _first(c, 0),
+                     "t_off": _first(c, 1)}
+    return out
+
+
+def exit_rates(result, multibody) -> tuple[dict, str]:
+    """Each multibody joint's rate at the last release of the last contact
+    that releases (``SUBSYSTEM/JOINT`` -> [rad/s or m/s]), and what that
+    instant is (``"release of C at T s"`` or ``"end of the run"``);
+    ``multibody``: the names of the multibody subsystems."""
+    from cosim.studies.metrics import exit_velocity
+
+    t = result.series["t"]
+    last = None
+    for name, c in result.summary["contacts"].items():
+        if c["intervals"] and c["intervals"][-1][1] < t[-1]:
+            t_off = float(c["intervals"][-1][1])
+            if last is None or t_off > last[1]:
+                last = (name, t_off)
+    rates = {}
+    for key in result.series:
+        if not key.startswith("dq/"):
+            continue
+        name = key[3:]
+        if name.split("/", 1)[0] not in multibody:
+            continue
+        dq = result.series[key]
+        rates[name] = (exit_velocity(t, dq, last[1]) if last is not None
+                       else float(dq[-1]))
+    when = (f"release of {last[0]} at {last[1]:.6g} s" if last is not None
+            else "end of the run")
+    return rates, when
+
+
+def _judge(value, other, r, p, why=None) -> dict:
+    """One quantity: its value, the companion's, and the estimate."""
+    out = {"value": value, "companion": other, "difference": None, "relative_error": None,
+           "reliable": False}
+    if not (math.isfinite(value) and math.isfinite(other)):
+        out["why"] = why or "not defined in both runs"
+        return out
+    diff = abs(value - other)
+    out["difference"] = diff
+    if why is not None:
+        out["why"] = why
+        return out
+    if value == 0.0 == other:            # at rest in both (a joint that never moved)
+        out.update(relative_error=0.0, reliable=True)
+        return out
+    if p is None:
+        out["why"] = "the scheme's order is not measured"
+        return out
+    est = diff / (r ** p - 1.0)
+    if value == 0.0:
+        out["why"] = "the quantity is zero in the run, not in the companion"
+        return out
+    rel = est / abs(value)
+    if rel > 1.0:
+        out["why"] = "the estimate is larger than the quantity"
+        return out
+    out.update(relative_error=rel, reliable=True)
+    return out
+
+
+def counted_share(result, companion) -> float:
+    """The companion's macro steps (with their iterations, if the scheme
+    iterates) over the run's: the counted share of its work."""
+    def work(res):
+        return max(res.n_windows, 1) + res.n_iterations
+    return work(companion) / work(result)
+
+
+def estimate_errors(scene, result, factor: float = DEFAULT_FACTOR) -> dict:
+    """Estimate the errors of ``result``, a finished run of ``scene``.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene as run (:func:`cosim.scene.load.load_scene`).
+    result : SimulationResult
+        The run's result (its ``series`` are read).
+    factor : float
+        How many times longer the companion's steps are (> 1).
+
+    Returns
+    -------
+    dict
+        The summary's ``accuracy``: ``reliable`` (every quantity is),
+        ``method``, ``factor``, ``order`` and ``order_source``,
+        ``coarsened`` (key path -> value in the companion), ``companion``
+        (``status``, ``message``, ``macro_steps``, ``cpu_time_s``),
+        ``work_share`` (:func:`counted_share`), ``contacts`` (name ->
+        ``count`` {``value``, ``companion``, ``robust``} and one entry per
+        quantity), ``exit`` (``at``, and ``SUBSYSTEM/JOINT`` -> entry) and
+        ``why`` (what made the summary unreliable).  An entry holds
+        ``value``, ``companion``, ``difference`` (absolute), ``reliable``,
+        and ``relative_error`` (the estimate over the value) or ``why``.
+    """
+    from cosim.scene.run import simulate
+
+    p, source = _order(scene.scheme)
+    comp_scene, changed = coarsened(scene, factor)
+    acc = {"reliable": False, "method": "richardson", "factor": factor, "order": p,
+           "order_source": source, "coarsened": changed, "companion": {}, "work_share": None,
+           "contacts": {}, "exit": {}, "why": []}
+    comp = None
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            comp = simulate(comp_scene)
+    except Exception as exc:       # a refused or broken companion: no estimate, said why
+        acc["companion"] = {"status": "refused", "message": f"{type(exc).__name__}: {exc}"}
+        acc["why"].append(f"the companion did not run ({type(exc).__name__})")
+    if comp is not None:
+        acc["companion"] = {"status": comp.status, "message": comp.message,
+                            "macro_steps": comp.n_windows,
+                            "cpu_time_s": comp.summary["cpu_time_s"]}
+        acc["work_share"] = counted_share(result, comp)
+        if not comp.success:
+            acc["why"].append(f"the companion stopped ({comp.status})")
+    mine = _contact_values(result.summary)
+    theirs = _contact_values(comp.summary) if comp is not None and comp.success else {}
+    stopped = "the companion did not finish" if not theirs else None
+    differ = []
+    for name, v in mine.items():
+        o = theirs.get(name, {})
+        count = {"value": v["count"], "companion": o.get("count"),
+                 "robust": o.get("count") == v["count"]}
+        entry = {"count": count}
+        why = stopped
+        if why is None and not count["robust"]:
+            why = f"contact {name} closed {v['count']} times, {o.get('count')} in the companion"
+            differ.append(why)
+        for q in _CONTACT_QUANTITIES:
+            entry[q] = _judge(v[q], o.get(q, math.nan), factor, p, why)
+        acc["contacts"][name] = entry
+    from cosim.scene.specs import MultibodySpec
+    multibody = {s.name for s in scene.subsystems if isinstance(s, MultibodySpec)}
+    rates, at = exit_rates(result, multibody)
+    acc["exit"]["at"] = at
+    if theirs:
+        crates = exit_rates(comp, multibody)[0]
+    else:
+        crates = {}
+    for joint, value in rates.items():
+        why = stopped or (differ[0] if differ else None)
+        acc["exit"][joint] = _judge(value, crates.get(joint, math.nan), factor, p, why)
+    acc["why"] += differ
+    entries = [e for c in acc["contacts"].values() for k, e in c.items() if k != "count"
+               if c["count"]["value"] > 0] + [e for k, e in acc["exit"].items() if k != "at"]
+    for e in entries:
+        if not e["reliable"] and e.get("why") and e["why"] not in acc["why"]:
+            acc["why"].append(e["why"])
+    acc["reliable"] = (not acc["why"] and all(e["reliable"] for e in entries)
+                       and all(c["count"]["robust"] for c in acc["contacts"].values()))
+    return acc
+
+
+def _pct(x: float) -> str:
+    return f"{100 * x:.2g} %"
+
+
+def accuracy_text(acc: dict) -> str:
+    """The terminal's line: the estimates that are reliable, and no number
+    for one that is not."""
+    steps = ", ".join(f"{k.rsplit('.', 1)[-1]} {v:.3g}" for k, v in acc["coarsened"].items())
+    head = f"accuracy (companion at {acc['factor']:g}x the step: {steps})"
+    if not acc["reliable"]:
+        return f"accuracy: not reliable ({'; '.join(acc['why']) or 'see summary.json'})"
+    parts = []
+    for name, c in acc["contacts"].items():
+        if c["count"]["value"] == 0:
+            continue
+        parts.append(f"{name} peak {_pct(c['peak_penetration']['relative_error'])}, "
+                     f"impulse {_pct(c['impulse']['relative_error'])}")
+    exits = [(k, e) for k, e in acc["exit"].items() if k != "at"]
+    if exits:
+        k, e = max(exits, key=lambda ke: ke[1]["relative_error"])
+        parts.append(f"exit {k} {_pct(e['relative_error'])}" + (
+            f" (worst of {len(exits)} joints)" if len(exits) > 1 else ""))
+    return f"{head}: {'; '.join(parts)}; counts robust"
