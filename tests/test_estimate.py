@@ -1,0 +1,113 @@
+"""The error estimate of every run (cosim.studies.estimate) against true errors."""
+import json
+import warnings
+
+import pytest
+
+import cosim
+from conftest import CASES
+from cosim import cli
+from cosim.studies.bench_cache import REFERENCE
+from cosim.studies.estimate import accuracy_text, estimate_errors
+from cosim.studies.roundoff import perturbed
+
+
+def _run(name, variant=None, overrides=(), scheme=None):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        scene = cosim.load_scene(CASES / f"{name}.toml", variant, list(overrides), scheme)
+        return scene, cosim.simulate(scene)
+
+
+def _within(estimate, true, factor=3.0):
+    return true / factor <= estimate <= true * factor
+
+
+def test_spring_drop_exit_velocity_estimate_within_3x_of_the_closed_form():
+    # undamped: the mass leaves at +1 m/s exactly; the run's error is the
+    # rate read between samples at the release (metrics.exit_velocity)
+    scene, res = _run("spring_drop")
+    acc = estimate_errors(scene, res)
+    e = acc["exit"]["body/x"]
+    assert e["reliable"] and acc["reliable"], acc["why"]
+    true = abs(e["value"] - 1.0)
+    assert true > 1e-6            # a measurable error, not round-off
+    assert _within(e["relative_error"], true), (e["relative_error"], true)
+    # peak: both runs step the embedded contact alike, the estimate is round-off
+    assert acc["contacts"]["wall"]["peak_penetration"]["relative_error"] < 1e-9
+
+
+@pytest.mark.xfail(strict=True, reason="at 4x the contact step three_mass f100 is outside "
+                   "the asymptotic range: the companion's peak lies closer to the reference "
+                   "than the run's, the estimate is about 14x too small")
+def test_three_mass_f100_peak_estimate_within_3x_of_the_reference():
+    scene, res = _run("three_mass", "f100")
+    acc = estimate_errors(scene, res)
+    ov = [f"scheme.monolithic.{k}={json.dumps(v)}" for k, v in REFERENCE.items()]
+    ref = _run("three_mass", "f100", ov, "monolithic")[1]
+    p = acc["contacts"]["C"]["peak_penetration"]
+    true = abs(p["value"] / ref.summary["contacts"]["C"]["peak_penetration"] - 1.0)
+    assert p["reliable"]
+    assert _within(p["relative_error"], true), (p["relative_error"], true)
+
+
+@pytest.mark.parametrize("ulps", [0, 1, -2])
+def test_counts_that_differ_are_not_reliable_and_print_no_number(ulps):
+    # at twice the scene's steps the run closes C 9 times; its companion
+    # (8x the scene's steps) 8 times
+    scene, _ = _run("three_mass", "f100", ["scheme.contact_step=6e-5",
+                                           "scheme.macro_step=4e-3"])
+    scene = perturbed(scene, ulps)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = cosim.simulate(scene)
+    acc = estimate_errors(scene, res)
+    c = acc["contacts"]["C"]
+    assert not c["count"]["robust"]
+    assert not acc["reliable"]
+    assert not c["peak_penetration"]["reliable"]
+    assert c["peak_penetration"]["relative_error"] is None
+    assert c["peak_penetration"]["difference"] > 0     # kept for the curious
+    assert all(not e["reliable"] for k, e in acc["exit"].items() if k != "at")
+    text = accuracy_text(acc)
+    assert text.startswith("accuracy: not reliable (contact C closed")
+    assert "%" not in text
+
+
+def test_companion_costs_at_most_30_percent_of_the_counted_work():
+    scene, res = _run("spring_drop")
+    acc = estimate_errors(scene, res)
+    assert acc["companion"]["macro_steps"] <= 0.3 * res.n_windows
+    assert acc["work_share"] <= 0.3
+
+
+def test_a_failed_companion_makes_nothing_reliable(monkeypatch):
+    scene, res = _run("spring_drop")
+    from cosim.scene import run as run_module
+
+    def broken(*a, **k):
+        raise RuntimeError("no")
+    monkeypatch.setattr(run_module, "simulate", broken)
+    acc = estimate_errors(scene, res)
+    assert not acc["reliable"] and acc["companion"]["status"] == "refused"
+    assert accuracy_text(acc).startswith("accuracy: not reliable (the companion did not run")
+
+
+def _cli_run(tmp_path, *extra):
+    out = tmp_path / "run"
+    assert cli.main(["run", str(CASES / "spring_drop.toml"), "--out", str(out), "--quiet",
+                     *extra]) == 0
+    return json.loads((out / "summary.json").read_text())
+
+
+def test_run_summary_has_accuracy_and_the_terminal_says_it(tmp_path, capsys):
+    s = _cli_run(tmp_path)
+    assert s["accuracy"]["reliable"] is True
+    assert s["accuracy"]["factor"] == 4
+    assert "accuracy (companion at 4x the step" in capsys.readouterr().out
+
+
+def test_no_estimate_leaves_no_accuracy_key(tmp_path, capsys):
+    assert "accuracy" not in _cli_run(tmp_path, "--no-estimate")
+    assert "accuracy" not in _cli_run(tmp_path, "--overwrite", "--set", "output.estimate=false")
+    assert "accuracy" not in capsys.readouterr().out
