@@ -274,7 +274,8 @@ def estimate_errors(scene, result, factor: float = DEFAULT_FACTOR) -> dict:
 
 
 def _pct(x: float) -> str:
-    return f"{100 * x:.2g} %"
+    """A relative error in percent; below 1e-8 (round-off) as such."""
+    return "< 1e-6 %" if x < 1e-8 else f"{100 * x:.2g} %"
 
 
 def accuracy_text(acc: dict) -> str:
