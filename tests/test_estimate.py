@@ -111,3 +111,14 @@ def test_no_estimate_leaves_no_accuracy_key(tmp_path, capsys):
     assert "accuracy" not in _cli_run(tmp_path, "--no-estimate")
     assert "accuracy" not in _cli_run(tmp_path, "--overwrite", "--set", "output.estimate=false")
     assert "accuracy" not in capsys.readouterr().out
+
+
+def test_exit_rates_are_the_bench_exit_velocity_at_the_last_release():
+    from cosim.studies.estimate import exit_rates
+    from cosim.studies.metrics import impact_metrics
+    scene, res = _run("spring_drop")
+    rates, at = exit_rates(res, {"body"})
+    assert at == "release of wall at 0.0131416 s"
+    # one interpolation, two callers: equal to round-off
+    assert rates["body/x"] == pytest.approx(impact_metrics(res, "wall", "body/x")[
+        "exit_velocity"], rel=1e-14)

@@ -36,7 +36,7 @@ _LINE = 'length=1.0, density=1000.0, elements=4, origin=[0.0, 0.0], axis=[1.0, 0
 #: (scene, variant, overrides) that reach the rows no shipped scene holds
 CONSTRUCTED = [
     (SPRING_DROP, None, [
-        "output.every=1", "output.export_every=1", "output.export=[]",
+        "output.every=1", "output.export_every=1", "output.export=[]", "output.estimate=true",
         "guard.energy_growth=0.1", "guard.energy_check=true", "guard.energy_floor=0.001",
         "guard.energy_warning=0.01", "guard.coupling_warning=0.01",
         "guard.chatter_switches=100", "guard.chatter_window=1e-6", "guard.max_steps=1e9",

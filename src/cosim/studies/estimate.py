@@ -44,6 +44,8 @@ import math
 import warnings
 from pathlib import Path
 
+import numpy as np
+
 __all__ = ["ORDERS", "DEFAULT_FACTOR", "coarsened", "estimate_errors", "accuracy_text",
            "counted_share"]
 
@@ -125,8 +127,6 @@ def exit_rates(result, multibody) -> tuple[dict, str]:
     that releases (``SUBSYSTEM/JOINT`` -> [rad/s or m/s]), and what that
     instant is (``"release of C at T s"`` or ``"end of the run"``);
     ``multibody``: the names of the multibody subsystems."""
-    from cosim.studies.metrics import exit_velocity
-
     t = result.series["t"]
     last = None
     for name, c in result.summary["contacts"].items():
@@ -142,7 +142,9 @@ def exit_rates(result, multibody) -> tuple[dict, str]:
         if name.split("/", 1)[0] not in multibody:
             continue
         dq = result.series[key]
-        rates[name] = (exit_velocity(t, dq, last[1]) if last is not None
+        # linear between the samples around it, as cosim.studies.metrics.exit_velocity
+        # (not imported: every run would load the bench's module)
+        rates[name] = (float(np.interp(last[1], t, dq)) if last is not None
                        else float(dq[-1]))
     when = (f"release of {last[0]} at {last[1]:.6g} s" if last is not None
             else "end of the run")
