@@ -11,18 +11,26 @@ with ``r`` the factor and ``p`` the scheme's observed order (:data:`ORDERS`).
 
 Which steps: a co-simulation scheme's ``macro_step`` and, where the scene
 gives one, its ``contact_step`` (the step while a contact is closed), both
-times ``r``; the monolithic scheme's ``rtol`` and ``atol`` times ``r**p``
-(its solver chooses the steps, the tolerance is what sets the accuracy).
-A side's own integrator step is left as it is: it is most often set by a
-stiff contact's stability, not by accuracy (three_mass's robot fails at 3x
-its step), and a scene's embedded contact is then resolved as finely in the
-companion as in the run.
+times ``r``.  A side's own integrator step is left as it is: it is most
+often set by a stiff contact's stability, not by accuracy (three_mass's
+robot fails at 3x its step), and an embedded contact is then resolved as
+finely in the companion as in the run; an error that comes from it is not
+seen.  The monolithic scheme gets no companion (:data:`MONOLITHIC`): its
+cost hardly falls with a coarser tolerance.
 
-Cost: the companion takes about ``1/r`` of the run's macro steps (r = 4:
-about a quarter; step control and aimed onsets add a few).  One companion
-and an order measured beforehand keep the cost under the 30 % that a third
-run (``r**2``) to measure ``p`` on every run would pass at r = 4
-(1/4 + 1/16).
+The order: ``p`` is measured once per scheme (:data:`ORDERS`, with where),
+not on every run.  Measuring it on every run needs a third run at ``r**2``
+whose cost, added to the companion's, passes 30 % of the run at r = 4
+(1/4 + 1/16 of its steps); at r = 5 (1/5 + 1/25) the run at 25x the step
+is far from the asymptotic range (three_mass f100 already closes C 8 times,
+not 9, at 8x).  A scheme without a measured order gives
+differences, no estimate.
+
+Cost: the companion takes about ``1/r`` of the run's macro steps where free
+flight and contact are both stepped at the scheme's steps (spring_drop,
+ground_multicontact: 1/4); step control adds steps aimed at each onset that
+do not scale with ``r`` (three_mass f100: 0.48 of the run's macro steps).
+:func:`counted_share` is that share, in the summary as ``work_share``.
 
 What is estimated: per contact, ``peak_penetration``, ``impulse``, the
 first interval's ``t_on`` and ``t_off``, and ``count`` (robust when both runs
@@ -33,9 +41,9 @@ or its final rate when no contact releases.
 Honest where it cannot: a quantity is ``reliable: false`` with a ``why``
 when the companion stopped or failed, when the two runs disagree on a
 contact's count (that contact's quantities and the exit state), when the
-scheme's order was not measured, or when the estimate exceeds the quantity
-itself; its ``relative_error`` is then None and ``difference`` keeps
-``|Q_h - Q_rh|``.
+scheme's order was not measured or the scheme is monolithic, or when the
+estimate exceeds the quantity itself; its ``relative_error`` is then None
+and ``difference`` keeps ``|Q_h - Q_rh|``.
 """
 from __future__ import annotations
 
@@ -52,14 +60,24 @@ __all__ = ["ORDERS", "DEFAULT_FACTOR", "coarsened", "estimate_errors", "accuracy
 #: the factor by which the companion's steps are longer than the run's
 DEFAULT_FACTOR = 4
 
-#: observed orders of the schemes, and where they were measured.  The
-#: explicit schemes: the error of peak penetration and exit velocity of
-#: three_mass f100 falls as about ``h**2.7`` with the contact step
-#: (``cosim bench three_mass --variant f100``, contact steps 1e-4 to 1e-5 s).
+#: observed orders of the schemes, and where they were measured: the slope
+#: of ``log(error)`` against ``log(contact_step)`` (``np.polyfit``) of C's
+#: peak penetration in three_mass f100 against the bench's monolithic
+#: reference (DOP853, rtol 1e-11), at the steps named.  Gauss-Seidel's local
+#: slope is 2.7 between 1e-5 and 2e-5 s and falls to 1.4 between 4e-5 and
+#: 8e-5 s; the implicit scheme's error is at its floor (2e-7) below 4e-5 s.
 ORDERS = {
-    "gauss_seidel": (2.7, "three_mass f100, cosim bench, contact_step 1e-4 to 1e-5 s"),
-    "jacobi": (2.7, "as gauss_seidel: the same exchange, one side a step later"),
+    "gauss_seidel": (2.1, "three_mass f100, C's peak, contact_step 1e-5 to 8e-5 s"),
+    "jacobi": (2.3, "three_mass f100, C's peak, contact_step 1e-5 to 8e-5 s"),
+    "implicit": (4.2, "three_mass f100, C's peak, contact_step 4e-5 to 1.6e-4 s"),
 }
+
+#: why the monolithic scheme gets no companion: its cost hardly depends on
+#: the tolerance (three_mass f100: 0.24 s of CPU at rtol 1e-5, 0.23 s at
+#: 1e-9; locating every switch and the output samples make most of it), so a
+#: companion at a coarser tolerance would cost about as much as the run
+MONOLITHIC = ("not estimated for the monolithic scheme: a coarser tolerance saves its "
+              "solver little, so a companion would cost about as much as the run")
 
 #: per contact, the summary's quantities that are estimated
 _CONTACT_QUANTITIES = ("peak_penetration", "impulse", "t_on", "t_off")
@@ -90,17 +108,13 @@ def coarsened(scene, factor: float):
     sch = data.setdefault("scheme", {})
     sch["name"] = spec.name
     own = sch.setdefault(spec.name, {})      # a [scheme.NAME] table wins over [scheme]
+    if "macro_step" not in spec.options:
+        raise ValueError(f"scheme `{spec.name}` has no macro step to coarsen")
     changed = {}
-    if spec.name == "monolithic":
-        p = _order(spec.name)[0] or 1.0
-        for key in ("rtol", "atol"):
-            own[key] = spec.options[key] * factor ** p
+    for key in ("macro_step", "contact_step"):
+        if spec.options.get(key):
+            own[key] = spec.options[key] * factor
             changed[f"scheme.{spec.name}.{key}"] = own[key]
-    else:
-        for key in ("macro_step", "contact_step"):
-            if spec.options.get(key):
-                own[key] = spec.options[key] * factor
-                changed[f"scheme.{spec.name}.{key}"] = own[key]
     return _validate(data, Path(scene.path), scene.variant, True), changed
 
 
@@ -215,21 +229,25 @@ def estimate_errors(scene, result, factor: float = DEFAULT_FACTOR) -> dict:
         ``value``, ``companion``, ``difference`` (absolute), ``reliable``,
         and ``relative_error`` (the estimate over the value) or ``why``.
     """
-    from cosim.scene.run import simulate
+    from cosim.scene import run
 
     p, source = _order(scene.scheme)
-    comp_scene, changed = coarsened(scene, factor)
     acc = {"reliable": False, "method": "richardson", "factor": factor, "order": p,
-           "order_source": source, "coarsened": changed, "companion": {}, "work_share": None,
+           "order_source": source, "coarsened": {}, "companion": {}, "work_share": None,
            "contacts": {}, "exit": {}, "why": []}
     comp = None
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            comp = simulate(comp_scene)
-    except Exception as exc:       # a refused or broken companion: no estimate, said why
-        acc["companion"] = {"status": "refused", "message": f"{type(exc).__name__}: {exc}"}
-        acc["why"].append(f"the companion did not run ({type(exc).__name__})")
+    if scene.scheme == "monolithic":
+        acc["companion"] = {"status": "not run", "message": MONOLITHIC}
+        acc["why"].append(MONOLITHIC)
+    else:
+        try:
+            comp_scene, acc["coarsened"] = coarsened(scene, factor)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                comp = run.simulate(comp_scene)
+        except Exception as exc:   # a refused or broken companion: no estimate, said why
+            acc["companion"] = {"status": "refused", "message": f"{type(exc).__name__}: {exc}"}
+            acc["why"].append(f"the companion did not run ({type(exc).__name__})")
     if comp is not None:
         acc["companion"] = {"status": comp.status, "message": comp.message,
                             "macro_steps": comp.n_windows,
@@ -239,7 +257,8 @@ def estimate_errors(scene, result, factor: float = DEFAULT_FACTOR) -> dict:
             acc["why"].append(f"the companion stopped ({comp.status})")
     mine = _contact_values(result.summary)
     theirs = _contact_values(comp.summary) if comp is not None and comp.success else {}
-    stopped = "the companion did not finish" if not theirs else None
+    stopped = None if theirs else (acc["why"][0] if acc["why"] else
+                                   "the companion did not finish")
     differ = []
     for name, v in mine.items():
         o = theirs.get(name, {})
@@ -285,6 +304,8 @@ def accuracy_text(acc: dict) -> str:
     for one that is not."""
     steps = ", ".join(f"{k.rsplit('.', 1)[-1]} {v:.3g}" for k, v in acc["coarsened"].items())
     head = f"accuracy (companion at {acc['factor']:g}x the step: {steps})"
+    if acc["companion"].get("status") == "not run":
+        return f"accuracy: {acc['companion']['message']}"
     if not acc["reliable"]:
         return f"accuracy: not reliable ({'; '.join(acc['why']) or 'see summary.json'})"
     parts = []
