@@ -131,3 +131,26 @@ def test_exit_rates_are_the_bench_exit_velocity_at_the_last_release():
     # one interpolation, two callers: equal to round-off
     assert rates["body/x"] == pytest.approx(impact_metrics(res, "wall", "body/x")[
         "exit_velocity"], rel=1e-14)
+
+
+def test_ctrl_c_during_the_companion_keeps_the_run_without_estimate(tmp_path, monkeypatch,
+                                                                   capsys):
+    from cosim.scene import run as run_module
+    from cosim.studies import estimate
+
+    partial = _run("spring_drop")[1]
+
+    def interrupted(scene, *a, **k):       # the companion: stopped by Ctrl-C
+        raise run_module.RunInterrupted(partial) from KeyboardInterrupt()
+    real = estimate.estimate_errors
+
+    def estimate_errors(scene, res, *a, **k):
+        monkeypatch.setattr(run_module, "simulate", interrupted)
+        return real(scene, res, *a, **k)
+    monkeypatch.setattr(estimate, "estimate_errors", estimate_errors)
+    out = tmp_path / "run"
+    code = cli.main(["run", str(CASES / "spring_drop.toml"), "--out", str(out), "--quiet"])
+    assert code == 130
+    s = json.loads((out / "summary.json").read_text())
+    assert s["status"] == "finished" and "accuracy" not in s
+    assert "accuracy" not in capsys.readouterr().out

@@ -160,7 +160,10 @@ def _run(args) -> int:
         if made is not None and made.is_dir() and not any(made.iterdir()):
             made.rmdir()
     if res.status == "finished" and scene.estimate and not args.no_estimate:
-        _estimate(scene, res, out)
+        try:
+            _estimate(scene, res, out)
+        except RunInterrupted as exc:      # the run is kept as it finished, without estimate
+            code = _stop_code(exc.__cause__)
     _print_summary(res.summary, out, _units(scene))
     for name in scene.export:
         print(f"  wrote {out / (name + '.xdmf')} (open in ParaView)")
