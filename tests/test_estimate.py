@@ -154,3 +154,34 @@ def test_ctrl_c_during_the_companion_keeps_the_run_without_estimate(tmp_path, mo
     s = json.loads((out / "summary.json").read_text())
     assert s["status"] == "finished" and "accuracy" not in s
     assert "accuracy" not in capsys.readouterr().out
+
+
+def test_the_companion_coarsens_the_steps_that_set_the_accuracy():
+    from cosim.studies.estimate import coarsened
+    scene, _ = _run("three_mass", "f100", ["scheme.interface_tolerance=1e-4"])
+    comp, changed = coarsened(scene, 4)
+    assert comp.scheme_options["macro_step"] == pytest.approx(4 * 2e-3, rel=1e-15)
+    assert comp.scheme_options["contact_step"] == pytest.approx(4 * 3e-5, rel=1e-15)
+    # extrapolation order 1: the controlled step goes as tol ** (1/3)
+    assert comp.scheme_options["interface_tolerance"] == pytest.approx(1e-4 * 4 ** 3,
+                                                                       rel=1e-15)
+    assert set(changed) == {f"scheme.gauss_seidel.{k}" for k in (
+        "macro_step", "contact_step", "interface_tolerance")}
+    # the sides' own steps stay
+    assert comp.subsystems == scene.subsystems
+    with pytest.raises(ValueError, match="`factor` must be a finite number > 1"):
+        coarsened(scene, 1)
+
+
+def test_the_library_run_bench_and_sweep_pay_nothing_for_it(monkeypatch):
+    from cosim.studies import estimate
+    calls = []
+    monkeypatch.setattr(estimate, "estimate_errors", lambda *a, **k: calls.append(a))
+    scene, res = _run("spring_drop")
+    assert "accuracy" not in res.summary
+    from cosim.studies.bench import run_bench
+    run_bench(CASES / "spring_drop.toml", schemes=["gauss_seidel"], steps=[1e-4],
+              tolerances=(), paper=False, spread=1,
+              ref={"count": 1, "peak": 1e-3, "exit_velocity": 1.0, "energy": 0.0,
+                   "cpu_time_s": 0.0})
+    assert calls == []

@@ -11,7 +11,10 @@ with ``r`` the factor and ``p`` the scheme's observed order (:data:`ORDERS`).
 
 Which steps: a co-simulation scheme's ``macro_step`` and, where the scene
 gives one, its ``contact_step`` (the step while a contact is closed), both
-times ``r``.  A side's own integrator step is left as it is: it is most
+times ``r``; under interface error control (``interface_tolerance``), the
+tolerance times ``r ** (extrapolation_order + 2)``, so that the controlled
+step is ``r`` times longer too.  The number of ``substeps`` stays (each is
+``r`` times longer).  A side's own integrator step is left as it is: it is most
 often set by a stiff contact's stability, not by accuracy (three_mass's
 robot fails at 3x its step), and an embedded contact is then resolved as
 finely in the companion as in the run; an error that comes from it is not
@@ -115,6 +118,11 @@ def coarsened(scene, factor: float):
         if spec.options.get(key):
             own[key] = spec.options[key] * factor
             changed[f"scheme.{spec.name}.{key}"] = own[key]
+    tol = spec.options.get("interface_tolerance")
+    if tol:           # the controller's step goes as tol ** (1 / (order + 2)): r times longer
+        own["interface_tolerance"] = min(tol * factor ** (spec.options.get(
+            "extrapolation_order", 0) + 2), 0.5)
+        changed[f"scheme.{spec.name}.interface_tolerance"] = own["interface_tolerance"]
     return _validate(data, Path(scene.path), scene.variant, True), changed
 
 
@@ -246,8 +254,12 @@ def estimate_errors(scene, result, factor: float = DEFAULT_FACTOR) -> dict:
                 warnings.simplefilter("ignore")
                 comp = run.simulate(comp_scene)
         except Exception as exc:   # a refused or broken companion: no estimate, said why
+            from cosim.errors import UnsafeStepError
             acc["companion"] = {"status": "refused", "message": f"{type(exc).__name__}: {exc}"}
-            acc["why"].append(f"the companion did not run ({type(exc).__name__})")
+            acc["why"].append(
+                f"the pre-flight check refuses {factor:g}x the step as unstable"
+                if isinstance(exc, UnsafeStepError) else
+                f"the companion did not run ({type(exc).__name__})")
     if comp is not None:
         acc["companion"] = {"status": comp.status, "message": comp.message,
                             "macro_steps": comp.n_windows,
