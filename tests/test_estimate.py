@@ -75,11 +75,14 @@ def test_counts_that_differ_are_not_reliable_and_print_no_number(ulps):
     assert "%" not in text
 
 
-def test_companion_costs_at_most_30_percent_of_the_counted_work():
-    scene, res = _run("spring_drop")
+@pytest.mark.parametrize("name", ["spring_drop", "ground_multicontact"])
+def test_companion_costs_at_most_30_percent_of_the_counted_work(name):
+    scene, res = _run(name)
     acc = estimate_errors(scene, res)
     assert acc["companion"]["macro_steps"] <= 0.3 * res.n_windows
-    assert acc["work_share"] <= 0.3
+    assert acc["work_share"]["macro_steps"] <= 0.3
+    # the rk4 side that hosts the contacts is coarsened too: its steps shrink alike
+    assert acc["work_share"]["integrator_steps"] <= 0.3
 
 
 def test_a_failed_companion_makes_nothing_reliable(monkeypatch):
@@ -167,8 +170,12 @@ def test_the_companion_coarsens_the_steps_that_set_the_accuracy():
                                                                        rel=1e-15)
     assert set(changed) == {f"scheme.gauss_seidel.{k}" for k in (
         "macro_step", "contact_step", "interface_tolerance")}
-    # the sides' own steps stay
+    # the robot's step stays: at 4x it would put contact A past omega h = 0.5
     assert comp.subsystems == scene.subsystems
+    spring, _ = _run("spring_drop")
+    comp, changed = coarsened(spring, 4)          # omega h = 0.04 at 4x: coarsened
+    assert comp.subsystems[0].max_step == pytest.approx(4e-5, rel=1e-15)
+    assert "subsystems.body.integrator.max_step" in changed
     with pytest.raises(ValueError, match="`factor` must be a finite number > 1"):
         coarsened(scene, 1)
 

@@ -14,11 +14,12 @@ gives one, its ``contact_step`` (the step while a contact is closed), both
 times ``r``; under interface error control (``interface_tolerance``), the
 tolerance times ``r ** (extrapolation_order + 2)``, so that the controlled
 step is ``r`` times longer too.  The number of ``substeps`` stays (each is
-``r`` times longer).  A side's own integrator step is left as it is: it is most
-often set by a stiff contact's stability, not by accuracy (three_mass's
-robot fails at 3x its step), and an embedded contact is then resolved as
-finely in the companion as in the run; an error that comes from it is not
-seen.  The monolithic scheme gets no companion (:data:`MONOLITHIC`): its
+``r`` times longer).  A side's own step (a multibody side's ``rk4``
+``max_step`` and ``free_step``, a structure's ``contact_step``) is ``r``
+times longer too, unless that would take a contact it hosts past omega h =
+:data:`OMEGA_H_MAX` (:func:`_coarsenable_sides`): such a step is set by the
+contact's stability, not by accuracy (three_mass's robot, at 0.3, fails at
+3x its step); it stays, and an error that comes from it is not seen.  The monolithic scheme gets no companion (:data:`MONOLITHIC`): its
 cost hardly falls with a coarser tolerance.
 
 The order: ``p`` is measured once per scheme (:data:`ORDERS`, with where),
@@ -33,7 +34,8 @@ Cost: the companion takes about ``1/r`` of the run's macro steps where free
 flight and contact are both stepped at the scheme's steps (spring_drop,
 ground_multicontact: 1/4); step control adds steps aimed at each onset that
 do not scale with ``r`` (three_mass f100: 0.48 of the run's macro steps).
-:func:`counted_share` is that share, in the summary as ``work_share``.
+A side's steps shrink with ``r`` only where its step is coarsened.  Both
+shares are in the summary's ``work_share``.
 
 What is estimated: per contact, ``peak_penetration``, ``impulse``, the
 first interval's ``t_on`` and ``t_off``, and ``count`` (robust when both runs
@@ -101,6 +103,7 @@ def coarsened(scene, factor: float):
     (Scene, dict)
     """
     from cosim.scene.load import _validate
+    from cosim.scene.specs import MultibodySpec
 
     if not (isinstance(factor, (int, float)) and factor > 1 and math.isfinite(factor)):
         raise ValueError(f"`factor` must be a finite number > 1, got {factor!r}")
@@ -123,7 +126,70 @@ def coarsened(scene, factor: float):
         own["interface_tolerance"] = min(tol * factor ** (spec.options.get(
             "extrapolation_order", 0) + 2), 0.5)
         changed[f"scheme.{spec.name}.interface_tolerance"] = own["interface_tolerance"]
+    for side, ok in _coarsenable_sides(scene, factor).values():
+        sd = data["subsystems"][side.name]
+        integ = sd.get("integrator")
+        integ = sd["integrator"] = dict(integ) if isinstance(integ, dict) else (
+            {"method": integ} if isinstance(integ, str) else {})
+        if not ok:
+            continue
+        if isinstance(side, MultibodySpec):
+            integ["max_step"] = (side.max_step or spec.default_step) * factor
+            keys = ["max_step"] + (["free_step"] if "free_step" in side.integrator_options
+                                   else [])
+            for key in keys[1:]:
+                integ[key] = side.integrator_options[key] * factor
+        else:
+            integ["contact_step"] = side.contact_step * factor
+            keys = ["contact_step"]
+        for key in keys:
+            changed[f"subsystems.{side.name}.integrator.{key}"] = integ[key]
     return _validate(data, Path(scene.path), scene.variant, True), changed
+
+
+#: the largest omega h [rad] of a contact that a side's own step may reach in
+#: the companion: below it an RK4 step resolves the contact's oscillation
+#: (an error of (omega h)**4 / 120 in a period's phase), so that the
+#: companion is still in the asymptotic range; three_mass's robot runs at
+#: 0.3 and fails at 4x that
+OMEGA_H_MAX = 0.5
+
+
+def _coarsenable_sides(scene, factor: float) -> dict:
+    """The sides whose own step sets the accuracy of a contact they host
+    (a multibody side under ``rk4``, a structure that steps its closed
+    contacts with ``contact_step``): name -> (spec, whether ``factor`` times
+    that step keeps omega h <= :data:`OMEGA_H_MAX` for every contact it
+    hosts (omega of the contact's linearised stiffness and the sides'
+    mobility at the initial pose)).  A side that hosts no contact is
+    coarsened too (its step sets only its own accuracy)."""
+    from cosim.core.preflight import stiffest_normal
+    from cosim.scene.specs import MultibodySpec, StructureSpec
+    from cosim.scene.work import _closed_form
+
+    steps = {}
+    for side in scene.subsystems:
+        if isinstance(side, MultibodySpec) and side.integrator == "rk4":
+            steps[side.name] = (side, side.max_step or scene.scheme_spec().default_step)
+        elif isinstance(side, StructureSpec) and not _closed_form(side, scene.contacts):
+            steps[side.name] = (side, side.contact_step)
+    if not steps:
+        return {}
+    system, _ = scene.build()
+    omega = {name: 0.0 for name in steps}
+    for c, (own, _) in system.embedded.items():
+        host = system.subsystems[own].name
+        if host not in omega:
+            continue
+        ln = system.links[c]
+        n = ln.contact.normal
+        mob = (system.subsystems[ln.sub_a].port_mobility(ln.port_a, n)
+               + system.subsystems[ln.sub_b].port_mobility(ln.port_b, n))
+        k = stiffest_normal(ln)[0]
+        w = math.sqrt(k * mob) if math.isfinite(k) and mob > 0 else math.inf
+        omega[host] = max(omega[host], w)
+    return {name: (side, omega[name] * factor * h <= OMEGA_H_MAX)
+            for name, (side, h) in steps.items()}
 
 
 def _order(scheme: str):
@@ -230,7 +296,9 @@ def estimate_errors(scene, result, factor: float = DEFAULT_FACTOR) -> dict:
         ``method``, ``factor``, ``order`` and ``order_source``,
         ``coarsened`` (key path -> value in the companion), ``companion``
         (``status``, ``message``, ``macro_steps``, ``cpu_time_s``),
-        ``work_share`` (:func:`counted_share`), ``contacts`` (name ->
+        ``work_share`` (``macro_steps``: :func:`counted_share`;
+        ``integrator_steps``: the ratio of the integrator steps counted
+        before the two runs, :meth:`~cosim.Scene.work`, upper bounds), ``contacts`` (name ->
         ``count`` {``value``, ``companion``, ``robust``} and one entry per
         quantity), ``exit`` (``at``, and ``SUBSYSTEM/JOINT`` -> entry) and
         ``why`` (what made the summary unreliable).  An entry holds
@@ -264,7 +332,8 @@ def estimate_errors(scene, result, factor: float = DEFAULT_FACTOR) -> dict:
         acc["companion"] = {"status": comp.status, "message": comp.message,
                             "macro_steps": comp.n_windows,
                             "cpu_time_s": comp.summary["cpu_time_s"]}
-        acc["work_share"] = counted_share(result, comp)
+        acc["work_share"] = {"macro_steps": counted_share(result, comp),
+                             "integrator_steps": comp_scene.work().steps / scene.work().steps}
         if not comp.success:
             acc["why"].append(f"the companion stopped ({comp.status})")
     mine = _contact_values(result.summary)
