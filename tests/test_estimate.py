@@ -192,3 +192,15 @@ def test_the_library_run_bench_and_sweep_pay_nothing_for_it(monkeypatch):
               ref={"count": 1, "peak": 1e-3, "exit_velocity": 1.0, "energy": 0.0,
                    "cpu_time_s": 0.0})
     assert calls == []
+
+
+def test_a_contact_that_never_closes_writes_no_nan(tmp_path):
+    # the wall moved out of reach: the contact never closes in either run
+    s = _cli_run(tmp_path, "--set", "subsystems.body.bodies.mass.joint.dq0=1.0")
+    wall = s["accuracy"]["contacts"]["wall"]
+    assert wall["count"] == {"value": 0, "companion": 0, "robust": True}
+    assert wall["t_on"]["value"] is None and not wall["t_on"]["reliable"]
+    assert s["accuracy"]["exit"]["at"] == "end of the run"
+    assert s["accuracy"]["reliable"] is True     # nothing closed: the counts and rates are
+    text = (tmp_path / "run" / "summary.json").read_text()
+    assert "NaN" not in text

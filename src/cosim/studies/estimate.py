@@ -167,15 +167,20 @@ def _coarsenable_sides(scene, factor: float) -> dict:
     from cosim.scene.specs import MultibodySpec, StructureSpec
     from cosim.scene.work import _closed_form
 
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        default_step = scene.scheme_spec().default_step
     steps = {}
     for side in scene.subsystems:
         if isinstance(side, MultibodySpec) and side.integrator == "rk4":
-            steps[side.name] = (side, side.max_step or scene.scheme_spec().default_step)
+            steps[side.name] = (side, side.max_step or default_step)
         elif isinstance(side, StructureSpec) and not _closed_form(side, scene.contacts):
             steps[side.name] = (side, side.contact_step)
     if not steps:
         return {}
-    system, _ = scene.build()
+    with warnings.catch_warnings():      # what the run said of the scene, said once
+        warnings.simplefilter("ignore")
+        system, _ = scene.build()
     omega = {name: 0.0 for name in steps}
     for c, (own, _) in system.embedded.items():
         host = system.subsystems[own].name
@@ -241,8 +246,10 @@ def exit_rates(result, multibody) -> tuple[dict, str]:
 
 def _judge(value, other, r, p, why=None) -> dict:
     """One quantity: its value, the companion's, and the estimate."""
-    out = {"value": value, "companion": other, "difference": None, "relative_error": None,
-           "reliable": False}
+    def finite(x):                       # summary.json holds no NaN
+        return x if math.isfinite(x) else None
+    out = {"value": finite(value), "companion": finite(other), "difference": None,
+           "relative_error": None, "reliable": False}
     if not (math.isfinite(value) and math.isfinite(other)):
         out["why"] = why or "not defined in both runs"
         return out
