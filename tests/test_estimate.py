@@ -204,3 +204,19 @@ def test_a_contact_that_never_closes_writes_no_nan(tmp_path):
     assert s["accuracy"]["reliable"] is True     # nothing closed: the counts and rates are
     text = (tmp_path / "run" / "summary.json").read_text()
     assert "NaN" not in text
+
+
+@pytest.mark.parametrize("ulps", [0, 1, -1])
+def test_a_companion_the_guard_stops_makes_nothing_reliable_and_says_why(ulps):
+    # three_mass f1000 at 4x the contact step (1.2e-4 s): C's spring creates energy
+    scene = perturbed(_run("three_mass", "f1000")[0], ulps)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = cosim.simulate(scene)
+    assert res.success
+    acc = estimate_errors(scene, res)
+    assert acc["companion"]["status"] == "failed" and not acc["reliable"]
+    assert acc["why"][0].startswith("the companion failed: the energy grew")
+    assert all(e["relative_error"] is None for c in acc["contacts"].values()
+               for k, e in c.items() if k != "count")
+    assert "%" not in accuracy_text(acc)

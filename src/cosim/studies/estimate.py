@@ -341,8 +341,9 @@ def estimate_errors(scene, result, factor: float = DEFAULT_FACTOR) -> dict:
                             "cpu_time_s": comp.summary["cpu_time_s"]}
         acc["work_share"] = {"macro_steps": counted_share(result, comp),
                              "integrator_steps": comp_scene.work().steps / scene.work().steps}
-        if not comp.success:
-            acc["why"].append(f"the companion stopped ({comp.status})")
+        if not comp.success:         # the guard's reason (energy growth, chatter), short
+            reason = comp.message.split(": ", 1)[-1].split(";")[0].split(" (")[0]
+            acc["why"].append(f"the companion {comp.status}: {reason}"[:160])
     mine = _contact_values(result.summary)
     theirs = _contact_values(comp.summary) if comp is not None and comp.success else {}
     stopped = None if theirs else (acc["why"][0] if acc["why"] else
