@@ -119,9 +119,10 @@ def group_sums(self_times: dict[str, float]) -> dict[str, float]:
 
 
 def import_times(scene: str, variant: str | None, out: str) -> dict[str, float]:
-    """Self import time [s] of each module, from one ``-X importtime`` run."""
+    """Self import time [s] of each module, from one ``-X importtime`` run
+    (without the error estimate, which comes after the run, not at start-up)."""
     argv = [sys.executable, "-X", "importtime", "-m", "cosim.cli", "run", scene, "--out", out,
-            "--overwrite", "--quiet"]
+            "--overwrite", "--quiet", "--no-estimate"]
     if variant:
         argv += ["--variant", variant]
     proc = subprocess.run(argv, capture_output=True, text=True, env=ENV)
