@@ -225,8 +225,8 @@ def test_a_bad_scheme_accuracy_names_the_file_and_key(value, capsys):
 
 
 def test_a_run_ignores_scheme_accuracy():
-    """The key is read by `cosim info` (and the lead's `run --accuracy`); a
-    run with it is the run without it."""
+    """The key is read by `cosim info` and `cosim run` (tests/test_accurate.py);
+    a library run with it is the run without it."""
     a = cosim.simulate(_load("spring_drop", overrides=["scheme.accuracy=0.01"]))
     b = cosim.simulate(_load("spring_drop"))
     assert a.summary["macro_steps"] == b.summary["macro_steps"]

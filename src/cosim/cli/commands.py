@@ -85,23 +85,31 @@ def _print_summary(s: dict, out: Path | None, units=None) -> None:
     if "accuracy" in s:
         from cosim.studies.estimate import accuracy_text
         print(f"  {accuracy_text(s['accuracy'])}")
+        if "request" in s["accuracy"]:
+            from cosim.studies.accurate import request_text
+            print("\n".join(f"  {line}" for line in request_text(s["accuracy"]["request"])))
     if s["message"] and s["status"] == "finished":
         print(f"  message: {s['message']}")      # a run that did not finish says it once, below
     if out is not None:
         print(f"  wrote {out / 'summary.json'}, {out / 'series.npz'} and {out / 'scene.toml'}")
 
 
-def _estimate(scene, res, out: Path) -> None:
+def _estimate(scene, res, out: Path, request=None) -> None:
     """Add the run's error estimate (summary key ``accuracy``) to its
-    summary and rewrite ``summary.json`` through the checked writer."""
+    summary and rewrite ``summary.json`` through the checked writer; a run
+    asked for an accuracy (``request``: :class:`cosim.cli.accuracy.Request`)
+    is checked and refined once (:mod:`cosim.studies.accurate`) first."""
     import json
 
     from cosim.io.rundir import OutputFolder
     from cosim.studies.estimate import estimate_errors
 
     res.summary["accuracy"] = estimate_errors(scene, res)
+    if request is not None:
+        res = request.check(res)
     with OutputFolder(out) as folder:
         folder.write("summary.json", lambda fh: json.dump(res.summary, fh, indent=2), "w")
+    return res
 
 
 def _default_name(scene) -> str:
@@ -136,6 +144,11 @@ def _run(args) -> int:
     from cosim.scene.load import load_scene
 
     scene = load_scene(args.scene, args.variant, args.set or (), args.scheme)
+    request = None
+    if args.accuracy is not None or "accuracy" in scene.data.get("scheme", {}):
+        from cosim.cli.accuracy import Request
+        request = Request.make(args, scene)      # the scene with the steps chosen for it
+        scene = request.scene
     made = None                 # a default folder, new: removed again if the run is refused
     if args.out:
         out = Path(args.out)
@@ -145,6 +158,9 @@ def _run(args) -> int:
         out = made = fresh_folder("runs", _default_name(scene))
     progress = _progress_line(args.quiet)
     code, crash = None, None
+    if request is not None:
+        request.run = lambda sc: simulate(sc, progress=_progress_line(args.quiet), out=out,
+                                          overwrite=True)
     try:
         res = simulate(scene, progress=progress, out=out, overwrite=args.overwrite)
     except RunInterrupted as exc:
@@ -159,9 +175,10 @@ def _run(args) -> int:
             progress.close()
         if made is not None and made.is_dir() and not any(made.iterdir()):
             made.rmdir()
-    if res.status == "finished" and scene.estimate and not args.no_estimate:
+    if res.status == "finished" and (request is not None or scene.estimate
+                                     and not args.no_estimate):
         try:
-            _estimate(scene, res, out)
+            res = _estimate(scene, res, out, request)
         except RunInterrupted as exc:      # the run is kept as it finished, without estimate
             code = _stop_code(exc.__cause__)
     _print_summary(res.summary, out, _units(scene))

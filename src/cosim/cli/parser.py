@@ -90,6 +90,11 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--no-estimate", action="store_true",
                    help="skip the error estimate (a companion run at 4x the step, about a "
                         "quarter of the run's cost; summary key `accuracy`)")
+    r.add_argument("--accuracy", type=_accuracy, metavar="X",
+                   help="choose the scheme and steps expected to meet a relative accuracy X "
+                        "(1%%, 0.5 %%, 0.01) of the strike's peak and exit velocity at the "
+                        "least CPU, check the run's estimate and refine once (default: the "
+                        "scene's scheme.accuracy)")
     r.add_argument("--quiet", action="store_true",
                    help="no progress line (it shows only on a terminal, after a second)")
     r.set_defaults(func=_cmd_run)
@@ -151,6 +156,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help="values of a scene key (TOML; commas inside [] and quotes stay); "
                          "repeatable: every combination runs")
     sw.add_argument("--scheme", help="coupling scheme of every point")
+    sw.add_argument("--accuracy", type=_accuracy, metavar="X",
+                    help="run every point with the scheme and steps the model chooses for a "
+                         "relative accuracy X (1%%, 0.01); not checked by a companion run")
     sw.add_argument("--workers", type=int, help="local processes (default: the CPUs; 1 runs "
                                                 "here); with --scheduler local, Dask workers")
     sw.add_argument("--scheduler", metavar="ADDRESS",

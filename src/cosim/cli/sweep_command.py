@@ -88,6 +88,7 @@ def _sweep_into(folder, args, study, scene, variants, grid, contact, joint, work
     try:
         with _stop_signals_interrupt() as got:
             rows = sw.sweep(scene, variants=variants or None, grid=grid, scheme=args.scheme,
+                            accuracy=args.accuracy,
                             workers=workers, scheduler=args.scheduler, out=folder,
                             retry_failed=args.retry_failed, contact=contact, joint=joint,
                             progress=bar, timeout=timeout)

@@ -81,8 +81,8 @@ class SweepInterrupted(KeyboardInterrupt):
 
 def sweep(scene, *, variants=None, grid=None, scheme: str | None = None, workers: int = 1,
           scheduler=None, out=None, retry_failed: bool = False,
-          contact: str | None = None, joint: str | None = None, progress=None, timeout: float | None = None
-          ) -> list[dict]:
+          contact: str | None = None, joint: str | None = None, progress=None, timeout: float | None = None,
+          accuracy: float | None = None) -> list[dict]:
     """Run a scene over a grid of variants and overrides; one record per point.
 
     Parameters
@@ -135,6 +135,13 @@ def sweep(scene, *, variants=None, grid=None, scheme: str | None = None, workers
         recorded with status ``timeout`` and its process stopped (on Dask its
         task is cancelled and the worker running it restarted).  With a
         timeout, even ``workers = 1`` runs the points in a child process.
+
+    accuracy : float, optional
+        A relative accuracy in (0, 1) asked of every point: each is loaded
+        with the scheme and steps the a-priori model chooses for it
+        (:func:`cosim.studies.accurate.plan`; ``scheme``, when given, the
+        only candidate).  A sweep runs no companion, so the choice is not
+        checked nor refined, as `cosim run --accuracy` does.
 
     Returns
     -------
@@ -189,6 +196,9 @@ def sweep(scene, *, variants=None, grid=None, scheme: str | None = None, workers
     from cosim.scene.shipped import find_scene
     _check_options(workers, timeout)
     scene_path = Path(find_scene(scene))
+    if accuracy is not None:
+        from cosim.scene.checks import parse_accuracy
+        accuracy = parse_accuracy(accuracy, "accuracy")
     table = read_toml_file(scene_path)      # a regular file within the limits, or refused
     hashes = FileDigests()
     try:
@@ -203,7 +213,7 @@ def sweep(scene, *, variants=None, grid=None, scheme: str | None = None, workers
     with _held(out) as folder:
         return _sweep(points, folder, scene_path, scene_hash, hashes, strikes, scheme=scheme,
                       workers=workers, scheduler=scheduler, retry_failed=retry_failed,
-                      progress=progress, timeout=timeout)
+                      progress=progress, timeout=timeout, accuracy=accuracy)
 
 
 #: most wall-clock seconds a point may be given (a `poll` wait holds 24.8 days)
@@ -270,11 +280,13 @@ def _held(out):
 
 
 def _sweep(points, folder, scene_path, scene_hash, hashes, strikes, *, scheme, workers,
-           scheduler, retry_failed, progress, timeout) -> list[dict]:
+           scheduler, retry_failed, progress, timeout, accuracy=None) -> list[dict]:
     """:func:`sweep` once its grid is made and its folder held.  Each point
     is loaded, keyed and checked against its folder only when a worker is
     free for it, so a grid of any size starts at once."""
     total = len(points)
+    # what a point's record keeps of how it was run (resume.point_key)
+    chosen = scheme if accuracy is None else f"{scheme or 'chosen'} for accuracy {accuracy:g}"
     rows: dict[int, dict] = {}
     live: dict[int, tuple] = {}         # points loaded, not ended: scene, key, note
     seen_warnings: set[str] = set()
@@ -299,11 +311,15 @@ def _sweep(points, folder, scene_path, scene_hash, hashes, strikes, *, scheme, w
                 return None
             if fd is not None:
                 os.close(fd)
-        key = point_key(p, scene_path, scheme, scene_hash)
+        key = point_key(p, scene_path, chosen, scene_hash)
         try:
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always")
-                sc = load_scene(scene_path, p.variant, p.overrides, scheme)
+                if accuracy is None:
+                    sc = load_scene(scene_path, p.variant, p.overrides, scheme)
+                else:                       # the scheme and steps chosen for the accuracy
+                    from cosim.studies.accurate import plan
+                    sc = plan(scene_path, p.variant, p.overrides, accuracy, scheme)[0]
         except SceneError as exc:
             _finish(p, key, folder, None, None, "refused", str(exc), rows, *strike)
             report(p, "refused", str(exc), False)
@@ -322,7 +338,7 @@ def _sweep(points, folder, scene_path, scene_hash, hashes, strikes, *, scheme, w
             _finish(p, key, folder, None, sc, "refused", message, rows, *strike)
             report(p, "refused", message, False)
             return None
-        key = point_key(p, scene_path, scheme, scene_hash, inputs)
+        key = point_key(p, scene_path, chosen, scene_hash, inputs)
         note = ""
         if folder is not None:
             wanted = (f"dq/{strike[1]}",) if strike[1] else ()

@@ -1,0 +1,136 @@
+"""A run on request of an accuracy: choose, run, check the estimate, refine once.
+
+``cosim run --accuracy 1%`` (or ``accuracy = 0.01`` in a scene's
+``[scheme]``) asks for a relative accuracy of the impact a study reads: the
+peak penetration of the contact :func:`cosim.studies.choose.choose` models
+and the striker's exit velocity (:func:`cosim.studies.strike.find_strike`).
+
+1. :func:`plan` asks the a-priori model (:mod:`cosim.studies.choose`) for
+   the scheme and steps expected to meet it at the least CPU, and loads the
+   scene with them;
+2. the run goes as any other, and the companion run estimates its error
+   (:mod:`cosim.studies.estimate`);
+3. :func:`verdict` compares the estimate with the accuracy asked.  Where
+   the estimate says it is not met, :func:`refined` asks the model once
+   more for the accuracy scaled by how far the estimate missed (``X * X /
+   estimate``, times the model's safety factor), and that run is the one
+   kept.  Where the estimate is not reliable (a count that differs in the
+   companion, the monolithic scheme's no companion), the request is said
+   to be unchecked, with why, and nothing is refined.
+
+What was asked, chosen, estimated and decided is the summary's
+``accuracy.request`` (:func:`request_record`).
+"""
+from __future__ import annotations
+
+import warnings
+
+__all__ = ["plan", "verdict", "refined", "request_record", "request_text", "asked"]
+
+
+def asked(scene, flag) -> tuple[float | None, str]:
+    """The accuracy a run is asked for: ``flag`` (``--accuracy``, a string
+    or a number) wins over the scene's ``scheme.accuracy``; ``(None, "")``
+    when neither gives one.  Returns ``(accuracy, where it came from)``."""
+    from cosim.scene.checks import parse_accuracy
+    if flag is not None:
+        return parse_accuracy(flag, "--accuracy"), "--accuracy"
+    table = scene.data.get("scheme", {})
+    if isinstance(table, dict) and "accuracy" in table:
+        return parse_accuracy(table["accuracy"], "scheme.accuracy"), "scheme.accuracy"
+    return None, ""
+
+
+def plan(path, variant, overrides, accuracy: float, scheme=None):
+    """The scene loaded with the scheme and steps :func:`choose` picks for
+    ``accuracy``: ``(scene, choice)``; ``scheme``, when given, is the only
+    candidate."""
+    from cosim.scene.load import load_scene
+    from cosim.studies.choose import choose
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")          # shown again when the chosen scene loads
+        first = load_scene(path, variant, list(overrides), scheme)
+    choice = choose(first, accuracy, schemes=[scheme] if scheme else None)
+    return _load(path, variant, overrides, choice), choice
+
+
+def _load(path, variant, overrides, choice):
+    from cosim.scene.load import load_scene
+    return load_scene(path, variant, list(overrides) + list(choice.overrides), choice.scheme)
+
+
+def verdict(acc: dict, choice, scene) -> tuple[float | None, str]:
+    """The estimated error of what was asked (the larger of the contact's
+    peak and the striker's exit velocity) and, when there is none, why:
+    ``(error, "")`` or ``(None, why)``."""
+    from cosim.studies.strike import find_strike
+
+    if not acc.get("reliable"):
+        return None, "; ".join(acc.get("why") or ["the estimate is not reliable"])
+    contact = choice.knob.contact
+    found = find_strike(scene, contact, None, required=False)
+    joint = found[1] if found else None
+    entries = [acc["contacts"][contact]["peak_penetration"]]
+    exits = {k: e for k, e in acc["exit"].items() if k != "at"}
+    entries += [exits[joint]] if joint in exits else list(exits.values())
+    errors = [e["relative_error"] for e in entries if e.get("relative_error") is not None]
+    if not errors:
+        return None, "no quantity of the impact was estimated"
+    return max(errors), ""
+
+
+def refined(path, variant, overrides, choice, estimated: float):
+    """The scene and choice of the one refinement: the model asked for
+    ``X * X / estimated`` (what it must aim at for the run to land on X,
+    when its prediction missed by ``estimated / X``), the scheme kept."""
+    from cosim.scene.load import load_scene
+    from cosim.studies.choose import choose
+
+    target = choice.accuracy * min(1.0, choice.accuracy / estimated)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        first = load_scene(path, variant, list(overrides), choice.scheme)
+    again = choose(first, target, choice.knob.contact, schemes=[choice.scheme])
+    return _load(path, variant, overrides, again), again
+
+
+def request_record(accuracy: float, source: str, choice, estimated, why: str,
+                   first=None) -> dict:
+    """The summary's ``accuracy.request``.
+
+    ``first`` is ``(choice, estimated)`` of the run a refinement replaced.
+    ``met`` is True or False when the estimate was reliable, else None
+    (``unchecked`` says why)."""
+    out = {"accuracy": accuracy, "from": source, "scheme": choice.scheme,
+           "overrides": list(choice.overrides), "step": choice.step,
+           "contact": choice.knob.contact, "predicted_error": dict(choice.predicted_error),
+           "why": choice.why, "caveat": choice.caveat, "estimated_error": estimated,
+           "met": None if estimated is None else bool(estimated <= accuracy),
+           "unchecked": why or None, "refined": first is not None}
+    if first is not None:
+        out["first"] = {"overrides": list(first[0].overrides), "step": first[0].step,
+                        "estimated_error": first[1]}
+    return out
+
+
+def request_text(req: dict) -> list[str]:
+    """The terminal's lines of a request."""
+    pct = f"{100 * req['accuracy']:.3g} %"
+
+    def step(x):
+        return f"rtol {x:.3g}" if req["scheme"] == "monolithic" else f"{x:.3g} s in contact"
+    lines = [f"accuracy asked {pct} ({req['from']}): {req['why']}"]
+    if req["refined"]:
+        f = req["first"]
+        lines.append(f"  the first run, at {step(f['step'])}, was estimated at "
+                     f"{100 * f['estimated_error']:.2g} %: refined once, to {step(req['step'])}")
+    if req["estimated_error"] is None:
+        lines.append(f"  not checked: {req['unchecked']}")
+    else:
+        verdict_ = "met" if req["met"] else "NOT met after one refinement" if req["refined"] \
+            else "NOT met"
+        lines.append(f"  estimated {100 * req['estimated_error']:.2g} %: {verdict_}")
+    if req["caveat"]:
+        lines.append(f"  caveat: {req['caveat']}")
+    return lines
