@@ -36,7 +36,8 @@ def test_a_run_asked_1_percent_is_chosen_estimated_and_met(tmp_path, capsys):
     assert req["refined"] is False
     text = capsys.readouterr().out
     assert "accuracy asked 1 % (--accuracy): gauss_seidel at" in text
-    assert "%: met" in text
+    assert "% on C's peak and robot/arm's exit velocity: met" in text
+    assert req["judged_on"] == "C's peak and robot/arm's exit velocity"
 
 
 def test_a_missed_estimate_is_refined_once(tmp_path, capsys):

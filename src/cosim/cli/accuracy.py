@@ -88,7 +88,7 @@ class Request:
             self.scene, self.choice, res = scene, choice, again
             estimated, why = self._verdict(res)
         res.summary["accuracy"]["request"] = request_record(
-            self.accuracy, self.source, self.choice, estimated, why, first)
+            self.accuracy, self.source, self.choice, estimated, why, first, self.scene)
         return res
 
     def _verdict(self, res):

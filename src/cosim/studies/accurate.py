@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import warnings
 
-__all__ = ["plan", "verdict", "refined", "request_record", "request_text", "asked"]
+__all__ = ["plan", "verdict", "judged", "refined", "request_record", "request_text", "asked"]
 
 
 def asked(scene, flag) -> tuple[float | None, str]:
@@ -60,10 +60,21 @@ def _load(path, variant, overrides, choice):
     return load_scene(path, variant, list(overrides) + list(choice.overrides), choice.scheme)
 
 
+def judged(choice, scene) -> str:
+    """What a request is judged on, in words: the contact's peak and the
+    striker's exit velocity (:func:`cosim.studies.strike.find_strike`)."""
+    from cosim.studies.strike import find_strike
+    contact = choice.knob.contact
+    found = find_strike(scene, contact, None, required=False) if scene is not None else None
+    joint = found[1] if found else None
+    return f"{contact}'s peak and " + (f"{joint}'s exit velocity" if joint else
+                                       "the joints' exit velocities")
+
+
 def verdict(acc: dict, choice, scene) -> tuple[float | None, str]:
     """The estimated error of what was asked (the larger of the contact's
-    peak and the striker's exit velocity) and, when there is none, why:
-    ``(error, "")`` or ``(None, why)``."""
+    peak and the striker's exit velocity, :func:`judged`) and, when there is
+    none, why: ``(error, "")`` or ``(None, why)``."""
     from cosim.studies.strike import find_strike
 
     if not acc.get("reliable"):
@@ -96,7 +107,7 @@ def refined(path, variant, overrides, choice, estimated: float):
 
 
 def request_record(accuracy: float, source: str, choice, estimated, why: str,
-                   first=None) -> dict:
+                   first=None, scene=None) -> dict:
     """The summary's ``accuracy.request``.
 
     ``first`` is ``(choice, estimated)`` of the run a refinement replaced.
@@ -104,7 +115,8 @@ def request_record(accuracy: float, source: str, choice, estimated, why: str,
     (``unchecked`` says why)."""
     out = {"accuracy": accuracy, "from": source, "scheme": choice.scheme,
            "overrides": list(choice.overrides), "step": choice.step,
-           "contact": choice.knob.contact, "predicted_error": dict(choice.predicted_error),
+           "contact": choice.knob.contact, "judged_on": judged(choice, scene),
+           "predicted_error": dict(choice.predicted_error),
            "why": choice.why, "caveat": choice.caveat, "estimated_error": estimated,
            "met": None if estimated is None else bool(estimated <= accuracy),
            "unchecked": why or None, "refined": first is not None}
@@ -130,7 +142,8 @@ def request_text(req: dict) -> list[str]:
     else:
         verdict_ = "met" if req["met"] else "NOT met after one refinement" if req["refined"] \
             else "NOT met"
-        lines.append(f"  estimated {100 * req['estimated_error']:.2g} %: {verdict_}")
+        lines.append(f"  estimated {100 * req['estimated_error']:.2g} % on {req['judged_on']}: "
+                     f"{verdict_}")
     if req["caveat"]:
         lines.append(f"  caveat: {req['caveat']}")
     return lines
