@@ -147,7 +147,8 @@ def default_run(name, variant, contact, joint, ref) -> dict:
         ctx.__exit__(None, None, None)
     act = actual(res, contact, joint, ref)
     return {"scheme": scene.scheme, "cpu_s": cpu, "count": act["count"],
-            "exit_at": acc.get("exit", {}).get("at"),
+            "exit_at": acc.get("exit", {}).get("at"), "factor": acc["factor"],
+            "coarsened": sorted(acc.get("coarsened") or {}),
             "pairs": _pairs(estimated(acc, contact, joint), act)}
 
 
@@ -183,7 +184,10 @@ def request_run(name, variant, contact, joint, ref, accuracy=ACCURACY):
             "request_estimate": r["estimated_error"], "request_met": r["met"],
             "unchecked": r["unchecked"], "cpu_s": t[-1] - t[0],
             "stages_s": {k: b - a for k, a, b in zip(STAGES, t, t[1:])},
-            "exit_at": res.summary["accuracy"].get("exit", {}).get("at"), "count": act["count"],
+            "exit_at": res.summary["accuracy"].get("exit", {}).get("at"),
+            "factor": res.summary["accuracy"]["factor"], "knob": req.choice.knob.key,
+            "coarsened": sorted(res.summary["accuracy"].get("coarsened") or {}),
+            "count": act["count"],
             "count_ref": act["count_ref"], "met": met and act["count"] == act["count_ref"],
             "pairs": _pairs(estimated(res.summary["accuracy"], contact, joint), act)}, req.choice
 
@@ -305,7 +309,7 @@ def case_label(c: dict) -> str:
 
 
 def table(data: dict) -> str:
-    """The Markdown table and totals of docs/performance.md."""
+    """The Markdown tables of docs/performance.md."""
     lines = ["| scene | default: peak est / actual | default: exit est / actual | "
              "1 %: choice | 1 %: peak est / actual | 1 %: exit est / actual | 1 % met | "
              "CPU [s]: 1 % / cheapest row | ratio |",
@@ -328,8 +332,13 @@ def table(data: dict) -> str:
         x = c["choice_over_cheapest"]
         lines.append(f"| {case_label(c)} | {r['exit_at'] or '-'} | {st} | "
                      f"{'-' if x is None else format(x, '.2g')} |")
+    return "\n".join(lines)
+
+
+def totals_text(data: dict) -> str:
+    """The totals in one line."""
     t = data["totals"]
-    lines += ["", f"Agree within {AGREE:g}x: {t['agree']} of {t['with_estimate']} pairs with "
+    lines = [f"Agree within {AGREE:g}x: {t['agree']} of {t['with_estimate']} pairs with "
               f"an estimate ({t['without_estimate']} of {t['pairs']} without one). 1 % met on "
               f"{t['met']} of {t['cases']}. CPU within {CPU_TARGET}x of the cheapest bench row "
               f"on {t['cpu_within_target']} of {t['cases'] - t['no_bench_row']} (median "
@@ -345,7 +354,8 @@ def main(argv=None) -> int:
     ap.add_argument("--table", metavar="DIR", help="print the table of a finished run")
     args = ap.parse_args(argv)
     if args.table:
-        print(table(json.loads((Path(args.table) / "validation.json").read_text())))
+        data = json.loads((Path(args.table) / "validation.json").read_text())
+        print(table(data) + "\n\n" + totals_text(data))
         return 0
     from cosim.io.rundir import OutputFolder
     data = {"machine": f"{platform.machine()}, Python {platform.python_version()}",
@@ -358,7 +368,7 @@ def main(argv=None) -> int:
                   f" met {c['request']['met']} ratio {c['cpu_ratio']}", flush=True)
             data["totals"] = totals(data["cases"])
             folder.write("validation.json", lambda fh: json.dump(data, fh, indent=1), "w")
-    print(table(data))
+    print(table(data) + "\n\n" + totals_text(data))
     return 0
 
 
