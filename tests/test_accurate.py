@@ -2,10 +2,11 @@
 choice (cosim.studies.choose), the run, the companion's estimate
 (cosim.studies.estimate), and one refinement where the estimate misses.
 
-The estimates these tests meet are far from the thresholds they decide
-(three_mass f10's first run is estimated at 1.4 % against 1 %, its refined
-run at 0.6 %), so the verdicts hold under round-off; the choice itself is
-shown monotonic under ulp perturbations in tests/test_choose.py.
+The verdicts these tests read are far from their thresholds (a first run
+estimated at 1.8 % against 1 %), or checked for consistency with the
+estimate rather than for their value, so they hold under round-off; the
+choice itself is shown monotonic under ulp perturbations in
+tests/test_choose.py.
 """
 import json
 
@@ -31,7 +32,12 @@ def test_a_run_asked_1_percent_is_chosen_estimated_and_met(tmp_path, capsys):
         (0.01, "--accuracy", "gauss_seidel", "C")
     assert f"scheme.contact_step={req['step']!r}" in req["overrides"] or any(
         o.endswith(f"={req['step']!r}") for o in req["overrides"])
-    assert acc["factor"] == 2 and acc["reliable"]
+    assert acc["factor"] == 2
+    # what the request is judged on is estimated (A and B, which the robot's own step
+    # resolves at omega h = 0.3 in both runs, are not: they do not decide it)
+    assert acc["contacts"]["C"]["peak_penetration"]["reliable"]
+    assert acc["exit"]["robot/arm"]["reliable"]
+    assert not acc["contacts"]["A"]["peak_penetration"]["reliable"]
     assert req["met"] is True and req["estimated_error"] <= 0.01
     assert req["refined"] is False
     text = capsys.readouterr().out
@@ -40,23 +46,59 @@ def test_a_run_asked_1_percent_is_chosen_estimated_and_met(tmp_path, capsys):
     assert req["judged_on"] == "C's peak and robot/arm's exit velocity"
 
 
-def test_a_missed_estimate_is_refined_once(tmp_path, capsys):
-    """three_mass f10: the first run's estimate misses 1 % (1.4 %); the model
-    is asked again for 1 % x 1 % / 1.4 %, a shorter step, and that run,
-    estimated below 1 %, is the one kept in the folder."""
+def test_a_missed_estimate_is_refined_once(tmp_path, capsys, monkeypatch):
+    """A model three times too optimistic for Gauss-Seidel (three_mass f1000):
+    the first run's estimate misses 1 % (1.8 %), the model is asked again for
+    1 % x 1 % / 1.8 %, a shorter step, and that run is the one kept; the
+    request says whether it met 1 % as its own estimate says."""
+    from cosim.studies import choose
+    key = ("exchanged", "gauss_seidel")
+    monkeypatch.setitem(choose.MODEL, key, {q: (a / 3, p, f)
+                                            for q, (a, p, f) in choose.MODEL[key].items()})
     out = tmp_path / "run"
-    assert cli.main(["run", str(CASES / "three_mass.toml"), "--variant", "f10",
+    assert cli.main(["run", str(CASES / "three_mass.toml"), "--variant", "f1000",
                      "--accuracy", "0.01", "--out", str(out), "--quiet"]) == 0
-    s = _summary(out)
-    req = s["accuracy"]["request"]
+    req = _summary(out)["accuracy"]["request"]
     assert req["refined"] is True
     assert req["first"]["estimated_error"] > 0.01
     assert req["step"] < req["first"]["step"]
-    assert req["met"] is True and req["estimated_error"] <= 0.01
+    assert req["met"] is (req["estimated_error"] <= 0.01)
     # the folder holds the refined run: its scene file has the refined step
-    assert f"{req['step']!r}" in (out / "scene.toml").read_text() or \
-        f"{req['step']:g}" in (out / "scene.toml").read_text()
-    assert "refined once, to" in capsys.readouterr().out
+    assert f"contact_step = {req['step']!r}" in (out / "scene.toml").read_text() or \
+        f"{req['step']!r}" in (out / "scene.toml").read_text()
+    text = capsys.readouterr().out
+    assert "refined once, to" in text
+    assert ("NOT met after one refinement" in text) is (not req["met"])
+
+
+def test_a_contact_its_host_steps_coarsely_in_the_companion_is_not_checked(tmp_path):
+    """spring_drop at 1 %: the model's step is the body's own RK4 step at
+    omega h = 0.32, which 4x would take past 0.5: it stays in the companion,
+    which then cannot see the wall's error, and the request says so."""
+    out = tmp_path / "run"
+    assert cli.main(["run", str(CASES / "spring_drop.toml"), "--accuracy", "1%",
+                     "--out", str(out), "--quiet"]) == 0
+    acc = _summary(out)["accuracy"]
+    assert acc["contacts"]["wall"]["peak_penetration"]["reliable"] is False
+    assert acc["request"]["met"] is None
+    assert "steps contact wall at the same step in the companion" in acc["request"]["unchecked"]
+
+
+def test_the_exit_rate_is_read_at_the_strikes_release():
+    """three_mass: the bench reads the arm's rate at C's last release, not at
+    A's, which releases last."""
+    import warnings
+    from cosim.scene.load import load_scene
+    from cosim.scene.run import simulate
+    from cosim.studies.estimate import estimate_errors
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        scene = load_scene(CASES / "three_mass.toml", "f100")
+        res = simulate(scene)
+        acc = estimate_errors(scene, res)
+    t_off = res.summary["contacts"]["C"]["intervals"][-1][1]
+    assert acc["exit"]["at"] == f"release of C at {t_off:.6g} s"
+    assert res.summary["contacts"]["A"]["intervals"][-1][1] > t_off
 
 
 def test_the_scenes_scheme_accuracy_asks_too_and_the_flag_wins(tmp_path):
@@ -70,7 +112,6 @@ def test_the_scenes_scheme_accuracy_asks_too_and_the_flag_wins(tmp_path):
                      "--accuracy", "5%", "--out", str(out), "--quiet"]) == 0
     req = _summary(out)["accuracy"]["request"]
     assert (req["accuracy"], req["from"]) == (0.05, "--accuracy")
-    assert req["met"] is True
 
 
 def test_an_accuracy_without_the_estimate_is_refused(tmp_path, capsys):
@@ -85,7 +126,7 @@ def test_an_unreliable_estimate_leaves_the_request_unchecked():
     from cosim.studies.accurate import request_record, request_text, verdict
 
     class Knob:
-        contact = "C"
+        contact, grasp = "C", False
 
     class Choice:
         knob, scheme, overrides, step, why, caveat = Knob(), "gauss_seidel", (), 3e-5, "w", None

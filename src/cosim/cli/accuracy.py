@@ -64,6 +64,12 @@ class Request:
         chosen, choice = plan(args.scene, args.variant, args.set or (), accuracy, scheme)
         return cls(args, accuracy, source, chosen, choice)
 
+    @property
+    def contact(self) -> str:
+        """The contact the accuracy is asked of (the exit rates are read at
+        its last release)."""
+        return self.choice.knob.contact
+
     def check(self, res):
         """The run ``res`` (its summary's ``accuracy`` estimated) checked,
         and refined once when the estimate misses: the run kept, its summary
@@ -84,7 +90,7 @@ class Request:
             if not again.success:
                 raise SimulationError(f"the refined run did not finish ({again.status}): "
                                       f"{again.message}")
-            again.summary["accuracy"] = estimate_errors(scene, again)
+            again.summary["accuracy"] = estimate_errors(scene, again, contact=self.contact)
             self.scene, self.choice, res = scene, choice, again
             estimated, why = self._verdict(res)
         res.summary["accuracy"]["request"] = request_record(
@@ -94,17 +100,18 @@ class Request:
     def _verdict(self, res):
         """:func:`cosim.studies.accurate.verdict` of ``res``; where the
         companion at 4x the step closed a contact another number of times,
-        a second one at 2x the step (half the run's cost, paid only then)
-        gives the estimate, which replaces the summary's ``accuracy``."""
+        or did not finish (a step that long is unstable), a second one at 2x
+        the step (half the run's cost, paid only then) gives the estimate,
+        which replaces the summary's ``accuracy``."""
         from cosim.studies.accurate import verdict
         from cosim.studies.estimate import estimate_errors
 
         acc = res.summary["accuracy"]
         estimated, why = verdict(acc, self.choice, self.scene)
         counts = [c["count"]["robust"] for c in acc["contacts"].values()]
-        if estimated is None and acc["companion"].get("status") == "finished" \
-                and not all(counts):
-            closer = estimate_errors(self.scene, res, factor=2)
+        failed = acc["companion"].get("status") not in ("finished", "not run")
+        if estimated is None and not self.choice.knob.grasp and (failed or not all(counts)):
+            closer = estimate_errors(self.scene, res, factor=2, contact=self.contact)
             estimated, why2 = verdict(closer, self.choice, self.scene)
             if estimated is not None:
                 res.summary["accuracy"] = closer

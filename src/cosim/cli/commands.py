@@ -104,7 +104,7 @@ def _estimate(scene, res, out: Path, request=None) -> None:
     from cosim.io.rundir import OutputFolder
     from cosim.studies.estimate import estimate_errors
 
-    res.summary["accuracy"] = estimate_errors(scene, res)
+    res.summary["accuracy"] = estimate_errors(scene, res, contact=request and request.contact)
     if request is not None:
         res = request.check(res)
     with OutputFolder(out) as folder:

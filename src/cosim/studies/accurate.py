@@ -77,18 +77,24 @@ def verdict(acc: dict, choice, scene) -> tuple[float | None, str]:
     none, why: ``(error, "")`` or ``(None, why)``."""
     from cosim.studies.strike import find_strike
 
-    if not acc.get("reliable"):
-        return None, "; ".join(acc.get("why") or ["the estimate is not reliable"])
+    if choice.knob.grasp:
+        return None, (f"`{choice.knob.contact}` is a grasp, whose estimate was not validated: "
+                      f"on brachiation every run and its companion closed it 2 times, the fine "
+                      f"reference 3 (docs/performance.md)")
     contact = choice.knob.contact
+    if contact not in acc.get("contacts", {}):
+        return None, "; ".join(acc.get("why") or ["the estimate is not reliable"])
     found = find_strike(scene, contact, None, required=False)
     joint = found[1] if found else None
     entries = [acc["contacts"][contact]["peak_penetration"]]
     exits = {k: e for k, e in acc["exit"].items() if k != "at"}
     entries += [exits[joint]] if joint in exits else list(exits.values())
-    errors = [e["relative_error"] for e in entries if e.get("relative_error") is not None]
-    if not errors:
-        return None, "no quantity of the impact was estimated"
-    return max(errors), ""
+    # only what was asked: another contact's estimate (one the companion cannot see) does
+    # not decide the request
+    bad = [e.get("why") or "not estimated" for e in entries if not e.get("reliable")]
+    if bad or not entries:
+        return None, bad[0] if bad else "no quantity of the impact was estimated"
+    return max(e["relative_error"] for e in entries), ""
 
 
 def refined(path, variant, overrides, choice, estimated: float):

@@ -88,7 +88,7 @@ MONOLITHIC = ("not estimated for the monolithic scheme: a coarser tolerance save
 _CONTACT_QUANTITIES = ("peak_penetration", "impulse", "t_on", "t_off")
 
 
-def coarsened(scene, factor: float):
+def coarsened(scene, factor: float, kept: list | None = None):
     """A copy of ``scene`` whose accuracy-setting steps are ``factor`` times
     longer (see the module), and the keys changed (key path -> new value).
 
@@ -97,6 +97,11 @@ def coarsened(scene, factor: float):
     scene : Scene
     factor : float
         > 1.
+    kept : list, optional
+        Filled with the contacts whose error the companion does not see: a
+        contact hosted by a side whose own step stays (a contact it hosts
+        would pass omega h = :data:`OMEGA_H_MAX`), where that step resolves
+        the contact itself coarsely (omega h > :data:`UNSEEN_OMEGA_H`).
 
     Returns
     -------
@@ -126,12 +131,16 @@ def coarsened(scene, factor: float):
         own["interface_tolerance"] = min(tol * factor ** (spec.options.get(
             "extrapolation_order", 0) + 2), 0.5)
         changed[f"scheme.{spec.name}.interface_tolerance"] = own["interface_tolerance"]
-    for side, ok in _coarsenable_sides(scene, factor).values():
+    omega_h: dict = {}
+    for side, ok in _coarsenable_sides(scene, factor, omega_h).values():
         sd = data["subsystems"][side.name]
         integ = sd.get("integrator")
         integ = sd["integrator"] = dict(integ) if isinstance(integ, dict) else (
             {"method": integ} if isinstance(integ, str) else {})
         if not ok:
+            if kept is not None:          # the contacts it resolves coarsely: not seen
+                kept.extend(c for c, (host, wh) in omega_h.items()
+                            if host == side.name and wh > UNSEEN_OMEGA_H)
             continue
         if isinstance(side, MultibodySpec):
             integ["max_step"] = (side.max_step or spec.default_step) * factor
@@ -155,7 +164,13 @@ def coarsened(scene, factor: float):
 OMEGA_H_MAX = 0.5
 
 
-def _coarsenable_sides(scene, factor: float) -> dict:
+#: the omega h [rad] above which a contact's error from its host's RK4 step,
+#: when that step stays in the companion, is not negligible: RK4's phase
+#: error per period is about (omega h)**4 / 120, 1e-6 at 0.1
+UNSEEN_OMEGA_H = 0.1
+
+
+def _coarsenable_sides(scene, factor: float, omega_h: dict | None = None) -> dict:
     """The sides whose own step sets the accuracy of a contact they host
     (a multibody side under ``rk4``, a structure that steps its closed
     contacts with ``contact_step``): name -> (spec, whether ``factor`` times
@@ -193,6 +208,8 @@ def _coarsenable_sides(scene, factor: float) -> dict:
         k = stiffest_normal(ln)[0]
         w = math.sqrt(k * mob) if math.isfinite(k) and mob > 0 else math.inf
         omega[host] = max(omega[host], w)
+        if omega_h is not None:           # the contact's own omega h at the run's step
+            omega_h[ln.contact.name] = (host, w * steps[host][1])
     return {name: (side, omega[name] * factor * h <= OMEGA_H_MAX)
             for name, (side, h) in steps.items()}
 
@@ -215,14 +232,18 @@ def _contact_values(summary: dict) -> dict:
     return out
 
 
-def exit_rates(result, multibody) -> tuple[dict, str]:
-    """Each multibody joint's rate at the last release of the last contact
-    that releases (``SUBSYSTEM/JOINT`` -> [rad/s or m/s]), and what that
-    instant is (``"release of C at T s"`` or ``"end of the run"``);
-    ``multibody``: the names of the multibody subsystems."""
+def exit_rates(result, multibody, contact: str | None = None) -> tuple[dict, str]:
+    """Each multibody joint's rate at the last release of ``contact`` (the
+    strike the bench reads, :func:`cosim.studies.strike.find_strike`), or,
+    without one, of the last contact that releases (``SUBSYSTEM/JOINT`` ->
+    [rad/s or m/s]), and what that instant is (``"release of C at T s"`` or
+    ``"end of the run"``); ``multibody``: the names of the multibody
+    subsystems."""
     t = result.series["t"]
     last = None
     for name, c in result.summary["contacts"].items():
+        if contact is not None and name != contact:
+            continue
         if c["intervals"] and c["intervals"][-1][1] < t[-1]:
             t_off = float(c["intervals"][-1][1])
             if last is None or t_off > last[1]:
@@ -284,7 +305,21 @@ def counted_share(result, companion) -> float:
     return work(companion) / work(result)
 
 
-def estimate_errors(scene, result, factor: float = DEFAULT_FACTOR) -> dict:
+def _hosts(scene) -> dict:
+    """Contact -> the side whose integrator evaluates it (an embedded
+    contact: its ``host``, or the side that is not rigid)."""
+    kinds = {s.name: s.type for s in scene.subsystems}
+    out = {}
+    for c in scene.contacts:
+        if c.placement != "embedded":
+            continue
+        sides = (c.a[0], c.b[0])
+        out[c.name] = c.host or next((n for n in sides if kinds[n] != "rigid"), None)
+    return out
+
+
+def estimate_errors(scene, result, factor: float = DEFAULT_FACTOR,
+                    contact: str | None = None) -> dict:
     """Estimate the errors of ``result``, a finished run of ``scene``.
 
     Parameters
@@ -295,6 +330,10 @@ def estimate_errors(scene, result, factor: float = DEFAULT_FACTOR) -> dict:
         The run's result (its ``series`` are read).
     factor : float
         How many times longer the companion's steps are (> 1).
+    contact : str, optional
+        The contact at whose last release the exit rates are read (default:
+        the scene's strike, :func:`cosim.studies.strike.find_strike`, else
+        the contact that releases last).
 
     Returns
     -------
@@ -319,12 +358,13 @@ def estimate_errors(scene, result, factor: float = DEFAULT_FACTOR) -> dict:
            "order_source": source, "coarsened": {}, "companion": {}, "work_share": None,
            "contacts": {}, "exit": {}, "why": []}
     comp = None
+    kept: list = []                   # contacts the companion cannot see (coarsened fills it)
     if scene.scheme == "monolithic":
         acc["companion"] = {"status": "not run", "message": MONOLITHIC}
         acc["why"].append(MONOLITHIC)
     else:
         try:
-            comp_scene, acc["coarsened"] = coarsened(scene, factor)
+            comp_scene, acc["coarsened"] = coarsened(scene, factor, kept)
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 comp = run.simulate(comp_scene)
@@ -344,6 +384,12 @@ def estimate_errors(scene, result, factor: float = DEFAULT_FACTOR) -> dict:
         if not comp.success:         # the guard's reason (energy growth, chatter), short
             reason = comp.message.split(": ", 1)[-1].split(";")[0].split(" (")[0]
             acc["why"].append(f"the companion {comp.status}: {reason}"[:160])
+    # what a side whose step stayed integrates: the companion does not see its error
+    hosts = _hosts(scene)
+    unseen = {c: (f"`{hosts.get(c)}` steps contact {c} at the same step in the companion (4x "
+                  f"would take a contact it hosts past omega h = {OMEGA_H_MAX}), and that step "
+                  f"resolves {c} coarsely (omega h > {UNSEEN_OMEGA_H}): its error is not seen")
+              for c in kept}
     mine = _contact_values(result.summary)
     theirs = _contact_values(comp.summary) if comp is not None and comp.success else {}
     stopped = None if theirs else (acc["why"][0] if acc["why"] else
@@ -358,19 +404,24 @@ def estimate_errors(scene, result, factor: float = DEFAULT_FACTOR) -> dict:
         if why is None and not count["robust"]:
             why = f"contact {name} closed {v['count']} times, {o.get('count')} in the companion"
             differ.append(why)
+        why = why or unseen.get(name)
         for q in _CONTACT_QUANTITIES:
             entry[q] = _judge(v[q], o.get(q, math.nan), factor, p, why)
         acc["contacts"][name] = entry
     from cosim.scene.specs import MultibodySpec
     multibody = {s.name for s in scene.subsystems if isinstance(s, MultibodySpec)}
-    rates, at = exit_rates(result, multibody)
+    if contact is None:
+        from cosim.studies.strike import find_strike
+        found = find_strike(scene, required=False)
+        contact = found[0] if found else None
+    rates, at = exit_rates(result, multibody, contact)
     acc["exit"]["at"] = at
     if theirs:
-        crates = exit_rates(comp, multibody)[0]
+        crates = exit_rates(comp, multibody, contact)[0]
     else:
         crates = {}
     for joint, value in rates.items():
-        why = stopped or (differ[0] if differ else None)
+        why = stopped or (differ[0] if differ else None) or unseen.get(contact)
         acc["exit"][joint] = _judge(value, crates.get(joint, math.nan), factor, p, why)
     acc["why"] += differ
     entries = [e for c in acc["contacts"].values() for k, e in c.items() if k != "count"
