@@ -1119,7 +1119,7 @@ def test_the_summary_keys_are_the_pages(tmp_path):
     res = simulate(load(THREE_MASS, "f100"))
     cosim.write_outputs(res, tmp_path / "run", load(THREE_MASS, "f100"))
     s = json.loads((tmp_path / "run" / "summary.json").read_text())
-    text = _section(CM, "`summary.json` has", "`series.npz` holds")
+    text = _section(CM, "`summary.json` has", "`accuracy` (left out")
     named = set(re.findall(r"(?<!\})`([a-z_]+)`", text))      # not a {doc}`page`
     if "`final_state.SUBSYSTEM.JOINT.{q,dq}`" in text:
         named.add("final_state")
@@ -1137,6 +1137,21 @@ def test_the_summary_keys_are_the_pages(tmp_path):
     listed = {re.sub(r"/.*", "/", k) if "/" in k and not k.startswith("energy/") else k
               for k in re.findall(r"`([a-z]+(?:/[A-Za-z/]+)?)`", series)}
     assert kinds == listed, (sorted(kinds), sorted(listed))
+
+
+def test_the_accuracy_keys_are_on_the_page():
+    """Every key of a run's error estimate (summary key `accuracy`, which
+    `cosim run` adds) is named in the page's paragraph on it."""
+    from cosim.studies.estimate import estimate_errors
+    scene = load(THREE_MASS, "f100")
+    acc = estimate_errors(scene, simulate(scene))
+    text = _section(CM, "`accuracy` (left out", "`series.npz` holds")
+    named = set(re.findall(r"`([a-z_]+)[`.]", text))             # `contacts.NAME` too
+    keys = set(acc) | set(acc["companion"]) | set(acc["work_share"]) | set(acc["exit"])
+    keys |= set(acc["contacts"]["C"]) | set(acc["contacts"]["C"]["count"])
+    keys |= set(acc["contacts"]["C"]["peak_penetration"])
+    keys = {k for k in keys if "/" not in k}                 # SUBSYSTEM/JOINT, not a key
+    assert keys <= named, f"not on the page: {sorted(keys - named)}"
 
 
 LOCATED_PEAK = Claim(CM, "spring_drop at macro steps from\n0.1 ms to 5 ms gives v0 sqrt(m/k) to 1e-6",

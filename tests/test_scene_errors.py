@@ -289,7 +289,7 @@ CASES_BAD = [
     (["output.every=0"], at("output.every", "must be >= 1, got 0")),
     (["output.every=1.5"], at("output.every", "must be an integer, got a number 1.5")),
     (["output.format=csv"], at("output.format", "is not a known key of output; "
-                                                "known keys are ['every', 'export', "
+                                                "known keys are ['estimate', 'every', 'export', "
                                                 "'export_every']")),
     (["effects.gravity=0"], at("effects.gravity", "must be > 0 m/s^2, got 0.0")),
     (["effects.gravity=down"], at("effects.gravity", "must be a number [m/s^2], "
