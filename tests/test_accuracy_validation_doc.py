@@ -121,20 +121,20 @@ def _pct(x):
 def test_what_the_page_says_dominates_the_misses(data, section):
     text, t = _flat(section), data["totals"]
     assert f"(it is {round(100 * t['agree'] / t['with_estimate'])} %)" in text
-    other = [c for c in data["cases"]
-             if not c["request"]["exit_at"].startswith(f"release of {c['contact']} ")]
-    assert {c["scene"] for c in other} == {"three_mass", "ground_multicontact"}
-    assert f"On {len(other)} of the 8 scenes (three_mass and ground_multicontact)" in text
-    f1 = next(c for c in data["cases"] if c["variant"] == "f1")["request"]
-    assert f1["refined"] and f1["met"] and f1["request_met"] is False
-    assert (f"(estimated {_pct(f1['request_estimate'])}, actual "
-            f"{_pct(f1['pairs']['exit_velocity']['actual'])})") in text
+    # every estimate reads the exit velocity at the strike contact's release, as the bench
+    assert all(c[run]["exit_at"].startswith(f"release of {c['contact']} ")
+               for c in data["cases"] for run in ("request",))
+    f1 = next(c for c in data["cases"] if c["variant"] == "f1")
+    off = [max(p["estimated"] / p["actual"], p["actual"] / p["estimated"])
+           for run in ("default", "request") for p in f1[run]["pairs"].values()
+           if p["agrees"] is False]
+    assert f"On f1 {len(off)} of its 4 pairs lie {min(off):.1f}x to {max(off):.1f}x off" in text
     rk = [_case(data, s)["request"] for s in ("spring_drop", "ground_multicontact")]
     for r in rk:
         assert r["knob"].endswith("integrator.max_step") and r["knob"] not in r["coarsened"]
-        assert r["pairs"]["peak"]["estimated"] < 1e-8 < r["pairs"]["peak"]["actual"]
-    assert ("while the actual errors are " + " and ".join(
-        f"{100 * r['pairs']['peak']['actual']:.2g} %" for r in rk)) in text
+        assert r["request_met"] is None and "at the same step in the companion" in r["unchecked"]
+        assert all(p["estimated"] is None for p in r["pairs"].values())
+    assert "the companion keeps it and cannot see the contact's error" in text
 
 
 def test_the_train_and_the_grasp_the_page_names(data, section):
@@ -148,9 +148,8 @@ def test_the_train_and_the_grasp_the_page_names(data, section):
     b = _case(data, "brachiation")
     r = b["request"]
     assert (r["count"], b["reference"]["count"]) == (2, 3) and not r["met"]
-    assert r["request_met"] and b["cheapest"] is None
-    assert (f"the request's estimate says met ({_pct(r['request_estimate'])}), the actual "
-            f"exit-velocity error is {_pct(r['pairs']['exit_velocity']['actual'])}") in text
+    assert r["request_met"] is None and "is a grasp" in r["unchecked"] and b["cheapest"] is None
+    assert "says it is not checked (a grasp) instead of met" in text
 
 
 def test_where_the_cpu_goes(data, section):
@@ -163,5 +162,3 @@ def test_where_the_cpu_goes(data, section):
         s = c["request"]["stages_s"]
         assert s["plan"] + s["estimate"] + s["check"] > s["run"], c["scene"]
     assert "On every scene that work costs more CPU than the run" in text
-    refined = {c["variant"] for c in data["cases"] if c["request"]["refined"]}
-    assert refined == {"f1", "f10"} and "on f1 and f10 the refinement" in text
