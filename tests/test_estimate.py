@@ -220,3 +220,15 @@ def test_a_companion_the_guard_stops_makes_nothing_reliable_and_says_why(ulps):
     assert all(e["relative_error"] is None for c in acc["contacts"].values()
                for k, e in c.items() if k != "count")
     assert "%" not in accuracy_text(acc)
+
+
+def test_the_line_gives_what_was_estimated_and_names_what_was_not():
+    """three_mass f100: C and the exit rates are estimated; A and B, which the
+    robot's own step resolves at omega h = 0.3 in both runs, are named
+    without a number."""
+    scene, res = _run("three_mass", "f100")
+    acc = estimate_errors(scene, res)
+    line = accuracy_text(acc)
+    assert "C peak " in line and "exit robot/" in line
+    assert "not estimated: A, B (`robot` steps contact A at the same step" in line
+    assert "A peak" not in line and "B peak" not in line

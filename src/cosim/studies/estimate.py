@@ -98,7 +98,9 @@ def coarsened(scene, factor: float, kept: list | None = None):
     factor : float
         > 1.
     kept : list, optional
-        Filled with the contacts whose error the companion does not see: a
+        Filled with ``(contact, omega h)`` of the contacts whose error the
+        companion does not see (omega h infinite: a law without a linear
+        stiffness, which cannot be judged): a
         contact hosted by a side whose own step stays (a contact it hosts
         would pass omega h = :data:`OMEGA_H_MAX`), where that step resolves
         the contact itself coarsely (omega h > :data:`UNSEEN_OMEGA_H`).
@@ -139,7 +141,7 @@ def coarsened(scene, factor: float, kept: list | None = None):
             {"method": integ} if isinstance(integ, str) else {})
         if not ok:
             if kept is not None:          # the contacts it resolves coarsely: not seen
-                kept.extend(c for c, (host, wh) in omega_h.items()
+                kept.extend((c, wh) for c, (host, wh) in omega_h.items()
                             if host == side.name and wh > UNSEEN_OMEGA_H)
             continue
         if isinstance(side, MultibodySpec):
@@ -388,8 +390,11 @@ def estimate_errors(scene, result, factor: float = DEFAULT_FACTOR,
     hosts = _hosts(scene)
     unseen = {c: (f"`{hosts.get(c)}` steps contact {c} at the same step in the companion (4x "
                   f"would take a contact it hosts past omega h = {OMEGA_H_MAX}), and that step "
-                  f"resolves {c} coarsely (omega h > {UNSEEN_OMEGA_H}): its error is not seen")
-              for c in kept}
+                  f"resolves {c} coarsely (omega h > {UNSEEN_OMEGA_H}): its error is not seen"
+                  if math.isfinite(wh) else
+                  f"`{hosts.get(c)}` keeps its step in the companion, as {c}'s law has no "
+                  f"linear stiffness to tell the omega h of a longer one: {c}'s error is not "
+                  f"seen") for c, wh in kept}
     mine = _contact_values(result.summary)
     theirs = _contact_values(comp.summary) if comp is not None and comp.success else {}
     stopped = None if theirs else (acc["why"][0] if acc["why"] else
@@ -440,23 +445,33 @@ def _pct(x: float) -> str:
 
 
 def accuracy_text(acc: dict) -> str:
-    """The terminal's line: the estimates that are reliable, and no number
-    for one that is not."""
+    """The terminal's line: the estimates that are reliable, no number for
+    one that is not, and why (the first reason, the rest in summary.json)."""
     steps = ", ".join(f"{k.rsplit('.', 1)[-1]} {v:.3g}" for k, v in acc["coarsened"].items())
     head = f"accuracy (companion at {acc['factor']:g}x the step: {steps})"
     if acc["companion"].get("status") == "not run":
         return f"accuracy: {acc['companion']['message']}"
-    if not acc["reliable"]:
-        return f"accuracy: not reliable ({'; '.join(acc['why']) or 'see summary.json'})"
-    parts = []
+    parts, missing = [], []
     for name, c in acc["contacts"].items():
         if c["count"]["value"] == 0:
             continue
-        parts.append(f"{name} peak {_pct(c['peak_penetration']['relative_error'])}, "
-                     f"impulse {_pct(c['impulse']['relative_error'])}")
-    exits = [(k, e) for k, e in acc["exit"].items() if k != "at"]
+        pk, im = c["peak_penetration"], c["impulse"]
+        if pk["reliable"] and im["reliable"]:
+            parts.append(f"{name} peak {_pct(pk['relative_error'])}, "
+                         f"impulse {_pct(im['relative_error'])}")
+        else:
+            missing.append(name)
+    exits = [(k, e) for k, e in acc["exit"].items() if k != "at" and e["reliable"]]
     if exits:
         k, e = max(exits, key=lambda ke: ke[1]["relative_error"])
         parts.append(f"exit {k} {_pct(e['relative_error'])}" + (
             f" (worst of {len(exits)} joints)" if len(exits) > 1 else ""))
-    return f"{head}: {'; '.join(parts)}; counts robust"
+    elif any(k != "at" for k in acc["exit"]):
+        missing.append("exit")
+    why = "; ".join(acc["why"]) or "see summary.json"
+    if not parts:
+        return f"accuracy: not reliable ({why})"
+    if acc["reliable"]:
+        return f"{head}: {'; '.join(parts)}; counts robust"
+    return (f"{head}: {'; '.join(parts)}; not estimated: {', '.join(missing) or 'counts'} "
+            f"({acc['why'][0] if acc['why'] else 'see summary.json'})")
