@@ -61,7 +61,8 @@ class Request:
                              f"asks for an accuracy ({source}), which is checked against the "
                              f"run's error estimate: it cannot go with --no-estimate")
         scheme = args.scheme if args.scheme else None
-        chosen, choice = plan(args.scene, args.variant, args.set or (), accuracy, scheme)
+        chosen, choice = plan(args.scene, args.variant, args.set or (), accuracy, scheme,
+                              first=scene)
         return cls(args, accuracy, source, chosen, choice)
 
     @property

@@ -230,11 +230,9 @@ def _cmd_info(args) -> int:
         return _list_scenes(args)
     scene = load_scene(args.scene, args.variant, args.set or ())
     info = scene_info(scene, run_fmu=args.run_fmu)
-    accuracy, source = args.accuracy, "--accuracy"
-    if accuracy is None and "accuracy" in scene.data.get("scheme", {}):
-        from cosim.scene.checks import parse_accuracy
-        accuracy, source = parse_accuracy(scene.data["scheme"]["accuracy"]), "scheme.accuracy"
-    if accuracy is not None:
+    if args.accuracy is not None or "accuracy" in scene.data.get("scheme", {}):
+        from cosim.studies.accurate import asked
+        accuracy, source = asked(scene, args.accuracy)
         from cosim.studies.choose import choose
         info["accuracy"] = {"from": source, **choose(scene, accuracy).as_dict()}
     if args.json:

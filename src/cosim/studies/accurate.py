@@ -41,16 +41,17 @@ def asked(scene, flag) -> tuple[float | None, str]:
     return None, ""
 
 
-def plan(path, variant, overrides, accuracy: float, scheme=None):
+def plan(path, variant, overrides, accuracy: float, scheme=None, first=None):
     """The scene loaded with the scheme and steps :func:`choose` picks for
     ``accuracy``: ``(scene, choice)``; ``scheme``, when given, is the only
-    candidate."""
+    candidate; ``first``: the scene as given, when the caller loaded it."""
     from cosim.scene.load import load_scene
     from cosim.studies.choose import choose
 
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")          # shown again when the chosen scene loads
-        first = load_scene(path, variant, list(overrides), scheme)
+    if first is None:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")      # shown again when the chosen scene loads
+            first = load_scene(path, variant, list(overrides), scheme)
     choice = choose(first, accuracy, schemes=[scheme] if scheme else None)
     return _load(path, variant, overrides, choice), choice
 
