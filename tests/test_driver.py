@@ -76,6 +76,11 @@ EXTRA = [
     ("three_mass", "f10", ('scheme.name="jacobi"',)),
     ("three_mass", "f10", ("scheme.extrapolation_order=0",)),
     ("three_mass", "f10", ("scheme.extrapolation_order=2",)),
+    # a predicted onset that shortens the step only within its horizon
+    ("three_mass", "f100", ("scheme.approach_horizon=5e-4",)),
+    ("spring_drop", "undamped", ('contacts.wall.placement="coupler"', "scheme.macro_step=1e-3",
+                                 "scheme.contact_step=1.25e-5", "scheme.accept_unsafe_step=true",
+                                 "scheme.approach_horizon=1e-4")),
     # a structure step the compiled kernel stalls in, taken by the reference
     ("three_mass", "f100", ("scheme.contact_step=1e-4", "scheme.accept_unsafe_step=true")),
     # a contact exchanged between two moving sides

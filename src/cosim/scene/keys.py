@@ -52,6 +52,8 @@ SCHEME_OPTIONS = {
     "max_energy_gain": "energy an exchange may create, relative, before the step is refined",
     "accept_unsafe_step": "run a macro step the pre-flight check finds too long",
     "contact_step": "a shorter macro step while a coupler contact is closed",
+    "approach_horizon": "how far ahead a coupler contact predicted to close shortens the "
+                        "step to `contact_step` (default: `macro_step`)",
     "interface_tolerance": "refine the step while the interface error estimate exceeds this",
     "substeps": "sub-steps per macro step of each named subsystem (multirate)",
     "sequence": "the order in which Gauss-Seidel advances the moving subsystems",

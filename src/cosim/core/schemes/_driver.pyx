@@ -52,7 +52,7 @@ cdef class Driver:
     cdef object system, subs, laws, hosted_embs, step_input
     cdef int nsub, nports, nc, nr, order, width_gs, n_order, n_hosted, n_coupler, n_exch
     cdef bint gs, controlled
-    cdef double H, contact_step
+    cdef double H, contact_step, horizon
     # layout
     cdef long[::1] kind, port0, nport, seq, rigid
     cdef long[::1] row_a, row_b, sub_a, sub_b, coupler, exchanged
@@ -100,6 +100,7 @@ cdef class Driver:
         self.gs = scheme.name == "gauss_seidel"
         self.order = scheme.extrapolation_order
         self.H = scheme.macro_step
+        self.horizon = getattr(scheme, "approach_horizon", None) or scheme.macro_step
         self.contact_step = scheme.contact_step if scheme.contact_step is not None else NAN
         self.controlled = controlled
         self.nc = system.n_contacts
@@ -239,7 +240,7 @@ cdef class Driver:
             c = self.exchanged[i]
             if self.fv[c] > 0:              # in touch (no connections here)
                 short = True
-            if c < self.nc and self.dv[c] + self.H * self.ddv[c] > 0:
+            if c < self.nc and self.dv[c] + self.horizon * self.ddv[c] > 0:
                 short = True
         h = self.contact_step if short else self.H
         return h if h < remaining else remaining

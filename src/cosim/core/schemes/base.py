@@ -131,6 +131,7 @@ class CoSimulationScheme(InputExtrapolation, CouplingScheme):
         "max_energy_gain": Option(float, 0.01, lambda v: v >= 0 and math.isfinite(v), ">= 0"),
         "accept_unsafe_step": Option(bool, False, lambda v: True, "true or false"),
         "contact_step": Option(float, None, _pos, "> 0 s"),
+        "approach_horizon": Option(float, None, _pos, "> 0 s"),
         "interface_tolerance": Option(float, None, _relative, RELATIVE_RULE),
         "substeps": Option(dict, None, _substeps_ok,
                            "a table of subsystem name = number of sub-steps (>= 1)"),

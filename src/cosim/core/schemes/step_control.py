@@ -76,6 +76,8 @@ class StepController:
         self.scheme, self.system, self.state = scheme, system, state
         self.macro_step = scheme.macro_step
         self.contact_step = scheme.contact_step
+        #: how far ahead [s] a contact predicted to close shortens the step
+        self.horizon = getattr(scheme, "approach_horizon", None) or scheme.macro_step
         self.interface_tolerance = scheme.interface_tolerance
         self.extrapolation_order = scheme.extrapolation_order
 
@@ -83,7 +85,8 @@ class StepController:
     def propose(self, d, dd, f, remaining):
         """The next macro step: the onset found by a rejected step, else
         ``contact_step`` while a coupler contact is closed or would close
-        within a long step (penetration predicted linearly), else
+        within ``approach_horizon`` (default: a long step; penetration
+        predicted linearly), else
         ``macro_step``."""
         st = self.state
         if st.h_next is not None:
@@ -98,7 +101,7 @@ class StepController:
         recent = len(st.hist) > 1 and np.any(st.hist[-2][c] != 0)
         normal = c[c < system.n_contacts]
         if np.any(system.in_touch(f)[system.row_contact[c]]) or recent \
-                or np.any(d[normal] + H * dd[normal] > 0):
+                or np.any(d[normal] + self.horizon * dd[normal] > 0):
             h = self.contact_step
             if self.interface_tolerance and st.h_adapt is not None:
                 h = st.h_adapt
