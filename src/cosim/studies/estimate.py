@@ -7,33 +7,49 @@ run's own error::
 
     err(Q_h) ~ |Q_h - Q_rh| / (r**p - 1)
 
-with ``r`` the factor and ``p`` the scheme's observed order (:data:`ORDERS`).
+with ``r`` the factor and ``p`` the scheme's observed order (:data:`ORDERS`,
+one for a contact's quantities, one for the exit rates), or, for a contact a
+side's own RK4 step integrates against a rigid partner (and the exit rates
+read at its release), that step's (:data:`HOSTED_ORDERS`).
 
-Which steps: a co-simulation scheme's ``macro_step`` and, where the scene
-gives one, its ``contact_step`` (the step while a contact is closed), both
-times ``r``; under interface error control (``interface_tolerance``), the
-tolerance times ``r ** (extrapolation_order + 2)``, so that the controlled
-step is ``r`` times longer too.  The number of ``substeps`` stays (each is
+Which steps (:func:`cosim.studies.companion.coarsened`): a co-simulation
+scheme's ``macro_step`` and, where the scene gives one, its
+``contact_step`` (the step while a contact is closed), both times ``r``;
+under interface error control (``interface_tolerance``), the tolerance times
+``r ** (extrapolation_order + 2)``, so that the controlled step is ``r``
+times longer too.  The ``approach_horizon`` (how far ahead a predicted
+onset shortens the step) stays the run's: the window before an onset is
+stepped at ``r`` times the contact step, in ``r`` times fewer steps (with a
+horizon ``r`` times longer too, the companion of three_mass f100 took more
+approach steps than the run).  The number of ``substeps`` stays (each is
 ``r`` times longer).  A side's own step (a multibody side's ``rk4``
 ``max_step`` and ``free_step``, a structure's ``contact_step``) is ``r``
 times longer too, unless that would take a contact it hosts past omega h =
-:data:`OMEGA_H_MAX` (:func:`_coarsenable_sides`): such a step is set by the
+:data:`~cosim.studies.companion.OMEGA_H_MAX`: such a step is set by the
 contact's stability, not by accuracy (three_mass's robot, at 0.3, fails at
-3x its step); it stays, and an error that comes from it is not seen.  The monolithic scheme gets no companion (:data:`MONOLITHIC`): its
-cost hardly falls with a coarser tolerance.
+3x its step); it stays, and an error that comes from it is not seen.  The
+monolithic scheme gets no companion (:data:`MONOLITHIC`): its cost hardly
+falls with a coarser tolerance.
+
+Which factor (:func:`cosim.studies.companion.fitting_factor`): ``r`` = 4,
+shortened (not below 2) where the companion's step in a contact the sides
+exchange would pass omega h =
+:data:`~cosim.studies.companion.ASYMPTOTIC_OMEGA_H`, past which the
+schemes' errors stop falling as one power of the step; a contact past it
+even at 2x (three_mass f100 at its 30 us) is not estimated, nor are the exit
+rates read at its release.
 
 The order: ``p`` is measured once per scheme (:data:`ORDERS`, with where),
 not on every run.  Measuring it on every run needs a third run at ``r**2``
 whose cost, added to the companion's, passes 30 % of the run at r = 4
-(1/4 + 1/16 of its steps); at r = 5 (1/5 + 1/25) the run at 25x the step
-is far from the asymptotic range (three_mass f100 already closes C 8 times,
-not 9, at 8x).  A scheme without a measured order gives
-differences, no estimate.
+(1/4 + 1/16 of its steps), and whose step lies 16 times past the run's, far
+outside the range where the error is one power of the step.  A scheme
+without a measured order gives differences, no estimate.
 
 Cost: the companion takes about ``1/r`` of the run's macro steps where free
 flight and contact are both stepped at the scheme's steps (spring_drop,
 ground_multicontact: 1/4); step control adds steps aimed at each onset that
-do not scale with ``r`` (three_mass f100: 0.48 of the run's macro steps).
+do not scale with ``r`` (three_mass f100: 0.28 of the run's macro steps).
 A side's steps shrink with ``r`` only where its step is coarsened.  Both
 shares are in the summary's ``work_share``.
 
@@ -46,36 +62,53 @@ or its final rate when no contact releases.
 Honest where it cannot: a quantity is ``reliable: false`` with a ``why``
 when the companion stopped or failed, when the two runs disagree on a
 contact's count (that contact's quantities and the exit state), when the
+contact's step lies past the asymptotic range, when a side that keeps its
+step in the companion resolves the contact coarsely, when the
 scheme's order was not measured or the scheme is monolithic, or when the
 estimate exceeds the quantity itself; its ``relative_error`` is then None
 and ``difference`` keeps ``|Q_h - Q_rh|``.
 """
 from __future__ import annotations
 
-import copy
 import math
 import warnings
-from pathlib import Path
 
 import numpy as np
 
-__all__ = ["ORDERS", "DEFAULT_FACTOR", "coarsened", "estimate_errors", "accuracy_text",
+from cosim.studies.companion import (ASYMPTOTIC_OMEGA_H, OMEGA_H_MAX, UNSEEN_OMEGA_H, built,
+                                     coarsened, exchanged_omega_h, fitting_factor)
+
+__all__ = ["ORDERS", "HOSTED_ORDERS", "DEFAULT_FACTOR", "coarsened", "estimate_errors", "accuracy_text",
            "counted_share"]
 
 #: the factor by which the companion's steps are longer than the run's
 DEFAULT_FACTOR = 4
 
-#: observed orders of the schemes, and where they were measured: the slope
-#: of ``log(error)`` against ``log(contact_step)`` (``np.polyfit``) of C's
-#: peak penetration in three_mass f100 against the bench's monolithic
-#: reference (DOP853, rtol 1e-11), at the steps named.  Gauss-Seidel's local
-#: slope is 2.7 between 1e-5 and 2e-5 s and falls to 1.4 between 4e-5 and
-#: 8e-5 s; the implicit scheme's error is at its floor (2e-7) below 4e-5 s.
+#: observed orders of the schemes where their errors fall as one power of
+#: the step, for a contact's quantities and for the exit rates, and where
+#: they were measured: the median slope of ``log(error)`` against
+#: ``log(omega h)`` between neighbouring points at omega h = 0.1, 0.2 and 0.4
+#: (:data:`~cosim.studies.companion.ASYMPTOTIC_OMEGA_H`) of C's peak
+#: penetration and the arm's exit velocity against the bench's monolithic
+#: reference, on three_mass f1 to f1000 and beam_impact
+#: (``benchmarks/results/accuracy_model``).  Gauss-Seidel's peak slopes lie
+#: in 2.0-4.1, its exit slopes in 1.5-3.5, Jacobi's in 2.0-2.7 and 0.8-4.4.
+#: The implicit scheme's peak error sits at its floor (2e-7) there: its
+#: contact order is the slope of three_mass f100's peak between contact
+#: steps 4e-5 and 1.6e-4 s; its exit slopes scatter from 0.1 to 5.2.
 ORDERS = {
-    "gauss_seidel": (2.1, "three_mass f100, C's peak, contact_step 1e-5 to 8e-5 s"),
-    "jacobi": (2.3, "three_mass f100, C's peak, contact_step 1e-5 to 8e-5 s"),
-    "implicit": (4.2, "three_mass f100, C's peak, contact_step 4e-5 to 1.6e-4 s"),
+    "gauss_seidel": {"contacts": 2.9, "exit": 2.6},
+    "jacobi": {"contacts": 2.1, "exit": 1.9},
+    "implicit": {"contacts": 4.2, "exit": 2.6},
 }
+#: the orders where a side's own RK4 step integrates the contact against a
+#: rigid partner (whatever the scheme), from the same run's ``host_rk4``
+#: fit (spring_drop, ground_multicontact): the peak error falls as RK4's,
+#: ``(omega h)**4.62``; the exit rate's, read linearly between the samples
+#: around the release, as ``(omega h)**1.84`` (its sampling)
+HOSTED_ORDERS = {"contacts": 4.6, "exit": 1.8}
+ORDER_SOURCE = ("benchmarks/results/accuracy_model: median slopes of C's peak and the arm's "
+                "exit velocity at omega h 0.1 to 0.4, three_mass f1-f1000 and beam_impact")
 
 #: why the monolithic scheme gets no companion: its cost hardly depends on
 #: the tolerance (three_mass f100: 0.24 s of CPU at rtol 1e-5, 0.23 s at
@@ -88,136 +121,8 @@ MONOLITHIC = ("not estimated for the monolithic scheme: a coarser tolerance save
 _CONTACT_QUANTITIES = ("peak_penetration", "impulse", "t_on", "t_off")
 
 
-def coarsened(scene, factor: float, kept: list | None = None):
-    """A copy of ``scene`` whose accuracy-setting steps are ``factor`` times
-    longer (see the module), and the keys changed (key path -> new value).
-
-    Parameters
-    ----------
-    scene : Scene
-    factor : float
-        > 1.
-    kept : list, optional
-        Filled with ``(contact, omega h)`` of the contacts whose error the
-        companion does not see (omega h infinite: a law without a linear
-        stiffness, which cannot be judged): a
-        contact hosted by a side whose own step stays (a contact it hosts
-        would pass omega h = :data:`OMEGA_H_MAX`), where that step resolves
-        the contact itself coarsely (omega h > :data:`UNSEEN_OMEGA_H`).
-
-    Returns
-    -------
-    (Scene, dict)
-    """
-    from cosim.scene.load import _validate
-    from cosim.scene.specs import MultibodySpec
-
-    if not (isinstance(factor, (int, float)) and factor > 1 and math.isfinite(factor)):
-        raise ValueError(f"`factor` must be a finite number > 1, got {factor!r}")
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        spec = scene.scheme_spec()
-    data = copy.deepcopy(scene.data)
-    sch = data.setdefault("scheme", {})
-    sch["name"] = spec.name
-    own = sch.setdefault(spec.name, {})      # a [scheme.NAME] table wins over [scheme]
-    if "macro_step" not in spec.options:
-        raise ValueError(f"scheme `{spec.name}` has no macro step to coarsen")
-    changed = {}
-    for key in ("macro_step", "contact_step"):
-        if spec.options.get(key):
-            own[key] = spec.options[key] * factor
-            changed[f"scheme.{spec.name}.{key}"] = own[key]
-    tol = spec.options.get("interface_tolerance")
-    if tol:           # the controller's step goes as tol ** (1 / (order + 2)): r times longer
-        own["interface_tolerance"] = min(tol * factor ** (spec.options.get(
-            "extrapolation_order", 0) + 2), 0.5)
-        changed[f"scheme.{spec.name}.interface_tolerance"] = own["interface_tolerance"]
-    omega_h: dict = {}
-    for side, ok in _coarsenable_sides(scene, factor, omega_h).values():
-        sd = data["subsystems"][side.name]
-        integ = sd.get("integrator")
-        integ = sd["integrator"] = dict(integ) if isinstance(integ, dict) else (
-            {"method": integ} if isinstance(integ, str) else {})
-        if not ok:
-            if kept is not None:          # the contacts it resolves coarsely: not seen
-                kept.extend((c, wh) for c, (host, wh) in omega_h.items()
-                            if host == side.name and wh > UNSEEN_OMEGA_H)
-            continue
-        if isinstance(side, MultibodySpec):
-            integ["max_step"] = (side.max_step or spec.default_step) * factor
-            keys = ["max_step"] + (["free_step"] if "free_step" in side.integrator_options
-                                   else [])
-            for key in keys[1:]:
-                integ[key] = side.integrator_options[key] * factor
-        else:
-            integ["contact_step"] = side.contact_step * factor
-            keys = ["contact_step"]
-        for key in keys:
-            changed[f"subsystems.{side.name}.integrator.{key}"] = integ[key]
-    return _validate(data, Path(scene.path), scene.variant, True), changed
-
-
-#: the largest omega h [rad] of a contact that a side's own step may reach in
-#: the companion: below it an RK4 step resolves the contact's oscillation
-#: (an error of (omega h)**4 / 120 in a period's phase), so that the
-#: companion is still in the asymptotic range; three_mass's robot runs at
-#: 0.3 and fails at 4x that
-OMEGA_H_MAX = 0.5
-
-
-#: the omega h [rad] above which a contact's error from its host's RK4 step,
-#: when that step stays in the companion, is not negligible: RK4's phase
-#: error per period is about (omega h)**4 / 120, 1e-6 at 0.1
-UNSEEN_OMEGA_H = 0.1
-
-
-def _coarsenable_sides(scene, factor: float, omega_h: dict | None = None) -> dict:
-    """The sides whose own step sets the accuracy of a contact they host
-    (a multibody side under ``rk4``, a structure that steps its closed
-    contacts with ``contact_step``): name -> (spec, whether ``factor`` times
-    that step keeps omega h <= :data:`OMEGA_H_MAX` for every contact it
-    hosts (omega of the contact's linearised stiffness and the sides'
-    mobility at the initial pose)).  A side that hosts no contact is
-    coarsened too (its step sets only its own accuracy)."""
-    from cosim.core.preflight import stiffest_normal
-    from cosim.scene.specs import MultibodySpec, StructureSpec
-    from cosim.scene.work import _closed_form
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        default_step = scene.scheme_spec().default_step
-    steps = {}
-    for side in scene.subsystems:
-        if isinstance(side, MultibodySpec) and side.integrator == "rk4":
-            steps[side.name] = (side, side.max_step or default_step)
-        elif isinstance(side, StructureSpec) and not _closed_form(side, scene.contacts):
-            steps[side.name] = (side, side.contact_step)
-    if not steps:
-        return {}
-    with warnings.catch_warnings():      # what the run said of the scene, said once
-        warnings.simplefilter("ignore")
-        system, _ = scene.build()
-    omega = {name: 0.0 for name in steps}
-    for c, (own, _) in system.embedded.items():
-        host = system.subsystems[own].name
-        if host not in omega:
-            continue
-        ln = system.links[c]
-        n = ln.contact.normal
-        mob = (system.subsystems[ln.sub_a].port_mobility(ln.port_a, n)
-               + system.subsystems[ln.sub_b].port_mobility(ln.port_b, n))
-        k = stiffest_normal(ln)[0]
-        w = math.sqrt(k * mob) if math.isfinite(k) and mob > 0 else math.inf
-        omega[host] = max(omega[host], w)
-        if omega_h is not None:           # the contact's own omega h at the run's step
-            omega_h[ln.contact.name] = (host, w * steps[host][1])
-    return {name: (side, omega[name] * factor * h <= OMEGA_H_MAX)
-            for name, (side, h) in steps.items()}
-
-
-def _order(scheme: str):
-    return ORDERS.get(scheme, (None, ""))
+def _order(scheme: str) -> dict:
+    return ORDERS.get(scheme, {"contacts": None, "exit": None})
 
 
 def _first(c: dict, i: int) -> float:
@@ -232,6 +137,10 @@ def _contact_values(summary: dict) -> dict:
                      "impulse": float(c["impulse"]), "t_on": _first(c, 0),
                      "t_off": _first(c, 1)}
     return out
+
+
+#: where the exit rates are read when no contact releases
+END = "end of the run"
 
 
 def exit_rates(result, multibody, contact: str | None = None) -> tuple[dict, str]:
@@ -262,8 +171,7 @@ def exit_rates(result, multibody, contact: str | None = None) -> tuple[dict, str
         # (not imported: every run would load the bench's module)
         rates[name] = (float(np.interp(last[1], t, dq)) if last is not None
                        else float(dq[-1]))
-    when = (f"release of {last[0]} at {last[1]:.6g} s" if last is not None
-            else "end of the run")
+    when = f"release of {last[0]} at {last[1]:.6g} s" if last is not None else END
     return rates, when
 
 
@@ -305,6 +213,13 @@ def counted_share(result, companion) -> float:
     def work(res):
         return max(res.n_windows, 1) + res.n_iterations
     return work(companion) / work(result)
+
+
+def _against_rigid(scene) -> set:
+    """The embedded contacts a side integrates against a rigid partner."""
+    kinds = {s.name: s.type for s in scene.subsystems}
+    return {c.name for c in scene.contacts if c.placement == "embedded"
+            and "rigid" in (kinds[c.a[0]], kinds[c.b[0]])}
 
 
 def _hosts(scene) -> dict:
@@ -355,18 +270,23 @@ def estimate_errors(scene, result, factor: float = DEFAULT_FACTOR,
     """
     from cosim.scene import run
 
-    p, source = _order(scene.scheme)
-    acc = {"reliable": False, "method": "richardson", "factor": factor, "order": p,
-           "order_source": source, "coarsened": {}, "companion": {}, "work_share": None,
+    order = _order(scene.scheme)
+    acc = {"reliable": False, "method": "richardson", "factor": factor, "order": order,
+           "order_source": ORDER_SOURCE if scene.scheme in ORDERS else "",
+           "coarsened": {}, "companion": {}, "work_share": None,
            "contacts": {}, "exit": {}, "why": []}
     comp = None
     kept: list = []                   # contacts the companion cannot see (coarsened fills it)
+    beyond: dict = {}                 # exchanged contacts past the asymptotic range
     if scene.scheme == "monolithic":
         acc["companion"] = {"status": "not run", "message": MONOLITHIC}
         acc["why"].append(MONOLITHIC)
     else:
         try:
-            comp_scene, acc["coarsened"] = coarsened(scene, factor, kept)
+            system = built(scene)
+            factor, beyond = fitting_factor(factor, exchanged_omega_h(scene, system))
+            acc["factor"] = factor
+            comp_scene, acc["coarsened"] = coarsened(scene, factor, kept, system)
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 comp = run.simulate(comp_scene)
@@ -388,13 +308,24 @@ def estimate_errors(scene, result, factor: float = DEFAULT_FACTOR,
             acc["why"].append(f"the companion {comp.status}: {reason}"[:160])
     # what a side whose step stayed integrates: the companion does not see its error
     hosts = _hosts(scene)
-    unseen = {c: (f"`{hosts.get(c)}` steps contact {c} at the same step in the companion (4x "
+    unseen = {c: (f"`{hosts.get(c)}` steps contact {c} at the same step in the companion "
+                  f"({factor:g}x "
                   f"would take a contact it hosts past omega h = {OMEGA_H_MAX}), and that step "
                   f"resolves {c} coarsely (omega h > {UNSEEN_OMEGA_H}): its error is not seen"
                   if math.isfinite(wh) else
                   f"`{hosts.get(c)}` keeps its step in the companion, as {c}'s law has no "
                   f"linear stiffness to tell the omega h of a longer one: {c}'s error is not "
                   f"seen") for c, wh in kept}
+    unseen.update({c: f"the companion steps contact {c} at omega h = {wh:.2g} ({factor:g}x the "
+                      f"run's step), past {ASYMPTOTIC_OMEGA_H}, where the scheme's error stops "
+                      f"falling as one power of the step: the two runs' difference does not "
+                      f"tell the run's error" for c, wh in beyond.items()})
+    hosted = _against_rigid(scene) if order["contacts"] is not None else set()
+
+    def orders(c):                   # the contact's (the exit's: at its release)
+        return HOSTED_ORDERS if c in hosted else order
+    if hosted:
+        acc["order_hosted"] = HOSTED_ORDERS
     mine = _contact_values(result.summary)
     theirs = _contact_values(comp.summary) if comp is not None and comp.success else {}
     stopped = None if theirs else (acc["why"][0] if acc["why"] else
@@ -411,7 +342,8 @@ def estimate_errors(scene, result, factor: float = DEFAULT_FACTOR,
             differ.append(why)
         why = why or unseen.get(name)
         for q in _CONTACT_QUANTITIES:
-            entry[q] = _judge(v[q], o.get(q, math.nan), factor, p, why)
+            entry[q] = _judge(v[q], o.get(q, math.nan), factor, orders(name)["contacts"],
+                              why)
         acc["contacts"][name] = entry
     from cosim.scene.specs import MultibodySpec
     multibody = {s.name for s in scene.subsystems if isinstance(s, MultibodySpec)}
@@ -421,13 +353,16 @@ def estimate_errors(scene, result, factor: float = DEFAULT_FACTOR,
         contact = found[0] if found else None
     rates, at = exit_rates(result, multibody, contact)
     acc["exit"]["at"] = at
+    crates, elsewhere = {}, None
     if theirs:
-        crates = exit_rates(comp, multibody, contact)[0]
-    else:
-        crates = {}
+        crates, cat = exit_rates(comp, multibody, contact)
+        if (cat == END) != (at == END):      # one run's contact is still closed at the end
+            elsewhere = f"the companion reads the exit rates at {cat}, the run at {at}"
     for joint, value in rates.items():
-        why = stopped or (differ[0] if differ else None) or unseen.get(contact)
-        acc["exit"][joint] = _judge(value, crates.get(joint, math.nan), factor, p, why)
+        why = (stopped or (differ[0] if differ else None) or elsewhere
+               or unseen.get(contact))
+        acc["exit"][joint] = _judge(value, crates.get(joint, math.nan), factor,
+                                    orders(contact)["exit"], why)
     acc["why"] += differ
     entries = [e for c in acc["contacts"].values() for k, e in c.items() if k != "count"
                if c["count"]["value"] > 0] + [e for k, e in acc["exit"].items() if k != "at"]
@@ -447,7 +382,8 @@ def _pct(x: float) -> str:
 def accuracy_text(acc: dict) -> str:
     """The terminal's line: the estimates that are reliable, no number for
     one that is not, and why (the first reason, the rest in summary.json)."""
-    steps = ", ".join(f"{k.rsplit('.', 1)[-1]} {v:.3g}" for k, v in acc["coarsened"].items())
+    steps = ", ".join(f"{k.rsplit('.', 1)[-1]} {v:.3g}" for k, v in acc["coarsened"].items()
+                      if not k.endswith(".approach_horizon"))      # kept, not coarsened
     head = f"accuracy (companion at {acc['factor']:g}x the step: {steps})"
     if acc["companion"].get("status") == "not run":
         return f"accuracy: {acc['companion']['message']}"
