@@ -80,8 +80,8 @@ def verdict(acc: dict, choice, scene) -> tuple[float | None, str]:
 
     if choice.knob.grasp:
         return None, (f"`{choice.knob.contact}` is a grasp, whose estimate was not validated: "
-                      f"on brachiation every run and its companion closed it 2 times, the fine "
-                      f"reference 3 (docs/performance.md)")
+                      f"on brachiation the runs and their companions close it 2 or 3 times "
+                      f"between neighbouring steps, the fine reference 3 (docs/performance.md)")
     contact = choice.knob.contact
     if contact not in acc.get("contacts", {}):
         return None, "; ".join(acc.get("why") or ["the estimate is not reliable"])
@@ -101,15 +101,28 @@ def verdict(acc: dict, choice, scene) -> tuple[float | None, str]:
 def refined(path, variant, overrides, choice, estimated: float):
     """The scene and choice of the one refinement: the model asked for
     ``X * X / estimated`` (what it must aim at for the run to land on X,
-    when its prediction missed by ``estimated / X``), the scheme kept."""
+    when its prediction missed by ``estimated / X``), the scheme kept, and
+    the step no longer than the first times ``(SAFETY X / estimated) **
+    (1 / p)``, ``p`` the scheme's lower order in
+    :data:`cosim.studies.estimate.ORDERS` (the error falls as the step to
+    that power)."""
     from cosim.scene.load import load_scene
     from cosim.studies.choose import choose
 
+    from cosim.studies.choose import SAFETY
+    from cosim.studies.estimate import ORDERS
+
     target = choice.accuracy * min(1.0, choice.accuracy / estimated)
+    # the estimate's own order says how much shorter the step must be (the
+    # model's step may be capped at the first one, so asking it alone may not
+    # shorten it)
+    p = min(ORDERS.get(choice.scheme, {"": 1.0}).values())
+    at_most = choice.step * (SAFETY * choice.accuracy / estimated) ** (1.0 / p)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         first = load_scene(path, variant, list(overrides), choice.scheme)
-    again = choose(first, target, choice.knob.contact, schemes=[choice.scheme])
+    again = choose(first, target, choice.knob.contact, schemes=[choice.scheme],
+                   at_most=at_most)
     return _load(path, variant, overrides, again), again
 
 

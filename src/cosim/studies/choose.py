@@ -24,7 +24,9 @@ scenes by ``benchmarks/accuracy_model.py``, which prints them again; ``a``
 is the largest a scene needed (the fit bounds every measured point from
 above), so the prediction is conservative where the scenes scatter, and a
 scheme whose ``floor`` lies above the accuracy is refused.  The step chosen
-meets :data:`SAFETY` times the requested accuracy by the model.  The CPU
+meets :data:`SAFETY` times the requested accuracy by the model, and is no
+longer than a step whose error the run's estimate can check
+(:data:`CHECKABLE`).  The CPU
 time is ``c0 + c1 * steps`` (:data:`COST`, measured per scheme), the steps
 counted before the run (:meth:`cosim.Scene.work`): it ranks the schemes of
 a scene rather than timing them.  The monolithic scheme is a candidate at
@@ -47,6 +49,7 @@ from pathlib import Path
 
 from cosim.errors import UnsafeStepError
 from cosim.scene.checks import parse_accuracy
+from cosim.studies.companion import ASYMPTOTIC_OMEGA_H, MIN_FACTOR, OMEGA_H_MAX
 
 __all__ = ["Choice", "Knob", "MODEL", "MONOLITHIC_MODEL", "COST", "SAFETY",
            "parse_accuracy", "knob", "predicted_error", "step_for", "choose"]
@@ -308,7 +311,8 @@ def _load(scene, overrides, scheme):
         return _validate(data, Path(scene.path), scene.variant, scheme != scene.scheme)
 
 
-def _candidate(scene, k: Knob, scheme: str, accuracy: float) -> dict:
+def _candidate(scene, k: Knob, scheme: str, accuracy: float, checkable: bool = True,
+               at_most: float = math.inf) -> dict:
     """One scheme at the step the model asks: its overrides, errors, work
     and CPU, or ``refused`` with the reason."""
     from cosim.scene.checks import SceneError
@@ -331,6 +335,11 @@ def _candidate(scene, k: Knob, scheme: str, accuracy: float) -> dict:
         why = ("not measured in this regime" if _params(k.regime, scheme) is None else
                "its error floor lies above the accuracy asked")
         return {**out, "refused": why}
+    cap = _floor2(CHECKABLE[k.regime] / k.omega) if checkable else math.inf
+    if h > at_most:                  # a refinement: shorter than the model says
+        out["model_step"], out["capped"], h = h, "refined", _floor2(at_most)
+    elif h > cap:                    # the model allows a longer step than can be checked
+        out["model_step"], out["capped"], h = h, "checkable", cap
     if scheme not in COST:
         return {**out, "refused": "its cost was not measured"}
     ov = k.overrides(h)
@@ -346,6 +355,17 @@ def _candidate(scene, k: Knob, scheme: str, accuracy: float) -> dict:
             "work_steps": steps, "predicted_cpu_s": COST[scheme][0] + COST[scheme][1] * steps}
 
 
+#: regime -> the largest omega h chosen, so that the run's error estimate can
+#: check it (:mod:`cosim.studies.estimate`): an exchanged contact's companion
+#: at :data:`~cosim.studies.companion.MIN_FACTOR` times the step stays within
+#: :data:`~cosim.studies.companion.ASYMPTOTIC_OMEGA_H`; a host's RK4 step at
+#: 4 times stays within :data:`~cosim.studies.companion.OMEGA_H_MAX`, so that
+#: the companion coarsens it.  A longer step the model allows would meet the
+#: accuracy unchecked (three_mass f100 at 1 %: omega h 0.59, where the
+#: errors of neighbouring steps scatter by 3x).
+CHECKABLE = {"exchanged": ASYMPTOTIC_OMEGA_H / MIN_FACTOR, "host_rk4": OMEGA_H_MAX / 4.0}
+
+
 def _rtol_for(accuracy: float) -> float | None:
     """The monolithic scheme's rtol for ``accuracy`` (at most 1e-3)."""
     r = _largest_x(MONOLITHIC_MODEL, SAFETY * accuracy)
@@ -353,7 +373,7 @@ def _rtol_for(accuracy: float) -> float | None:
 
 
 def choose(scene, accuracy: float, contact: str | None = None,
-           schemes=None) -> Choice:
+           schemes=None, checkable: bool = True, at_most: float = math.inf) -> Choice:
     """The scheme and steps that meet ``accuracy`` at the least predicted CPU.
 
     Parameters
@@ -368,6 +388,13 @@ def choose(scene, accuracy: float, contact: str | None = None,
     schemes : sequence of str, optional
         The candidates (default: every scheme with a model, and the
         monolithic scheme).
+    checkable : bool
+        Choose a step whose error the run's estimate can check
+        (:data:`CHECKABLE`), and the monolithic scheme (which gets no
+        estimate) only where no other scheme meets the accuracy; False: the
+        model's choice alone, at the least predicted CPU.
+    at_most : float
+        The longest step [s] (a refinement's, from the run's estimate).
 
     Returns
     -------
@@ -389,13 +416,14 @@ def choose(scene, accuracy: float, contact: str | None = None,
                    sorted({s for (r, s) in MODEL if r == k.regime} - {scene.scheme}))
         schemes = [scene.scheme] + schemes + (["monolithic"] if scene.scheme != "monolithic"
                                               else [])
-    cands = [_candidate(scene, k, s, accuracy) for s in schemes]
+    cands = [_candidate(scene, k, s, accuracy, checkable, at_most) for s in schemes]
     ok = [c for c in cands if "refused" not in c]
     if not ok:
         raise SceneError(scene.path, "scheme.accuracy",
                          f"no scheme meets {accuracy:.3g} by the model: " + "; ".join(
                              f"{c['scheme']}: {c['refused']}" for c in cands))
-    best = min(ok, key=lambda c: (c["predicted_cpu_s"], c["scheme"] != scene.scheme))
+    best = min(ok, key=lambda c: (checkable and c["scheme"] == "monolithic",
+                                  c["predicted_cpu_s"], c["scheme"] != scene.scheme))
     return Choice(best["scheme"], tuple(best["overrides"]), accuracy,
                   best["predicted_error"], best["work_steps"], best["predicted_cpu_s"],
                   best["step"], k, _why(best, ok, k), cands)
@@ -415,9 +443,16 @@ def _why(best: dict, ok: list, k: Knob) -> str:
             f"{err['exit_velocity'] * 100:.2g} % exit-velocity error on `{k.contact}` "
             f"(omega h = {k.omega * best['step']:.2g})" if best["scheme"] != "monolithic" else
             f"monolithic at {_at(best, k)}: predicted {max(err.values()) * 100:.2g} % error")
+    if "model_step" in best:
+        text += (f", capped so that the run's error can be estimated" if best["capped"] ==
+                 "checkable" else ", shorter than the first run's step as its estimate asks")
+        text += f" (the model allows omega h = {k.omega * best['model_step']:.2g})"
     others = sorted((c for c in ok if c is not best), key=lambda c: c["predicted_cpu_s"])
     if others:
         o = others[0]
-        text += (f"; {o['scheme']} would meet it at {_at(o, k)} but costs "
-                 f"{o['predicted_cpu_s'] / best['predicted_cpu_s']:.2g}x")
+        ratio = o["predicted_cpu_s"] / best["predicted_cpu_s"]
+        text += (f"; {o['scheme']} would meet it at {_at(o, k)} but costs {ratio:.2g}x"
+                 if ratio >= 1 else
+                 f"; {o['scheme']} would meet it at {_at(o, k)} for {ratio:.2g}x the CPU, "
+                 f"but gets no error estimate")
     return text
