@@ -118,38 +118,74 @@ def _pct(x):
     return f"{100 * x:.2g} %"
 
 
-def test_what_the_page_says_dominates_the_misses(data, section):
+def test_what_the_page_says_decides_the_misses(data, section):
     text, t = _flat(section), data["totals"]
-    assert f"(it is {round(100 * t['agree'] / t['with_estimate'])} %)" in text
+    assert f"(it is {round(100 * t['agree'] / t['with_estimate'])} % of the estimates given" \
+        in text
+    assert f"an estimate is given for {t['with_estimate']} of the {t['pairs']} pairs" in text
     # every estimate reads the exit velocity at the strike contact's release, as the bench
     assert all(c[run]["exit_at"].startswith(f"release of {c['contact']} ")
                for c in data["cases"] for run in ("request",))
-    f1 = next(c for c in data["cases"] if c["variant"] == "f1")
-    off = [max(p["estimated"] / p["actual"], p["actual"] / p["estimated"])
+    f1 = _case_v(data, "f1")
+    off = [(max(p["estimated"] / p["actual"], p["actual"] / p["estimated"]), p["actual"])
            for run in ("default", "request") for p in f1[run]["pairs"].values()
            if p["agrees"] is False]
-    assert f"On f1 {len(off)} of its 4 pairs lie {min(off):.1f}x to {max(off):.1f}x off" in text
-    rk = [_case(data, s)["request"] for s in ("spring_drop", "ground_multicontact")]
-    for r in rk:
-        assert r["knob"].endswith("integrator.max_step") and r["knob"] not in r["coarsened"]
-        assert r["request_met"] is None and "at the same step in the companion" in r["unchecked"]
-        assert all(p["estimated"] is None for p in r["pairs"].values())
-    assert "the companion keeps it and cannot see the contact's error" in text
+    lo, hi = min(o for o, _ in off), max(o for o, _ in off)
+    assert f"On three_mass f1 {len(off)} of 4 pairs lie {lo:.1f}x to {hi:.1f}x off" \
+        .lower() in text.lower()
+    assert f"{min(a for _, a in off):.0e}" == "2e-06" and f"{max(a for _, a in off):.0e}" \
+        == "4e-05" and "at errors of 2e-6 to 4e-5" in text
+    g = _case(data, "ground_multicontact")["default"]["pairs"]["exit_velocity"]
+    assert f"{g['estimated'] / g['actual']:.0f}" == "13" and "estimated 13x too high" in text
+    # within the range the request's estimates on f100 agree as the page says
+    f100 = _case_v(data, "f100")["request"]["pairs"]
+    assert (_pct(f100["peak"]["estimated"]), _pct(f100["peak"]["actual"])) == \
+        ("0.025 %", "0.026 %")
+    assert (_pct(f100["exit_velocity"]["estimated"]), _pct(f100["exit_velocity"]["actual"])) \
+        == ("0.05 %", "0.041 %")
+    assert "0.025 % against 0.026 % on the peak and 0.05 % against 0.041 %" in text
 
 
-def test_the_train_and_the_grasp_the_page_names(data, section):
+def _case_v(data, variant):
+    c, = [c for c in data["cases"] if c["variant"] == variant]
+    return c
+
+
+def test_the_scatter_past_the_range_the_page_quotes(data, section):
+    """C's peak error on three_mass f100 at 55, 77 and 110 us (the bench rows
+    of the request at 18 us are elsewhere: this reads the published
+    reference's peak and runs the three steps)."""
+    import warnings
+    import cosim
+    from conftest import CASES
+    from cosim.studies.metrics import impact_metrics
+    ref = _case_v(data, "f100")["reference"]
+    got = []
+    for h in (5.5e-5, 7.7e-5, 1.1e-4):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            scene = cosim.load_scene(CASES / "three_mass.toml", "f100",
+                                     [f"scheme.contact_step={h}"])
+            m = impact_metrics(cosim.simulate(scene), "C", "robot/arm")
+        got.append(f"{100 * (m['peak'] / ref['peak'] - 1):+.2f} %")
+    assert got == ["-0.24 %", "+0.38 %", "-0.25 %"]
+    assert ("C's peak error is -0.24 % at 55 us, +0.38 % at 77 us, -0.25 % at 110 us"
+            in _flat(section))
+
+
+def test_the_counts_and_the_grasp_the_page_names(data, section):
     text = _flat(section)
-    f100 = next(c for c in data["cases"] if c["variant"] == "f100")["request"]
-    p = f100["pairs"]["peak"]
-    assert f100["factor"] == 2 and p["actual"] > 100 * p["estimated"]
-    assert "the one at 2x gives the estimate, more than 100x below the actual peak error" in text
-    f1000 = next(c for c in data["cases"] if c["variant"] == "f1000")["default"]
-    assert all("energy grew" in q["why"] for q in f1000["pairs"].values())
+    f1000 = _case_v(data, "f1000")
+    r = f1000["request"]
+    assert (r["scheme"], r["step"]) == ("jacobi", 5.8e-6) and "Jacobi at 5.8 us" in text
+    assert "closed 9 times, 10 in the companion; at 2x the step too" in r["unchecked"]
+    assert all("energy grew" in q["why"] for q in f1000["default"]["pairs"].values())
     b = _case(data, "brachiation")
     r = b["request"]
-    assert (r["count"], b["reference"]["count"]) == (2, 3) and not r["met"]
-    assert r["request_met"] is None and "is a grasp" in r["unchecked"] and b["cheapest"] is None
-    assert "says it is not checked (a grasp) instead of met" in text
+    assert r["count"] == b["reference"]["count"] == 3 and not r["met"]
+    assert _pct(r["pairs"]["exit_velocity"]["actual"]) == "3.4 %"
+    assert r["request_met"] is None and "is a grasp" in r["unchecked"]
+    assert "not 1 % on the exit velocity (3.4 %), and it says it is not checked (a grasp)" in text
 
 
 def test_where_the_cpu_goes(data, section):
@@ -158,7 +194,19 @@ def test_where_the_cpu_goes(data, section):
     assert f"costs {min(x):.1f} to {max(x):.1f} times the cheapest row" in text
     b = _case(data, "brachiation")["request"]["stages_s"]
     assert f"{b['plan']:.2g} s on brachiation against a run of {b['run']:.2g} s" in text
-    for c in data["cases"]:
-        s = c["request"]["stages_s"]
-        assert s["plan"] + s["estimate"] + s["check"] > s["run"], c["scene"]
-    assert "On every scene that work costs more CPU than the run" in text
+    share = [c["request"]["stages_s"]["estimate"] / c["request"]["stages_s"]["run"]
+             for c in data["cases"] if c["scene"] == "three_mass"]
+    assert f"{min(share):.1f} to {max(share):.1f} of the run's CPU on three_mass" in text
+    assert "its macro steps are 0.28 of the run's on f100" in text
+
+
+def test_the_companion_takes_0_28_of_the_runs_macro_steps_on_f100():
+    import warnings
+    import cosim
+    from conftest import CASES
+    from cosim.studies.estimate import estimate_errors
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        scene = cosim.load_scene(CASES / "three_mass.toml", "f100")
+        acc = estimate_errors(scene, cosim.simulate(scene))
+    assert f"{acc['work_share']['macro_steps']:.2f}" == "0.28"

@@ -12,7 +12,7 @@ before), so ``cosim --help`` or ``cosim plot`` do not pay for the schemes and
 """
 #: the release, read by setuptools for the package metadata (pyproject.toml) and shown by
 #: ``cosim --version``
-__version__ = "0.12.0"
+__version__ = "0.13.0"
 
 from cosim.errors import CouplingError, FMUError, SimulationError, UnsafeStepError
 
