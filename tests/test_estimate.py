@@ -84,13 +84,14 @@ def test_three_mass_f100_at_its_own_step_is_past_the_range_and_says_so(ulps):
 
 @pytest.mark.parametrize("ulps", [0, 1, -2])
 def test_counts_that_differ_are_not_reliable_and_print_no_number(ulps):
-    # at twice the scene's steps the run closes C 9 times; its companion
-    # (8x the scene's steps) 8 times
-    scene, _ = _run("three_mass", "f100", ["scheme.contact_step=6e-5",
-                                           "scheme.macro_step=4e-3"])
-    scene = perturbed(scene, ulps)
-    with warnings.catch_warnings():
+    # Jacobi at omega h 0.13 in C: the run closes C 9 times, its companion
+    # (3x, within the asymptotic range) 10 times, as at every step measured
+    # from omega h 0.06 to 0.19
+    scene, _ = _run("three_mass", "f100", ['scheme.name="jacobi"',
+                                           "scheme.contact_step=1.2e-5"])
+    with warnings.catch_warnings():       # Jacobi ignores the scene's `sequence`
         warnings.simplefilter("ignore")
+        scene = perturbed(scene, ulps)
         res = cosim.simulate(scene)
     acc = estimate_errors(scene, res)
     c = acc["contacts"]["C"]
@@ -100,8 +101,10 @@ def test_counts_that_differ_are_not_reliable_and_print_no_number(ulps):
     assert c["peak_penetration"]["relative_error"] is None
     assert c["peak_penetration"]["difference"] > 0     # kept for the curious
     assert all(not e["reliable"] for k, e in acc["exit"].items() if k != "at")
+    assert c["count"] == {"value": 9, "companion": 10, "robust": False}
     text = accuracy_text(acc)
-    assert text.startswith("accuracy: not reliable (contact C closed")
+    assert text.startswith("accuracy: not reliable (contact C closed 9 times, 10 in the "
+                           "companion")
     assert "%" not in text
 
 
@@ -240,8 +243,12 @@ def test_a_contact_that_never_closes_writes_no_nan(tmp_path):
 
 @pytest.mark.parametrize("ulps", [0, 1, -1])
 def test_a_companion_the_guard_stops_makes_nothing_reliable_and_says_why(ulps):
-    # three_mass f1000 at 4x the contact step (1.2e-4 s): C's spring creates energy
-    scene = perturbed(_run("three_mass", "f1000")[0], ulps)
+    # spring_drop's wall exchanged with the force held over each 50 us step
+    # (extrapolation order 0): the run holds, its companion at 200 us creates
+    # energy and the guard stops it
+    scene = perturbed(_run("spring_drop", None, [
+        'contacts.wall.placement="coupler"', "scheme.accept_unsafe_step=true",
+        "scheme.extrapolation_order=0", "scheme.macro_step=5e-5"])[0], ulps)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         res = cosim.simulate(scene)
@@ -252,6 +259,24 @@ def test_a_companion_the_guard_stops_makes_nothing_reliable_and_says_why(ulps):
     assert all(e["relative_error"] is None for c in acc["contacts"].values()
                for k, e in c.items() if k != "count")
     assert "%" not in accuracy_text(acc)
+
+
+@pytest.mark.parametrize("ulps", [0, 2, -2])
+def test_no_companion_runs_where_nothing_it_gives_could_be_read(ulps):
+    """three_mass f100 at its own 30 us: C lies past the asymptotic range at
+    4x and 2x, A and B are stepped by the robot, which keeps its step: the
+    companion would cost 0.5 of the run for nothing, and is not run."""
+    from cosim.studies.estimate import BLIND
+    scene = perturbed(_run("three_mass", "f100")[0], ulps)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = cosim.simulate(scene)
+    acc = estimate_errors(scene, res)
+    assert acc["companion"] == {"status": "not run", "message": BLIND}
+    assert acc["work_share"] is None and not acc["reliable"]
+    assert all(c["count"]["robust"] is None for c in acc["contacts"].values())
+    assert "past 0.4" in acc["contacts"]["C"]["peak_penetration"]["why"]
+    assert accuracy_text(acc).startswith("accuracy: not reliable, no companion run (")
 
 
 def test_the_line_gives_what_was_estimated_and_names_what_was_not():

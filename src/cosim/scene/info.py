@@ -96,10 +96,12 @@ class _Touched(Exception):
     """Every contact sought has closed (or the budget is spent): the probe ends."""
 
 
-def first_touch(scene, budget_s: float = FIRST_TOUCH_BUDGET_S) -> tuple[dict, str | None]:
-    """Where each contact first closes in a run of ``scene`` with its scheme.
+def first_touch(scene, budget_s: float = FIRST_TOUCH_BUDGET_S,
+                contacts=None) -> tuple[dict, str | None]:
+    """Where each contact (of ``contacts``, names, if given) first closes in
+    a run of ``scene`` with its scheme.
 
-    The run goes until every contact has closed once, the end time, or
+    The run goes until every contact sought has closed once, the end time, or
     ``budget_s`` of CPU time; it writes nothing.  A contact closed at the
     start closes at t = 0.  It runs every side, an FMU's code included
     (:func:`scene_info` calls it for a scene with an FMU only when asked).
@@ -119,7 +121,8 @@ def first_touch(scene, budget_s: float = FIRST_TOUCH_BUDGET_S) -> tuple[dict, st
     from cosim.errors import SimulationError, UnsafeStepError
 
     system, sch = scene.build()
-    sought = {c for c, ln in enumerate(system.links) if not ln.contact.law.rigid}
+    sought = {c for c, ln in enumerate(system.links) if not ln.contact.law.rigid
+              and (contacts is None or ln.contact.name in contacts)}
     touches: dict = {}
     if not sought:
         return touches, None

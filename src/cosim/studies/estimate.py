@@ -37,7 +37,9 @@ exchange would pass omega h =
 :data:`~cosim.studies.companion.ASYMPTOTIC_OMEGA_H`, past which the
 schemes' errors stop falling as one power of the step; a contact past it
 even at 2x (three_mass f100 at its 30 us) is not estimated, nor are the exit
-rates read at its release.
+rates read at its release.  Where that leaves nothing to read (every contact
+that closed past the range, or stepped by a side that keeps its step), no
+companion runs (:data:`BLIND`).
 
 The order: ``p`` is measured once per scheme (:data:`ORDERS`, with where),
 not on every run.  Measuring it on every run needs a third run at ``r**2``
@@ -207,6 +209,21 @@ def _judge(value, other, r, p, why=None) -> dict:
     return out
 
 
+#: why no companion runs where nothing it gives could be read
+BLIND = ("no companion: every contact that closed (the strike among them) lies past the "
+         "asymptotic range at the companion's step, or is stepped by a side that keeps its "
+         "step in it, so nothing it gives could be read")
+
+
+def _blind(result, strike, beyond: dict, kept: list) -> bool:
+    """Whether every contact that closed, and the strike whose release the
+    exit rates are read at, is past the asymptotic range or unseen: a
+    companion would be run for nothing."""
+    closed = {n for n, c in result.summary["contacts"].items() if c["count"] > 0}
+    blind = set(beyond) | {c for c, _ in kept}
+    return bool(closed) and closed <= blind and (strike is None or strike in blind)
+
+
 def counted_share(result, companion) -> float:
     """The companion's macro steps (with their iterations, if the scheme
     iterates) over the run's: the counted share of its work."""
@@ -270,6 +287,10 @@ def estimate_errors(scene, result, factor: float = DEFAULT_FACTOR,
     """
     from cosim.scene import run
 
+    if contact is None:
+        from cosim.studies.strike import find_strike
+        found = find_strike(scene, required=False)
+        contact = found[0] if found else None
     order = _order(scene.scheme)
     acc = {"reliable": False, "method": "richardson", "factor": factor, "order": order,
            "order_source": ORDER_SOURCE if scene.scheme in ORDERS else "",
@@ -287,9 +308,12 @@ def estimate_errors(scene, result, factor: float = DEFAULT_FACTOR,
             factor, beyond = fitting_factor(factor, exchanged_omega_h(scene, system))
             acc["factor"] = factor
             comp_scene, acc["coarsened"] = coarsened(scene, factor, kept, system)
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                comp = run.simulate(comp_scene)
+            if not _blind(result, contact, beyond, kept):
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    comp = run.simulate(comp_scene)
+            else:
+                acc["companion"] = {"status": "not run", "message": BLIND}
         except Exception as exc:   # a refused or broken companion: no estimate, said why
             from cosim.errors import UnsafeStepError
             acc["companion"] = {"status": "refused", "message": f"{type(exc).__name__}: {exc}"}
@@ -316,10 +340,10 @@ def estimate_errors(scene, result, factor: float = DEFAULT_FACTOR,
                   f"`{hosts.get(c)}` keeps its step in the companion, as {c}'s law has no "
                   f"linear stiffness to tell the omega h of a longer one: {c}'s error is not "
                   f"seen") for c, wh in kept}
-    unseen.update({c: f"the companion steps contact {c} at omega h = {wh:.2g} ({factor:g}x the "
-                      f"run's step), past {ASYMPTOTIC_OMEGA_H}, where the scheme's error stops "
-                      f"falling as one power of the step: the two runs' difference does not "
-                      f"tell the run's error" for c, wh in beyond.items()})
+    unseen.update({c: f"a companion at {factor:g}x the run's step would step contact {c} at "
+                      f"omega h = {wh:.2g}, past {ASYMPTOTIC_OMEGA_H}, where the scheme's error "
+                      f"stops falling as one power of the step: the two runs' difference would "
+                      f"not tell the run's error" for c, wh in beyond.items()})
     hosted = _against_rigid(scene) if order["contacts"] is not None else set()
 
     def orders(c):                   # the contact's (the exit's: at its release)
@@ -328,16 +352,16 @@ def estimate_errors(scene, result, factor: float = DEFAULT_FACTOR,
         acc["order_hosted"] = HOSTED_ORDERS
     mine = _contact_values(result.summary)
     theirs = _contact_values(comp.summary) if comp is not None and comp.success else {}
-    stopped = None if theirs else (acc["why"][0] if acc["why"] else
-                                   "the companion did not finish")
+    stopped = None if theirs or acc["companion"].get("message") == BLIND else (
+        acc["why"][0] if acc["why"] else "the companion did not finish")
     differ = []
     for name, v in mine.items():
         o = theirs.get(name, {})
         count = {"value": v["count"], "companion": o.get("count"),
-                 "robust": o.get("count") == v["count"]}
+                 "robust": o.get("count") == v["count"] if theirs else None}
         entry = {"count": count}
         why = stopped
-        if why is None and not count["robust"]:
+        if why is None and count["robust"] is False:
             why = f"contact {name} closed {v['count']} times, {o.get('count')} in the companion"
             differ.append(why)
         why = why or unseen.get(name)
@@ -347,10 +371,6 @@ def estimate_errors(scene, result, factor: float = DEFAULT_FACTOR,
         acc["contacts"][name] = entry
     from cosim.scene.specs import MultibodySpec
     multibody = {s.name for s in scene.subsystems if isinstance(s, MultibodySpec)}
-    if contact is None:
-        from cosim.studies.strike import find_strike
-        found = find_strike(scene, required=False)
-        contact = found[0] if found else None
     rates, at = exit_rates(result, multibody, contact)
     acc["exit"]["at"] = at
     crates, elsewhere = {}, None
@@ -360,7 +380,7 @@ def estimate_errors(scene, result, factor: float = DEFAULT_FACTOR,
             elsewhere = f"the companion reads the exit rates at {cat}, the run at {at}"
     for joint, value in rates.items():
         why = (stopped or (differ[0] if differ else None) or elsewhere
-               or unseen.get(contact))
+               or unseen.get(contact) or (BLIND if not theirs else None))
         acc["exit"][joint] = _judge(value, crates.get(joint, math.nan), factor,
                                     orders(contact)["exit"], why)
     acc["why"] += differ
@@ -385,6 +405,10 @@ def accuracy_text(acc: dict) -> str:
     steps = ", ".join(f"{k.rsplit('.', 1)[-1]} {v:.3g}" for k, v in acc["coarsened"].items()
                       if not k.endswith(".approach_horizon"))      # kept, not coarsened
     head = f"accuracy (companion at {acc['factor']:g}x the step: {steps})"
+    if acc["companion"].get("message") == BLIND:
+        why = [w for w in acc["why"] if w != BLIND] or [BLIND]
+        more = f"; {len(why) - 1} more in summary.json" if len(why) > 1 else ""
+        return f"accuracy: not reliable, no companion run ({why[0]}{more})"
     if acc["companion"].get("status") == "not run":
         return f"accuracy: {acc['companion']['message']}"
     parts, missing = [], []
