@@ -223,3 +223,16 @@ def test_the_companion_takes_0_27_of_the_runs_macro_steps_on_f10():
         scene = cosim.load_scene(CASES / "three_mass.toml", "f10")
         acc = estimate_errors(scene, cosim.simulate(scene))
     assert f"{acc['work_share']['macro_steps']:.2f}" == "0.27"
+
+
+def test_on_three_mass_the_cheapest_row_lies_past_the_cap(data, section):
+    """What makes 1.5x out of reach there: the cheapest row that meets 1 %
+    takes a longer step than the request may (the cap), so the request's run
+    costs at least the row's before its companion."""
+    rows = [c for c in data["cases"] if c["scene"] == "three_mass"]
+    assert len(rows) == 4
+    for c in rows:
+        assert c["cheapest"]["step"] > c["request"]["step"], c["variant"]
+        assert c["cpu_ratio"] > 1.5
+    assert "cheapest row's step is longer than the cap (every three_mass variant)" in \
+        _flat(section)

@@ -37,10 +37,27 @@ def table(out):
         return {r["point"]: r for r in csv.DictReader(fh)}
 
 
+_STARTED: list = []
+
+
 def cosim(*args, **kw):
-    return subprocess.Popen([sys.executable, "-m", "cosim.cli", *map(str, args)],
+    proc = subprocess.Popen([sys.executable, "-m", "cosim.cli", *map(str, args)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             cwd=ROOT, **kw)
+    _STARTED.append(proc)
+    return proc
+
+
+@pytest.fixture(autouse=True)
+def _no_process_outlives_its_test():
+    """A test that fails while its sweep still runs (a timeout) kills it, so
+    that it does not eat a core under the tests that follow."""
+    yield
+    while _STARTED:
+        proc = _STARTED.pop()
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
 
 
 def many(first: int, n: int, exponent: int) -> str:
