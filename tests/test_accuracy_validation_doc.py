@@ -236,3 +236,11 @@ def test_on_three_mass_the_cheapest_row_lies_past_the_cap(data, section):
         assert c["cpu_ratio"] > 1.5
     assert "cheapest row's step is longer than the cap (every three_mass variant)" in \
         _flat(section)
+
+
+def test_the_changelog_quotes_the_published_totals(data):
+    t = data["totals"]
+    text = _flat((ROOT / "CHANGELOG.md").read_text(encoding="utf-8").split("## 0.12.0")[0])
+    assert (f"{t['agree']} of the {t['with_estimate']} estimates given agree within 3x with "
+            f"the bench's reference, {t['without_estimate']} of {t['pairs']} pairs get none"
+            ) in text
