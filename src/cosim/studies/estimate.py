@@ -51,7 +51,7 @@ without a measured order gives differences, no estimate.
 Cost: the companion takes about ``1/r`` of the run's macro steps where free
 flight and contact are both stepped at the scheme's steps (spring_drop,
 ground_multicontact: 1/4); step control adds steps aimed at each onset that
-do not scale with ``r`` (three_mass f100: 0.28 of the run's macro steps).
+do not scale with ``r`` (three_mass f10: 0.27 of the run's macro steps).
 A side's steps shrink with ``r`` only where its step is coarsened.  Both
 shares are in the summary's ``work_share``.
 
@@ -80,8 +80,8 @@ import numpy as np
 from cosim.studies.companion import (ASYMPTOTIC_OMEGA_H, OMEGA_H_MAX, UNSEEN_OMEGA_H, built,
                                      coarsened, exchanged_omega_h, fitting_factor)
 
-__all__ = ["ORDERS", "HOSTED_ORDERS", "DEFAULT_FACTOR", "coarsened", "estimate_errors", "accuracy_text",
-           "counted_share"]
+__all__ = ["ORDERS", "HOSTED_ORDERS", "DEFAULT_FACTOR", "BLIND", "coarsened", "estimate_errors",
+           "accuracy_text", "counted_share"]
 
 #: the factor by which the companion's steps are longer than the run's
 DEFAULT_FACTOR = 4
@@ -97,7 +97,7 @@ DEFAULT_FACTOR = 4
 #: in 2.0-4.1, its exit slopes in 1.5-3.5, Jacobi's in 2.0-2.7 and 0.8-4.4.
 #: The implicit scheme's peak error sits at its floor (2e-7) there: its
 #: contact order is the slope of three_mass f100's peak between contact
-#: steps 4e-5 and 1.6e-4 s; its exit slopes scatter from 0.1 to 5.2.
+#: steps 4e-5 and 1.6e-4 s; its exit slopes scatter from 0 to 5.2.
 ORDERS = {
     "gauss_seidel": {"contacts": 2.9, "exit": 2.6},
     "jacobi": {"contacts": 2.1, "exit": 1.9},
