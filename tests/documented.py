@@ -9,6 +9,7 @@ run now, gives the value within the tolerance (so the page is true).
 """
 from __future__ import annotations
 
+import importlib.util
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -56,3 +57,23 @@ def assert_reproduced(claim: Claim, measured: float) -> None:
     assert math.isfinite(measured), (claim.id, measured)
     assert measured == pytest.approx(claim.value, rel=claim.rel, abs=claim.abs), \
         f"{claim.page} prints {claim.printed!r} ({claim.value}); `{claim.command}` gives {measured}"
+
+
+def load_script(path: Path, name: str):
+    """A benchmark script (not a package module) imported as ``name``."""
+    spec = importlib.util.spec_from_file_location(name, path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def page_section(page: str, heading: str) -> str:
+    """The text of ``page`` (relative to the root) under the level-2
+    heading ``heading``, up to the next one."""
+    text = (ROOT / page).read_text(encoding="utf-8")
+    return text.split(f"## {heading}\n", 1)[1].split("\n## ", 1)[0]
+
+
+def flat(text: str) -> str:
+    """``text`` with every run of white space one space (prose wraps)."""
+    return " ".join(text.split())

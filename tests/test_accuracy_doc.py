@@ -1,7 +1,6 @@
 """The numbers of docs/performance.md, "Accuracy on request", held to the
 published run of benchmarks/accuracy_model.py (its points, refitted here)
 and to what cosim.studies.choose gives now."""
-import importlib.util
 import json
 import re
 import warnings
@@ -14,16 +13,14 @@ from cosim.studies import choose as ch
 from cosim.studies.bench import reference
 from cosim.studies.metrics import impact_metrics, relative_errors
 from conftest import CASES, ROOT
+from documented import flat as _flat, load_script, page_section
 
 SCRIPT = ROOT / "benchmarks" / "accuracy_model.py"
 RUN = ROOT / "benchmarks" / "results" / "accuracy_model"
 
 
 def _script():
-    spec = importlib.util.spec_from_file_location("accuracy_model", SCRIPT)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_script(SCRIPT, "accuracy_model")
 
 
 @pytest.fixture(scope="module")
@@ -38,12 +35,7 @@ def points():
 
 @pytest.fixture(scope="module")
 def section():
-    text = (ROOT / "docs" / "performance.md").read_text(encoding="utf-8")
-    return text.split("## Accuracy on request", 1)[1].split("\n## ", 1)[0]
-
-
-def _flat(text: str) -> str:
-    return " ".join(text.split())
+    return page_section("docs/performance.md", "Accuracy on request")
 
 
 def _load(name, variant=None, overrides=()):

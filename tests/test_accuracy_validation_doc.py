@@ -1,13 +1,13 @@
 """The numbers of docs/performance.md, "Accuracy on request: validation",
 held to the published run of benchmarks/accuracy_validation.py, and one
 cheap case of it run again here."""
-import importlib.util
 import json
 import math
 
 import pytest
 
 from conftest import ROOT
+from documented import flat as _flat, load_script, page_section
 
 SCRIPT = ROOT / "benchmarks" / "accuracy_validation.py"
 RUN = ROOT / "benchmarks" / "results" / "accuracy_validation"
@@ -15,10 +15,7 @@ RUN = ROOT / "benchmarks" / "results" / "accuracy_validation"
 
 @pytest.fixture(scope="module")
 def av():
-    spec = importlib.util.spec_from_file_location("accuracy_validation", SCRIPT)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_script(SCRIPT, "accuracy_validation")
 
 
 @pytest.fixture(scope="module")
@@ -28,12 +25,7 @@ def data():
 
 @pytest.fixture(scope="module")
 def section():
-    text = (ROOT / "docs" / "performance.md").read_text(encoding="utf-8")
-    return text.split("## Accuracy on request: validation", 1)[1].split("\n## ", 1)[0]
-
-
-def _flat(text: str) -> str:
-    return " ".join(text.split())
+    return page_section("docs/performance.md", "Accuracy on request: validation")
 
 
 def test_the_run_covers_every_case_and_its_totals_are_its_own(av, data):

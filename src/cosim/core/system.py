@@ -209,6 +209,15 @@ class CoupledSystem:
             changed = True
         return changed
 
+    def contact_mobility(self, c: int) -> float:
+        """``n^T J M^-1 J^T n`` of contact ``c``'s two ports, summed, in the
+        subsystems' present state [1/kg]: one over the reduced mass the
+        contact's spring sees along its normal."""
+        ln = self.links[c]
+        n = ln.contact.normal
+        return (self.subsystems[ln.sub_a].port_mobility(ln.port_a, n)
+                + self.subsystems[ln.sub_b].port_mobility(ln.port_b, n))
+
     def in_touch(self, f) -> np.ndarray:
         """Per contact: carries force (or is grasped)."""
         on = np.asarray(f[:self.n_contacts]) > 0

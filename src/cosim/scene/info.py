@@ -83,15 +83,6 @@ def _sampling(system, c, scene, contact_time: float, name: str) -> dict:
     return out
 
 
-def _mobility(system, c) -> float:
-    """``n^T J M^-1 J^T n`` of contact ``c``'s two ports, summed, in the
-    subsystems' present state [1/kg]."""
-    ln = system.links[c]
-    n = ln.contact.normal
-    return (system.subsystems[ln.sub_a].port_mobility(ln.port_a, n)
-            + system.subsystems[ln.sub_b].port_mobility(ln.port_b, n))
-
-
 class _Touched(Exception):
     """Every contact sought has closed (or the budget is spent): the probe ends."""
 
@@ -133,7 +124,7 @@ def first_touch(scene, budget_s: float = FIRST_TOUCH_BUDGET_S,
     class Probe(Recorder):
         def edge(self, c, t, on):
             if on and c in sought and c not in touches:
-                touches[c] = (float(t), _mobility(system, c))
+                touches[c] = (float(t), system.contact_mobility(c))
                 if len(touches) == len(sought):
                     raise _Touched
             super().edge(c, t, on)
@@ -178,7 +169,7 @@ def _contact_info(system, c, scene, touch=None, why_not=None) -> dict:
         out.update(restitution=law.restitution, friction=law.friction)
         return out
     n = ln.contact.normal
-    mob = _mobility(system, c)
+    mob = system.contact_mobility(c)
     k, cd = stiffest_normal(ln)      # a grasp stiffer than the law sets the frequency
     conn = ln.connection
     if conn is not None:

@@ -116,7 +116,7 @@ def refined(path, variant, overrides, choice, estimated: float):
     # the estimate's own order says how much shorter the step must be (the
     # model's step may be capped at the first one, so asking it alone may not
     # shorten it)
-    p = min(ORDERS.get(choice.scheme, {"": 1.0}).values())
+    p = min(ORDERS[choice.scheme].values())   # a scheme with an estimate has orders
     at_most = choice.step * (SAFETY * choice.accuracy / estimated) ** (1.0 / p)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

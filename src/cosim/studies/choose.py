@@ -159,10 +159,7 @@ def knob(scene, contact: str | None = None) -> Knob:
         if ln.contact.law.rigid:
             continue
         k, _ = stiffest_normal(ln)
-        ab = system.subsystems[ln.sub_a], system.subsystems[ln.sub_b]
-        mob = (touches[c][1] if c in touches else
-               ab[0].port_mobility(ln.port_a, ln.contact.normal)
-               + ab[1].port_mobility(ln.port_b, ln.contact.normal))
+        mob = touches[c][1] if c in touches else system.contact_mobility(c)   # at the start
         if math.isfinite(k) and math.isfinite(mob) and mob > 0:
             omegas[c] = math.sqrt(k * mob)
     if not omegas:
@@ -447,7 +444,7 @@ def _why(best: dict, ok: list, k: Knob) -> str:
             f"(omega h = {k.omega * best['step']:.2g})" if best["scheme"] != "monolithic" else
             f"monolithic at {_at(best, k)}: predicted {max(err.values()) * 100:.2g} % error")
     if "model_step" in best:
-        text += (f", capped so that the run's error can be estimated" if best["capped"] ==
+        text += (", capped so that the run's error can be estimated" if best["capped"] ==
                  "checkable" else ", shorter than the first run's step as its estimate asks")
         text += f" (the model allows omega h = {k.omega * best['model_step']:.2g})"
     others = sorted((c for c in ok if c is not best), key=lambda c: c["predicted_cpu_s"])

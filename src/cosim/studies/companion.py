@@ -50,11 +50,8 @@ def contact_omega(system, c: int) -> float:
     sides' mobility along its normal at the system's present pose; inf for a
     law without a linear stiffness or sides without mobility."""
     from cosim.core.preflight import stiffest_normal
-    ln = system.links[c]
-    n = ln.contact.normal
-    mob = (system.subsystems[ln.sub_a].port_mobility(ln.port_a, n)
-           + system.subsystems[ln.sub_b].port_mobility(ln.port_b, n))
-    k = stiffest_normal(ln)[0]
+    mob = system.contact_mobility(c)
+    k = stiffest_normal(system.links[c])[0]
     return math.sqrt(k * mob) if math.isfinite(k) and mob > 0 else math.inf
 
 

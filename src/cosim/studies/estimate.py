@@ -232,23 +232,17 @@ def counted_share(result, companion) -> float:
     return work(companion) / work(result)
 
 
-def _against_rigid(scene) -> set:
-    """The embedded contacts a side integrates against a rigid partner."""
-    kinds = {s.name: s.type for s in scene.subsystems}
-    return {c.name for c in scene.contacts if c.placement == "embedded"
-            and "rigid" in (kinds[c.a[0]], kinds[c.b[0]])}
-
-
-def _hosts(scene) -> dict:
-    """Contact -> the side whose integrator evaluates it (an embedded
-    contact: its ``host``, or the side that is not rigid)."""
+def _embedded(scene) -> dict:
+    """Embedded contact -> (the side whose integrator evaluates it: its
+    ``host``, or the side that is not rigid; whether its partner is rigid)."""
     kinds = {s.name: s.type for s in scene.subsystems}
     out = {}
     for c in scene.contacts:
         if c.placement != "embedded":
             continue
         sides = (c.a[0], c.b[0])
-        out[c.name] = c.host or next((n for n in sides if kinds[n] != "rigid"), None)
+        out[c.name] = (c.host or next((n for n in sides if kinds[n] != "rigid"), None),
+                       any(kinds[n] == "rigid" for n in sides))
     return out
 
 
@@ -299,6 +293,7 @@ def estimate_errors(scene, result, factor: float = DEFAULT_FACTOR,
     comp = None
     kept: list = []                   # contacts the companion cannot see (coarsened fills it)
     beyond: dict = {}                 # exchanged contacts past the asymptotic range
+    blind = False                     # no companion: nothing it gives could be read
     if scene.scheme == "monolithic":
         acc["companion"] = {"status": "not run", "message": MONOLITHIC}
         acc["why"].append(MONOLITHIC)
@@ -308,12 +303,13 @@ def estimate_errors(scene, result, factor: float = DEFAULT_FACTOR,
             factor, beyond = fitting_factor(factor, exchanged_omega_h(scene, system))
             acc["factor"] = factor
             comp_scene, acc["coarsened"] = coarsened(scene, factor, kept, system)
-            if not _blind(result, contact, beyond, kept):
+            blind = _blind(result, contact, beyond, kept)
+            if blind:
+                acc["companion"] = {"status": "not run", "message": BLIND}
+            else:
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")
                     comp = run.simulate(comp_scene)
-            else:
-                acc["companion"] = {"status": "not run", "message": BLIND}
         except Exception as exc:   # a refused or broken companion: no estimate, said why
             from cosim.errors import UnsafeStepError
             acc["companion"] = {"status": "refused", "message": f"{type(exc).__name__}: {exc}"}
@@ -331,7 +327,8 @@ def estimate_errors(scene, result, factor: float = DEFAULT_FACTOR,
             reason = comp.message.split(": ", 1)[-1].split(";")[0].split(" (")[0]
             acc["why"].append(f"the companion {comp.status}: {reason}"[:160])
     # what a side whose step stayed integrates: the companion does not see its error
-    hosts = _hosts(scene)
+    embedded = _embedded(scene)
+    hosts = {c: host for c, (host, _) in embedded.items()}
     unseen = {c: (f"`{hosts.get(c)}` steps contact {c} at the same step in the companion "
                   f"({factor:g}x "
                   f"would take a contact it hosts past omega h = {OMEGA_H_MAX}), and that step "
@@ -344,7 +341,8 @@ def estimate_errors(scene, result, factor: float = DEFAULT_FACTOR,
                       f"omega h = {wh:.2g}, past {ASYMPTOTIC_OMEGA_H}, where the scheme's error "
                       f"stops falling as one power of the step: the two runs' difference would "
                       f"not tell the run's error" for c, wh in beyond.items()})
-    hosted = _against_rigid(scene) if order["contacts"] is not None else set()
+    hosted = ({c for c, (_, rigid) in embedded.items() if rigid}
+              if order["contacts"] is not None else set())
 
     def orders(c):                   # the contact's (the exit's: at its release)
         return HOSTED_ORDERS if c in hosted else order
@@ -352,7 +350,7 @@ def estimate_errors(scene, result, factor: float = DEFAULT_FACTOR,
         acc["order_hosted"] = HOSTED_ORDERS
     mine = _contact_values(result.summary)
     theirs = _contact_values(comp.summary) if comp is not None and comp.success else {}
-    stopped = None if theirs or acc["companion"].get("message") == BLIND else (
+    stopped = None if theirs or blind else (
         acc["why"][0] if acc["why"] else "the companion did not finish")
     differ = []
     for name, v in mine.items():
@@ -380,7 +378,7 @@ def estimate_errors(scene, result, factor: float = DEFAULT_FACTOR,
             elsewhere = f"the companion reads the exit rates at {cat}, the run at {at}"
     for joint, value in rates.items():
         why = (stopped or (differ[0] if differ else None) or elsewhere
-               or unseen.get(contact) or (BLIND if not theirs else None))
+               or unseen.get(contact) or (BLIND if blind else None))
         acc["exit"][joint] = _judge(value, crates.get(joint, math.nan), factor,
                                     orders(contact)["exit"], why)
     acc["why"] += differ

@@ -100,7 +100,7 @@ cdef class Driver:
         self.gs = scheme.name == "gauss_seidel"
         self.order = scheme.extrapolation_order
         self.H = scheme.macro_step
-        self.horizon = getattr(scheme, "approach_horizon", None) or scheme.macro_step
+        self.horizon = scheme.horizon
         self.contact_step = scheme.contact_step if scheme.contact_step is not None else NAN
         self.controlled = controlled
         self.nc = system.n_contacts

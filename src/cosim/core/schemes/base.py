@@ -137,6 +137,12 @@ class CoSimulationScheme(InputExtrapolation, CouplingScheme):
                            "a table of subsystem name = number of sub-steps (>= 1)"),
     }
 
+    @property
+    def horizon(self) -> float:
+        """How far ahead [s] a contact predicted to close shortens the step to
+        ``contact_step``: ``approach_horizon``, else ``macro_step``."""
+        return self.approach_horizon or self.macro_step
+
     def preflight(self, system, t_end: float = math.inf) -> None:
         """Refuse a macro step that is too large for a contact's stiffness.
 
@@ -151,9 +157,7 @@ class CoSimulationScheme(InputExtrapolation, CouplingScheme):
                 f"macro step {H:.3g} s (the whole run: `{which}` = {given:.3g} s is longer)")
         for c in system.coupler:
             ln = system.links[c]
-            n = ln.contact.normal
-            mob = (system.subsystems[ln.sub_a].port_mobility(ln.port_a, n)
-                   + system.subsystems[ln.sub_b].port_mobility(ln.port_b, n))
+            mob = system.contact_mobility(c)
             if mob <= 0:
                 continue
             m, (k, cd) = 1.0 / mob, stiffest_normal(ln)     # the law's, or a grasp's

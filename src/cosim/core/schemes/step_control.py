@@ -77,7 +77,7 @@ class StepController:
         self.macro_step = scheme.macro_step
         self.contact_step = scheme.contact_step
         #: how far ahead [s] a contact predicted to close shortens the step
-        self.horizon = getattr(scheme, "approach_horizon", None) or scheme.macro_step
+        self.horizon = scheme.horizon
         self.interface_tolerance = scheme.interface_tolerance
         self.extrapolation_order = scheme.extrapolation_order
 
