@@ -9,6 +9,7 @@ and what the others default to.
 from __future__ import annotations
 
 import contextlib
+import difflib
 import math
 import re
 
@@ -19,7 +20,7 @@ from cosim.scene import keys as _keys
 from cosim.scene.keytable import MAX_STEPS
 
 __all__ = ["SceneError", "Table", "check_name", "type_name", "build_model", "floats",
-           "record_keys", "echo", "MAX_ELEMENTS", "MAX_STEPS", "parse_accuracy"]
+           "record_keys", "echo", "MAX_ELEMENTS", "MAX_STEPS", "parse_accuracy", "nearest"]
 
 #: most elements (or masses) a structure may have: a mesh beyond it is refused
 #: when the scene is read, before anything is assembled
@@ -51,6 +52,18 @@ def echo(value) -> str:
     so that a 100 KB string or a line break in the file cannot flood or
     forge the message.  Every scene error that echoes a value does so here."""
     return shown(repr(value) if isinstance(value, str) else value)
+
+
+def nearest(word: str, known) -> str | None:
+    """The one name of ``known`` closest to ``word`` (:func:`difflib.get_close_matches`,
+    a ratio of at least 0.6), or None: what a misspelt key most likely meant
+    (``tend`` -> ``t_end``, ``youngs_modulos`` -> ``youngs_modulus``).  Names in
+    upper case (``NAME``, ``POINT``: a name the scene chooses) are not offered."""
+    if not isinstance(word, str):
+        return None
+    names = [n for n in known if isinstance(n, str) and not n.isupper() and n != word]
+    found = difflib.get_close_matches(word, names, n=1, cutoff=0.6)
+    return found[0] if found else None
 
 
 def check_name(file, key: str, name, what: str) -> None:
@@ -144,9 +157,25 @@ class Table:
         self.used.add(k)
         if k not in self.data:
             if default is _MISSING:
-                self.error(k, "is required but missing")
+                self.error(k, "is required but missing" + self.misspelt(k))
             return default
         return self.data[k]
+
+    def misspelt(self, k: str) -> str:
+        """`` (found `KEY`: a misspelling?)`` when the table holds a key it does
+        not accept that is close to the missing key ``k`` (:func:`nearest`),
+        else ``""``: a misspelt required key is reported with the spelling the
+        file has."""
+        if self.section is not None:
+            strangers = [x for x in self.data if self.section.find(x) is None]
+        else:
+            strangers = [x for x in self.data if x not in self.used]
+        near = nearest(k, strangers)
+        return "" if near is None else f" (found `{shown(near)}`: a misspelling?)"
+
+    def _did_you_mean(self, k: str, known) -> str:
+        near = nearest(k, known)
+        return "" if near is None else f" (did you mean `{near}`?)"
 
     def _present(self, k, default):
         """(value, True) if ``k`` is given, else (its default, False)."""
@@ -249,12 +278,14 @@ class Table:
             row = None if self.section is None else self.section.find(k)
             if self.section is not None and row is None:
                 where = self.key() or "the top level"
-                self.error(k, f"is not a known key of {where}; known keys are "
+                self.error(k, f"is not a known key of {where}"
+                              f"{self._did_you_mean(k, self.section.names)}; known keys are "
                               f"{sorted(self.section.names)}")
             if k not in self.used:
                 where = self.key() or "the top level"
                 if self.section is None:
-                    self.error(k, f"is not a known key of {where}; known keys are "
+                    self.error(k, f"is not a known key of {where}"
+                                  f"{self._did_you_mean(k, self.used)}; known keys are "
                                   f"{sorted(self.used)}")
                 self.error(k, f"does not apply with the other keys of {where}, which uses "
                               f"{sorted(self.used)}")

@@ -51,7 +51,8 @@ def contact_spec(name: str, t: Table, subs: list) -> ContactSpec:
             params[f.name] = law_t.number(f.name)
         elif f.default is dataclasses.MISSING:
             why = f.metadata.get("required")     # a law may say why no default would do
-            law_t.error(f.name, f"is required by law `{law_name}`" + (f": {why}" if why else ""))
+            law_t.error(f.name, f"is required by law `{law_name}`" + (f": {why}" if why else "")
+                        + law_t.misspelt(f.name))
     law_t.finish()
     law = build_model(law_t, law_cls, **params)
     kinds = {s.name: s.type for s in subs}

@@ -18,7 +18,7 @@ import os
 
 from cosim.core.guard import GuardOptions
 from cosim.scene.checks import (MAX_ELEMENTS, MAX_STEPS, SceneError, Table, check_name,
-                                 echo)
+                                 echo, nearest)
 from cosim.scene.contacts import check_conditions, contact_spec
 from cosim.scene.read import parse_override, read_scene, read_toml_file
 from cosim.scene.shipped import find_scene, not_found
@@ -177,15 +177,20 @@ def _scheme_table(sch: Table) -> tuple[str, dict, dict]:
             other = COUPLING_SCHEMES[k]
             for ko in list(sub.data):
                 if ko not in other.options:
-                    sub.error(ko, f"is not an option of scheme `{k}`; its options are "
-                                  f"{sorted(other.options)}")
+                    near = nearest(ko, other.options)
+                    sub.error(ko, f"is not an option of scheme `{k}`"
+                                  + (f" (did you mean `{near}`?)" if near else "")
+                                  + f"; its options are {sorted(other.options)}")
             tables[k] = {ko: _scheme_option(sub, ko, other.options[ko]) for ko in sub.data}
             sub.finish()
             continue
         free.used.add(k)
         if k not in cls.options and not any(k in c.options for c in COUPLING_SCHEMES.values()):
-            free.error(k, f"is not an option of any scheme; options of `{name}` are "
-                          f"{sorted(cls.options)}")
+            known = {o for c in COUPLING_SCHEMES.values() for o in c.options} | {"accuracy"}
+            near = nearest(k, known)
+            free.error(k, f"is not an option of any scheme"
+                          + (f" (did you mean `{near}`?)" if near else "")
+                          + f"; options of `{name}` are {sorted(cls.options)}")
         owner = cls if k in cls.options else next(c for c in COUPLING_SCHEMES.values()
                                                   if k in c.options)
         given[k] = _scheme_option(free, k, owner.options[k])    # still a valid value
