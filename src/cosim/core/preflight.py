@@ -22,6 +22,7 @@ import math
 import numpy as np
 
 __all__ = ["contact_time", "step_map", "contact_energy_gain", "is_safe", "largest_safe_step",
+           "advised_step",
            "partner_first", "stiffest_normal", "EXPLICIT_STABILITY", "stiffest_mode"]
 
 #: the explicit Runge-Kutta methods of :func:`scipy.integrate.solve_ivp` ->
@@ -160,3 +161,28 @@ def largest_safe_step(m, k, c, H, order, max_energy_gain, gs_partner_first=False
         if hi / lo < 1.001:
             break
     return lo
+
+
+def advised_step(problems, H) -> float:
+    """The step [s] a pre-flight refusal advises: safe for every contact of
+    ``problems`` (``(m, k, c, order, max_energy_gain, gs_partner_first)``
+    each, as :func:`is_safe` takes them) at the value as the message prints
+    it (two significant digits, ``{:.2g}``), so that a user who sets the
+    printed value passes the check.  It starts from the smallest
+    :func:`largest_safe_step` below ``H`` [s], rounded down, and is lowered
+    by a tenth at a time while a contact finds it unsafe (the energy gain
+    need not fall monotonically with the step).  0.0 if a contact has no
+    safe step or none is found within 40 tries."""
+    if not problems:
+        return H
+    h = min(largest_safe_step(m, k, c, H, order, gain, pf) for m, k, c, order, gain, pf in problems)
+    for _ in range(40):
+        if not h > 0:
+            return 0.0
+        e = math.floor(math.log10(h)) - 1
+        h = float(f"{math.floor(h / 10.0 ** e) * 10.0 ** e:.2g}")   # as printed, rounded down
+        if h > 0 and all(is_safe(m, k, c, h, order, gain, pf)
+                         for m, k, c, order, gain, pf in problems):
+            return h
+        h *= 0.9
+    return 0.0

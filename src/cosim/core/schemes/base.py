@@ -153,8 +153,10 @@ class CoSimulationScheme(InputExtrapolation, CouplingScheme):
         given = self.contact_step or self.macro_step     # the step used while in contact
         H = min(given, t_end)
         which = "contact_step" if self.contact_step else "macro_step"
-        step = (f"macro step {H:.3g} s" if H == given else
-                f"macro step {H:.3g} s (the whole run: `{which}` = {given:.3g} s is longer)")
+        step = (f"macro step {H:.3g} s (`scheme.{which}`)" if H == given else
+                f"macro step {H:.3g} s (the whole run: `scheme.{which}` = {given:.3g} s is "
+                f"longer)")
+        checked, refused = [], None        # every contact the step is judged on; the first refused
         for c in system.coupler:
             ln = system.links[c]
             mob = system.contact_mobility(c)
@@ -168,22 +170,31 @@ class CoSimulationScheme(InputExtrapolation, CouplingScheme):
                     f"scheme `{self.name}`; give the law a "
                     f"`reference_penetration`, use the `implicit` scheme, or set "
                     f"`scheme.accept_unsafe_step = true`")
-            partner_first = self._partner_first(system, c)
-            if preflight.is_safe(m, k, cd, H, self.extrapolation_order, self.max_energy_gain,
-                                 partner_first):
-                continue
-            hmax = preflight.largest_safe_step(m, k, cd, H, self.extrapolation_order,
-                                               self.max_energy_gain, partner_first)
-            gain = preflight.contact_energy_gain(m, k, cd, H, self.extrapolation_order,
-                                                 partner_first)
-            raise UnsafeStepError(
-                f"contact `{ln.contact.name}`: {step} is too large for scheme "
-                f"`{self.name}` (extrapolation order {self.extrapolation_order}): contact "
-                f"frequency omega = {math.sqrt(k / m):.4g} rad/s with reduced mass {m:.4g} kg; "
-                f"one contact would change the energy by a factor {gain:.4g} "
-                f"(allowed 1 + {self.max_energy_gain:g}). The largest safe macro step is "
-                f"{hmax:.3g} s. Use a smaller `scheme.macro_step`, the `implicit` scheme, "
-                f"or set `scheme.accept_unsafe_step = true` to run anyway.")
+            problem = (m, k, cd, self.extrapolation_order, self.max_energy_gain,
+                       self._partner_first(system, c))
+            checked.append(problem)
+            if refused is None and not preflight.is_safe(m, k, cd, H, *problem[3:]):
+                refused = (ln, problem)
+        if refused is None:
+            return
+        ln, (m, k, cd, order, allowed, partner_first) = refused
+        hmax = preflight.largest_safe_step(m, k, cd, H, order, allowed, partner_first)
+        gain = preflight.contact_energy_gain(m, k, cd, H, order, partner_first)
+        # the advice holds for every contact the check judges, not the first alone
+        advised = preflight.advised_step(checked, H)
+        fix = ("Use the `implicit` scheme, " if advised <= 0 else
+               f"Set `scheme.{which}` to {advised:.2g} s or less"
+               + ("" if which == "contact_step" else
+                  " (or `scheme.contact_step` to it, which keeps the longer steps away "
+                  "from contact)")
+               + ", use the `implicit` scheme, ")
+        raise UnsafeStepError(
+            f"contact `{ln.contact.name}`: {step} is too large for scheme "
+            f"`{self.name}` (extrapolation order {order}): contact "
+            f"frequency omega = {math.sqrt(k / m):.4g} rad/s with reduced mass {m:.4g} kg; "
+            f"one contact would change the energy by a factor {gain:.4g} "
+            f"(allowed 1 + {allowed:g}). The largest safe macro step is "
+            f"{hmax:.3g} s. {fix}or set `scheme.accept_unsafe_step = true` to run anyway.")
 
     def _partner_first(self, system, c) -> bool:
         return False
