@@ -81,7 +81,7 @@ def _structure(spec, scene, macro_step):
         structure = spec.model.assemble()
         basis = fem.modes(structure, **{k: v for k, v in spec.modes.items() if v})
     except ValueError as exc:
-        msg = str(exc)
+        msg = _unit_slip_first(str(exc), spec, scene)
         for arg, key in (("cutoff_hz", "cutoff_hz"), ("n_modes", "count")):
             if msg.startswith(f"`{arg}` "):     # the modes table's key, not the function's
                 raise SceneError(scene.path, f"{spec.key}.modes.{key}",
@@ -126,6 +126,31 @@ def _structure(spec, scene, macro_step):
                          f"keep fewer modes (`modes.cutoff_hz`), shorten the step or use "
                          f"`exact`")
     return sub
+
+
+def _unit_slip_first(msg: str, spec, scene) -> str:
+    """``msg`` of :func:`fem.modes`, whose advice to raise ``modes.cutoff_hz``
+    is put after the unit slip that more likely made every mode too high: a
+    section larger than the structure (millimetres read as metres: about
+    1e6 times too stiff for its mass, :func:`cosim.scene.plausible.section_problem`),
+    or a lowest natural frequency above :data:`~cosim.scene.plausible.HIGH_HZ`."""
+    import re
+
+    from cosim.scene.plausible import HIGH_HZ, section_problem
+    advice = "; give a cutoff above it"
+    if not (msg.startswith("`cutoff_hz` keeps no mode") and msg.endswith(advice)):
+        return msg
+    problem = section_problem(scene, spec)
+    if problem is not None:
+        why = problem["message"]
+    else:
+        m = re.search(r"lowest natural frequency is ([0-9.eE+-]+) Hz", msg)
+        if m is None or not float(m.group(1)) > HIGH_HZ:
+            return msg
+        why = (f"a lowest natural frequency above {HIGH_HZ:g} Hz is no structure's as meant: "
+               f"check the units of `{spec.key}`'s density, stiffness and section")
+    return (msg[:-len(advice)] + f". Check the units first: {why}. A higher cutoff would run "
+            f"the {spec.type} as written; if its numbers are right, give a cutoff above it")
 
 
 def build_side(side, scene, default_step: float, macro_step: float | None = None):

@@ -110,12 +110,17 @@ def simulate(scene: Scene, *, scheme: str | None = None, progress=None,
 def _simulate(scene, scheme, progress, progress_interval, out, overwrite):
     from cosim.core.result import check_output_dir, write_scene, write_summary
     from cosim.io.rundir import inside
+    from cosim.scene.plausible import gap_warnings, scene_size, structure_warnings
     from cosim.scene.work import warn_work
 
     if out is not None:
         check_output_dir(out, overwrite, scene.export)
     system, sch = scene.build(scheme)
     warn_work(scene.path, scene.work(scheme, system))      # a long run says so first
+    # what looks like a unit slip (cosim.scene.plausible): judged on the system as built,
+    # said in the summary's warnings, never a refusal
+    plausible = structure_warnings(scene, system)
+    size = scene_size(system)
     if out is not None:
         sch.preflight(system, scene.t_end)     # a refusal writes nothing
         write_scene(scene, out)
@@ -169,6 +174,9 @@ def _simulate(scene, scheme, progress, progress_interval, out, overwrite):
         raise _lost(exc, f"{ended} but wrote no series or summary", out) from None
     if failure is not None:
         res.summary["fmu_failure"] = failure     # which FMU call failed, and when
+    if status == "finished":
+        plausible += gap_warnings(res.summary, res.series, size)
+    res.summary["warnings"] = plausible + res.summary.get("warnings", [])
     if out is not None:
         try:
             write_summary(res.summary, inside(out, "summary.json"))
