@@ -46,6 +46,9 @@ GAP_RATIO = 100.0
 _SLIPS = {"Pa": ((1e6, "MPa written as Pa"), (1e9, "GPa written as Pa")),
           "N/m": ((1e3, "kN/m written as N/m"), (1e6, "kN/mm written as N/m")),
           "N": ((1e3, "kN written as N"),)}
+#: unit -> the range a value of it has in a structure as meant: Young's moduli of
+#: structural materials, polymers (about 1 GPa) to diamond (about 1.2e12 Pa)
+_TYPICAL = {"Pa": (1e9, 1.2e12)}
 
 
 def length_text(x: float) -> str:
@@ -95,13 +98,17 @@ def _stiffness_key(spec, data) -> tuple[str, str] | None:
 
 
 def _slip(value, unit: str, fits) -> str:
-    """``; was it 210e9 (GPa written as Pa)?`` for the smallest factor of
-    :data:`_SLIPS` that ``fits(factor)`` accepts, else a plain ``; check its
-    unit (Pa)``."""
+    """``; was it 210e9 (GPa written as Pa)?``: of the factors of
+    :data:`_SLIPS` that ``fits(factor)`` accepts (the deflection or frequency
+    it would give is plausible), the first that also puts ``value`` in the
+    range of :data:`_TYPICAL` (a modulus of a structural material), else
+    the first; a plain ``; check its unit (Pa)`` when none fits."""
     if isinstance(value, (int, float)) and not isinstance(value, bool):
-        for factor, what in _SLIPS.get(unit, ()):
-            if fits(factor):
-                return f"; was it {value:g}e{round(math.log10(factor))} ({what})?"
+        fitting = [(f, what) for f, what in _SLIPS.get(unit, ()) if fits(f)]
+        low, high = _TYPICAL.get(unit, (-math.inf, math.inf))
+        typical = [(f, what) for f, what in fitting if low <= value * f <= high]
+        for factor, what in typical or fitting:
+            return f"; was it {value:g}e{round(math.log10(factor))} ({what})?"
     return f"; check its unit ({unit})" if unit else ""
 
 
