@@ -143,8 +143,8 @@ def test_a_section_in_millimetres_warns():
 
 
 def test_a_rod_area_in_square_millimetres_warns():
-    (w,) = _before(_quiet_load(CASES / "rod_impact.toml",
-                               overrides=["subsystems.rod.area=400", "subsystems.rod.modes.count=8"]))
+    (w,) = _before(_quiet_load(CASES / "rod_impact.toml", overrides=[
+        "subsystems.rod.area=400", "subsystems.rod.modes.count=8"]))
     assert w["kind"] == "section" and w["key"] == "subsystems.rod.area"
     assert "(mm^2 written as m^2)" in w["message"]
 

@@ -1,5 +1,6 @@
 """The pre-flight stability check of explicit coupling."""
 import math
+import re
 
 import pytest
 
@@ -7,6 +8,8 @@ import cosim
 from analytic import held_force_rebound_factor
 from conftest import CASES
 from cosim.core import preflight
+from cosim.studies.roundoff import OFFSETS, nudge
+from roundoff import COPIES
 
 M, K = 1.0, 1e6
 W = math.sqrt(K / M)
@@ -78,3 +81,71 @@ def test_implicit_and_embedded_need_no_check():
     scene = cosim.load_scene(CASES / "spring_drop.toml", overrides=["scheme.macro_step=1e-3"],
                              scheme="jacobi")
     assert cosim.simulate(scene).success       # the wall's contact is embedded
+
+
+# ------------------------------------------------- the refusal's advice works
+def _refusal(scene) -> str:
+    system, sch = scene.build()
+    with pytest.raises(cosim.UnsafeStepError) as info:
+        sch.preflight(system, scene.t_end)
+    return str(info.value)
+
+
+def _passes(scene) -> bool:
+    system, sch = scene.build()
+    try:
+        sch.preflight(system, scene.t_end)
+    except cosim.UnsafeStepError:
+        return False
+    return True
+
+
+def _advised(msg: str, key: str) -> float:
+    m = re.search(rf"Set `scheme\.{key}` to ([0-9.e+-]+) s or less", msg)
+    assert m, msg
+    return float(m[1])
+
+
+BEAM_C = ["contacts.C.placement=\"coupler\""]    # the scheme, not the beam, steps contact C
+
+
+def test_a_refused_contact_step_is_named_and_its_advice_passes():
+    """beam_impact with contact C in the coupler: its 5e-5 s `contact_step` is
+    refused, the refusal names `scheme.contact_step` (not the macro step, whose
+    lowering would be refused the same) and the value it advises passes the
+    check, as printed and nudged a few ulps."""
+    scene = cosim.load_scene(CASES / "beam_impact.toml", overrides=BEAM_C)
+    msg = _refusal(scene)
+    assert "the step is `scheme.contact_step`" in msg and "scheme.macro_step" not in msg, msg
+    h = _advised(msg, "contact_step")
+    assert 0 < h < 5e-5
+    for k in (0,) + OFFSETS[:COPIES - 1]:
+        assert _passes(cosim.load_scene(CASES / "beam_impact.toml", overrides=BEAM_C + [
+            f"scheme.contact_step={nudge(h, k)!r}"]))
+    # following the old advice (a smaller macro step) is refused all the same
+    assert not _passes(cosim.load_scene(CASES / "beam_impact.toml",
+                                        overrides=BEAM_C + ["scheme.macro_step=1e-4"]))
+
+
+@pytest.mark.parametrize("key", ["macro_step", "contact_step"])
+def test_a_refused_macro_step_advises_a_step_that_passes(key):
+    """spring_drop at 1e-4 s: the advised value, set as the macro step or as
+    the contact step, passes; just above the largest safe step does not."""
+    msg = _refusal(_load(1e-4))
+    assert "the step is `scheme.macro_step`" in msg, msg
+    h = _advised(msg, "macro_step")
+    assert "or `scheme.contact_step` to it" in msg
+    hmax = float(re.search(r"largest safe macro step is ([0-9.e+-]+) s", msg)[1])
+    assert h <= hmax
+    for k in (0,) + OFFSETS[:COPIES - 1]:
+        assert _passes(_load(1e-4, extra=[f"scheme.{key}={nudge(h, k)!r}"]))
+    assert not _passes(_load(1e-4, extra=[f"scheme.{key}={1.05 * hmax!r}"]))
+
+
+def test_the_advised_step_holds_for_every_contact():
+    """Two contacts of different stiffness: the advice is the smaller safe step."""
+    problems = [(M, K, 0.0, 0, 0.01, False), (M, 100 * K, 0.0, 0, 0.01, False)]
+    h = preflight.advised_step(problems, 1e-4)
+    assert all(preflight.is_safe(*p[:3], h, *p[3:]) for p in problems)
+    assert h < preflight.largest_safe_step(M, K, 0.0, 1e-4, 0, 0.01)
+    assert h == float(f"{h:.2g}")                # exactly what the message prints

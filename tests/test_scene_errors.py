@@ -516,3 +516,56 @@ def test_huge_integer_is_a_scene_error(override, key):
 def test_sequence_names_the_moving_subsystems(seq):
     with pytest.raises(SceneError, match=re.escape("`scheme.sequence`")):
         load_scene(SPRING_DROP, overrides=[f"scheme.sequence={seq}"]).build()
+
+
+# ------------------------------------------- a misspelt key names the nearest
+MISSPELT = [
+    ("beam_impact", 'law = { type = "linear", contact_stiffness = 1.6e6 }',
+     'law = { type = "linear", contact_stifness = 1.6e6 }',
+     at("contacts.C.law.contact_stiffness", "is required by law `linear`")
+     + r".*\(found `contact_stifness`: a misspelling\?\)"),
+    ("beam_impact", "youngs_modulus = 210e9", "youngs_modulos = 210e9",
+     at("subsystems.beam.youngs_modulus", "is required but missing")
+     + r" \(found `youngs_modulos`: a misspelling\?\)"),
+    ("beam_impact", "t_end = 0.13", "tend = 0.13",
+     at("t_end", "is required but missing") + r" \(found `tend`: a misspelling\?\)"),
+    ("beam_impact", "elements = 32", "elements = 32\nlenght = 1.0",
+     at("subsystems.beam.lenght", "is not a known key of subsystems.beam")
+     + r" \(did you mean `length`\?\)"),
+    ("beam_impact", "macro_step = 1e-3 ", "macro_stp = 1e-3 ",
+     at("scheme.macro_stp", "is not an option of any scheme")
+     + r" \(did you mean `macro_step`\?\)"),
+    ("spring_drop", "[scheme]", "[output]\nevry = 1\n\n[scheme]",
+     at("output.evry", "is not a known key of output") + r" \(did you mean `every`\?\)"),
+]
+
+
+@pytest.mark.parametrize("case,old,new,match", MISSPELT, ids=[m[2][:16] for m in MISSPELT])
+def test_a_misspelt_key_is_named_with_the_nearest_known_key(tmp_path, case, old, new, match):
+    """The file, the key path and the spelling the file has; exit 2 from the CLI."""
+    text = (CASES / f"{case}.toml").read_text()
+    assert old in text
+    path = tmp_path / f"{case}.toml"
+    path.write_text(text.replace(old, new, 1))
+    with pytest.raises(SceneError, match=re.escape(str(path)) + ": " + match):
+        load_scene(path)
+
+
+def test_a_misspelling_exits_2_with_the_nearest_key(tmp_path):
+    import subprocess
+    import sys
+    path = tmp_path / "scene.toml"
+    path.write_text((CASES / "beam_impact.toml").read_text().replace("t_end = 0.13", "tend = 0.13"))
+    proc = subprocess.run([sys.executable, "-m", "cosim.cli", "run", str(path), "--out",
+                           str(tmp_path / "run")], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2, proc.stderr
+    assert "`t_end` is required but missing (found `tend`: a misspelling?)" in proc.stderr
+    assert "Traceback" not in proc.stderr and not (tmp_path / "run").exists()
+
+
+def test_nothing_near_is_offered():
+    """A key far from every known key is refused without a guess."""
+    from cosim.scene.checks import nearest
+    assert nearest("tend", ["t_end", "name"]) == "t_end"
+    assert nearest("zzzz", ["t_end", "name"]) is None
+    assert nearest("name", ["NAME", "POINT"]) is None       # placeholders are no spelling

@@ -153,7 +153,7 @@ class CoSimulationScheme(InputExtrapolation, CouplingScheme):
         given = self.contact_step or self.macro_step     # the step used while in contact
         H = min(given, t_end)
         which = "contact_step" if self.contact_step else "macro_step"
-        step = (f"macro step {H:.3g} s (`scheme.{which}`)" if H == given else
+        step = (f"macro step {H:.3g} s" if H == given else
                 f"macro step {H:.3g} s (the whole run: `scheme.{which}` = {given:.3g} s is "
                 f"longer)")
         checked, refused = [], None        # every contact the step is judged on; the first refused
@@ -190,7 +190,7 @@ class CoSimulationScheme(InputExtrapolation, CouplingScheme):
                + ", use the `implicit` scheme, ")
         raise UnsafeStepError(
             f"contact `{ln.contact.name}`: {step} is too large for scheme "
-            f"`{self.name}` (extrapolation order {order}): contact "
+            f"`{self.name}` (extrapolation order {order}; the step is `scheme.{which}`): contact "
             f"frequency omega = {math.sqrt(k / m):.4g} rad/s with reduced mass {m:.4g} kg; "
             f"one contact would change the energy by a factor {gain:.4g} "
             f"(allowed 1 + {allowed:g}). The largest safe macro step is "
