@@ -18,6 +18,7 @@ import pytest
 
 import cosim
 from conftest import CASES
+from documented import ROOT, flat
 from roundoff import COPIES, outcomes
 from cosim.scene import plausible
 from cosim.scene.load import SceneError
@@ -179,6 +180,12 @@ def test_the_terminal_and_the_summary_show_the_warnings(tmp_path):
     assert ("warning: `subsystems.beam.youngs_modulus` = 210 Pa: a static deflection of 573 km "
             "under gravity on a 1 m beam") in proc.stdout
     assert "warning: contact `C` never closed" in proc.stdout
+    # the line docs/scenes.md quotes, and the troubleshooting page's row, are the run's
+    page = (ROOT / "docs" / "scenes.md").read_text(encoding="utf-8")
+    quoted = re.search(r"```text\n(warning: .*?)\n```", page)[1]
+    assert quoted in [line.strip() for line in proc.stdout.splitlines()]
+    assert quoted[len("warning: "):] in flat(
+        (ROOT / "docs" / "troubleshooting.md").read_text(encoding="utf-8"))
     summary = json.loads((out / "summary.json").read_text())
     assert {w["kind"] for w in summary["warnings"]} == {"static_deflection", "contact_gap"}
     assert all(set(w) >= {"kind", "contact", "key", "message"} for w in summary["warnings"])

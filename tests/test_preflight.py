@@ -7,6 +7,7 @@ import pytest
 import cosim
 from analytic import held_force_rebound_factor
 from conftest import CASES
+from documented import ROOT
 from cosim.core import preflight
 from cosim.studies.roundoff import OFFSETS, nudge
 from roundoff import COPIES
@@ -119,6 +120,9 @@ def test_a_refused_contact_step_is_named_and_its_advice_passes():
     assert "the step is `scheme.contact_step`" in msg and "scheme.macro_step" not in msg, msg
     h = _advised(msg, "contact_step")
     assert 0 < h < 5e-5
+    page = (ROOT / "docs" / "troubleshooting.md").read_text(encoding="utf-8")
+    quoted = re.search(r"`(Set `scheme\.contact_step` to [0-9.e+-]+ s or less)`", page)[1]
+    assert quoted in msg            # the page quotes this refusal's advice
     for k in (0,) + OFFSETS[:COPIES - 1]:
         assert _passes(cosim.load_scene(CASES / "beam_impact.toml", overrides=BEAM_C + [
             f"scheme.contact_step={nudge(h, k)!r}"]))
