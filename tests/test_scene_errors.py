@@ -569,3 +569,26 @@ def test_nothing_near_is_offered():
     assert nearest("tend", ["t_end", "name"]) == "t_end"
     assert nearest("zzzz", ["t_end", "name"]) is None
     assert nearest("name", ["NAME", "POINT"]) is None       # placeholders are no spelling
+
+
+# ------------------------------------- a side's step refusal advises a value that builds
+SIDE_STEPS = [
+    (SPRING_DROP, [f"{B}.integrator.max_step=0.01"], f"{B}.integrator.max_step"),
+    (CASES / "beam_impact.toml", ['subsystems.beam.integrator.method="central_difference"'],
+     "scheme.macro_step"),
+]
+
+
+@pytest.mark.parametrize("path,overrides,key", SIDE_STEPS, ids=["max_step", "stable_step"])
+def test_a_side_step_refusal_advises_a_value_that_builds(path, overrides, key):
+    """The value the refusal prints passes its check, as printed and nudged a few ulps."""
+    from roundoff import COPIES
+    from cosim.studies.roundoff import OFFSETS, nudge
+    with pytest.raises(SceneError) as info:
+        load_scene(path, overrides=overrides).build()
+    m = re.search(r"set (?:it|`([\w.]+)`) to ([0-9.e+-]+) s or less", str(info.value))
+    assert m, str(info.value)
+    assert (m[1] or key) == key
+    h = float(m[2])
+    for k in (0,) + OFFSETS[:COPIES - 1]:
+        load_scene(path, overrides=overrides + [f"{key}={nudge(h, k)!r}"]).build()

@@ -119,13 +119,31 @@ def _structure(spec, scene, macro_step):
         raise SceneError(scene.path, f"{spec.key}.integrator", str(exc)) from None
     H = macro_step
     if H is not None and H > sub.max_stable_step():
+        stable = sub.max_stable_step()
+        advised = _printed_below(stable, lambda h: not h > stable)
         raise SceneError(scene.path, f"{spec.key}.integrator.method",
                          f"`{spec.integrator}` is stable only for steps below "
-                         f"{sub.max_stable_step():.3g} s (highest kept mode "
+                         f"{stable:.3g} s (highest kept mode "
                          f"{basis.frequencies_hz[-1]:.4g} Hz), the macro step is {H:.3g} s; "
-                         f"keep fewer modes (`modes.cutoff_hz`), shorten the step or use "
-                         f"`exact`")
+                         f"keep fewer modes (a lower `modes.cutoff_hz`), set "
+                         f"`scheme.macro_step` to {advised:.2g} s or less, or use `exact`")
     return sub
+
+
+def _printed_below(limit: float, ok) -> float:
+    """``limit`` [s] rounded down to the two digits a message prints, lowered
+    by a tenth while ``ok`` (the refusal's own test) finds it too large: the
+    value a refusal advises passes it as printed."""
+    h = limit
+    for _ in range(40):
+        if not (h > 0 and math.isfinite(h)):
+            break
+        e = math.floor(math.log10(h)) - 1
+        h = float(f"{math.floor(h / 10.0 ** e) * 10.0 ** e:.2g}")
+        if ok(h):
+            return h
+        h *= 0.9
+    return limit
 
 
 def _unit_slip_first(msg: str, spec, scene) -> str:
@@ -262,10 +280,11 @@ def build_system(scene, scheme: str | None = None, *, run_fmu: bool = True):
             dt, key = subs[s]._rk4.max_step, "contact_step"
         if omega * dt > 0.5 * _RK4_LIMIT:
             limit = 0.5 * _RK4_LIMIT / omega
+            advised = _printed_below(limit, lambda h, w=omega: not w * h > 0.5 * _RK4_LIMIT)
             raise SceneError(scene.path, f"subsystems.{subs[s].name}.integrator.{key}",
                              f"is {dt:.3g} s, too large for contact `{ln.contact.name}` "
                              f"(omega = {omega:.4g} rad/s): the integrator needs a step below "
-                             f"{limit:.3g} s to resolve it")
+                             f"{limit:.3g} s to resolve it; set it to {advised:.2g} s or less")
     seq = opts.get("sequence")
     if seq is not None:
         moving = [s.name for s in subs if not s.rigid]
