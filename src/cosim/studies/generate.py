@@ -32,7 +32,8 @@ How a scene is drawn (:func:`draw`), from its own generator
    :func:`cosim.studies.generate_parts.law_table`);
 5. the structure placed so that the tip meets the port 0.5 to 4 ms after the
    start (shorter where the tip's path curves), the scheme's steps (contact
-   steps of a 20th to an 80th of the contact time; an exchanged contact
+   steps of a 20th to an 80th of the contact time, four times shorter at
+   extrapolation order 0, whose error is first order; an exchanged contact
    under an explicit scheme at 0.3 to 0.9 of the pre-flight check's largest
    safe step, at extrapolation order 1 or 2), and ``t_end`` long enough for
    the contact, the push and every rebound to end, at most :data:`MAX_T_END`.
@@ -206,7 +207,8 @@ def draw(index: int, seed: int = 0, cats: dict | None = None) -> tuple[str, dict
     explicit = scheme != "implicit"
     order = (int(rng.integers(1, 3)) if placement == "coupler" and explicit
              else int(rng.integers(0, 2)) if explicit else 1)
-    h_c = t_c / _log_uniform(rng, 20.0, 80.0)
+    # a held force (order 0) errs at first order: four times the steps
+    h_c = t_c / _log_uniform(rng, 20.0, 80.0) / (4.0 if order == 0 else 1.0)
     if placement == "coupler" and explicit:
         h_c = min(h_c, float(rng.uniform(0.3, 0.9)) * _safe_step(law_t, m_red, order))
     h_c = _sig(h_c, 3)
