@@ -151,7 +151,8 @@ def _linearised(law: dict) -> tuple[float, float]:
 
 def _safe_step(law: dict, m_red: float, order: int) -> float:
     """The pre-flight check's largest safe step for the law's linearisation
-    at the reduced mass (no rigid partner: the force is extrapolated)."""
+    at the reduced mass (no rigid partner: the force is extrapolated), searched
+    below ten contact times as `cosim info` searches it."""
     from cosim.core import preflight
     k, c = _linearised(law)
     h = preflight.largest_safe_step(m_red, k, c, 10 * math.pi / math.sqrt(k / m_red), order,
@@ -159,6 +160,27 @@ def _safe_step(law: dict, m_red: float, order: int) -> float:
     if not h > 0:
         raise RuntimeError(f"generator bug: no safe step for law {law} at {m_red} kg")
     return h
+
+
+def _safe_below(law: dict, m_red: float, order: int, h: float) -> float:
+    """``h``, rounded down to 3 digits, or a shorter step the pre-flight
+    check passes: the energy one contact gains is not monotonic in the step
+    (the steps per contact are a whole number), so a step below a safe one
+    need not be safe."""
+    from cosim.core import preflight
+    k, c = _linearised(law)
+    for _ in range(10):
+        h = _sig_down(h)
+        if preflight.is_safe(m_red, k, c, h, order, 0.01, False):
+            return h
+        h = preflight.largest_safe_step(m_red, k, c, h, order, 0.01, False)
+    raise RuntimeError(f"generator bug: no safe step below {h} s for law {law}")
+
+
+def _sig_down(x: float, digits: int = 3) -> float:
+    """``x`` rounded down to ``digits`` significant digits."""
+    exp = math.floor(math.log10(x)) - digits + 1
+    return float(f"{math.floor(x / 10.0 ** exp * (1 + 1e-12))}e{exp}")
 
 
 def _sig(x: float, digits: int = 4) -> float:
@@ -211,7 +233,9 @@ def draw(index: int, seed: int = 0, cats: dict | None = None) -> tuple[str, dict
     h_c = t_c / _log_uniform(rng, 20.0, 80.0) / (4.0 if order == 0 else 1.0)
     if placement == "coupler" and explicit:
         h_c = min(h_c, float(rng.uniform(0.3, 0.9)) * _safe_step(law_t, m_red, order))
-    h_c = _sig(h_c, 3)
+        h_c = _safe_below(law_t, m_red, order, h_c)
+    else:
+        h_c = _sig(h_c, 3)
     macro = _sig(max(_log_uniform(rng, 2e-4, 1e-3), h_c), 3)
     sch = {"name": scheme, "macro_step": macro, "contact_step": h_c,
            "extrapolation_order": order}
