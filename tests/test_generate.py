@@ -2,6 +2,7 @@
 covering every structure, law, placement, scheme, robot size and joint kind,
 and each one loads, passes the pre-flight check, runs to its end, strikes
 early and closes its energy ledger."""
+import json
 import math
 import time
 import tomllib
@@ -164,3 +165,33 @@ def test_an_exchanged_step_is_checked_where_it_lands():
     assert not preflight.is_safe(m, k, 0.0, 1.66e-4, 2, 0.01)
     h = _safe_below({"type": "linear", "contact_stiffness": k}, m, 2, 1.66e-4)
     assert h < 1.66e-4 and preflight.is_safe(m, k, 0.0, h, 2, 0.01)
+
+
+def _validation_script():
+    from documented import ROOT, load_script
+    return ROOT, load_script(ROOT / "benchmarks" / "generated_validation.py",
+                             "generated_validation")
+
+
+@pytest.mark.parametrize("est,act,agrees", [
+    (0.01, 0.004, True), (0.01, 0.0034, True), (0.01, 0.0033, False),   # within 3x of actual
+    (1e-3, 2.9e-3, True), (1e-3, 3.1e-3, False), (None, 0.01, None), (0.01, None, None),
+    (9e-4, 1e-6, True), (1.1e-3, 1e-6, False),      # actual below X/100: estimate below X/10?
+])
+def test_the_validation_judges_pairs_as_its_page_says(est, act, agrees):
+    _, gv = _validation_script()
+    assert gv.judge(est, act) is agrees
+
+
+def test_the_published_validation_tables_are_its_json():
+    """benchmarks/results/generated_validation/README.md is what `--table`
+    makes of the validation.json beside it, and its scenes are the
+    generator's (same seed, same text)."""
+    root, gv = _validation_script()
+    run = root / "benchmarks" / "results" / "generated_validation"
+    data = json.loads((run / "validation.json").read_text())
+    assert (run / "README.md").read_text() == gv.readme(data)
+    written = sorted((run / "scenes").glob("*.toml"))
+    assert [p.stem for p in written] == [c["scene"] for c in data["cases"]]
+    texts = dict(generate.scenes(data["n"], data["seed"]))
+    assert {p.stem: p.read_text() for p in written} == texts
