@@ -390,6 +390,10 @@ def main(argv=None) -> int:
     t0 = _cpu()
     with OutputFolder(args.out) as folder:
         paths = write_scenes(folder.path / "scenes", n, args.seed)
+        with OutputFolder(folder.path / "scenes") as scenes:     # a former run's, gone
+            for old in sorted(scenes.path.glob("*.toml")):
+                if old not in paths:
+                    scenes.remove(old.name)
         for path in paths:
             case = validate(path, args.cache, request=not args.quick)
             data["cases"].append(case)

@@ -9,10 +9,10 @@ penalty laws, hosted by one side (``embedded``, the lighter by default) or
 exchanged by the scheme (``coupler``), under ``jacobi``, ``gauss_seidel``
 or ``implicit``.  The categories (structure, law, placement, scheme, the
 number of links and the first joint's kind) are dealt from shuffled decks,
-so that any ``n`` scenes hold each structure at least ``n // 5`` times, each
-law ``n // 6`` times and so on: 30 scenes cover every category; each deck
-has its own stream, so the first ``k`` of ``n`` scenes are the ``k``
-scenes of :func:`scenes` ``(k)``.
+so that the first ``n`` scenes hold each structure at least ``n // 5``
+times, each law ``n // 6`` times and so on (the first 6 already cover every
+category); each deck has its own stream, so the first ``k`` of ``n`` scenes
+are the ``k`` scenes of :func:`scenes` ``(k)``.
 
 How a scene is drawn (:func:`draw`), from its own generator
 ``numpy.random.default_rng([seed, index])``:
