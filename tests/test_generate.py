@@ -112,7 +112,7 @@ def test_the_strike_is_the_contact_a_study_reads(runs):
     """find_strike names the one contact and the joint of the tip's link, and
     the tip leaves before the end: the exit velocity a study compares is read
     on every scene of seed 0 (a robot that comes back to the structure just
-    before t_end leaves it unread: 1 of the 320 scenes of seeds 0 to 7)."""
+    before t_end leaves it unread: 3 of the 320 scenes of seeds 0 to 7)."""
     for name, (scene, res, _) in runs.items():
         contact, joint = find_strike(scene)
         n_links = len(scene.data["subsystems"]["robot"]["bodies"])
