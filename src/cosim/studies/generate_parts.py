@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-__all__ = ["LAWS", "STRUCTURES", "PLACEMENTS", "SCHEMES", "JOINT_KINDS", "draw_robot",
+__all__ = ["LAWS", "STRUCTURES", "PLACEMENTS", "SCHEMES", "JOINT_KINDS", "draw_robot", "aim",
            "robot_kinematics", "scale_robot", "robot_table", "draw_structure", "law_table",
            "POWER_EXPONENT", "MAX_JOINT_RATE"]
 
@@ -58,11 +58,11 @@ def draw_robot(rng, n_links: int, first_kind: str) -> list[dict]:
     return links
 
 
-def _tree(links, scale: float = 1.0):
+def _tree(links):
     from multibody import Body, Joint, TreeModel
     bodies, joints = [], []
     for i, ln in enumerate(links):
-        m, L = scale * ln["mass"], ln["length"]
+        m, L = ln["mass"], ln["length"]
         bodies.append(Body(f"link{i + 1}", m, m * L * L / 12.0, (L / 2, 0.0),
                            {"tip": (L, 0.0)} if i == len(links) - 1 else {}))
         joints.append(Joint(f"q{i + 1}", ln["kind"], i - 1,
@@ -71,11 +71,11 @@ def _tree(links, scale: float = 1.0):
     return TreeModel(bodies, joints)
 
 
-def robot_kinematics(links, dq, scale: float = 1.0) -> dict:
+def robot_kinematics(links, dq) -> dict:
     """The tip's position, velocity and velocity-product acceleration, and
     the mobility ``n^T J M^-1 J^T`` (2 x 2) of the tip, from cosim's own
     tree (:class:`multibody.TreeModel`)."""
-    tree = _tree(links, scale)
+    tree = _tree(links)
     q = np.array([ln["q0"] for ln in links])
     dq = np.asarray(dq, float)
     fr = tree.frames(q, dq)
