@@ -94,6 +94,8 @@ def estimated(acc: dict, joint: str) -> dict:
 def actual(res, joint: str, ref: dict) -> dict:
     from cosim.studies.metrics import impact_metrics, relative_errors
     m = impact_metrics(res, CONTACT, joint)
+    if ref is None:                 # the reference failed: nothing to compare with
+        return {"peak": None, "exit_velocity": None, "count": m["count"]}
     e = relative_errors(m, ref)
     return {"peak": _finite(e["peak"]), "exit_velocity": _finite(e["exit_velocity"]),
             "count": m["count"]}
@@ -153,10 +155,11 @@ def request_run(path, joint, ref) -> dict:
         ctx.__exit__(None, None, None)
     r = res.summary["accuracy"]["request"]
     act = actual(res, joint, ref)
-    met = all(act[q] is not None and act[q] <= ACCURACY for q in QUANTITIES)
+    met = (all(act[q] is not None and act[q] <= ACCURACY for q in QUANTITIES)
+           if ref is not None else None)
     return {"status": res.status, "cpu_s": time.process_time() - t0, "scheme": r["scheme"],
             "step": r["step"], "refined": r["refined"], "count": act["count"],
-            "met": met and act["count"] == ref["count"],
+            "met": met and act["count"] == ref["count"] if ref is not None else None,
             "pairs": pairs(estimated(res.summary["accuracy"], joint), act)}
 
 
@@ -223,20 +226,21 @@ def validate(path, cache, request: bool) -> dict:
     from cosim.studies.strike import find_strike
     data = tomllib.loads(Path(path).read_text())
     ctx = _quiet()
+    contact, joint = find_strike(path)
+    t0 = time.process_time()
     try:
-        contact, joint = find_strike(path)
-        t0 = time.process_time()
         ref = reference(path, None, contact, joint, cache_dir=cache)
-        ref_cpu = time.process_time() - t0
+        case_ref = {k: ref[k] for k in ("count", "peak", "exit_velocity")}
+    except Exception as exc:        # one scene's failed reference does not end the batch
+        ref, case_ref = None, {"count": None, "error": f"{type(exc).__name__}: {exc}"}
     finally:
         ctx.__exit__(None, None, None)
+    case_ref["cpu_s"] = time.process_time() - t0
     c = data["contacts"][CONTACT]
     case = {"scene": Path(path).stem, "description": data["description"],
             "scheme": data["scheme"]["name"], "placement": c["placement"],
             "law": c["law"]["type"], "structure": data["subsystems"]["target"]["type"],
-            "joint": joint, "reference": {"count": ref["count"], "peak": ref["peak"],
-                                          "exit_velocity": ref["exit_velocity"],
-                                          "cpu_s": ref_cpu}}
+            "joint": joint, "reference": case_ref}
     case["run"] = own_run(path, joint, ref)
     case["request"] = request_run(path, joint, ref) if request else None
     info = info_steps(path)
@@ -254,8 +258,9 @@ def totals(cases: list[dict]) -> dict:
                              for p in judged),
                 "no_estimate": sum(p["estimated"] is None for p in ps)}
     reqs = [c["request"] for c in cases if c["request"]]
+    unreferenced = sum(c["reference"]["count"] is None for c in cases)
     steps = [s for c in cases for s in c["at_0.9"]]
-    return {"scenes": len(cases),
+    return {"scenes": len(cases), "unreferenced": unreferenced,
             "finished": sum(c["run"]["status"] == "finished" for c in cases),
             "estimate": tally([c["run"] for c in cases]), "request": tally(reqs),
             "requests": len(reqs), "met": sum(bool(r.get("met")) for r in reqs),
@@ -289,18 +294,19 @@ def table(data: dict) -> str:
              "|---|---|---|---|---|---|---|---|---|---|"]
     for c in data["cases"]:
         r, q = c["run"], c["request"]
+        rc = "no reference" if c["reference"]["count"] is None else c["reference"]["count"]
         if "pairs" in r:
             pk, ex = _pair(r["pairs"]["peak"]), _pair(r["pairs"]["exit_velocity"])
-            cnt = f"{r['count']} ({c['reference']['count']})"
+            cnt = f"{r['count']} ({rc})"
         else:
             pk = ex = "-"
-            cnt = f"{r['status']} ({c['reference']['count']})"
+            cnt = f"{r['status']} ({rc})"
         if q is None:
             qc = qp = qe = qm = "-"
         elif "pairs" in q:
             qc = f"{q['scheme']} {q['step']:.3g}" + (" (refined)" if q["refined"] else "")
             qp, qe = _pair(q["pairs"]["peak"]), _pair(q["pairs"]["exit_velocity"])
-            qm = "yes" if q["met"] else "**no**"
+            qm = "-" if q["met"] is None else "yes" if q["met"] else "**no**"
         else:
             qc, qp, qe, qm = q["status"], "-", "-", "-"
         lines.append(f"| {c['scene']} | {c['structure']}, {c['law']}, {c['placement']}, "
@@ -312,7 +318,9 @@ def table(data: dict) -> str:
 def totals_text(data: dict) -> str:
     t = data["totals"]
     e, r = t["estimate"], t["request"]
-    out = (f"{t['finished']} of {t['scenes']} scenes finished. Estimate: {e['agree']} of "
+    out = (f"{t['finished']} of {t['scenes']} scenes finished"
+           + (f" ({t['unreferenced']} without a reference: it failed)" if t.get("unreferenced")
+              else "") + f". Estimate: {e['agree']} of "
            f"{e['judged']} pairs agree ({e['small']} of them below X/100 = "
            f"{ACCURACY / 100:.0e}, judged on the estimate below X/10), {e['no_estimate']} of "
            f"{e['pairs']} without an estimate.")
