@@ -115,7 +115,11 @@ def own_run(path, joint, ref) -> dict:
     try:
         scene = load_scene(path)
         t0 = time.process_time()
-        res = simulate(scene)
+        try:
+            res = simulate(scene)
+        except Exception as exc:        # a scene the generator got wrong: said, not fatal
+            return {"status": "error", "message": f"{type(exc).__name__}: {exc}",
+                    "cpu_s": time.process_time() - t0}
         t1 = time.process_time()
         if not res.success:
             return {"status": res.status, "message": res.message, "cpu_s": t1 - t0}
@@ -187,7 +191,7 @@ def info_steps(path) -> dict:
 def step_checks(path, info: dict, scene_data: dict) -> list[dict]:
     """Runs at STEP_FRACTION times each printed stable step: finished,
     stopped (by the guard) or refused (the pre-flight check or the build)."""
-    from cosim.errors import UnsafeStepError
+    from cosim.errors import SimulationError, UnsafeStepError
     from cosim.scene.checks import SceneError
     from cosim.scene.load import load_scene
     from cosim.scene.run import simulate
@@ -215,6 +219,8 @@ def step_checks(path, info: dict, scene_data: dict) -> list[dict]:
             c["message"] = "" if res.success else res.message
         except (UnsafeStepError, SceneError) as exc:
             c["status"], c["message"] = "refused", str(exc)
+        except SimulationError as exc:  # an iteration that did not converge, say
+            c["status"], c["message"] = "failed", f"{type(exc).__name__}: {exc}"
         finally:
             ctx.__exit__(None, None, None)
     return checks
