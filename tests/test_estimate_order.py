@@ -227,21 +227,31 @@ def test_the_line_names_what_it_leaves_out_never_counts_that_were_robust():
 
 
 def test_the_bound_at_order_one():
-    """|Q_h - Q_c| r / (r - 1), the largest over the run's companions: the
-    error at order 1 of the coarser of the two runs."""
-    assert bound(1.0, [1.1], 2.0) == pytest.approx(0.2, rel=1e-15)
-    assert bound(1.0, [1.01, 0.9], 4.0) == pytest.approx(0.1 * 4 / 3, rel=1e-15)
+    """|Q_h - Q_(r h)| r / (r - 1), the coarser companion's error at order 1,
+    and |Q_h - Q_(h/r)| (2 r - 1) / (r - 1), the same margin from the finer
+    one: the larger of the two."""
+    assert bound(1.0, None, 1.1, 2.0) == pytest.approx(0.2, rel=1e-15)
+    assert bound(1.0, 0.99, None, 2.0) == pytest.approx(0.03, rel=1e-15)
+    assert bound(1.0, 0.9, 1.01, 4.0) == pytest.approx(0.1 * 7 / 3, rel=1e-15)
     # no order confirmed (not monotone): judge gives the bound, said so
-    j = judge(1.0, 0.99, 0.98, math.sqrt(2))
+    r = math.sqrt(2)
+    j = judge(1.0, 0.99, 0.98, r)
     assert j["kind"] == "bound" and "not monotone" in j["order_why"]
-    assert j["estimate"] == pytest.approx(0.02 * math.sqrt(2) / (math.sqrt(2) - 1), rel=1e-14)
+    assert j["estimate"] == pytest.approx(max(0.02 * r / (r - 1), 0.01 * (2 * r - 1) / (r - 1)),
+                                          rel=1e-14)
     # one companion alone: a bound from it
     j = judge(1.0, None, 1.3, 2.0)
     assert j["kind"] == "bound" and j["estimate"] == pytest.approx(0.6, rel=1e-15)
-    # at order 1 exactly (Q = 1 + h), the bound from the coarser companion is
-    # the coarser run's error, r times the run's
+    # where the error is the step to the power q = log((2r - 1)/r)/log(r),
+    # both are the run's error exactly: the weakest order they bound
+    q = math.log((2 * r - 1) / r) / math.log(r)
+    assert q == pytest.approx(0.737, abs=1e-3)
     h = 0.01
-    assert bound(1 + h, [1 + 2 * h], 2.0) == pytest.approx(2 * h, rel=1e-12)
+    err = [h ** q * f ** q for f in (1 / r, 1.0, r)]
+    assert bound(1 + err[1], 1 + err[0], None, r) == pytest.approx(err[1], rel=1e-12)
+    assert bound(1 + err[1], None, 1 + err[2], r) == pytest.approx(err[1], rel=1e-12)
+    # and above it (at order 1) they exceed it
+    assert bound(1 + h, 1 + h / r, 1 + h * r, r) > h
 
 
 @pytest.mark.parametrize("p", [1.0, 2.0, 3.3])

@@ -39,7 +39,7 @@ Which companions (:func:`cosim.studies.companion.ladder_plan`): a contact
 the sides exchange whose step in the coarser companion lies past omega h =
 :data:`~cosim.studies.companion.ASYMPTOTIC_OMEGA_H` (where the schemes'
 errors stop falling as one power of the step) is read from the finer
-companion alone: a bound, ``|Q_h - Q_(h/r)| r / (r - 1)``; where every
+companion alone: a bound, ``|Q_h - Q_(h/r)| (2 r - 1) / (r - 1)``; where every
 exchanged contact is past it, the coarser companion is not run.  A contact
 past the range at the run's own step is not estimated, nor are the exit
 rates read at its release; where that leaves nothing to read, no companion

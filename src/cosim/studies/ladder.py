@@ -14,10 +14,11 @@ Richardson's extrapolation with that ``p``: with ``Q* = Q0 - (Q1 - Q0) /
 (r**p - 1)``, the run's error is ``|Q_run - Q*|`` (for the run at ``h1``,
 ``|Q1 - Q0| r**p / (r**p - 1)``; at ``h0``, ``|Q1 - Q0| / (r**p - 1)``).
 Where it is not, :func:`judge` gives a bound at order 1 (:func:`bound`):
-the largest difference between the run and one of its companions times
-``r / (r - 1)``, the error at order 1 of the coarser of the two, which is
-no smaller than the run's wherever the error falls at least as fast as the
-step between them.  The fitted orders of
+the difference between the run and its coarser companion times ``r / (r -
+1)`` (the error at order 1 of the coarser of the two), or between the run
+and its finer companion times ``(2 r - 1) / (r - 1)``, whichever is larger;
+each is no smaller than the run's error wherever the error falls at least
+as fast as the step to the power 0.74 (r = sqrt(2)) between the two runs.  The fitted orders of
 :data:`cosim.studies.estimate.ORDERS` are a prior, never the answer.
 """
 from __future__ import annotations
@@ -67,11 +68,22 @@ def richardson(values, r: float, p: float, run: int) -> float:
     return abs(float(values[run]) - extrapolated)
 
 
-def bound(value: float, companions, r: float) -> float:
-    """The bound at order 1: the largest ``|Q_h - Q_c|`` over the run's
-    neighbouring companions ``companions`` (one step ratio ``r`` away),
-    times ``r / (r - 1)``."""
-    return max(abs(value - c) for c in companions) * r / (r - 1.0)
+def bound(value: float, finer: float | None, coarser: float | None, r: float) -> float:
+    """The bound at order 1 of the run's error from its companions (either
+    may be None): the largest of ``|Q_h - Q_(r h)| r / (r - 1)`` and
+    ``|Q_h - Q_(h/r)| (2 r - 1) / (r - 1)``.
+
+    The first is the error of the coarser companion at order 1; both are
+    the run's error at the order ``q = log((2 r - 1) / r) / log(r)`` (0.74
+    at r = sqrt(2), 0.58 at 2), so that either bounds it wherever the error
+    falls between the two runs at least as fast as the step to that power
+    (at order 1 they are ``r`` and ``(2 r - 1) / r`` times the error)."""
+    out = []
+    if coarser is not None:
+        out.append(abs(value - coarser) * r / (r - 1.0))
+    if finer is not None:
+        out.append(abs(value - finer) * (2.0 * r - 1.0) / (r - 1.0))
+    return max(out)
 
 
 def judge(value: float, finer: float | None, coarser: float | None, r: float) -> dict:
@@ -98,9 +110,8 @@ def judge(value: float, finer: float | None, coarser: float | None, r: float) ->
     else:
         out["order_why"] = ("one companion alone: two runs do not tell an order"
                             if finer is not None or coarser is not None else "no companion")
-    near = [c for c in (finer, coarser) if c is not None]
-    if not near:
+    if finer is None and coarser is None:
         out.update(kind=None, estimate=None)
         return out
-    out.update(kind="bound", estimate=bound(value, near, r))
+    out.update(kind="bound", estimate=bound(value, finer, coarser, r))
     return out
