@@ -49,6 +49,14 @@ def test_spring_drop_exit_velocity_bound_holds_against_the_closed_form(ulps):
     pk = acc["contacts"]["wall"]["peak_penetration"]
     assert pk["relative_error"] < 1e-9 and pk["order_why"] == (
         "the three runs differ by round-off alone")
+    if ulps == 0:                 # getting-started's words on its line
+        from documented import Claim, assert_printed, assert_reproduced
+        page = "docs/getting-started.md"
+        for printed, value, measured in (("(`<= 0.1 % (bound)`", 0.1, e["relative_error"]),
+                                          ("the error is 0.05 %)", 0.05, true)):
+            claim = Claim(page, printed, "cosim run spring_drop", value, abs=0.005)
+            assert_printed(claim)
+            assert_reproduced(claim, 100 * measured)
 
 
 def _reference_f100():
