@@ -299,6 +299,7 @@ def test_a_coarser_companion_the_guard_stops_leaves_a_bound_from_the_finer_one(u
     assert acc["companion"]["status"] == "failed"
     e = acc["exit"]["body/x"]
     assert e["kind"] == "bound" and e["companion"] == e["finer"]
+    assert e["order_why"] == coarser["why"]
     true = abs(e["value"] - 1.0)
     assert true <= e["relative_error"], (e["relative_error"], true)
     assert "exit body/x <= " in accuracy_text(acc)

@@ -426,6 +426,8 @@ def _fill(acc, scene, result, contact, r, runs, kept, beyond, finer_only, blind)
                   for c, wh in finer_only.items()}
     stopped = None if done or blind else (acc["why"][0] if acc["why"] else
                                           "no companion finished")
+    # why one companion gave nothing, said by each entry the other alone bounds
+    lost = next((c["why"] for c in acc["companions"] if "why" in c), None) if done else None
     mine = _contact_values(result.summary)
     theirs = {role: _contact_values(res.summary) for role, res in done.items()}
     differ = []
@@ -447,7 +449,7 @@ def _fill(acc, scene, result, contact, r, runs, kept, beyond, finer_only, blind)
             coarser = (None if name in coarse_why else
                        theirs.get("coarser", {}).get(name, {}).get(q))
             entry[q] = _entry(v[q], theirs.get("finer", {}).get(name, {}).get(q), coarser, r,
-                              why, coarse_why.get(name))
+                              why, coarse_why.get(name) or lost)
         acc["contacts"][name] = entry
     multibody = {s.name for s in scene.subsystems if isinstance(s, MultibodySpec)}
     rates, at = exit_rates(result, multibody, contact)
@@ -463,7 +465,7 @@ def _fill(acc, scene, result, contact, r, runs, kept, beyond, finer_only, blind)
         why = (stopped or (differ[0] if differ else None)
                or (elsewhere[0] if len(elsewhere) == len(done) and done else None)
                or unseen.get(contact) or (BLIND if blind else None))
-        note = coarse_why.get(contact) or (elsewhere[0] if elsewhere else None)
+        note = coarse_why.get(contact) or (elsewhere[0] if elsewhere else None) or lost
         coarser = None if contact in coarse_why else crates.get("coarser", {}).get(joint)
         acc["exit"][joint] = _entry(value, crates.get("finer", {}).get(joint), coarser, r,
                                     why, note)
