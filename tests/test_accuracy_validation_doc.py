@@ -205,7 +205,11 @@ def test_where_the_cpu_goes(av, data, section):
     assert f"no companion runs ({min(blind):.2f} to {max(blind):.2f}" in text
 
 
-def test_the_companion_takes_0_27_of_the_runs_macro_steps_on_f10():
+def test_the_companions_take_2_24_of_the_runs_macro_steps_on_f10():
+    """The finer companion (at 0.71x the steps) takes 1.49 of the run's
+    macro steps, the coarser (1.41x) 0.75: the approach to each onset adds
+    steps that do not scale (the single 4x companion that docs/performance.md
+    describes took 0.27)."""
     import warnings
     import cosim
     from conftest import CASES
@@ -214,7 +218,8 @@ def test_the_companion_takes_0_27_of_the_runs_macro_steps_on_f10():
         warnings.simplefilter("ignore")
         scene = cosim.load_scene(CASES / "three_mass.toml", "f10")
         acc = estimate_errors(scene, cosim.simulate(scene))
-    assert f"{acc['work_share']['macro_steps']:.2f}" == "0.27"
+    assert f"{acc['work_share']['macro_steps']:.2f}" == "2.24"
+    assert [f"{c['work_share']['macro_steps']:.2f}" for c in acc["companions"]] == ["1.49", "0.75"]
 
 
 def test_on_three_mass_the_cheapest_row_lies_past_the_cap(data, section):

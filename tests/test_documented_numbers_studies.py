@@ -1148,7 +1148,8 @@ def test_the_accuracy_keys_are_on_the_page():
     text = _section(CM, "`accuracy` (left out", "`series.npz` holds")
     named = set(re.findall(r"`([a-z_]+)[`.]", text))             # `contacts.NAME` too
     keys = set(acc) | set(acc["companion"]) | set(acc["work_share"]) | set(acc["exit"])
-    keys |= set(acc["order"]) | set(acc["order_hosted"])
+    keys |= set(acc["order"]) | set(acc["order_prior"]) | set(acc["companions"][0])
+    keys |= {k for e in acc["exit"].values() if isinstance(e, dict) for k in e}
     keys |= set(acc["contacts"]["C"]) | set(acc["contacts"]["C"]["count"])
     keys |= set(acc["contacts"]["C"]["peak_penetration"])
     keys = {k for k in keys if "/" not in k}                 # SUBSYSTEM/JOINT, not a key

@@ -8,7 +8,7 @@ import cosim
 from conftest import CASES
 from cosim import cli
 from cosim.studies.bench_cache import REFERENCE
-from cosim.studies.estimate import accuracy_text, estimate_errors
+from cosim.studies.estimate import DEFAULT_FACTOR, accuracy_text, estimate_errors
 from cosim.studies.metrics import impact_metrics
 from cosim.studies.roundoff import perturbed
 
@@ -24,20 +24,39 @@ def _within(estimate, true, factor=3.0):
     return true / factor <= estimate <= true * factor
 
 
-def test_spring_drop_exit_velocity_estimate_within_3x_of_the_closed_form():
-    # undamped: the mass leaves at +1 m/s exactly; the run's error is the
-    # rate read between samples at the release (metrics.exit_velocity)
-    scene, res = _run("spring_drop")
+@pytest.mark.parametrize("ulps", [0, 2, -2])
+def test_spring_drop_exit_velocity_bound_holds_against_the_closed_form(ulps):
+    """Undamped: the mass leaves at +1 m/s exactly; the run's error is the
+    rate read between samples at the release (metrics.exit_velocity), which
+    moves with where the release falls between samples, not as one power of
+    the step: the three runs are not monotone (the finer one is off by 2.7e-4,
+    the run by 5.1e-4, the coarser one by 6.4e-4, measured), the order is not
+    confirmed, and the estimate is the bound at order 1, above the error."""
+    scene = perturbed(_run("spring_drop")[0], ulps)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = cosim.simulate(scene)
     acc = estimate_errors(scene, res)
     e = acc["exit"]["body/x"]
     assert e["reliable"] and acc["reliable"], acc["why"]
+    assert e["kind"] == "bound" and e["order_why"].startswith("the measured order")
     true = abs(e["value"] - 1.0)
     assert true > 1e-6            # a measurable error, not round-off
-    assert _within(e["relative_error"], true), (e["relative_error"], true)
-    assert acc["order"] == {"contacts": 2.9, "exit": 2.6}
-    assert acc["order_hosted"] == {"contacts": 4.6, "exit": 1.8}     # the body's RK4, its samples
-    # peak: both runs step the embedded contact alike, the estimate is round-off
-    assert acc["contacts"]["wall"]["peak_penetration"]["relative_error"] < 1e-9
+    assert true <= e["relative_error"] <= 3 * true, (e["relative_error"], true)
+    assert acc["order"] == {"contacts": None, "exit": None}      # none confirmed
+    assert acc["order_prior"] == {"contacts": 2.9, "exit": 2.6}  # given, not used
+    # peak: every run steps the embedded contact alike, the estimate is round-off
+    pk = acc["contacts"]["wall"]["peak_penetration"]
+    assert pk["relative_error"] < 1e-9 and pk["order_why"] == (
+        "the three runs differ by round-off alone")
+    if ulps == 0:                 # getting-started's words on its line
+        from documented import Claim, assert_printed, assert_reproduced
+        page = "docs/getting-started.md"
+        for printed, value, measured in (("(`<= 0.1 % (bound)`", 0.1, e["relative_error"]),
+                                          ("the error is 0.05 %)", 0.05, true)):
+            claim = Claim(page, printed, "cosim run spring_drop", value, abs=0.005)
+            assert_printed(claim)
+            assert_reproduced(claim, 100 * measured)
 
 
 def _reference_f100():
@@ -47,13 +66,13 @@ def _reference_f100():
 
 @pytest.mark.parametrize("contact_step", [1e-5, 1.8e-5])
 def test_three_mass_f100_within_the_asymptotic_range_is_estimated_within_3x(contact_step):
-    """At omega h = 0.10 and 0.19 in C the companion (at 3.8x and 2.1x, so
-    that its omega h stays below 0.4) gives C's peak error within 1.2x and
-    the arm's exit-velocity error within 1.8x of the error against the
-    bench's reference (measured)."""
+    """At omega h = 0.10 and 0.19 in C the companions (at 0.71x and 1.41x,
+    the coarser one's omega h below 0.4) give C's peak error and the arm's
+    exit-velocity error within 3x of the error against the bench's
+    reference."""
     scene, res = _run("three_mass", "f100", [f"scheme.contact_step={contact_step}"])
     acc = estimate_errors(scene, res)
-    assert 2 <= acc["factor"] < 4
+    assert acc["factor"] == DEFAULT_FACTOR
     ref, m = _reference_f100(), impact_metrics(res, "C", "robot/arm")
     assert m["count"] == ref["count"] == 9
     for est, q in ((acc["contacts"]["C"]["peak_penetration"], "peak"),
@@ -64,36 +83,44 @@ def test_three_mass_f100_within_the_asymptotic_range_is_estimated_within_3x(cont
 
 
 @pytest.mark.parametrize("ulps", [0, 2, -2])
-def test_three_mass_f100_at_its_own_step_is_past_the_range_and_says_so(ulps):
-    """At the scene's 30 us C sits at omega h = 0.31: even a companion at 2x
-    would step it past 0.4, where the errors of neighbouring steps scatter
-    (the estimate at 4x was 6x too small); C and the exit rates read at its
-    release get no number, and the line says why."""
+def test_three_mass_f100_at_its_own_step_is_bounded_from_the_finer_companion(ulps):
+    """At the scene's 30 us C sits at omega h = 0.31: the coarser companion
+    would step it at 0.44, past 0.4, where the errors of neighbouring steps
+    scatter (the estimate at 4x was 6x too small); C and the exit rates read
+    at its release are bounded from the finer companion alone, and the bound
+    holds against the bench's reference (C's peak: 0.24 % against 0.12 %;
+    the arm's exit velocity: 0.37 % against 0.20 %, measured)."""
     scene = perturbed(_run("three_mass", "f100")[0], ulps)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         res = cosim.simulate(scene)
     acc = estimate_errors(scene, res)
-    c = acc["contacts"]["C"]
-    assert c["peak_penetration"]["relative_error"] is None
-    assert "past 0.4" in c["peak_penetration"]["why"]
-    assert acc["exit"]["robot/arm"]["relative_error"] is None
-    assert not acc["reliable"]
-    assert "C peak" not in accuracy_text(acc)
+    pk, ex = acc["contacts"]["C"]["peak_penetration"], acc["exit"]["robot/arm"]
+    for e in (pk, ex):
+        assert e["reliable"] and e["kind"] == "bound", e
+        assert "past 0.4: read from the finer companion alone" in e["order_why"]
+        assert e["companion"] == e["finer"]
+    assert "C peak <= " in accuracy_text(acc)
+    if ulps == 0:
+        ref, m = _reference_f100(), impact_metrics(res, "C", "robot/arm")
+        for e, q in ((pk, "peak"), (ex, "exit_velocity")):
+            true = abs(m[q] / ref[q] - 1.0)
+            assert true <= e["relative_error"] <= 3 * true, (q, e["relative_error"], true)
 
 
 @pytest.mark.parametrize("ulps", [0, 1, -2])
 def test_counts_that_differ_are_not_reliable_and_print_no_number(ulps):
-    # Jacobi at omega h 0.13 in C: the run closes C 9 times, its companion
-    # (3x, within the asymptotic range) 10 times, as at every step measured
-    # from omega h 0.06 to 0.19
+    # Jacobi at omega h 0.13 in C: the run closes C 9 times, a companion at
+    # 3x (within the asymptotic range) 10 times, as at every step measured
+    # from omega h 0.06 to 0.19 (its companions at 0.71x and 1.41x close it 9
+    # times: a ladder of ratio 3, as asked here, is wider)
     scene, _ = _run("three_mass", "f100", ['scheme.name="jacobi"',
                                            "scheme.contact_step=1.2e-5"])
     with warnings.catch_warnings():       # Jacobi ignores the scene's `sequence`
         warnings.simplefilter("ignore")
         scene = perturbed(scene, ulps)
         res = cosim.simulate(scene)
-    acc = estimate_errors(scene, res)
+    acc = estimate_errors(scene, res, factor=3)
     c = acc["contacts"]["C"]
     assert not c["count"]["robust"]
     assert not acc["reliable"]
@@ -101,21 +128,23 @@ def test_counts_that_differ_are_not_reliable_and_print_no_number(ulps):
     assert c["peak_penetration"]["relative_error"] is None
     assert c["peak_penetration"]["difference"] > 0     # kept for the curious
     assert all(not e["reliable"] for k, e in acc["exit"].items() if k != "at")
-    assert c["count"] == {"value": 9, "companion": 10, "robust": False}
+    assert c["count"] == {"value": 9, "companion": 10, "robust": False, "finer": 9}
     text = accuracy_text(acc)
     assert text.startswith("accuracy: not reliable (contact C closed 9 times, 10 in the "
-                           "companion")
+                           "coarser companion")
     assert "%" not in text
 
 
 @pytest.mark.parametrize("name", ["spring_drop", "ground_multicontact"])
-def test_companion_costs_at_most_30_percent_of_the_counted_work(name):
+def test_the_companions_cost_about_r_plus_1_over_r_of_the_counted_work(name):
+    # sqrt(2) + 1/sqrt(2) = 2.12: the run with its estimate about 3x the run
     scene, res = _run(name)
     acc = estimate_errors(scene, res)
-    assert acc["companion"]["macro_steps"] <= 0.3 * res.n_windows
-    assert acc["work_share"]["macro_steps"] <= 0.3
-    # the rk4 side that hosts the contacts is coarsened too: its steps shrink alike
-    assert acc["work_share"]["integrator_steps"] <= 0.3
+    assert acc["companion"]["macro_steps"] <= 2.2 * res.n_windows
+    assert acc["work_share"]["macro_steps"] <= 2.2
+    # the rk4 side that hosts the contacts is scaled too: its steps alike
+    assert acc["work_share"]["integrator_steps"] <= 2.2
+    assert [c["role"] for c in acc["companions"]] == ["finer", "coarser"]
 
 
 def test_a_failed_companion_makes_nothing_reliable(monkeypatch):
@@ -127,7 +156,8 @@ def test_a_failed_companion_makes_nothing_reliable(monkeypatch):
     monkeypatch.setattr(run_module, "simulate", broken)
     acc = estimate_errors(scene, res)
     assert not acc["reliable"] and acc["companion"]["status"] == "refused"
-    assert accuracy_text(acc).startswith("accuracy: not reliable (the companion did not run")
+    assert accuracy_text(acc).startswith(
+        "accuracy: not reliable (the finer companion did not run")
 
 
 def test_the_monolithic_scheme_gets_no_companion_and_says_so():
@@ -148,8 +178,8 @@ def _cli_run(tmp_path, *extra):
 def test_run_summary_has_accuracy_and_the_terminal_says_it(tmp_path, capsys):
     s = _cli_run(tmp_path)
     assert s["accuracy"]["reliable"] is True
-    assert s["accuracy"]["factor"] == 4
-    assert "accuracy (companion at 4x the step" in capsys.readouterr().out
+    assert s["accuracy"]["factor"] == pytest.approx(2 ** 0.5, rel=1e-15)
+    assert "accuracy (companions at 0.707x and 1.41x the step" in capsys.readouterr().out
 
 
 def test_no_estimate_leaves_no_accuracy_key(tmp_path, capsys):
@@ -203,6 +233,7 @@ def test_the_companion_coarsens_the_steps_that_set_the_accuracy():
                                                                        rel=1e-15)
     assert set(changed) == {f"scheme.gauss_seidel.{k}" for k in (
         "macro_step", "contact_step", "interface_tolerance", "approach_horizon")}
+    keys = set(changed)
     # the window stepped at contact_step before an onset stays the run's
     assert comp.scheme_options["approach_horizon"] == 2e-3
     # the robot's step stays: at 4x it would put contact A past omega h = 0.5
@@ -211,8 +242,14 @@ def test_the_companion_coarsens_the_steps_that_set_the_accuracy():
     comp, changed = coarsened(spring, 4)          # omega h = 0.04 at 4x: coarsened
     assert comp.subsystems[0].max_step == pytest.approx(4e-5, rel=1e-15)
     assert "subsystems.body.integrator.max_step" in changed
-    with pytest.raises(ValueError, match="`factor` must be a finite number > 1"):
+    with pytest.raises(ValueError, match="`factor` must be a finite number > 0 other than 1"):
         coarsened(scene, 1)
+    # the finer companion: the same keys, shorter; the robot's step stays, as
+    # it would in the coarser one (judged at 4x)
+    fine, changed_fine = coarsened(scene, 0.25, judged_at=4)
+    assert set(changed_fine) == keys
+    assert fine.scheme_options["contact_step"] == pytest.approx(3e-5 / 4, rel=1e-15)
+    assert fine.subsystems == scene.subsystems
 
 
 def test_the_library_run_bench_and_sweep_pay_nothing_for_it(monkeypatch):
@@ -233,7 +270,7 @@ def test_a_contact_that_never_closes_writes_no_nan(tmp_path):
     # the wall moved out of reach: the contact never closes in either run
     s = _cli_run(tmp_path, "--set", "subsystems.body.bodies.mass.joint.dq0=1.0")
     wall = s["accuracy"]["contacts"]["wall"]
-    assert wall["count"] == {"value": 0, "companion": 0, "robust": True}
+    assert wall["count"] == {"value": 0, "companion": 0, "robust": True, "finer": 0}
     assert wall["t_on"]["value"] is None and not wall["t_on"]["reliable"]
     assert s["accuracy"]["exit"]["at"] == "end of the run"
     assert s["accuracy"]["reliable"] is True     # nothing closed: the counts and rates are
@@ -242,10 +279,12 @@ def test_a_contact_that_never_closes_writes_no_nan(tmp_path):
 
 
 @pytest.mark.parametrize("ulps", [0, 1, -1])
-def test_a_companion_the_guard_stops_makes_nothing_reliable_and_says_why(ulps):
-    # spring_drop's wall exchanged with the force held over each 50 us step
-    # (extrapolation order 0): the run holds, its companion at 200 us creates
-    # energy and the guard stops it
+def test_a_coarser_companion_the_guard_stops_leaves_a_bound_from_the_finer_one(ulps):
+    """spring_drop's wall exchanged with the force held over each 50 us step
+    (extrapolation order 0): the run holds, its coarser companion at 71 us
+    creates energy and the guard stops it; the finer one (35 us) holds, and
+    each quantity is bounded from it alone, the exit velocity's bound above
+    its error against the closed form (+1 m/s)."""
     scene = perturbed(_run("spring_drop", None, [
         'contacts.wall.placement="coupler"', "scheme.accept_unsafe_step=true",
         "scheme.extrapolation_order=0", "scheme.macro_step=5e-5"])[0], ulps)
@@ -254,68 +293,78 @@ def test_a_companion_the_guard_stops_makes_nothing_reliable_and_says_why(ulps):
         res = cosim.simulate(scene)
     assert res.success
     acc = estimate_errors(scene, res)
-    assert acc["companion"]["status"] == "failed" and not acc["reliable"]
-    assert acc["why"][0].startswith("the companion failed: the energy grew")
-    assert all(e["relative_error"] is None for c in acc["contacts"].values()
-               for k, e in c.items() if k != "count")
-    assert "%" not in accuracy_text(acc)
+    finer, coarser = acc["companions"]
+    assert finer["status"] == "finished" and coarser["status"] == "failed"
+    assert coarser["why"].startswith("the coarser companion failed: the energy grew")
+    assert acc["companion"]["status"] == "failed"
+    e = acc["exit"]["body/x"]
+    assert e["kind"] == "bound" and e["companion"] == e["finer"]
+    assert e["order_why"] == coarser["why"]
+    true = abs(e["value"] - 1.0)
+    assert true <= e["relative_error"], (e["relative_error"], true)
+    assert "exit body/x <= " in accuracy_text(acc)
 
 
 @pytest.mark.parametrize("ulps", [0, 2, -2])
 def test_no_companion_runs_where_nothing_it_gives_could_be_read(ulps):
-    """three_mass f100 at its own 30 us: C lies past the asymptotic range at
-    4x and 2x, A and B are stepped by the robot, which keeps its step: the
-    companion would cost 0.5 of the run for nothing, and is not run."""
+    """brachiation: the grasp gripper1, the one contact that closes, sits at
+    omega h = 1.2 at the run's own step, past 0.4: no companion could tell
+    its error, and none is run."""
     from cosim.studies.estimate import BLIND
-    scene = perturbed(_run("three_mass", "f100")[0], ulps)
+    scene = perturbed(_run("brachiation")[0], ulps)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         res = cosim.simulate(scene)
     acc = estimate_errors(scene, res)
     assert acc["companion"] == {"status": "not run", "message": BLIND}
-    assert acc["work_share"] is None and not acc["reliable"]
+    assert acc["companions"] == [] and acc["work_share"] is None and not acc["reliable"]
     assert all(c["count"]["robust"] is None for c in acc["contacts"].values())
-    assert "past 0.4" in acc["contacts"]["C"]["peak_penetration"]["why"]
-    assert accuracy_text(acc).startswith("accuracy: not reliable, no companion run (")
-
-
-def test_the_line_gives_what_was_estimated_and_names_what_was_not():
-    """three_mass f10: C and the exit rates are estimated; A and B, which the
-    robot's own step resolves at omega h = 0.3 in both runs, are named
-    without a number."""
-    scene, res = _run("three_mass", "f10")
-    acc = estimate_errors(scene, res)
-    line = accuracy_text(acc)
-    assert "C peak " in line and "exit robot/" in line
-    assert "not estimated: A, B (`robot` steps contact A at the same step" in line
-    assert "A peak" not in line and "B peak" not in line
-
-
-def test_the_companion_factor_keeps_exchanged_contacts_within_the_asymptotic_range():
-    from cosim.studies.companion import ASYMPTOTIC_OMEGA_H, MIN_FACTOR, fitting_factor
-    assert (ASYMPTOTIC_OMEGA_H, MIN_FACTOR) == (0.4, 2.0)
-    assert fitting_factor(4, {}) == (4, {})
-    assert fitting_factor(4, {"C": 0.05, "D": 0.1}) == (4, {})
-    factor, beyond = fitting_factor(4, {"C": 0.05, "D": 0.15})     # 0.4 / 0.15 = 2.67
-    assert factor == 2.6 and beyond == {}
-    factor, beyond = fitting_factor(4, {"C": 0.05, "D": 0.3})      # 2x would pass 0.4
-    assert factor == 4 and beyond == {"D": pytest.approx(1.2, rel=1e-15)}
+    assert accuracy_text(acc).startswith(
+        "accuracy: not reliable, no companion run (the run steps contact gripper1 at omega h "
+        "= 1.2, past 0.4")
 
 
 @pytest.mark.parametrize("ulps", [0, 2, -2])
-def test_exit_rates_read_at_another_instant_in_the_companion_are_not_compared(ulps):
-    """beam_impact: at 2x its steps (C at omega h 0.19, so a 2x companion)
-    the second closing of C lasts to the end of the run, so the companion
+def test_the_line_gives_what_was_estimated_and_names_what_was_not(ulps):
+    """three_mass f100 at 45 us in C (omega h 0.47 at the run's step): A and
+    B, which the robot's RK4 steps, are estimated; C and the exit rates read
+    at its release are named without a number."""
+    scene = perturbed(_run("three_mass", "f100", ["scheme.contact_step=4.5e-5"])[0], ulps)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = cosim.simulate(scene)
+    line = accuracy_text(estimate_errors(scene, res))
+    assert "A peak " in line and "B peak " in line and "C peak" not in line
+    assert "not estimated: C, exit (the run steps contact C at omega h = 0.47, past 0.4" in line
+    assert "counts" not in line
+
+
+def test_the_ladder_keeps_exchanged_contacts_within_the_asymptotic_range():
+    from cosim.studies.companion import ASYMPTOTIC_OMEGA_H, ladder_plan
+    assert ASYMPTOTIC_OMEGA_H == 0.4
+    r = 2 ** 0.5
+    assert ladder_plan(r, {}) == ({}, {})
+    assert ladder_plan(r, {"C": 0.05, "D": 0.28}) == ({}, {})
+    finer_only, beyond = ladder_plan(r, {"C": 0.05, "D": 0.3, "E": 0.5})
+    assert finer_only == {"D": pytest.approx(0.3 * r, rel=1e-15)}    # 0.42 at r h
+    assert beyond == {"E": 0.5}                                       # past at h itself
+
+
+@pytest.mark.parametrize("ulps", [0, 2, -2])
+def test_exit_rates_read_at_another_instant_in_a_companion_are_not_compared(ulps):
+    """beam_impact with a ladder of ratio 2: in the coarser companion (C at
+    omega h 0.19) the second closing of C lasts to the end of the run, so it
     reads the rates at the end, the run at C's release: 7 % apart, not an
-    error of the run; no number is given (on copies moved by a few ulps too)."""
+    error of the run; the finer companion reads them at the release too, and
+    gives the bound (on copies moved by a few ulps too)."""
     scene = perturbed(_run("beam_impact")[0], ulps)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         res = cosim.simulate(scene)
-    acc = estimate_errors(scene, res)
-    assert acc["factor"] == 2
+    acc = estimate_errors(scene, res, factor=2)
     assert acc["exit"]["at"].startswith("release of C at ")
     e = acc["exit"]["robot/arm"]
-    assert e["relative_error"] is None
-    assert e["why"].startswith("the companion reads the exit rates at end of the run")
+    assert e["reliable"] and e["kind"] == "bound" and e["companion"] == e["finer"]
+    assert e["order_why"].startswith("the coarser companion reads the exit rates at end of "
+                                     "the run")
     assert acc["contacts"]["C"]["peak_penetration"]["reliable"]

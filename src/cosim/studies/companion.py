@@ -1,14 +1,18 @@
-"""The companion run of an error estimate: which steps it takes.
+"""The companion runs of an error estimate: which steps they take.
 
-:func:`coarsened` makes the companion's scene: the run's steps that set its
-accuracy ``r`` times longer (see :mod:`cosim.studies.estimate`), a side's
-own step only where a contact it hosts stays below omega h =
-:data:`OMEGA_H_MAX`.  :func:`fitting_factor` shortens ``r`` where the
-companion's step in an exchanged contact would leave the range in which the
-schemes' errors fall as one power of the step (:data:`ASYMPTOTIC_OMEGA_H`):
-outside it the difference of the two runs says nothing of the run's error.
-omega is a contact's frequency from its linearised stiffness and the two
-sides' mobility along its normal at the initial pose.
+:func:`coarsened` makes a companion's scene: the run's steps that set its
+accuracy ``factor`` times longer (``factor`` > 1, a coarser companion) or
+shorter (``factor`` < 1, a finer one; see :mod:`cosim.studies.estimate`), a
+side's own step only where a contact it hosts stays below omega h =
+:data:`OMEGA_H_MAX` at the coarsest step of the ladder.  :func:`ladder_plan`
+says which companions can tell the run's error: the coarser one only where
+the companion's step in every exchanged contact stays in the range in which
+the schemes' errors fall as one power of the step
+(:data:`ASYMPTOTIC_OMEGA_H`); a contact past it at the coarser step but
+within it at the run's is read from the finer companion alone; one past it
+at the run's own step is not read.  omega is a contact's frequency from its
+linearised stiffness and the two sides' mobility along its normal at the
+initial pose.
 """
 from __future__ import annotations
 
@@ -17,7 +21,7 @@ import math
 import warnings
 from pathlib import Path
 
-__all__ = ["coarsened", "fitting_factor", "exchanged_omega_h", "contact_omega",
+__all__ = ["coarsened", "ladder_plan", "exchanged_omega_h", "contact_omega",
            "OMEGA_H_MAX", "UNSEEN_OMEGA_H", "ASYMPTOTIC_OMEGA_H", "MIN_FACTOR"]
 
 #: the largest omega h [rad] of an exchanged contact's step at which the
@@ -30,10 +34,11 @@ __all__ = ["coarsened", "fitting_factor", "exchanged_omega_h", "contact_omega",
 #: 9 times (one impact's error moves another's onset)
 ASYMPTOTIC_OMEGA_H = 0.4
 
-#: the shortest factor a companion is given to keep within
-#: :data:`ASYMPTOTIC_OMEGA_H`: it costs about half the run, and below it the
-#: two runs' difference, divided by ``r**p - 1``, hangs on the order ``p``
-#: more than on the runs
+#: the margin below :data:`ASYMPTOTIC_OMEGA_H` that the a-priori choice of
+#: a step keeps (:data:`cosim.studies.choose.CHECKABLE`): a run at omega h
+#: up to 0.4 / 2 has its coarser companion within the range at the default
+#: ladder ratio sqrt(2), and at the ratio 2 that ``cosim run --accuracy``
+#: tries where the first estimate gave no number
 MIN_FACTOR = 2.0
 
 
@@ -79,26 +84,27 @@ def exchanged_omega_h(scene, system) -> dict:
     return out
 
 
-def fitting_factor(factor: float, omega_h: dict) -> tuple[float, dict]:
-    """The companion's factor, and the exchanged contacts beyond
-    :data:`ASYMPTOTIC_OMEGA_H` at it (name -> omega h in the companion).
+def ladder_plan(r: float, omega_h: dict) -> tuple[dict, dict]:
+    """Which exchanged contacts the companions of a ladder ``h/r, h, r h``
+    can tell the error of, from each one's omega h at the run's step
+    (:func:`exchanged_omega_h`).
 
-    ``factor`` where every contact of ``omega_h`` (:func:`exchanged_omega_h`)
-    stays within the range at ``factor`` times its step; else the longest
-    factor that keeps them all within it, rounded down to two digits, where
-    that is at least :data:`MIN_FACTOR`; else ``factor``, and the contacts
-    beyond the range are returned."""
-    worst = max(omega_h.values(), default=0.0)
-    if worst * factor <= ASYMPTOTIC_OMEGA_H:
-        return factor, {}
-    fit = math.floor(ASYMPTOTIC_OMEGA_H / worst * 10.0) / 10.0
-    if fit >= MIN_FACTOR:
-        return fit, {}
-    return factor, {c: w * factor for c, w in omega_h.items()
-                    if w * factor > ASYMPTOTIC_OMEGA_H}
+    Returns
+    -------
+    (dict, dict)
+        The contacts to be read from the finer companion alone (name ->
+        omega h at ``r h``: past :data:`ASYMPTOTIC_OMEGA_H` there, not at the
+        run's step), and those past it at the run's own step (name -> omega
+        h there: not read at all).
+    """
+    run_past = {c: w for c, w in omega_h.items() if w > ASYMPTOTIC_OMEGA_H}
+    finer_only = {c: w * r for c, w in omega_h.items()
+                  if w * r > ASYMPTOTIC_OMEGA_H and c not in run_past}
+    return finer_only, run_past
 
 
-def coarsened(scene, factor: float, kept: list | None = None, system=None):
+def coarsened(scene, factor: float, kept: list | None = None, system=None,
+              judged_at: float | None = None):
     """A copy of ``scene`` whose accuracy-setting steps are ``factor`` times
     longer (see the module), and the keys changed (key path -> new value).
 
@@ -106,7 +112,12 @@ def coarsened(scene, factor: float, kept: list | None = None, system=None):
     ----------
     scene : Scene
     factor : float
-        > 1.
+        > 0 and not 1: > 1 for a coarser companion, < 1 for a finer one.
+    judged_at : float, optional
+        The factor at which a side's own step is judged (whether a contact
+        it hosts stays below :data:`OMEGA_H_MAX`): the coarsest of the
+        ladder, so that every companion scales the same steps (default:
+        ``max(factor, 1)``).
     system : CoupledSystem, optional
         ``scene`` built (built here if not given; only read).
     kept : list, optional
@@ -124,8 +135,10 @@ def coarsened(scene, factor: float, kept: list | None = None, system=None):
     from cosim.scene.load import _validate
     from cosim.scene.specs import MultibodySpec
 
-    if not (isinstance(factor, (int, float)) and factor > 1 and math.isfinite(factor)):
-        raise ValueError(f"`factor` must be a finite number > 1, got {factor!r}")
+    if not (isinstance(factor, (int, float)) and factor > 0 and factor != 1
+            and math.isfinite(factor)):
+        raise ValueError(f"`factor` must be a finite number > 0 other than 1, got {factor!r}")
+    judged_at = max(factor, 1.0) if judged_at is None else judged_at
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         spec = scene.scheme_spec()
@@ -153,7 +166,7 @@ def coarsened(scene, factor: float, kept: list | None = None, system=None):
             "extrapolation_order", 0) + 2), 0.5)
         changed[f"scheme.{spec.name}.interface_tolerance"] = own["interface_tolerance"]
     omega_h: dict = {}
-    for side, ok in _coarsenable_sides(scene, factor, omega_h, system).values():
+    for side, ok in _coarsenable_sides(scene, judged_at, omega_h, system).values():
         sd = data["subsystems"][side.name]
         integ = sd.get("integrator")
         integ = sd["integrator"] = dict(integ) if isinstance(integ, dict) else (

@@ -1,74 +1,76 @@
-"""An estimate of a finished run's error, from one coarser companion run.
+"""An estimate of a finished run's error, its order measured on the run's own scene.
 
-:func:`estimate_errors` runs the same scene and scheme again with the steps
-that set its accuracy made ``factor`` times longer (the *companion*), and
-turns the difference of each quantity into a Richardson estimate of the
-run's own error::
+:func:`estimate_errors` runs the same scene and scheme twice more, with the
+steps that set its accuracy ``r`` times shorter (the *finer companion*) and
+``r`` times longer (the *coarser companion*): a geometric ladder ``h/r, h,
+r h`` around the run's step.  Each quantity's order is measured on those
+three runs (:func:`cosim.studies.ladder.observed_order`); where it is
+confirmed, the run's error is Richardson's with that order; where it is
+not, it is a bound at order 1 (:func:`cosim.studies.ladder.bound`), said
+as such (``kind``).  The orders fitted once on the shipped scenes
+(:data:`ORDERS`, :data:`HOSTED_ORDERS`) are a prior only (``order_prior``):
+on a scene a user wrote (an arm striking a pinned beam whose exit velocity
+converges at order 1) the fitted 2.6 put the estimate several times below
+the error.
 
-    err(Q_h) ~ |Q_h - Q_rh| / (r**p - 1)
+Why a ladder centred on the run, and not two coarser companions at ``r``
+and ``r**2`` (cheaper: ``1/r + 1/r**2`` of the run's steps): where the
+error is the sum of two powers of the step (``a h + b h**2``), the coarser
+runs see the higher power and confirm it, and the estimate falls below the
+error by the ratio of the two terms at the run's step; the finer companion
+sees the power that rules at the run's step.  With ``r`` = sqrt(2)
+(:data:`DEFAULT_FACTOR`) the two companions cost about ``r + 1/r`` = 2.1
+times the run's steps, so that the run with its estimate stays near 3 times
+the run's steps (``work_share``).
 
-with ``r`` the factor and ``p`` the scheme's observed order (:data:`ORDERS`,
-one for a contact's quantities, one for the exit rates), or, for a contact a
-side's own RK4 step integrates against a rigid partner (and the exit rates
-read at its release), that step's (:data:`HOSTED_ORDERS`).
+What it cannot see: an error whose size turns with the step near the run's
+(a sum of terms of opposite signs: the peak of the damped contact in
+``tests/test_estimate_order.py`` is off by 2.4e-3 at the run's step, 1.6e-3
+at half of it and 1.1e-3 at twice it) looks like one power of the step on
+three neighbouring runs, and its estimate can fall far below it (2.2e-4
+there, measured); nor an error that comes from a step the companions keep.
 
 Which steps (:func:`cosim.studies.companion.coarsened`): a co-simulation
 scheme's ``macro_step`` and, where the scene gives one, its
-``contact_step`` (the step while a contact is closed), both times ``r``;
-under interface error control (``interface_tolerance``), the tolerance times
-``r ** (extrapolation_order + 2)``, so that the controlled step is ``r``
-times longer too.  The ``approach_horizon`` (how far ahead a predicted
-onset shortens the step) stays the run's: the window before an onset is
-stepped at ``r`` times the contact step, in ``r`` times fewer steps (with a
-horizon ``r`` times longer too, the companion of three_mass f100 took more
-approach steps than the run).  The number of ``substeps`` stays (each is
-``r`` times longer).  A side's own step (a multibody side's ``rk4``
-``max_step`` and ``free_step``, a structure's ``contact_step``) is ``r``
-times longer too, unless that would take a contact it hosts past omega h =
-:data:`~cosim.studies.companion.OMEGA_H_MAX`: such a step is set by the
-contact's stability, not by accuracy (three_mass's robot, at 0.3, fails at
-3x its step); it stays, and an error that comes from it is not seen.  The
-monolithic scheme gets no companion (:data:`MONOLITHIC`): its cost hardly
-falls with a coarser tolerance.
+``contact_step``, both times ``r`` (or ``1/r``); under interface error
+control (``interface_tolerance``), the tolerance times ``r **
+(extrapolation_order + 2)``, so that the controlled step scales alike.  The
+``approach_horizon`` stays the run's.  The number of ``substeps`` stays.  A
+side's own step (a multibody side's ``rk4`` ``max_step`` and
+``free_step``, a structure's ``contact_step``) scales too, unless the
+coarser companion's would take a contact it hosts past omega h =
+:data:`~cosim.studies.companion.OMEGA_H_MAX`: it then stays in both
+companions, and an error that comes from it is not seen.  The monolithic
+scheme gets no companion (:data:`MONOLITHIC`).
 
-Which factor (:func:`cosim.studies.companion.fitting_factor`): ``r`` = 4,
-shortened (not below 2) where the companion's step in a contact the sides
-exchange would pass omega h =
-:data:`~cosim.studies.companion.ASYMPTOTIC_OMEGA_H`, past which the
-schemes' errors stop falling as one power of the step; a contact past it
-even at 2x (three_mass f100 at its 30 us) is not estimated, nor are the exit
-rates read at its release.  Where that leaves nothing to read (every contact
-that closed past the range, or stepped by a side that keeps its step), no
-companion runs (:data:`BLIND`).
-
-The order: ``p`` is measured once per scheme (:data:`ORDERS`, with where),
-not on every run.  Measuring it on every run needs a third run at ``r**2``
-whose cost, added to the companion's, passes 30 % of the run at r = 4
-(1/4 + 1/16 of its steps), and whose step lies 16 times past the run's, far
-outside the range where the error is one power of the step.  A scheme
-without a measured order gives differences, no estimate.
-
-Cost: the companion takes about ``1/r`` of the run's macro steps where free
-flight and contact are both stepped at the scheme's steps (spring_drop,
-ground_multicontact: 1/4); step control adds steps aimed at each onset that
-do not scale with ``r`` (three_mass f10: 0.27 of the run's macro steps).
-A side's steps shrink with ``r`` only where its step is coarsened.  Both
-shares are in the summary's ``work_share``.
+Which companions (:func:`cosim.studies.companion.ladder_plan`): a contact
+the sides exchange whose step in the coarser companion lies past omega h =
+:data:`~cosim.studies.companion.ASYMPTOTIC_OMEGA_H` (where the schemes'
+errors stop falling as one power of the step) is read from the finer
+companion alone: a bound, ``|Q_h - Q_(h/r)| (2 r - 1) / (r - 1)``; where every
+contact that closed is past it (or not seen), the coarser companion is not
+run.  A contact
+past the range at the run's own step is not estimated, nor are the exit
+rates read at its release; where that leaves nothing to read, no companion
+runs (:data:`BLIND`).  A coarser companion that the guard stops, or that
+the pre-flight check refuses, leaves the finer one: bounds.
 
 What is estimated: per contact, ``peak_penetration``, ``impulse``, the
-first interval's ``t_on`` and ``t_off``, and ``count`` (robust when both runs
-agree); the exit state: each multibody joint's rate at the last release of
-the last contact that releases (:func:`cosim.studies.metrics.exit_velocity`),
-or its final rate when no contact releases.
+first interval's ``t_on`` and ``t_off``, and ``count`` (robust when every
+companion agrees); the exit state: each multibody joint's rate at the last
+release of the last contact that releases (:func:`exit_rates`), after the
+velocity jump where that contact is a rigid impact (its impulse law is
+exact: the rates are read as the impact left them, not interpolated across
+the jump), or the final rate when no contact releases.
 
 Honest where it cannot: a quantity is ``reliable: false`` with a ``why``
-when the companion stopped or failed, when the two runs disagree on a
-contact's count (that contact's quantities and the exit state), when the
-contact's step lies past the asymptotic range, when a side that keeps its
-step in the companion resolves the contact coarsely, when the
-scheme's order was not measured or the scheme is monolithic, or when the
-estimate exceeds the quantity itself; its ``relative_error`` is then None
-and ``difference`` keeps ``|Q_h - Q_rh|``.
+when no companion finished, when the runs disagree on a contact's count
+(that contact's quantities and the exit state), when the contact's step is
+past the asymptotic range at the run's own step, when a side that keeps its
+step in the companions resolves the contact coarsely, when the scheme is
+monolithic, or when the estimate exceeds the quantity; its
+``relative_error`` is then None and ``difference`` keeps ``|Q_h -
+Q_companion|``.
 """
 from __future__ import annotations
 
@@ -77,40 +79,33 @@ import warnings
 
 import numpy as np
 
+from cosim.studies.accuracy_line import accuracy_text
 from cosim.studies.companion import (ASYMPTOTIC_OMEGA_H, OMEGA_H_MAX, UNSEEN_OMEGA_H, built,
-                                     coarsened, exchanged_omega_h, fitting_factor)
+                                     coarsened, exchanged_omega_h, ladder_plan)
+from cosim.studies.ladder import judge
 
 __all__ = ["ORDERS", "HOSTED_ORDERS", "DEFAULT_FACTOR", "BLIND", "coarsened", "estimate_errors",
-           "accuracy_text", "counted_share"]
+           "accuracy_text", "counted_share", "exit_rates"]
 
-#: the factor by which the companion's steps are longer than the run's
-DEFAULT_FACTOR = 4
+#: the ratio of the ladder's steps: the companions run at ``h/r`` and ``r h``
+DEFAULT_FACTOR = math.sqrt(2.0)
 
-#: observed orders of the schemes where their errors fall as one power of
-#: the step, for a contact's quantities and for the exit rates, and where
-#: they were measured: the median slope of ``log(error)`` against
-#: ``log(omega h)`` between neighbouring points at omega h = 0.1, 0.2 and 0.4
-#: (:data:`~cosim.studies.companion.ASYMPTOTIC_OMEGA_H`) of C's peak
-#: penetration and the arm's exit velocity against the bench's monolithic
-#: reference, on three_mass f1 to f1000 and beam_impact
-#: (``benchmarks/results/accuracy_model``).  Gauss-Seidel's peak slopes lie
-#: in 2.0-4.1, its exit slopes in 1.5-3.5, Jacobi's in 2.0-2.7 and 0.8-4.4.
-#: The implicit scheme's peak error sits at its floor (2e-7) there: its
-#: contact order is the slope of three_mass f100's peak between contact
-#: steps 4e-5 and 1.6e-4 s; its exit slopes scatter from 0 to 5.2.
+#: the prior: observed orders of the schemes fitted once on the shipped
+#: scenes (the median slope of ``log(error)`` against ``log(omega h)``
+#: between omega h = 0.1, 0.2 and 0.4 of C's peak penetration and the arm's
+#: exit velocity against the bench's monolithic reference, three_mass f1 to
+#: f1000 and beam_impact, ``benchmarks/results/accuracy_model``).  Not used
+#: for a run's estimate (its order is measured on the run's own ladder);
+#: :mod:`cosim.studies.accurate` reads it to size a refinement before it
+#: runs, and the summary gives it as ``order_prior``.
 ORDERS = {
     "gauss_seidel": {"contacts": 2.9, "exit": 2.6},
     "jacobi": {"contacts": 2.1, "exit": 1.9},
     "implicit": {"contacts": 4.2, "exit": 2.6},
 }
-#: the orders where a side's own RK4 step integrates the contact against a
-#: rigid partner (whatever the scheme), from the same run's ``host_rk4``
-#: fit (spring_drop, ground_multicontact): the peak error falls as RK4's,
-#: ``(omega h)**4.62``; the exit rate's, read linearly between the samples
-#: around the release, as ``(omega h)**1.84`` (its sampling)
+#: the prior where a side's own RK4 step integrates the contact against a
+#: rigid partner (spring_drop, ground_multicontact: ``host_rk4`` fit)
 HOSTED_ORDERS = {"contacts": 4.6, "exit": 1.8}
-ORDER_SOURCE = ("benchmarks/results/accuracy_model: median slopes of C's peak and the arm's "
-                "exit velocity at omega h 0.1 to 0.4, three_mass f1-f1000 and beam_impact")
 
 #: why the monolithic scheme gets no companion: its cost hardly depends on
 #: the tolerance (three_mass f100: 0.24 s of CPU at rtol 1e-5, 0.23 s at
@@ -122,9 +117,13 @@ MONOLITHIC = ("not estimated for the monolithic scheme: a coarser tolerance save
 #: per contact, the summary's quantities that are estimated
 _CONTACT_QUANTITIES = ("peak_penetration", "impulse", "t_on", "t_off")
 
+#: where the exit rates are read when no contact releases
+END = "end of the run"
 
-def _order(scheme: str) -> dict:
-    return ORDERS.get(scheme, {"contacts": None, "exit": None})
+#: why no companion runs where nothing it gives could be read
+BLIND = ("no companion: every contact that closed (the strike among them) lies past the "
+         "asymptotic range at the run's own step, or is stepped by a side that keeps its "
+         "step in the companions, so nothing they give could be read")
 
 
 def _first(c: dict, i: int) -> float:
@@ -141,17 +140,19 @@ def _contact_values(summary: dict) -> dict:
     return out
 
 
-#: where the exit rates are read when no contact releases
-END = "end of the run"
-
-
 def exit_rates(result, multibody, contact: str | None = None) -> tuple[dict, str]:
     """Each multibody joint's rate at the last release of ``contact`` (the
     strike the bench reads, :func:`cosim.studies.strike.find_strike`), or,
     without one, of the last contact that releases (``SUBSYSTEM/JOINT`` ->
-    [rad/s or m/s]), and what that instant is (``"release of C at T s"`` or
-    ``"end of the run"``); ``multibody``: the names of the multibody
-    subsystems."""
+    [rad/s or m/s]), and what that instant is (``"release of C at T s"``,
+    ``"after the impact of C at T s"`` or ``"end of the run"``);
+    ``multibody``: the names of the multibody subsystems.
+
+    Between samples the rate is read linearly (as
+    :func:`cosim.studies.metrics.exit_velocity`); where the release is a
+    rigid impact (the summary's ``impacts``), the impacted side's rates are
+    the impact's ``dq_after``: the exact law's jump is not interpolated
+    across."""
     t = result.series["t"]
     last = None
     for name, c in result.summary["contacts"].items():
@@ -161,47 +162,76 @@ def exit_rates(result, multibody, contact: str | None = None) -> tuple[dict, str
             t_off = float(c["intervals"][-1][1])
             if last is None or t_off > last[1]:
                 last = (name, t_off)
+    impact = None
+    if last is not None:
+        hits = [i for i in result.summary.get("impacts", ()) if i["contact"] == last[0]
+                and i["time"] <= last[1]]
+        impact = hits[-1] if hits else None
     rates = {}
     for key in result.series:
         if not key.startswith("dq/"):
             continue
         name = key[3:]
-        if name.split("/", 1)[0] not in multibody:
+        sub, joint = name.split("/", 1)
+        if sub not in multibody:
+            continue
+        if impact is not None and joint in impact["dq_after"] and _impacted(result, impact,
+                                                                            sub):
+            rates[name] = float(impact["dq_after"][joint])
             continue
         dq = result.series[key]
-        # linear between the samples around it, as cosim.studies.metrics.exit_velocity
-        # (not imported: every run would load the bench's module)
+        # (cosim.studies.metrics not imported: every run would load the bench's module)
         rates[name] = (float(np.interp(last[1], t, dq)) if last is not None
                        else float(dq[-1]))
-    when = f"release of {last[0]} at {last[1]:.6g} s" if last is not None else END
-    return rates, when
+    if last is None:
+        return rates, END
+    if impact is not None:
+        return rates, f"after the impact of {last[0]} at {last[1]:.6g} s"
+    return rates, f"release of {last[0]} at {last[1]:.6g} s"
 
 
-def _judge(value, other, r, p, why=None) -> dict:
-    """One quantity: its value, the companion's, and the estimate."""
-    def finite(x):                       # summary.json holds no NaN
-        return x if math.isfinite(x) else None
-    out = {"value": finite(value), "companion": finite(other), "difference": None,
-           "relative_error": None, "reliable": False}
-    if not (math.isfinite(value) and math.isfinite(other)):
-        out["why"] = why or "not defined in both runs"
+def _impacted(result, impact, sub: str) -> bool:
+    """Whether ``sub`` is the side whose velocities ``impact`` jumped: its
+    ``dq_after`` names that side's joints (a rigid contact has one moving
+    side); a scene with one multibody side needs no more."""
+    sides = {k.split("/", 1)[0] for k in result.series if k.startswith("dq/")}
+    if len(sides) == 1:
+        return True
+    own = {k.split("/", 1)[1] for k in result.series if k.startswith(f"dq/{sub}/")}
+    return own == set(impact["dq_after"])
+
+
+def _finite(x):                      # summary.json holds no NaN
+    return x if x is not None and math.isfinite(x) else None
+
+
+def _entry(value: float, finer, coarser, r: float, why: str | None = None,
+           note: str | None = None) -> dict:
+    """One quantity: its value, its companions' (None: not read) and the
+    estimate (see :func:`cosim.studies.ladder.judge`); ``note``: why a
+    companion is not read for it."""
+    finer, coarser = _finite(finer), _finite(coarser)
+    other = coarser if coarser is not None else finer
+    out = {"value": _finite(value), "companion": other, "finer": finer, "difference": None,
+           "relative_error": None, "reliable": False, "kind": None, "order": None}
+    if not math.isfinite(value) or other is None:
+        out["why"] = why or "not defined in the run and a companion"
         return out
-    diff = abs(value - other)
-    out["difference"] = diff
+    out["difference"] = abs(value - other)
     if why is not None:
         out["why"] = why
         return out
-    if value == 0.0 == other:            # at rest in both (a joint that never moved)
-        out.update(relative_error=0.0, reliable=True)
-        return out
-    if p is None:
-        out["why"] = "the scheme's order is not measured"
-        return out
-    est = diff / (r ** p - 1.0)
+    j = judge(value, finer, coarser, r)
+    out.update(kind=j["kind"], order=j["order"])
+    if "order_why" in j:
+        out["order_why"] = note or j["order_why"]
     if value == 0.0:
-        out["why"] = "the quantity is zero in the run, not in the companion"
+        if j["estimate"] == 0.0:          # at rest in every run (a joint that never moved)
+            out.update(relative_error=0.0, reliable=True)
+            return out
+        out["why"] = "the quantity is zero in the run, not in a companion"
         return out
-    rel = est / abs(value)
+    rel = j["estimate"] / abs(value)
     if rel > 1.0:
         out["why"] = "the estimate is larger than the quantity"
         return out
@@ -209,16 +239,10 @@ def _judge(value, other, r, p, why=None) -> dict:
     return out
 
 
-#: why no companion runs where nothing it gives could be read
-BLIND = ("no companion: every contact that closed (the strike among them) lies past the "
-         "asymptotic range at the companion's step, or is stepped by a side that keeps its "
-         "step in it, so nothing it gives could be read")
-
-
 def _blind(result, strike, beyond: dict, kept: list) -> bool:
     """Whether every contact that closed, and the strike whose release the
-    exit rates are read at, is past the asymptotic range or unseen: a
-    companion would be run for nothing."""
+    exit rates are read at, is past the asymptotic range at the run's step
+    or unseen: companions would be run for nothing."""
     closed = {n for n, c in result.summary["contacts"].items() if c["count"] > 0}
     blind = set(beyond) | {c for c, _ in kept}
     return bool(closed) and closed <= blind and (strike is None or strike in blind)
@@ -233,17 +257,45 @@ def counted_share(result, companion) -> float:
 
 
 def _embedded(scene) -> dict:
-    """Embedded contact -> (the side whose integrator evaluates it: its
-    ``host``, or the side that is not rigid; whether its partner is rigid)."""
+    """Embedded contact -> the side whose integrator evaluates it (its
+    ``host``, or the side that is not rigid)."""
     kinds = {s.name: s.type for s in scene.subsystems}
-    out = {}
-    for c in scene.contacts:
-        if c.placement != "embedded":
-            continue
-        sides = (c.a[0], c.b[0])
-        out[c.name] = (c.host or next((n for n in sides if kinds[n] != "rigid"), None),
-                       any(kinds[n] == "rigid" for n in sides))
-    return out
+    return {c.name: c.host or next((n for n in (c.a[0], c.b[0]) if kinds[n] != "rigid"),
+                                   None)
+            for c in scene.contacts if c.placement == "embedded"}
+
+
+def _simulate(scene):
+    from cosim.scene import run
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return run.simulate(scene)
+
+
+def _companion(role: str, factor: float, make, scene, result) -> tuple[dict, object]:
+    """Run one companion (``make()`` gives its scene): its record (``role``,
+    ``factor``, ``status``, ``message``, ``macro_steps``, ``cpu_time_s``,
+    ``work_share``) and its result, None where it was refused or failed."""
+    from cosim.errors import UnsafeStepError
+    rec = {"role": role, "factor": factor}
+    try:
+        comp_scene = make()
+        comp = _simulate(comp_scene)
+    except Exception as exc:     # a refused or broken companion: said why
+        rec.update(status="refused", message=f"{type(exc).__name__}: {exc}",
+                   why=(f"the pre-flight check refuses {factor:.3g}x the step as unstable"
+                        if isinstance(exc, UnsafeStepError) else
+                        f"the {role} companion did not run ({type(exc).__name__})"))
+        return rec, None
+    rec.update(status=comp.status, message=comp.message, macro_steps=comp.n_windows,
+               cpu_time_s=comp.summary["cpu_time_s"],
+               work_share={"macro_steps": counted_share(result, comp),
+                           "integrator_steps": comp_scene.work().steps / scene.work().steps})
+    if not comp.success:          # the guard's reason (energy growth, chatter), short
+        reason = comp.message.split(": ", 1)[-1].split(";")[0].split(" (")[0]
+        rec["why"] = f"the {role} companion {comp.status}: {reason}"[:160]
+        return rec, None
+    return rec, comp
 
 
 def estimate_errors(scene, result, factor: float = DEFAULT_FACTOR,
@@ -257,7 +309,8 @@ def estimate_errors(scene, result, factor: float = DEFAULT_FACTOR,
     result : SimulationResult
         The run's result (its ``series`` are read).
     factor : float
-        How many times longer the companion's steps are (> 1).
+        The ladder's ratio ``r`` (> 1): the companions run at ``h/r`` and
+        ``r h``.
     contact : str, optional
         The contact at whose last release the exit rates are read (default:
         the scene's strike, :func:`cosim.studies.strike.find_strike`, else
@@ -266,170 +319,176 @@ def estimate_errors(scene, result, factor: float = DEFAULT_FACTOR,
     Returns
     -------
     dict
-        The summary's ``accuracy``: ``reliable`` (every quantity is),
-        ``method``, ``factor``, ``order`` and ``order_source``,
-        ``coarsened`` (key path -> value in the companion), ``companion``
-        (``status``, ``message``, ``macro_steps``, ``cpu_time_s``),
-        ``work_share`` (``macro_steps``: :func:`counted_share`;
-        ``integrator_steps``: the ratio of the integrator steps counted
-        before the two runs, :meth:`~cosim.Scene.work`, upper bounds), ``contacts`` (name ->
-        ``count`` {``value``, ``companion``, ``robust``} and one entry per
-        quantity), ``exit`` (``at``, and ``SUBSYSTEM/JOINT`` -> entry) and
-        ``why`` (what made the summary unreliable).  An entry holds
-        ``value``, ``companion``, ``difference`` (absolute), ``reliable``,
-        and ``relative_error`` (the estimate over the value) or ``why``.
+        The summary's ``accuracy``: ``reliable`` (every quantity has an
+        estimate), ``method``, ``factor``, ``order`` (the lowest confirmed
+        order among the contacts' quantities and among the exit rates, None
+        where none is), ``order_prior`` (:data:`ORDERS`, not used),
+        ``order_source``, ``coarsened`` and ``refined`` (key path -> value in
+        the coarser and the finer companion), ``companions`` (one record
+        each, :func:`_companion`), ``companion`` (``status``: finished when
+        every companion run did; ``message``, ``macro_steps``,
+        ``cpu_time_s`` summed), ``work_share`` (summed over the companions:
+        ``macro_steps``, :func:`counted_share`; ``integrator_steps``, the
+        ratio of the integrator steps counted before the runs, upper
+        bounds), ``contacts`` (name -> ``count`` {``value``, ``companion``,
+        ``robust``} and one entry per quantity), ``exit`` (``at``, and
+        ``SUBSYSTEM/JOINT`` -> entry) and ``why`` (what made the summary
+        unreliable).  An entry holds ``value``, ``companion`` (the coarser
+        companion's value, else the finer's), ``finer``, ``difference``
+        (``|value - companion|``), ``reliable``, ``kind`` (``"richardson"``
+        or ``"bound"``), ``order`` (measured, or None), ``order_why`` (why
+        the order was not confirmed), and ``relative_error`` (the estimate
+        over the value) or ``why``.
     """
-    from cosim.scene import run
-
     if contact is None:
         from cosim.studies.strike import find_strike
         found = find_strike(scene, required=False)
         contact = found[0] if found else None
-    order = _order(scene.scheme)
-    acc = {"reliable": False, "method": "richardson", "factor": factor, "order": order,
-           "order_source": ORDER_SOURCE if scene.scheme in ORDERS else "",
-           "coarsened": {}, "companion": {}, "work_share": None,
-           "contacts": {}, "exit": {}, "why": []}
-    comp = None
-    kept: list = []                   # contacts the companion cannot see (coarsened fills it)
-    beyond: dict = {}                 # exchanged contacts past the asymptotic range
-    blind = False                     # no companion: nothing it gives could be read
+    r = float(factor)
+    acc = {"reliable": False, "method": "richardson with the order measured on h/r, h, r h; "
+                                        "else a bound at order 1",
+           "factor": factor, "order": {"contacts": None, "exit": None},
+           "order_prior": ORDERS.get(scene.scheme),
+           "order_source": "measured on this run and its companions at h/r and r h",
+           "coarsened": {}, "refined": {}, "companions": [], "companion": {},
+           "work_share": None, "contacts": {}, "exit": {}, "why": []}
+    runs = {"finer": None, "coarser": None}
+    kept: list = []                   # contacts the companions cannot see (coarsened fills it)
+    beyond: dict = {}                 # exchanged contacts past the range at the run's step
+    finer_only: dict = {}             # ... past it at the coarser companion's step only
+    blind = False
     if scene.scheme == "monolithic":
         acc["companion"] = {"status": "not run", "message": MONOLITHIC}
         acc["why"].append(MONOLITHIC)
     else:
         try:
             system = built(scene)
-            factor, beyond = fitting_factor(factor, exchanged_omega_h(scene, system))
-            acc["factor"] = factor
-            comp_scene, acc["coarsened"] = coarsened(scene, factor, kept, system)
-            blind = _blind(result, contact, beyond, kept)
-            if blind:
-                acc["companion"] = {"status": "not run", "message": BLIND}
-            else:
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore")
-                    comp = run.simulate(comp_scene)
-        except Exception as exc:   # a refused or broken companion: no estimate, said why
-            from cosim.errors import UnsafeStepError
+            finer_only, beyond = ladder_plan(r, exchanged_omega_h(scene, system))
+            coarse_scene, acc["coarsened"] = coarsened(scene, r, kept, system)
+            acc["refined"] = coarsened(scene, 1.0 / r, None, system, judged_at=r)[1]
+        except Exception as exc:      # the scene cannot be scaled: no estimate, said why
+            blind = None
             acc["companion"] = {"status": "refused", "message": f"{type(exc).__name__}: {exc}"}
-            acc["why"].append(
-                f"the pre-flight check refuses {factor:g}x the step as unstable"
-                if isinstance(exc, UnsafeStepError) else
-                f"the companion did not run ({type(exc).__name__})")
-    if comp is not None:
-        acc["companion"] = {"status": comp.status, "message": comp.message,
-                            "macro_steps": comp.n_windows,
-                            "cpu_time_s": comp.summary["cpu_time_s"]}
-        acc["work_share"] = {"macro_steps": counted_share(result, comp),
-                             "integrator_steps": comp_scene.work().steps / scene.work().steps}
-        if not comp.success:         # the guard's reason (energy growth, chatter), short
-            reason = comp.message.split(": ", 1)[-1].split(";")[0].split(" (")[0]
-            acc["why"].append(f"the companion {comp.status}: {reason}"[:160])
-    # what a side whose step stayed integrates: the companion does not see its error
-    embedded = _embedded(scene)
-    hosts = {c: host for c, (host, _) in embedded.items()}
-    unseen = {c: (f"`{hosts.get(c)}` steps contact {c} at the same step in the companion "
-                  f"({factor:g}x "
-                  f"would take a contact it hosts past omega h = {OMEGA_H_MAX}), and that step "
-                  f"resolves {c} coarsely (omega h > {UNSEEN_OMEGA_H}): its error is not seen"
-                  if math.isfinite(wh) else
-                  f"`{hosts.get(c)}` keeps its step in the companion, as {c}'s law has no "
-                  f"linear stiffness to tell the omega h of a longer one: {c}'s error is not "
-                  f"seen") for c, wh in kept}
-    unseen.update({c: f"a companion at {factor:g}x the run's step would step contact {c} at "
-                      f"omega h = {wh:.2g}, past {ASYMPTOTIC_OMEGA_H}, where the scheme's error "
-                      f"stops falling as one power of the step: the two runs' difference would "
-                      f"not tell the run's error" for c, wh in beyond.items()})
-    hosted = ({c for c, (_, rigid) in embedded.items() if rigid}
-              if order["contacts"] is not None else set())
+            acc["why"].append(f"the companion did not run ({type(exc).__name__})")
+        if blind is not None:
+            blind = _blind(result, contact, beyond, kept)
+            # the coarser companion, where some contact that closed can be read from it
+            coarse = not _blind(result, contact, {**beyond, **finer_only}, kept)
+        if blind:
+            acc["companion"] = {"status": "not run", "message": BLIND}
+        elif blind is not None:
+            plan = [("finer", 1.0 / r,
+                     lambda: coarsened(scene, 1.0 / r, None, system, judged_at=r)[0])]
+            if coarse:
+                plan.append(("coarser", r, lambda: coarse_scene))
+            for role, f, make in plan:
+                rec, runs[role] = _companion(role, f, make, scene, result)
+                acc["companions"].append(rec)
+            _summarise(acc)
+    _fill(acc, scene, result, contact, r, runs, kept, beyond, finer_only, blind)
+    return acc
 
-    def orders(c):                   # the contact's (the exit's: at its release)
-        return HOSTED_ORDERS if c in hosted else order
-    if hosted:
-        acc["order_hosted"] = HOSTED_ORDERS
+
+def _summarise(acc: dict) -> None:
+    """``companion`` and ``work_share`` summed over the companions run, and
+    why no companion gave anything, where none did."""
+    recs = acc["companions"]
+    bad = [c for c in recs if c["status"] != "finished"]
+    acc["companion"] = {"status": bad[0]["status"] if bad else "finished",
+                        "message": "; ".join(c["message"] for c in recs if c["message"]),
+                        "macro_steps": sum(c.get("macro_steps", 0) for c in recs),
+                        "cpu_time_s": sum(c.get("cpu_time_s", 0.0) for c in recs)}
+    shares = [c["work_share"] for c in recs if "work_share" in c]
+    if shares:
+        acc["work_share"] = {k: sum(s[k] for s in shares) for k in shares[0]}
+    if all("why" in c for c in recs):            # no companion to read
+        acc["why"].append(recs[0]["why"])
+
+
+def _unseen(scene, r, kept, beyond) -> dict:
+    """Contact -> why its error cannot be read from the companions."""
+    hosts = _embedded(scene)
+    out = {c: (f"`{hosts.get(c)}` steps contact {c} at the same step in the companions "
+               f"({r:.3g}x would take a contact it hosts past omega h = {OMEGA_H_MAX}), and "
+               f"that step resolves {c} coarsely (omega h > {UNSEEN_OMEGA_H}): its error is "
+               f"not seen"
+               if math.isfinite(wh) else
+               f"`{hosts.get(c)}` keeps its step in the companions, as {c}'s law has no "
+               f"linear stiffness to tell the omega h of another one: {c}'s error is not seen")
+           for c, wh in kept}
+    out.update({c: f"the run steps contact {c} at omega h = {wh:.2g}, past "
+                   f"{ASYMPTOTIC_OMEGA_H}, where the scheme's error stops falling as one power "
+                   f"of the step: its companions' differences would not tell the run's error"
+                for c, wh in beyond.items()})
+    return out
+
+
+def _fill(acc, scene, result, contact, r, runs, kept, beyond, finer_only, blind) -> None:
+    """The entries of every contact and exit rate, and the summary's
+    ``order``, ``why`` and ``reliable``."""
+    from cosim.scene.specs import MultibodySpec
+
+    done = {role: res for role, res in runs.items() if res is not None}
+    unseen = _unseen(scene, r, kept, beyond)
+    coarse_why = {c: f"the coarser companion steps contact {c} at omega h = {wh:.2g}, past "
+                     f"{ASYMPTOTIC_OMEGA_H}: read from the finer companion alone"
+                  for c, wh in finer_only.items()}
+    stopped = None if done or blind else (acc["why"][0] if acc["why"] else
+                                          "no companion finished")
+    # why one companion gave nothing, said by each entry the other alone bounds
+    lost = next((c["why"] for c in acc["companions"] if "why" in c), None) if done else None
     mine = _contact_values(result.summary)
-    theirs = _contact_values(comp.summary) if comp is not None and comp.success else {}
-    stopped = None if theirs or blind else (
-        acc["why"][0] if acc["why"] else "the companion did not finish")
+    theirs = {role: _contact_values(res.summary) for role, res in done.items()}
     differ = []
     for name, v in mine.items():
-        o = theirs.get(name, {})
-        count = {"value": v["count"], "companion": o.get("count"),
-                 "robust": o.get("count") == v["count"] if theirs else None}
-        entry = {"count": count}
+        counts = {role: t[name]["count"] for role, t in theirs.items()}
+        robust = all(n == v["count"] for n in counts.values()) if counts else None
+        other = counts.get("coarser", counts.get("finer"))
+        entry = {"count": {"value": v["count"], "companion": other, "robust": robust}}
+        if "finer" in counts:
+            entry["count"]["finer"] = counts["finer"]
         why = stopped
-        if why is None and count["robust"] is False:
-            why = f"contact {name} closed {v['count']} times, {o.get('count')} in the companion"
+        if why is None and robust is False:
+            bad = next(role for role, n in counts.items() if n != v["count"])
+            why = (f"contact {name} closed {v['count']} times, {counts[bad]} in the "
+                   f"{'' if len(counts) == 1 else bad + ' '}companion")
             differ.append(why)
         why = why or unseen.get(name)
         for q in _CONTACT_QUANTITIES:
-            entry[q] = _judge(v[q], o.get(q, math.nan), factor, orders(name)["contacts"],
-                              why)
+            coarser = (None if name in coarse_why else
+                       theirs.get("coarser", {}).get(name, {}).get(q))
+            entry[q] = _entry(v[q], theirs.get("finer", {}).get(name, {}).get(q), coarser, r,
+                              why, coarse_why.get(name) or lost)
         acc["contacts"][name] = entry
-    from cosim.scene.specs import MultibodySpec
     multibody = {s.name for s in scene.subsystems if isinstance(s, MultibodySpec)}
     rates, at = exit_rates(result, multibody, contact)
     acc["exit"]["at"] = at
-    crates, elsewhere = {}, None
-    if theirs:
-        crates, cat = exit_rates(comp, multibody, contact)
+    crates, elsewhere = {}, []
+    for role, res in done.items():
+        crates[role], cat = exit_rates(res, multibody, contact)
         if (cat == END) != (at == END):      # one run's contact is still closed at the end
-            elsewhere = f"the companion reads the exit rates at {cat}, the run at {at}"
+            elsewhere.append(f"the {role} companion reads the exit rates at {cat}, the run "
+                             f"at {at}")
+            crates[role] = {}
     for joint, value in rates.items():
-        why = (stopped or (differ[0] if differ else None) or elsewhere
+        why = (stopped or (differ[0] if differ else None)
+               or (elsewhere[0] if len(elsewhere) == len(done) and done else None)
                or unseen.get(contact) or (BLIND if blind else None))
-        acc["exit"][joint] = _judge(value, crates.get(joint, math.nan), factor,
-                                    orders(contact)["exit"], why)
+        note = coarse_why.get(contact) or (elsewhere[0] if elsewhere else None) or lost
+        coarser = None if contact in coarse_why else crates.get("coarser", {}).get(joint)
+        acc["exit"][joint] = _entry(value, crates.get("finer", {}).get(joint), coarser, r,
+                                    why, note)
     acc["why"] += differ
     entries = [e for c in acc["contacts"].values() for k, e in c.items() if k != "count"
                if c["count"]["value"] > 0] + [e for k, e in acc["exit"].items() if k != "at"]
     for e in entries:
         if not e["reliable"] and e.get("why") and e["why"] not in acc["why"]:
             acc["why"].append(e["why"])
+    contact_entries = [e for c in acc["contacts"].values() for k, e in c.items()
+                       if k != "count" and c["count"]["value"] > 0]
+    exit_entries = [e for k, e in acc["exit"].items() if k != "at"]
+    for key, group in (("contacts", contact_entries), ("exit", exit_entries)):
+        measured = [e["order"] for e in group if e.get("kind") == "richardson"]
+        acc["order"][key] = min(measured) if measured else None
     acc["reliable"] = (not acc["why"] and all(e["reliable"] for e in entries)
                        and all(c["count"]["robust"] for c in acc["contacts"].values()))
-    return acc
-
-
-def _pct(x: float) -> str:
-    """A relative error in percent; below 1e-8 (round-off) as such."""
-    return "< 1e-6 %" if x < 1e-8 else f"{100 * x:.2g} %"
-
-
-def accuracy_text(acc: dict) -> str:
-    """The terminal's line: the estimates that are reliable, no number for
-    one that is not, and why (the first reason, the rest in summary.json)."""
-    steps = ", ".join(f"{k.rsplit('.', 1)[-1]} {v:.3g}" for k, v in acc["coarsened"].items()
-                      if not k.endswith(".approach_horizon"))      # kept, not coarsened
-    head = f"accuracy (companion at {acc['factor']:g}x the step: {steps})"
-    if acc["companion"].get("message") == BLIND:
-        why = [w for w in acc["why"] if w != BLIND] or [BLIND]
-        more = f"; {len(why) - 1} more in summary.json" if len(why) > 1 else ""
-        return f"accuracy: not reliable, no companion run ({why[0]}{more})"
-    if acc["companion"].get("status") == "not run":
-        return f"accuracy: {acc['companion']['message']}"
-    parts, missing = [], []
-    for name, c in acc["contacts"].items():
-        if c["count"]["value"] == 0:
-            continue
-        pk, im = c["peak_penetration"], c["impulse"]
-        if pk["reliable"] and im["reliable"]:
-            parts.append(f"{name} peak {_pct(pk['relative_error'])}, "
-                         f"impulse {_pct(im['relative_error'])}")
-        else:
-            missing.append(name)
-    exits = [(k, e) for k, e in acc["exit"].items() if k != "at" and e["reliable"]]
-    if exits:
-        k, e = max(exits, key=lambda ke: ke[1]["relative_error"])
-        parts.append(f"exit {k} {_pct(e['relative_error'])}" + (
-            f" (worst of {len(exits)} joints)" if len(exits) > 1 else ""))
-    elif any(k != "at" for k in acc["exit"]):
-        missing.append("exit")
-    why = "; ".join(acc["why"]) or "see summary.json"
-    if not parts:
-        return f"accuracy: not reliable ({why})"
-    if acc["reliable"]:
-        return f"{head}: {'; '.join(parts)}; counts robust"
-    return (f"{head}: {'; '.join(parts)}; not estimated: {', '.join(missing) or 'counts'} "
-            f"({acc['why'][0] if acc['why'] else 'see summary.json'})")
