@@ -34,8 +34,10 @@ RUNS = [("spring_drop", None, None, (), 0.02),
         ("three_mass", "f100", None, (), None),
         ("three_mass", "f100", "monolithic", (), 1.0),
         ("beam_impact", None, None, (), None),
+        ("beam_impact", None, "monolithic", (), None),
         ("beam_impact", None, None, ("t_end=10",), 2.0),
-        ("brachiation", None, None, (), 0.3)]
+        ("brachiation", None, None, (), 0.3),
+        ("brachiation", None, "monolithic", (), None)]
 
 
 def solve_cpu(name, variant, scheme, overrides, kernel, repeat):

@@ -179,12 +179,15 @@ def test_the_prose_numbers_are_the_published_runs(claim, measure):
 
 
 def test_the_targets_not_met_are_those_the_page_names():
-    """Of the scenes run's targets, only beam_impact over 10 s is missed, and
-    the page says so; of the start-up targets, our modules' 30 ms."""
+    """Of the scenes run's targets, beam_impact over 10 s and brachiation are
+    missed, and the page names both; of the start-up targets, our modules'
+    30 ms."""
     rows = _json("scenes", "scenes.json")["rows"]
     missed = [(r["scene"], tuple(r["overrides"])) for r in rows
               if r["target_s"] is not None and r["cpu_s"]["compiled"] > r["target_s"]]
-    assert missed == [("beam_impact", ("t_end=10",))]
+    assert missed == [("beam_impact", ("t_end=10",)), ("brachiation", ())]
     assert_printed(Claim(PAGE, "- **beam_impact over 10 s**: the loop runs in Python", "", 0))
+    assert_printed(Claim(PAGE, "- **brachiation**, 0.369 s against 0.3, on a machine this "
+                               "loaded", "", 0))
     assert _startup("ours_ms") > 30 and _startup("scene_ms") < 20
     assert_printed(Claim(PAGE, "are above the 30 ms line: **this target is not met.**", "", 0))

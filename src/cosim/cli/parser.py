@@ -187,8 +187,9 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--format", choices=("png", "svg", "pdf"), default="png",
                     help="figure format (default png)")
     pl.add_argument("--animate", action="store_true",
-                    help="also write an animation of the robot and the structure (GIF with "
-                         "Pillow, else MP4 with ffmpeg); needs the run's scene.toml")
+                    help="also write an animation of the robot and the structure (MP4 with "
+                         "ffmpeg where matplotlib finds it, else GIF with Pillow); needs the "
+                         "run's scene.toml")
     pl.add_argument("--frames", type=_frames, default=200,
                     help="most frames in the animation, at least 2 (default 200)")
     pl.add_argument("--magnify", type=_magnify, default=1.0,

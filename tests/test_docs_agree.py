@@ -1,0 +1,147 @@
+"""Where two pages, or a page and the code, could say different things:
+each claim run against the code, and the pages that repeat it held to one
+wording.
+
+- the chatter example's stop (docs/troubleshooting.md, twice): the time the
+  guard names when `cosim run examples/chatter.toml` stops;
+- the friction paragraph's RK4 limit (docs/contacts.md): the sliding block
+  settles with RK4 steps just below it and keeps creeping just above;
+- `scheme.accuracy` (docs/accuracy.md, docs/commands.md): `cosim run` reads
+  it;
+- the animation's format (`cosim plot --help`, docs/getting-started.md): MP4
+  where matplotlib finds ffmpeg, else GIF, as the code chooses;
+- the timings the guides quote (docs/structures.md, docs/contacts.md): the
+  published run of docs/performance.md's scenes table.
+"""
+from __future__ import annotations
+
+import json
+import re
+import sys
+import warnings
+
+import numpy as np
+import pytest
+
+from documented import ROOT, Claim, assert_printed, assert_reproduced, flat
+
+from cosim.cli import main
+
+TS, C, A, G, S = ("docs/troubleshooting.md", "docs/contacts.md", "docs/accuracy.md",
+                  "docs/getting-started.md", "docs/structures.md")
+
+
+def test_the_chatter_example_stops_where_the_page_says(tmp_path, capsys):
+    """`cosim run examples/chatter.toml` stops on chatter at t = 0.428353 s
+    (the guard's own time, in its message), as both places of the page say."""
+    assert main(["run", str(ROOT / "examples" / "chatter.toml"), "--out", str(tmp_path / "r"),
+                 "--quiet", "--no-estimate"]) == 1
+    message = json.loads((tmp_path / "r" / "summary.json").read_text())["message"]
+    assert "chatters" in message, message
+    at = float(re.search(r"the guard tripped at t = ([\d.]+) s", message).group(1))
+    for printed in ("(for example `cosim run examples/chatter.toml`, which stops at "
+                    "t = 0.428353 s)", "its impacts accumulate at t = 0.428353 s, and the guard "
+                                       "stops it there"):
+        claim = Claim(TS, printed, "cosim run examples/chatter.toml", 0.428353, abs=0.5e-6)
+        assert_printed(claim)
+        assert_reproduced(claim, at)
+
+
+def _slide(tmp_path, max_step: float) -> float:
+    """The sliding block of tests/test_connections.py with its friction
+    embedded (RK4 integrates it): the largest speed left after it stops."""
+    import cosim
+    from cosim.scene.load import load_scene
+    sys.path.insert(0, str(ROOT / "tests"))
+    from test_connections import MASS, SLIDE, scene_text
+    fr = "friction = { coefficient = 0.3, slip_velocity = 0.0001 }"
+    path = tmp_path / f"slide-{max_step:g}.toml"
+    path.write_text(scene_text(SLIDE.format(k=1e6, friction=fr), t_end=0.4, dq0=(1.0, 0.0),
+                               q0=(0.0, -MASS * 9.81 / 1e6), max_step=max_step))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = cosim.simulate(load_scene(path, overrides=["scheme.macro_step=1e-3"],
+                                        scheme="gauss_seidel"))
+    assert res.status == "finished", res.message
+    after = res.t > 1.0 / (0.3 * 9.81) + 0.01          # past the stop at v0 / (mu g)
+    return float(np.max(np.abs(res.series["dq/robot/x"][after])))
+
+
+def test_the_friction_damper_needs_rk4_steps_below_the_limit_the_page_names(tmp_path):
+    """"the sliding test (2 kg, μ = 0.3, v_s = 1e-4 m/s) needs RK4 steps below
+    9.5e-5 s": with the macro step of 1 ms cut into 11 RK4 steps (9.09e-5 s,
+    4 % below) the block comes to rest; into 10 (1e-4 s, 6 % above) it keeps
+    creeping at a sixth of v_s, the damper's RK4 step past its stability
+    limit (h μ g / v_s = 2.785)."""
+    claim = Claim(C, "needs RK4 steps below 9.5e-5 s", "the sliding block, gauss_seidel",
+                  9.5e-5, abs=0.05e-5)
+    assert_printed(claim)
+    below, above = _slide(tmp_path, 9.1e-5), _slide(tmp_path, 1e-4)
+    assert below < 1e-9 and above > 1e-6, (below, above)
+    assert 1e-3 / 11 < claim.value < 1e-4                 # the limit lies between them
+
+
+def test_a_run_reads_the_scenes_accuracy(tmp_path, capsys):
+    """`accuracy = "1%"` in a scene's `[scheme]`: `cosim run` asks it when the
+    flag is not given (docs/accuracy.md says so, docs/commands.md too)."""
+    assert_printed(Claim(A, "`accuracy = \"1%\"` in a scene's `[scheme]` asks the same when the "
+                            "flag is not given (`cosim run` and `cosim info` both read it)", "", 0))
+    assert_printed(Claim("docs/commands.md", "`--accuracy X` (`1%`, `0.01`; without it the "
+                                             "scene's `scheme.accuracy`, if any) runs", "", 0))
+    out = tmp_path / "r"
+    assert main(["run", str(ROOT / "cases" / "spring_drop.toml"), "--variant", "undamped",
+                 "--set", 'scheme.accuracy="1%"', "--out", str(out), "--quiet"]) == 0
+    request = json.loads((out / "summary.json").read_text())["accuracy"]["request"]
+    assert request["from"] == "scheme.accuracy" and request["accuracy"] == 0.01, request
+    assert "accuracy asked 1 % (scheme.accuracy)" in capsys.readouterr().out
+
+
+def test_the_animation_format_is_said_once_as_the_code_chooses(monkeypatch, capsys):
+    """MP4 where matplotlib finds ffmpeg, else GIF: the code's choice, the
+    help text and the page say the same."""
+    pytest.importorskip("matplotlib")
+    from matplotlib import animation as mpl_animation
+    from cosim.plot import animation
+    for found, suffix in ((True, "mp4"), (False, "gif")):
+        monkeypatch.setattr(mpl_animation.writers, "is_available", lambda name, f=found: f)
+        assert animation._encoder(None)[1] == suffix
+    with pytest.raises(SystemExit):
+        main(["plot", "--help"])
+    assert "(MP4 with ffmpeg where matplotlib finds it, else GIF with Pillow)" in \
+        flat(capsys.readouterr().out)
+    for printed in ("# + animation.mp4 (ffmpeg), else .gif (Pillow)",
+                    "It writes `animation.mp4` (H.264) where matplotlib finds ffmpeg, else "
+                    "`animation.gif` (Pillow"):
+        assert_printed(Claim(G, printed, "cosim plot --animate", 0))
+    assert "GIF with Pillow, else MP4" not in flat((ROOT / G).read_text(encoding="utf-8"))
+
+
+def _scene_cpu(scene: str, scheme: str) -> float:
+    """Solve CPU of ``scene`` under ``scheme`` (no overrides) in the published
+    run of docs/performance.md's scenes table."""
+    data = json.loads((ROOT / "benchmarks" / "results" / "scenes" / "scenes.json").read_text())
+    (row,) = [r for r in data["rows"]
+              if r["scene"] == scene and r["scheme"] == scheme and not r["overrides"]]
+    assert data["date"] == "2026-12-02"
+    return row["cpu_s"]["compiled"]
+
+
+@pytest.mark.parametrize("page, printed, scene, scheme, value", [
+    (S, "the reference's solve takes 1.549 s of CPU and the scene's default 0.171 s",
+     "beam_impact", "monolithic", 1.549),
+    (S, "the reference's solve takes 1.549 s of CPU and the scene's default 0.171 s",
+     "beam_impact", "gauss_seidel", 0.171),
+    (C, "the default run's solve takes 0.369 s of CPU, the monolithic reference's 16.334 s",
+     "brachiation", "implicit", 0.369),
+    (C, "the default run's solve takes 0.369 s of CPU, the monolithic reference's 16.334 s",
+     "brachiation", "monolithic", 16.334),
+])
+def test_the_guides_timings_are_the_published_runs(page, printed, scene, scheme, value):
+    """A guide quotes a timing from the one published run of the scenes table,
+    which docs/performance.md shows whole: the same number on both pages."""
+    claim = Claim(page, printed, "python benchmarks/scenes.py --kernels compiled --repeat 3",
+                  value, abs=0.0005)
+    assert_printed(claim)
+    assert_printed(Claim(page, "(*Compiled kernels and loops*: 2026-12-02, a shared", "", 0))
+    assert_reproduced(claim, _scene_cpu(scene, scheme))
+    assert f"| {value:.3f} |" in (ROOT / "docs" / "performance.md").read_text(encoding="utf-8")
