@@ -145,3 +145,105 @@ def test_the_guides_timings_are_the_published_runs(page, printed, scene, scheme,
     assert_printed(Claim(page, "(*Compiled kernels and loops*: 2026-12-02, a shared", "", 0))
     assert_reproduced(claim, _scene_cpu(scene, scheme))
     assert f"| {value:.3f} |" in (ROOT / "docs" / "performance.md").read_text(encoding="utf-8")
+
+
+def _sweep_cost(key: str) -> float:
+    data = json.loads((ROOT / "benchmarks" / "results" / "sweep_costs" / "sweep_costs.json")
+                      .read_text())
+    assert data["date"] == "2026-12-02" and data["finished"] == data["points"] == 8
+    assert data["tables_identical"] and data["tables_compared"] == 3
+    return data["cpu_s"][key] if key in data["cpu_s"] else data[key]
+
+
+_SW = "docs/sweeps.md"
+_SWEEP = ("1.20 s on one process and 2.00 s with `--workers 2`, of which the runs themselves "
+          "account for 0.74 s (`cpu_time_s`): each of the pool's processes starts and imports "
+          "cosim (0.26 s of CPU). `--scheduler local` takes 4.63 s, the extra being the "
+          "cluster's start. Run again, the sweep reads the 8 points back in 0.41 s. The three "
+          "tables (one process, pool, Dask) are identical apart from `cpu_time_s`.")
+
+
+@pytest.mark.parametrize("key, value", [("one_process", 1.20), ("pool_2", 2.00), ("runs", 0.74),
+                                        ("import", 0.26), ("dask_local", 4.63),
+                                        ("read_back", 0.41), ("load_average", 5.4)])
+def test_the_sweep_costs_are_the_published_runs(key, value):
+    """docs/sweeps.md's paragraph of costs: one run of
+    `python benchmarks/sweep_costs.py`, its file, half a unit of each digit."""
+    claim = Claim(_SW, _SWEEP if key != "load_average" else
+                  "(2026-12-02, a shared 2-core x86_64 machine at load average 5.4;",
+                  "python benchmarks/sweep_costs.py", value, abs=0.005 if key != "load_average"
+                  else 0.05)
+    assert_printed(claim)
+    assert_reproduced(claim, _sweep_cost(key))
+    assert_printed(Claim(_SW, "each imports cosim once (0.26 s of CPU in the run quoted", "", 0))
+
+
+def test_what_the_estimate_costs_is_said_as_the_published_validation_measured(capsys):
+    """`cosim run --help` on `--no-estimate`: the companion's factor and its
+    share of the run's CPU, as the published validation run of docs/accuracy.md
+    measured them on the shipped scenes (its last column)."""
+    import importlib.util
+    spec = importlib.util.spec_from_file_location(
+        "accuracy_validation_agree", ROOT / "benchmarks" / "accuracy_validation.py")
+    av = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(av)
+    data = json.loads((ROOT / "benchmarks" / "results" / "accuracy_validation" /
+                       "validation.json").read_text())
+    shares = sorted(av.estimate_share(c["default"]) for c in data["cases"])
+    factors = {c["default"]["factor"] for c in data["cases"]
+               if c["default"].get("companion") != "not run"}
+    with pytest.raises(SystemExit):
+        main(["run", "--help"])
+    text = flat(capsys.readouterr().out)
+    assert ("skip the error estimate (a companion run at 2 to 4 times the step, 0.05 to 1.2 "
+            "times the run's CPU on the shipped scenes, median 0.31, none where nothing could "
+            "be read; summary key `accuracy`)") in text, text
+    assert factors == {2.0, 4.0}
+    assert round(shares[0], 2) == 0.05 and round(shares[-1], 1) == 1.2
+    assert round(data["totals"]["estimate_share_median"], 2) == 0.31
+    assert any(c["default"].get("companion") == "not run" for c in data["cases"])
+
+
+def _published(folder: str, name: str) -> dict:
+    data = json.loads((ROOT / "benchmarks" / "results" / folder / name).read_text())
+    assert data["date"] == "2026-12-02"
+    return data
+
+
+_BUILD = ("the compilation took 76 s of CPU and 6.5 min of wall time")
+
+
+def test_the_readme_build_is_the_published_run():
+    """The README's install paragraph: six compiled modules (the sources'
+    .pyx files, each built), and the CPU and wall time of the one published
+    build."""
+    data = _published("build", "build.json")
+    pyx = sorted(p.relative_to(ROOT).as_posix() for p in (ROOT / "src").rglob("*.pyx"))
+    assert data["pyx"] == pyx and len(data["built"]) == len(pyx)
+    six = Claim("README.md", "first compiles cosim's six compiled modules", "ls src/**/*.pyx", 6)
+    assert_printed(six)
+    assert_reproduced(six, len(pyx))
+    for value, measured, tol in ((76, data["cpu_s"], 0.5), (6.5, data["wall_s"] / 60, 0.05)):
+        claim = Claim("README.md", _BUILD, "python benchmarks/build_time.py", value, abs=tol)
+        assert_printed(claim)
+        assert_reproduced(claim, measured)
+
+
+_PLOT = ("`cosim plot` of spring_drop takes 1.78 s of CPU for its four PNGs, matplotlib's "
+         "import included, and `cosim plot runs/three_mass-f100 --animate` 4.80 s for its five "
+         "PNGs and the 200-frame GIF, of which the animation takes 2.01 s (10 ms a frame; "
+         "drawing each frame whole, as matplotlib's stock writer does, took 27.6 s).")
+
+
+def test_what_plotting_costs_is_the_published_run():
+    data = _published("animation", "animation.json")
+    assert data["frames"] == 200 and data["video"] == "gif"
+    assert data["pngs"] == {"spring_drop": 4, "three_mass": 5}
+    for value, measured, tol in ((1.78, data["plot_spring_drop_cpu_s"], 0.005),
+                                 (4.80, data["plot_animate_three_mass_cpu_s"], 0.005),
+                                 (2.01, data["cosim_s"]["cpu"], 0.005),
+                                 (10, 1e3 * data["cosim_s"]["cpu"] / data["frames"], 0.5),
+                                 (27.6, data["stock_s"]["cpu"], 0.05)):
+        claim = Claim(G, _PLOT, "python benchmarks/animation.py --repeat 2", value, abs=tol)
+        assert_printed(claim)
+        assert_reproduced(claim, measured)
