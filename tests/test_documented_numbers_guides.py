@@ -843,7 +843,7 @@ def test_fmu_page_numbers(fmu_runs):
 def test_plot_of_spring_drop_draws_four_pngs(tmp_path):
     """``cosim plot`` of spring_drop (about 2 s of CPU with matplotlib)."""
     pytest.importorskip("matplotlib")
-    claim = Claim(G, "`cosim plot` of spring_drop takes 1.5 s of CPU for its four PNGs",
+    claim = Claim(G, "`cosim plot` of spring_drop takes 1.78 s of CPU for its four PNGs",
                   "cosim plot runs/spring_drop", 4)
     assert_printed(claim)
     out = tmp_path / "run"
