@@ -391,3 +391,29 @@ def test_the_full_beam_at_1024_elements_solves_its_contact_basis_147_times(size_
     claim = Claim(PAGE, "147 times at 1024 elements", "python benchmarks/size_scaling.py", 147)
     assert_printed(claim)
     assert_reproduced(claim, calls[0])
+
+
+def test_cs_contact_time_on_three_mass_f100(capsys):
+    """"keep its step in contact at 30 µs or below, a tenth of the contact
+    time (0.3 ms here)": C's contact time at its first touch, as `cosim info`
+    gives it."""
+    assert main(["info", str(CASES / "three_mass.toml"), "--variant", "f100", "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    claim = Claim(PAGE, "at 30 µs or below, a tenth of the contact time (0.3 ms here)",
+                  "cosim info cases/three_mass.toml --variant f100", 0.3e-3, abs=0.05e-3)
+    assert_printed(claim)
+    assert_reproduced(claim, info["contacts"]["C"]["contact_time_s"])
+
+
+def test_the_bench_settings_the_page_names():
+    """The reference and the paper's method as `cosim bench` runs them."""
+    import cosim.studies.bench as bench
+    for printed, value, measured in (
+            ("monolithic DOP853, rtol 1e-11", 1e-11, bench.REFERENCE["rtol"]),
+            ("RK45, max step 1e-4 s, rtol 1e-4, atol\n1e-6", 1e-4, bench.PAPER_RK45["max_step"]),
+            ("RK45, max step 1e-4 s, rtol 1e-4, atol\n1e-6", 1e-4, bench.PAPER_RK45["rtol"]),
+            ("RK45, max step 1e-4 s, rtol 1e-4, atol\n1e-6", 1e-6, bench.PAPER_RK45["atol"])):
+        claim = Claim(PAGE, printed, "cosim bench", value, rel=1e-12)
+        assert_printed(claim)
+        assert_reproduced(claim, measured)
+    assert bench.REFERENCE["method"] == "DOP853" and bench.PAPER_RK45["method"] == "RK45"
