@@ -417,3 +417,31 @@ def test_the_bench_settings_the_page_names():
         assert_printed(claim)
         assert_reproduced(claim, measured)
     assert bench.REFERENCE["method"] == "DOP853" and bench.PAPER_RK45["method"] == "RK45"
+
+
+_SCIPY = """
+import sys, warnings
+warnings.simplefilter("ignore")
+import cosim
+scene = cosim.load_scene(sys.argv[1], "f100", overrides=sys.argv[2:], scheme="monolithic")
+before = "scipy.integrate" in sys.modules
+cosim.simulate(scene)
+print(before, "scipy.integrate" in sys.modules)
+"""
+
+
+def test_the_paper_rows_solve_imports_scipys_integrators():
+    """"The paper row's solve includes the import of scipy's integrators,
+    which the monolithic scheme makes when it first runs in a process": in a
+    fresh process, loaded and not yet run, the scene has not imported
+    ``scipy.integrate``; run, it has."""
+    import subprocess
+    import cosim.studies.bench as bench
+    assert_printed(Claim(PAGE, "The paper row's solve includes the import of scipy's "
+                               "integrators, which the monolithic scheme makes when it first "
+                               "runs in a process", "python benchmarks/peers/run.py", 0))
+    proc = subprocess.run([sys.executable, "-c", _SCIPY, str(CASES / "three_mass.toml"),
+                           *bench._monolithic(bench.PAPER_RK45)], capture_output=True,
+                          text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert proc.stdout.split() == ["False", "True"], proc.stdout
