@@ -247,3 +247,29 @@ def test_what_plotting_costs_is_the_published_run():
         claim = Claim(G, _PLOT, "python benchmarks/animation.py --repeat 2", value, abs=tol)
         assert_printed(claim)
         assert_reproduced(claim, measured)
+
+
+def test_the_plug_in_strings_lowest_frequency_is_the_strings_shifted():
+    """docs/plugins.md: "The lowest frequency, 57.5 Hz, is the 40-element
+    string's 8.925 Hz shifted by the foundation's sqrt(k_f / (rho A)) / (2 pi)
+    = 56.8 Hz": cosim's own string of the example scene's numbers, and the
+    shift that the plug-in adds to its stiffness."""
+    import math
+    import fem
+    page = "docs/plugins.md"
+    text = ("The lowest frequency, 57.5 Hz, is the 40-element string's 8.925 Hz shifted by "
+            "the foundation's sqrt(k_f / (rho A)) / (2 pi) = 56.8 Hz.")
+    string = fem.String(length=2.0, tension=1000.0, density=7850.0, area=1e-4,
+                        n_elements=40).assemble()
+    f0 = float(fem.natural_frequencies(string, 1)[0])
+    fk = math.sqrt(1e5 / (7850.0 * 1e-4)) / (2 * math.pi)
+    scene = (ROOT / "examples" / "custom_structure" / "scene.toml").read_text()
+    for key, value in (("length", "2.0"), ("tension", "1000.0"), ("density", "7850.0"),
+                       ("area", "1e-4"), ("foundation_stiffness", "1e5"), ("elements", "40")):
+        assert re.search(rf"^{key} = {re.escape(value)}\b", scene, flags=re.M), key
+    for value, measured, tol in ((8.925, f0, 0.0005), (56.8, fk, 0.05),
+                                 (57.5, math.hypot(f0, fk), 0.05)):
+        claim = Claim(page, text, "cosim info examples/custom_structure/scene.toml", value,
+                      abs=tol)
+        assert_printed(claim)
+        assert_reproduced(claim, measured)
