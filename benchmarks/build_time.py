@@ -8,7 +8,7 @@ them (Cython, then one C compiler per core), in a fresh process whose CPU
 (user + sys, the compilers included: ``os.wait4``) and wall time it prints
 with the number of extensions built.  With ``--out DIR`` it writes
 ``DIR/build.json`` through cosim's checked writer; the published run is in
-``benchmarks/results/build``.  The checkout's own built files are not touched.
+``benchmarks/results/compile``.  The checkout's own built files are not touched.
 """
 import argparse
 import datetime
