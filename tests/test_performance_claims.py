@@ -323,7 +323,7 @@ def test_the_full_beam_at_1024_elements_keeps_2048_modes(size_scaling):
     seconds)."""
     system, _ = _size_scene(size_scaling, "beam_full", 1024).build()
     beam = system.subsystems[system.names.index("beam")]
-    text = "every mode kept: 2048 modes at 1024 elements, ω_max = 7.9·10⁸ rad/s"
+    text = "(`beam_full`: 2048 modes at 1024 elements, ω_max = 7.9·10⁸ rad/s)"
     for claim, value in ((Claim(PAGE, text, "python benchmarks/size_scaling.py", 2048),
                           beam.n_modes),
                          (Claim(PAGE, text, "python benchmarks/size_scaling.py", 7.9e8,
