@@ -203,3 +203,29 @@ def test_the_targets_not_met_are_those_the_page_names():
                                "loaded", "", 0))
     assert _startup("ours_ms") > 30 and _startup("scene_ms") < 20
     assert_printed(Claim(PAGE, "are above the 30 ms line: **this target is not met.**", "", 0))
+
+
+@pytest.mark.parametrize("printed, folder, name, key, value", [
+    ("the machine above (load average 5.8: heavily loaded)", "scenes", "scenes.json",
+     "load_average", 5.8),
+    ("`cpu_time_s`), best of 3; the file is `benchmarks/results/scenes/scenes.json`", "scenes",
+     "scenes.json", "repeat", 3),
+    ("machine above (load average 2.3, other jobs running); the file is", "startup",
+     "startup.json", "load_average", 2.3),
+    ("each the best of 8 processes", "startup", "startup.json", "repeat", 8),
+])
+def test_the_runs_conditions_the_page_names(printed, folder, name, key, value):
+    """The load and the repeats each run was measured with, as its file has them."""
+    claim = Claim(PAGE, printed, f"benchmarks/results/{folder}/{name}", value, abs=0.05)
+    assert_printed(claim)
+    assert_reproduced(claim, _json(folder, name)[key])
+
+
+def test_the_peers_runs_conditions_the_page_names():
+    data = _json("peers", "peers.json")
+    claim = Claim(PAGE, "2026-12-02, the machine above (load average 2.3, other jobs running), "
+                        "best of 3; the files are", "python benchmarks/peers/run.py", 2.3,
+                  abs=0.05)
+    assert_printed(claim)
+    assert_reproduced(claim, data["machine"]["load_average_1min"])
+    assert {r["repeat"] for r in data["rows"]} == {3}
