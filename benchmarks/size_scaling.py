@@ -35,6 +35,9 @@ Run from the project root::
     python benchmarks/size_scaling.py [--quick] [--out DIR] [--png FILE]
 
 (the picture needs the `plot` extra).  It prints the machine it ran on.
+``python benchmarks/size_scaling.py --table CSV`` prints the Markdown table of
+a run's CSV as docs/performance.md shows it; the published run is in
+``benchmarks/results/size_scaling``.
 """
 from __future__ import annotations
 
