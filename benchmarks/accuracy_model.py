@@ -19,7 +19,7 @@ Run from the project root::
     python benchmarks/accuracy_model.py --check       # predicted against measured
 
 It writes ``DIR/points.json`` (every run) and ``DIR/model.json`` (the fit),
-through cosim's checked writer, and prints the tables of docs/performance.md
+through cosim's checked writer, and prints the tables of docs/accuracy.md
 ("Accuracy on request") and the constants of :mod:`cosim.studies.choose`.
 The published run is in ``benchmarks/results/accuracy_model``.
 """
@@ -212,7 +212,7 @@ def _g(x: float) -> str:
 
 
 def table(fitted: dict) -> str:
-    """The Markdown tables of docs/performance.md ("Accuracy on request")."""
+    """The Markdown tables of docs/accuracy.md ("Accuracy on request")."""
     lines = ["| regime | scheme | quantity | a | p | floor | scatter | points | scenes |",
              "|---|---|---|---|---|---|---|---|---|"]
     for key, entry in fitted["model"].items():

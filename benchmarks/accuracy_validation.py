@@ -32,7 +32,7 @@ Run from the project root::
     python benchmarks/accuracy_validation.py --table DIR    # the table of a finished run
 
 It writes ``DIR/validation.json`` through cosim's checked writer and prints
-the Markdown table and totals of docs/performance.md ("Accuracy on request:
+the Markdown table and totals of docs/accuracy.md ("Accuracy on request:
 validation").  The published run is in
 ``benchmarks/results/accuracy_validation``.
 """
@@ -324,7 +324,7 @@ def case_label(c: dict) -> str:
 
 
 def table(data: dict) -> str:
-    """The Markdown tables of docs/performance.md."""
+    """The Markdown tables of docs/accuracy.md."""
     lines = ["| scene | default: peak est / actual | default: exit est / actual | "
              "1 %: choice | 1 %: peak est / actual | 1 %: exit est / actual | 1 % met | "
              "CPU [s]: 1 % / cheapest row | ratio |",

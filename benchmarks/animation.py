@@ -19,8 +19,17 @@ and the best of each is printed:
 
 Both write a GIF (Pillow) so that the encoders compare too; ``--video mp4``
 times cosim's MP4 instead, where ffmpeg is installed.
+
+Beside them it reads the CPU (user + sys, ``os.wait4``) of two whole
+commands in fresh processes, matplotlib's import included: ``cosim plot`` of
+a spring_drop run and ``cosim plot --animate`` of the three_mass f100 run.
+``--out DIR`` writes all of it as ``DIR/animation.json`` through cosim's
+checked writer (the published run is in ``benchmarks/results/animation``).
 """
 import argparse
+import datetime
+import json
+import os
 import platform
 import subprocess
 import sys
@@ -51,6 +60,15 @@ def _stock(run, path, frames, fps):
                 writer.grab_frame()
 
 
+def _command_cpu(argv) -> float:
+    """CPU [s] (user + sys) of ``argv`` run in a fresh process."""
+    proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    _, status, usage = os.wait4(proc.pid, 0)
+    if os.waitstatus_to_exitcode(status) != 0:
+        raise RuntimeError(f"{' '.join(map(str, argv))} failed")
+    return usage.ru_utime + usage.ru_stime
+
+
 def _best(fn, repeat):
     best = [float("inf"), float("inf")]
     for _ in range(repeat):
@@ -66,6 +84,7 @@ def main(argv=None) -> int:
     ap.add_argument("--repeat", type=int, default=3, help="timings of each way (default 3)")
     ap.add_argument("--video", choices=("gif", "mp4"), default="gif",
                     help="cosim's encoder (default gif, as the stock writer)")
+    ap.add_argument("--out", default=None, help="write DIR/animation.json")
     args = ap.parse_args(argv)
 
     from cosim.plot import animate_run, load_run
@@ -81,6 +100,17 @@ def main(argv=None) -> int:
         stock = _best(lambda: _stock(run, Path(tmp) / "stock.gif", args.frames, 20), args.repeat)
         size = {p.name: p.stat().st_size for p in (Path(tmp) / "cosim").glob("animation.*")}
         size["stock.gif"] = (Path(tmp) / "stock.gif").stat().st_size
+        cli = [sys.executable, "-m", "cosim.cli"]
+        drop = Path(tmp) / "spring_drop"
+        subprocess.run(cli + ["run", str(ROOT / "cases" / "spring_drop.toml"), "--out",
+                              str(drop), "--quiet"], check=True, stdout=subprocess.DEVNULL)
+        plot_cpu = min(_command_cpu(cli + ["plot", str(drop), "--out", str(Path(tmp) / f"p{k}")])
+                       for k in range(args.repeat))
+        animate_cpu = min(_command_cpu(cli + ["plot", str(run_dir), "--animate", "--quiet",
+                                              "--out", str(Path(tmp) / f"a{k}")])
+                          for k in range(args.repeat))
+        pngs = {"spring_drop": len(list((Path(tmp) / "p0").glob("*.png"))),
+                "three_mass": len(list((Path(tmp) / "a0").glob("*.png")))}
     print(f"three_mass f100, {args.frames} frames, best of {args.repeat}; "
           f"python {platform.python_version()}, {platform.machine()}")
     print(f"{'':8} {'wall [s]':>9} {'cpu [s]':>9}")
@@ -88,6 +118,22 @@ def main(argv=None) -> int:
     print(f"{'stock':8} {stock[0]:9.2f} {stock[1]:9.2f}")
     print(f"stock / cosim: wall x{stock[0] / ours[0]:.1f}, cpu x{stock[1] / ours[1]:.1f}")
     print("files: " + ", ".join(f"{k} {v / 1024:.0f} KiB" for k, v in sorted(size.items())))
+    print(f"cosim plot of spring_drop: {plot_cpu:.2f} s CPU ({pngs['spring_drop']} PNGs); "
+          f"cosim plot --animate of three_mass f100: {animate_cpu:.2f} s CPU "
+          f"({pngs['three_mass']} PNGs and the animation)")
+    if args.out:
+        from cosim.io.rundir import OutputFolder
+        data = {"machine": f"{platform.machine()}, {os.cpu_count()} cores, Python "
+                           f"{platform.python_version()}",
+                "date": datetime.date.today().isoformat(), "load_average": os.getloadavg()[0],
+                "frames": args.frames, "repeat": args.repeat, "video": args.video,
+                "cosim_s": {"wall": ours[0], "cpu": ours[1]},
+                "stock_s": {"wall": stock[0], "cpu": stock[1]}, "bytes": size,
+                "plot_spring_drop_cpu_s": plot_cpu, "plot_animate_three_mass_cpu_s": animate_cpu,
+                "pngs": pngs}
+        with OutputFolder(args.out) as folder:
+            folder.write("animation.json", lambda fh: json.dump(data, fh, indent=1), "w")
+        print(f"wrote {args.out}/animation.json")
     return 0
 
 

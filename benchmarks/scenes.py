@@ -4,14 +4,21 @@ reference, from one run (the README's scenes table).
 Run from the project root::
 
     python benchmarks/scenes.py [--repeat N] [--kernels compiled,numpy] [--only NAME,...]
+                                [--out DIR]
 
 It prints the machine, then one row per run: the process CPU of the solve
 (the ``cpu_time_s`` of its summary), the best of ``--repeat`` runs, with each
 kernel (``COSIM_KERNEL``, see :mod:`cosim.sides.kernel`), their ratio, and the target
 of the row where there is one.  Both kernels run in the same process, one
-after the other, so the ratio holds whatever the machine's speed.
+after the other, so the ratio holds whatever the machine's speed.  With
+``--out DIR`` it writes the same as ``DIR/scenes.json`` (through cosim's
+checked writer); ``--table DIR`` prints the Markdown table of such a run as
+docs/performance.md shows it (the published run is in
+``benchmarks/results/scenes``).
 """
 import argparse
+import datetime
+import json
 import os
 import platform
 import warnings
@@ -27,8 +34,10 @@ RUNS = [("spring_drop", None, None, (), 0.02),
         ("three_mass", "f100", None, (), None),
         ("three_mass", "f100", "monolithic", (), 1.0),
         ("beam_impact", None, None, (), None),
+        ("beam_impact", None, "monolithic", (), None),
         ("beam_impact", None, None, ("t_end=10",), 2.0),
-        ("brachiation", None, None, (), 0.3)]
+        ("brachiation", None, None, (), 0.3),
+        ("brachiation", None, "monolithic", (), None)]
 
 
 def solve_cpu(name, variant, scheme, overrides, kernel, repeat):
@@ -46,18 +55,48 @@ def solve_cpu(name, variant, scheme, overrides, kernel, repeat):
     return best, summary
 
 
+def _label(r) -> str:
+    text = r["scene"] + (f" {r['variant']}" if r["variant"] else "")
+    text += f", `{r['scheme']}`"
+    if r["overrides"]:
+        text += " " + " ".join(f"`--set {o}`" for o in r["overrides"])
+    return text
+
+
+def table(data: dict) -> str:
+    """The Markdown table of a run's ``scenes.json`` (its first kernel)."""
+    k = data["kernels"][0]
+    lines = [f"| scene, scheme | simulated [s] | {k} CPU [s] | target [s] | met |",
+             "|---|---|---|---|---|"]
+    for r in data["rows"]:
+        cpu = r["cpu_s"][k]
+        target = "-" if r["target_s"] is None else f"{r['target_s']:g}"
+        met = "-" if r["target_s"] is None else ("yes" if cpu <= r["target_s"] else "**no**")
+        lines.append(f"| {_label(r)} | {r['t_end']:g} | {cpu:.3f} | {target} | {met} |")
+    return "\n".join(lines)
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--repeat", type=int, default=1)
     p.add_argument("--kernels", default="compiled,numpy",
                    help="comma-separated: compiled, numpy (default both)")
     p.add_argument("--only", default="", help="comma-separated scene names")
+    p.add_argument("--out", default=None, help="write DIR/scenes.json")
+    p.add_argument("--table", metavar="DIR", help="print the table of a finished run")
     args = p.parse_args()
+    if args.table:
+        with open(os.path.join(args.table, "scenes.json"), encoding="utf-8") as fh:
+            print(table(json.load(fh)))
+        return
     kernels = [k for k in args.kernels.split(",") if k]
     only = {s for s in args.only.split(",") if s}
-    print(f"machine: {platform.machine()}, {os.cpu_count()} cores, Python "
-          f"{platform.python_version()}, {platform.system()} {platform.release()}; "
-          f"load average {os.getloadavg()[0]:.2f}")
+    machine = (f"{platform.machine()}, {os.cpu_count()} cores, Python "
+               f"{platform.python_version()}, {platform.system()} {platform.release()}")
+    data = {"machine": machine, "date": datetime.date.today().isoformat(),
+            "load_average": os.getloadavg()[0], "repeat": args.repeat, "kernels": kernels,
+            "rows": []}
+    print(f"machine: {machine}; load average {data['load_average']:.2f}")
     head = "".join(f"{k + ' CPU [s]':>18}" for k in kernels)
     print(f"{'scene':<22}{'variant':<9}{'scheme':<14}{'simulated [s]':>14}{head}"
           f"{'ratio':>8}{'target [s]':>12}")
@@ -73,6 +112,14 @@ def main():
         tgt = f"{target:>12.2f}" if target is not None else f"{'-':>12}"
         print(f"{name:<22}{variant or '-':<9}{summary['scheme']:<14}"
               f"{summary['t_end']:>14.3g}{cells}{ratio}{tgt}", flush=True)
+        data["rows"].append({"scene": name, "variant": variant, "scheme": summary["scheme"],
+                             "overrides": list(over), "t_end": summary["t_end"],
+                             "cpu_s": dict(zip(kernels, cpus)), "target_s": target})
+    if args.out:
+        from cosim.io.rundir import OutputFolder
+        with OutputFolder(args.out) as folder:
+            folder.write("scenes.json", lambda fh: json.dump(data, fh, indent=1), "w")
+        print(f"wrote {args.out}/scenes.json")
 
 
 if __name__ == "__main__":

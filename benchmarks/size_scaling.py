@@ -35,6 +35,9 @@ Run from the project root::
     python benchmarks/size_scaling.py [--quick] [--out DIR] [--png FILE]
 
 (the picture needs the `plot` extra).  It prints the machine it ran on.
+``python benchmarks/size_scaling.py --table CSV`` prints the Markdown table of
+a run's CSV as docs/performance.md shows it; the published run is in
+``benchmarks/results/size_scaling``.
 """
 from __future__ import annotations
 
@@ -326,6 +329,31 @@ def slopes(points) -> dict:
     return out
 
 
+_UNITS = {"chain": "masses"}
+
+
+def table(points) -> str:
+    """The Markdown table of a run's points as docs/performance.md shows it:
+    per series its sizes and kept modes (first … last), the CPU per simulated
+    second, the slopes of log CPU per step on log size (whole run and the
+    structure's steps; all sizes / larger half) and the build CPU."""
+    fits = slopes(points)
+    lines = ["| series | sizes | kept modes | CPU per simulated second [s] | slope per step, "
+             "whole run | slope per step, structure's steps | build [ms] |",
+             "|---|---|---|---|---|---|---|"]
+    for series, fit in fits.items():
+        pts = [q for q in points if q.series == series and q.status == "finished"]
+        a, b = pts[0], pts[-1]
+        lines.append(
+            f"| `{series}` | {a.size} … {b.size} {_UNITS.get(series, 'elements')} "
+            f"| {a.modes} … {b.modes} | {a.cpu_per_sim_s:.1f} … {b.cpu_per_sim_s:.1f} "
+            f"| {fit['cpu_per_step_s'][0]:.2f} / {fit['cpu_per_step_s'][1]:.2f} "
+            f"| {fit['structure_cpu_per_step_s'][0]:.2f} / "
+            f"{fit['structure_cpu_per_step_s'][1]:.2f} "
+            f"| {1e3 * a.cpu_build_s:.0f} … {1e3 * b.cpu_build_s:.0f} |")
+    return "\n".join(lines)
+
+
 def plot(points, path) -> Path:
     """Log-log picture: CPU per simulated second (solid) and the structure's
     share of it (dashed) against size, one panel for the beam, one for the
@@ -400,7 +428,12 @@ def main(argv=None):
                     help="sizes of one series (repeatable)")
     ap.add_argument("--from-csv", default=None, metavar="CSV",
                     help="no runs: slopes and picture of an earlier CSV")
+    ap.add_argument("--table", default=None, metavar="CSV",
+                    help="no runs: the Markdown table of an earlier CSV")
     args = ap.parse_args(argv)
+    if args.table:
+        print(table(read_csv(args.table)))
+        return 0
     if args.from_csv:
         points = read_csv(args.from_csv)
         _report(points, args.png or Path(args.from_csv).with_suffix(".png"))

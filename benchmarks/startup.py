@@ -1,7 +1,11 @@
 """Start-up of `cosim run`: what importing cosim's own modules and reading and
 building the scene cost, as ratios to numpy's own import in the same process.
 
-Run from the project root: ``python benchmarks/startup.py [--repeat 5]``.  A
+Run from the project root: ``python benchmarks/startup.py [--repeat 5] [--out DIR]``
+(``--out DIR`` writes the figures as ``DIR/startup.json`` through cosim's
+checked writer; ``--table DIR`` prints the Markdown table of such a run as
+docs/performance.md shows it; the published run is in
+``benchmarks/results/startup``).  A
 loaded, shared machine makes absolute times noisy; a ratio to numpy, measured in
 the same process, travels better between machines and loads.  Each figure is
 the best of ``--repeat`` fresh processes, after one that is not counted:
@@ -26,6 +30,7 @@ the environment of the runs, and the first run writes the caches).
   load and build alone.
 """
 import argparse
+import datetime
 import json
 import math
 import os
@@ -165,12 +170,38 @@ def best(runs: list[dict]) -> dict:
     return {k: least([r[k] for r in runs]) for k in runs[0]}
 
 
+def table(data: dict) -> str:
+    """The Markdown table of a run's ``startup.json``."""
+    n, per, cpu = data["modules"], data["self_sum_of_bests_s"], data["cpu_s"]
+    ratio = cpu["ours"] / cpu["numpy"]
+    rows = [(f"our modules imported (`{'`, `'.join(OURS)}`)",
+             f"{n['all']} ({', '.join(str(n[p]) for p in OURS)})"),
+            ("their import, CPU, alone", f"{1e3 * cpu['ours']:.1f} ms"),
+            (f"... as a ratio to numpy's import (CPU, {1e3 * cpu['numpy']:.0f} ms)",
+             f"{ratio:.2f}"),
+            ("`-X importtime` self times, sum of per-module bests: "
+             + " / ".join(f"`{p}`" for p in OURS),
+             " / ".join(f"{1e3 * per[p]:.1f}" for p in OURS) + " ms"),
+            ("... ours together, as a ratio to numpy's self times",
+             f"{per['ours'] / per['numpy']:.2f}"),
+            ("scene read and build alone, CPU (ratio)",
+             f"{1e3 * cpu['scene']:.1f} ms ({cpu['scene'] / cpu['numpy']:.2f})")]
+    lines = [f"| {data['scene']} | measured |", "|---|---|"]
+    return "\n".join(lines + [f"| {a} | {b} |" for a, b in rows])
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--scene", default="cases/three_mass.toml")
     p.add_argument("--variant", default="f100")
     p.add_argument("--repeat", type=int, default=5)
+    p.add_argument("--out", default=None, help="write DIR/startup.json")
+    p.add_argument("--table", metavar="DIR", help="print the table of a finished run")
     args = p.parse_args(argv)
+    if args.table:
+        with open(os.path.join(args.table, "startup.json"), encoding="utf-8") as fh:
+            print(table(json.load(fh)))
+        return
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores, Python "
           f"{platform.python_version()}, {platform.system()} {platform.release()}, load average "
           f"{os.getloadavg()[0]:.1f}")
@@ -216,6 +247,23 @@ def main(argv=None):
     for label, (wall, cpu) in rows:
         print(f"{label:<34}{1e3 * wall:>10.1f}{wall / cold['numpy'][0]:>9.2f}"
               f"{1e3 * cpu:>10.1f}{cpu / cold['numpy'][1]:>9.2f}")
+    if args.out:
+        from cosim.io.rundir import OutputFolder
+        data = {"machine": f"{platform.machine()}, {os.cpu_count()} cores, Python "
+                           f"{platform.python_version()}, {platform.system()} {platform.release()}",
+                "date": datetime.date.today().isoformat(), "load_average": os.getloadavg()[0],
+                "repeat": args.repeat,
+                "scene": args.scene.rsplit("/", 1)[-1].removesuffix(".toml")
+                + (f" {args.variant}" if args.variant else ""),
+                "modules": {"all": len(loaded),
+                            **{p: sum(group(m) == p for m in loaded) for p in OURS}},
+                "self_best_sum_s": imp, "self_sum_of_bests_s": per_module,
+                "cpu_s": {"numpy": cold["numpy"][1], "ours": alone["ours"][1],
+                          "scene": alone["load"][1] + alone["build"][1]},
+                "in_process": {label: v for label, v in rows}}
+        with OutputFolder(args.out) as folder:
+            folder.write("startup.json", lambda fh: json.dump(data, fh, indent=1), "w")
+        print(f"wrote {args.out}/startup.json")
 
 
 if __name__ == "__main__":

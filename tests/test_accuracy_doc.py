@@ -1,4 +1,4 @@
-"""The numbers of docs/performance.md, "Accuracy on request", held to the
+"""The numbers of docs/accuracy.md, "Accuracy on request", held to the
 published run of benchmarks/accuracy_model.py (its points, refitted here)
 and to what cosim.studies.choose gives now."""
 import json
@@ -35,7 +35,7 @@ def points():
 
 @pytest.fixture(scope="module")
 def section():
-    return page_section("docs/performance.md", "Accuracy on request")
+    return page_section("docs/accuracy.md", "Accuracy on request")
 
 
 def _load(name, variant=None, overrides=()):

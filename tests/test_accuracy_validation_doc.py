@@ -1,4 +1,4 @@
-"""The numbers of docs/performance.md, "Accuracy on request: validation",
+"""The numbers of docs/accuracy.md, "Accuracy on request: validation",
 held to the published run of benchmarks/accuracy_validation.py, and one
 cheap case of it run again here."""
 import json
@@ -25,7 +25,7 @@ def data():
 
 @pytest.fixture(scope="module")
 def section():
-    return page_section("docs/performance.md", "Accuracy on request: validation")
+    return page_section("docs/accuracy.md", "Accuracy on request: validation")
 
 
 def test_the_run_covers_every_case_and_its_totals_are_its_own(av, data):

@@ -123,7 +123,7 @@ def test_on_f1000_the_choice_costs_1_8x_the_cheapest_bench_row(tmp_path):
     """The model's worst case over the scenes is f100's; three_mass f1000
     still meets 1 % at 30 us (omega h = 1.03), where the model, fitted up
     to omega h = 0.8, chooses 17 us: 1.8 times the counted work
-    (docs/performance.md says so)."""
+    (docs/accuracy.md says so)."""
     ratio, choice = _bench_ratio("f1000", (3e-5, 2.4e-5, 1.6e-5, 8e-6), tmp_path)
     assert ratio == pytest.approx(1.76, abs=0.05), (ratio, choice.why)
 

@@ -17,7 +17,7 @@ test file already holds (a convergence rate, a test's bound) is in ``HELD``,
 checked to stand in that test's source as the page prints it.
 
 Cost in the default run: about 65 s of CPU (measured on a shared 2-core AMD
-EPYC).  The full beam_impact against its 35 s monolithic reference is
+EPYC).  The full beam_impact against its monolithic reference is
 ``slow``; the default run holds the same claims on the scene stopped after
 C's last release with 12 modes.
 """
@@ -261,7 +261,7 @@ def test_contact_counts_hold_under_round_off(key):
 # structures.md: beam_impact against its monolithic reference
 # ======================================================================
 #: the scene stopped just past C's last release (0.1217 s), 12 modes: the
-#: reference takes 7 s of CPU rather than 35 s, and the errors round to the
+#: reference is a fraction of the full scene's, and the errors round to the
 #: same printed digits as the full scene's (measured: peak -0.0012 % and exit
 #: -0.013 % here, -0.0012 % and -0.014 % on the full scene)
 SHORT = ("t_end=0.125", "subsystems.beam.modes={count=12}")
@@ -558,7 +558,7 @@ def _brach_measured(res) -> dict:
 
 @pytest.fixture(scope="module")
 def brachiation():
-    """The default run, its monolithic reference (14 s of CPU) and
+    """The default run, its monolithic reference (16 s of solve CPU) and
     ``rigid_cable`` (about 18 s of CPU in all)."""
     return {"default": _brach_measured(_simulate(_load(BRACH))),
             "monolithic": _brach_measured(_simulate(_load(BRACH, scheme="monolithic"))),
@@ -843,7 +843,7 @@ def test_fmu_page_numbers(fmu_runs):
 def test_plot_of_spring_drop_draws_four_pngs(tmp_path):
     """``cosim plot`` of spring_drop (about 2 s of CPU with matplotlib)."""
     pytest.importorskip("matplotlib")
-    claim = Claim(G, "`cosim plot` of spring_drop takes 1.5 s of CPU for its four PNGs",
+    claim = Claim(G, "`cosim plot` of spring_drop takes 1.78 s of CPU for its four PNGs",
                   "cosim plot runs/spring_drop", 4)
     assert_printed(claim)
     out = tmp_path / "run"

@@ -511,7 +511,7 @@ TWO_MASS_CLAIMS = [(c, case) for prefix, cells, cases in TWO_MASS
 
 @pytest.fixture(scope="module")
 def two_mass_orders(tmp_path_factory):
-    """The observed order of the global error over the four halvings of H,
+    """The observed order of the global error over the four steps H (three halvings),
     as tests/test_two_mass.py measures it (the same scene and error norm)."""
     import test_two_mass as tm
     path = tmp_path_factory.mktemp("two_mass") / "two_mass.toml"
@@ -538,6 +538,20 @@ def two_mass_orders(tmp_path_factory):
                 errs.append(np.linalg.norm(np.concatenate([q - q_ex, (dq - dq_ex) / tm.W])) / amp)
             out[scheme, order] = float(np.polyfit(np.log(tm.HS), np.log(errs), 1)[0])
     return out
+
+
+def test_the_two_mass_steps_the_page_names():
+    """"four macro steps H from 5 ms to 0.625 ms (three halvings)": the steps
+    tests/test_two_mass.py fits the orders over."""
+    import test_two_mass as tm
+    text = "fitted over four macro steps H from 5 ms to 0.625 ms (three halvings;"
+    hs = np.asarray(tm.HS)
+    for value, measured in ((4, len(hs)), (5e-3, hs[0]), (0.625e-3, hs[-1]),
+                            (3, int(np.sum(np.isclose(hs[:-1] / hs[1:], 2.0, rtol=0,
+                                                      atol=1e-12))))):
+        claim = Claim(V, text, "pytest tests/test_two_mass.py", value, rel=1e-12)
+        assert_printed(claim)
+        assert_reproduced(claim, measured)
 
 
 @pytest.mark.parametrize("claim,case", TWO_MASS_CLAIMS, ids=[c.id for c, _ in TWO_MASS_CLAIMS])
