@@ -178,30 +178,27 @@ def test_the_sweep_costs_are_the_published_runs(key, value):
     assert_printed(Claim(_SW, "each imports cosim once (0.26 s of CPU in the run quoted", "", 0))
 
 
-def test_what_the_estimate_costs_is_said_as_the_published_validation_measured(capsys):
-    """`cosim run --help` on `--no-estimate`: the companion's factor and its
-    share of the run's CPU, as the published validation run of docs/accuracy.md
-    measured them on the shipped scenes (its last column)."""
-    import importlib.util
-    spec = importlib.util.spec_from_file_location(
-        "accuracy_validation_agree", ROOT / "benchmarks" / "accuracy_validation.py")
-    av = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(av)
-    data = json.loads((ROOT / "benchmarks" / "results" / "accuracy_validation" /
-                       "validation.json").read_text())
-    shares = sorted(av.estimate_share(c["default"]) for c in data["cases"])
-    factors = {c["default"]["factor"] for c in data["cases"]
-               if c["default"].get("companion") != "not run"}
+def test_what_the_estimate_costs_is_said_as_a_run_counts_it(capsys):
+    """`cosim run --help` on `--no-estimate` and docs/commands.md give the two
+    companions' factors and their share of the run's macro steps; spring_drop,
+    whose free flight and contact are both stepped at the scheme's steps,
+    counts it (``work_share.macro_steps``: sqrt(2) + 1/sqrt(2) = 2.12 where
+    every step scales)."""
+    from cosim import load_scene, simulate
+    from cosim.studies.estimate import estimate_errors
+    scene = load_scene(ROOT / "cases" / "spring_drop.toml")
+    acc = estimate_errors(scene, simulate(scene))
+    share = acc["work_share"]["macro_steps"]
+    assert f"{share:.1f}" == "2.1", share
     with pytest.raises(SystemExit):
         main(["run", "--help"])
     text = flat(capsys.readouterr().out)
-    assert ("skip the error estimate (a companion run at 2 to 4 times the step, 0.05 to 1.2 "
-            "times the run's CPU on the shipped scenes, median 0.31, none where nothing could "
-            "be read; summary key `accuracy`)") in text, text
-    assert factors == {2.0, 4.0}
-    assert round(shares[0], 2) == 0.05 and round(shares[-1], 1) == 1.2
-    assert round(data["totals"]["estimate_share_median"], 2) == 0.31
-    assert any(c["default"].get("companion") == "not run" for c in data["cases"])
+    assert ("skip the error estimate (two companion runs, at 0.71 and 1.41 times the step, "
+            "together about 2.1 times the run's macro steps; none where nothing could be "
+            "read; summary key `accuracy`)") in text, text
+    page = flat((ROOT / "docs" / "commands.md").read_text())
+    assert "two cost about 2.1 times the run's steps (`work_share`)" in page
+    assert [f"{f:.2f}" for f in (acc["factor"] ** -1, acc["factor"])] == ["0.71", "1.41"]
 
 
 def _published(folder: str, name: str) -> dict:

@@ -88,9 +88,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="replace a run that the output directory already holds (without "
                         "--out: the default folder itself, not a new one)")
     r.add_argument("--no-estimate", action="store_true",
-                   help="skip the error estimate (a companion run at 2 to 4 times the step, "
-                        "0.05 to 1.2 times the run's CPU on the shipped scenes, median 0.31, "
-                        "none where nothing could be read; summary key `accuracy`)")
+                   help="skip the error estimate (two companion runs, at 0.71 and 1.41 times the "
+                        "step, together about 2.1 times the run's macro steps; none where "
+                        "nothing could be read; summary key `accuracy`)")
     r.add_argument("--accuracy", type=_accuracy, metavar="X",
                    help="choose the scheme and steps expected to meet a relative accuracy X "
                         "(1%%, 0.5 %%, 0.01) of the strike's peak and exit velocity at the "

@@ -164,7 +164,8 @@ _OUTPUT = (
       "structures whose fields are written as `NAME.xdmf` (needs meshio)"),
     K("export_every", "", 1, "an integer >= 1", "export every n-th recorded sample"),
     K("estimate", "", True, "true or false",
-      "`cosim run` estimates the run's error from a companion run at 2 to 4 times the step "
+      "`cosim run` estimates the run's error from two companion runs at 0.71 and 1.41 times "
+      "the step "
       "(summary key `accuracy`)"),
 )
 
