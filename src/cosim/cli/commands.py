@@ -99,16 +99,15 @@ def _estimate(scene, res, out: Path, request=None) -> None:
     summary and rewrite ``summary.json`` through the checked writer; a run
     asked for an accuracy (``request``: :class:`cosim.cli.accuracy.Request`)
     is checked and refined once (:mod:`cosim.studies.accurate`) first."""
-    import json
-
     from cosim.io.rundir import OutputFolder
+    from cosim.io.strict_json import json_writer
     from cosim.studies.estimate import estimate_errors
 
     res.summary["accuracy"] = estimate_errors(scene, res, contact=request and request.contact)
     if request is not None:
         res = request.check(res)
     with OutputFolder(out) as folder:
-        folder.write("summary.json", lambda fh: json.dump(res.summary, fh, indent=2), "w")
+        folder.write("summary.json", json_writer(res.summary, indent=2), "w")
     return res
 
 
