@@ -368,15 +368,18 @@ def _machine() -> str:
 
 def _cmd_bench(args) -> int:
     from cosim.io.rundir import OutputFolder
-    from cosim.scene.shipped import find_scene
+    from cosim.scene.shipped import scene_file
     from cosim.studies.strike import find_strike
 
-    args.scene = find_scene(args.scene)     # a path, or the name of a shipped scene
+    args.scene = scene_file(args.scene)     # a path, or the name of a shipped scene
     # the contact and joint compared, as `cosim sweep` chooses them: checked
     # (and a scene that leaves no single choice refused, naming its contacts)
     # before a folder is made or anything runs
     args.contact, args.joint = find_strike(args.scene, args.contact, args.joint,
                                            variant=args.variant)
+    from cosim.scene.load import load_scene
+    for scheme in args.schemes or [None]:   # --set and each of --schemes, read before any run
+        load_scene(args.scene, args.variant, args.set or (), scheme)
     out = Path(args.out) if args.out else Path("runs") / (
         Path(args.scene).stem + (f"-{args.variant}" if args.variant else "") + "-bench")
     # the folder is opened (a link or a file at its place refused) and locked
@@ -403,7 +406,8 @@ def _bench(args, folder) -> bool:
 
     out = folder.path
     spread = args.spread
-    print(f"bench {args.scene}" + (f" --variant {args.variant}" if args.variant else "")
+    from cosim.errors import shown
+    print(f"bench {shown(str(args.scene), 500)}" + (f" --variant {args.variant}" if args.variant else "")
           + f" on {_machine()}")
     print(f"contact {args.contact}, exit velocity of joint {args.joint}")
     print(f"each row: the scene and {spread - 1} round-off copies; errors median / worst, "
@@ -434,6 +438,11 @@ def _bench(args, folder) -> bool:
     print(f"reference (monolithic DOP853, rtol 1e-11, one run): {ref['count']} contacts of "
           f"{args.contact}, peak {ref['peak']:.6g} m, exit velocity {ref['exit_velocity']:.6g}, "
           f"CPU {ref['cpu_time_s']:.2f} s")
+    zero = [what for key, what in (("peak", "peak"), ("exit_velocity", "exit velocity"))
+            if ref[key] == 0]
+    if zero:            # a rigid contact's peak: no relative error to give
+        print(f"note: the reference's {' and '.join(zero)} is 0: no relative error; a row's "
+              f"error is 0 where its value is 0 too, else `-`")
     best = cheapest_within(rows, 0.01)
     print("cheapest within 1 % (exact count; peak and exit velocity within 1 %"
           + (", every copy" if spread > 1 else "") + "):")

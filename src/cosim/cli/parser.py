@@ -16,7 +16,36 @@ def _floats(text: str) -> list[float]:
     try:
         return [float(x) for x in text.split(",") if x.strip()]
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected numbers separated by commas, got {text!r}")
+        raise argparse.ArgumentTypeError(f"expected numbers separated by commas, got "
+                                         f"{_shown(repr(text))}")
+
+
+def _steps(text: str) -> list[float]:
+    """`--steps`: one or more finite step sizes > 0 [s], checked before any run."""
+    import math
+    steps = _floats(text)
+    if not steps:
+        raise argparse.ArgumentTypeError(f"expected one or more step sizes [s] separated by "
+                                         f"commas, got {_shown(repr(text))}")
+    bad = [x for x in steps if not (math.isfinite(x) and x > 0)]
+    if bad:
+        raise argparse.ArgumentTypeError(f"each step must be a finite number of seconds > 0, "
+                                         f"got {bad[0]!r}")
+    return steps
+
+
+def _schemes(text: str) -> list[str]:
+    """`--schemes`: one or more names (each checked against the scene before any run)."""
+    names = [x.strip() for x in text.split(",") if x.strip()]
+    if not names:
+        raise argparse.ArgumentTypeError(f"expected one or more scheme names separated by "
+                                         f"commas, got {_shown(repr(text))}")
+    return names
+
+
+def _shown(text: str) -> str:
+    from cosim.errors import shown
+    return shown(text)
 
 
 def _accuracy(text: str) -> float:
@@ -125,10 +154,10 @@ def build_parser() -> argparse.ArgumentParser:
     bn.add_argument("scene", help=_SCENE_HELP)
     bn.add_argument("--variant", help="apply the scene's [variants.NAME] table (default: the "
                                       "scene's default_variant)")
-    bn.add_argument("--schemes", type=lambda t: [x for x in t.split(",") if x],
+    bn.add_argument("--schemes", type=_schemes,
                     help="co-simulation schemes, comma separated (default: the scene's "
                          "own, if it is one, and implicit)")
-    bn.add_argument("--steps", type=_floats, help="step sizes [s], comma separated (default "
+    bn.add_argument("--steps", type=_steps, help="step sizes [s], comma separated (default "
                                                   "1e-4,5e-5,2e-5,1e-5)")
     bn.add_argument("--contact", help="contact whose peak penetration and count are compared "
                                       "(default: the scene's only contact, else its only "
