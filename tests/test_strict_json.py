@@ -107,3 +107,21 @@ def test_a_sweep_point_whose_summary_holds_infinity_writes_strict_json(tmp_path)
     files = strict_files(out)
     summaries = [v for p, v in files.items() if p.name == "summary.json"]
     assert summaries and all(v["energy"]["initial"] is None for v in summaries)
+
+
+def test_a_run_whose_energy_overflows_is_stopped_with_the_energy_check_off(tmp_path):
+    """The issue's run: a penalty wall of 1e250 N/m exchanged by the coupler
+    at an unsafe step, no energy bound. It ended `finished` with six
+    `Infinity` values in its summary; the ledger that turned infinite now
+    stops it (the last sample kept is finite), and its summary parses."""
+    out = tmp_path / "run"
+    code = cli.main(["run", str(CASES / "spring_drop.toml"), "--no-estimate",
+                     "--set", 'contacts.wall.placement="coupler"',
+                     "--set", "scheme.accept_unsafe_step=true",
+                     "--set", "guard.energy_check=false",
+                     "--set", "contacts.wall.law.contact_stiffness=1e250", "--out", str(out)])
+    assert code == 1
+    s = strict_files(out)[out / "summary.json"]
+    assert s["status"] == "failed"
+    assert "the energy ledger is not finite (inf J created)" in s["message"]
+    assert math.isfinite(s["energy"]["final"]) and NOTE_KEY not in s

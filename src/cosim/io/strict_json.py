@@ -69,7 +69,7 @@ def json_writer(value, indent: int | None = 2):
     """A ``writer(fh)`` for :meth:`cosim.io.rundir.OutputFolder.write` (mode
     ``"w"``) that writes ``value`` as strict JSON (:func:`dumps`).
 
-    The value is cleaned when the writer is made, so a value that cannot be
-    written (not JSON at all) fails before any file is opened."""
-    text = dumps(value, indent=indent)
-    return lambda fh: fh.write(text)
+    The value is cleaned when the writer is made; the writer dumps it to the
+    open file (``json.dump``, strict)."""
+    clean = _noted(value)
+    return lambda fh: json.dump(clean, fh, indent=indent, allow_nan=False)
