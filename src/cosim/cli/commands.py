@@ -366,20 +366,38 @@ def _machine() -> str:
             f"{platform.system()} {platform.release()}")
 
 
+def _check_scheme(name: str, option: str) -> None:
+    """Refuse, before any work, a scheme name no scheme (shipped or an
+    installed plug-in) has: a ValueError naming ``option``
+    and the schemes known."""
+    from cosim.core.plugins import provide
+    from cosim.core.schemes import COUPLING_SCHEMES
+    from cosim.errors import shown
+    provide(COUPLING_SCHEMES, "cosim.schemes", name)        # an installed plug-in
+    if name not in COUPLING_SCHEMES:
+        raise ValueError(f"{option}: no scheme is named {shown(repr(name))}; the schemes are "
+                         f"{sorted(COUPLING_SCHEMES)}")
+
+
 def _cmd_bench(args) -> int:
     from cosim.io.rundir import OutputFolder
     from cosim.scene.shipped import scene_file
     from cosim.studies.strike import find_strike
 
     args.scene = scene_file(args.scene)     # a path, or the name of a shipped scene
+    try:
+        for scheme in args.schemes or ():
+            _check_scheme(scheme, "--schemes")
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     # the contact and joint compared, as `cosim sweep` chooses them: checked
     # (and a scene that leaves no single choice refused, naming its contacts)
     # before a folder is made or anything runs
     args.contact, args.joint = find_strike(args.scene, args.contact, args.joint,
                                            variant=args.variant)
     from cosim.scene.load import load_scene
-    for scheme in args.schemes or [None]:   # --set and each of --schemes, read before any run
-        load_scene(args.scene, args.variant, args.set or (), scheme)
+    load_scene(args.scene, args.variant, args.set or ())     # --set, read before any run
     out = Path(args.out) if args.out else Path("runs") / (
         Path(args.scene).stem + (f"-{args.variant}" if args.variant else "") + "-bench")
     # the folder is opened (a link or a file at its place refused) and locked

@@ -87,12 +87,8 @@ def _check_names(scene, variants, scheme) -> None:
     its points, which say why."""
     from cosim.errors import shown
     if scheme is not None:
-        from cosim.core.plugins import provide
-        from cosim.core.schemes import COUPLING_SCHEMES
-        provide(COUPLING_SCHEMES, "cosim.schemes", scheme)      # an installed plug-in
-        if scheme not in COUPLING_SCHEMES:
-            raise ValueError(f"--scheme: no scheme is named {shown(repr(scheme))}; the "
-                             f"schemes are {sorted(COUPLING_SCHEMES)}")
+        from cosim.cli.commands import _check_scheme
+        _check_scheme(scheme, "--scheme")
     if variants:
         from cosim.scene.shipped import scene_variants
         known, _ = scene_variants(scene)
