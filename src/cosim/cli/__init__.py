@@ -4,7 +4,8 @@
 is the console script (``cosim = "cosim.cli:console"``) and ``python -m
 cosim.cli``: :func:`main`, then the process ends cheaper.  The parser is in
 :mod:`cosim.cli.parser`, the sub-commands in :mod:`cosim.cli.commands` (``sweep`` in
-:mod:`cosim.cli.sweep_command`), the progress line and the
+:mod:`cosim.cli.sweep_command`, ``bench`` in :mod:`cosim.cli.bench_command`), the
+environment checked before any command, the progress line and the
 escaping of control characters in :mod:`cosim.cli.terminal`, the stop on
 SIGTERM and SIGHUP in :mod:`cosim.cli.signals`.
 """

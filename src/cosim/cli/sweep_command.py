@@ -87,7 +87,7 @@ def _check_names(scene, variants, scheme) -> None:
     its points, which say why."""
     from cosim.errors import shown
     if scheme is not None:
-        from cosim.cli.commands import _check_scheme
+        from cosim.cli.bench_command import _check_scheme
         _check_scheme(scheme, "--scheme")
     if variants:
         from cosim.scene.shipped import scene_variants
