@@ -219,8 +219,7 @@ def _fmt(v):
 
 
 def _cmd_info(args) -> int:
-    import json
-
+    from cosim.io.strict_json import dumps
     from cosim.scene.info import scene_info
     from cosim.scene.load import load_scene
 
@@ -234,7 +233,7 @@ def _cmd_info(args) -> int:
         from cosim.studies.choose import choose
         info["accuracy"] = {"from": source, **choose(scene, accuracy).as_dict()}
     if args.json:
-        print(json.dumps(info, indent=2))
+        print(dumps(info, indent=2))        # strict: a value not finite as null, noted
         return 0
     print(f"scene {info['scene']}" + (f"  variant {info['variant']}" if info["variant"] else "")
           + f"  scheme {info['scheme']}  t_end {info['t_end']:g} s")
@@ -334,8 +333,7 @@ def _print_variants(info: dict) -> None:
 
 def _list_scenes(args) -> int:
     """`cosim info` without a scene, or `--list`: the scenes cosim ships."""
-    import json
-
+    from cosim.io.strict_json import dumps
     from cosim.scene.shipped import shipped_list
 
     if args.variant or args.set or args.run_fmu:
@@ -343,7 +341,7 @@ def _list_scenes(args) -> int:
         return 2
     scenes = shipped_list()
     if args.json:
-        print(json.dumps(scenes, indent=2))
+        print(dumps(scenes, indent=2))
         return 0
     width = max((len(s["name"]) for s in scenes), default=0)
     print(f"{len(scenes)} scenes ship with cosim (`cosim run NAME`, `cosim info NAME` for "
