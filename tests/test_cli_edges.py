@@ -192,3 +192,10 @@ def test_plot_sweep_refuses_a_table_with_no_finished_point(tmp_path):
     with pytest.raises(ValueError, match="no point of the sweep finished"):
         plot_sweep(rows, tmp_path / "sweep.png")
     assert not (tmp_path / "sweep.png").exists()
+
+
+def test_a_folder_named_like_a_shipped_study_does_not_hide_it(tmp_path, monkeypatch):
+    from cosim.scene.shipped import find_study, shipped_folder
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "fig8_stiffness").mkdir()
+    assert find_study("fig8_stiffness") == shipped_folder("studies") / "fig8_stiffness.toml"
