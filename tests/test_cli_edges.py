@@ -199,3 +199,14 @@ def test_a_folder_named_like_a_shipped_study_does_not_hide_it(tmp_path, monkeypa
     monkeypatch.chdir(tmp_path)
     (tmp_path / "fig8_stiffness").mkdir()
     assert find_study("fig8_stiffness") == shipped_folder("studies") / "fig8_stiffness.toml"
+
+
+@pytest.mark.parametrize("variable", ["COSIM_KERNEL", "COSIM_DRIVER"])
+def test_simulate_refuses_a_bad_environment_before_it_writes(variable, tmp_path, monkeypatch):
+    import cosim
+    from conftest import CASES
+    scene = cosim.load_scene(CASES / "spring_drop.toml")
+    monkeypatch.setenv(variable, "bogus")
+    with pytest.raises(ValueError, match=variable):
+        cosim.simulate(scene, out=tmp_path / "run")
+    assert not any(tmp_path.iterdir())
