@@ -101,7 +101,8 @@ def test_a_bad_environment_variable_is_refused_before_any_work(variable, command
     assert not any(tmp_path.iterdir())          # no run folder, nothing written
 
 
-@pytest.mark.parametrize("steps", ["0", "nan", "-1e-4", "inf", "1e-4,0", ","])
+@pytest.mark.parametrize("steps", ["0", "nan", "-1e-4", "inf", "1e-4,0", ",", "1_0e-4",
+                                   "\u0665e-4"])
 def test_bench_refuses_steps_it_cannot_run_before_any_row(steps, tmp_path, monkeypatch,
                                                           capsys):
     monkeypatch.chdir(tmp_path)

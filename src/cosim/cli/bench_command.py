@@ -77,7 +77,8 @@ def _bench(args, folder) -> bool:
     out = folder.path
     spread = args.spread
     from cosim.errors import shown
-    print(f"bench {shown(str(args.scene), 500)}" + (f" --variant {args.variant}" if args.variant else "")
+    print(f"bench {shown(str(args.scene), 500)}"
+          + (f" --variant {args.variant}" if args.variant else "")
           + f" on {_machine()}")
     print(f"contact {args.contact}, exit velocity of joint {args.joint}")
     print(f"each row: the scene and {spread - 1} round-off copies; errors median / worst, "

@@ -4,6 +4,7 @@ sweep, plot and verify, each bound to its ``_cmd_NAME`` in
 from __future__ import annotations
 
 import argparse
+import re
 
 from cosim import __version__
 from cosim.cli.commands import (_cmd_bench, _cmd_info, _cmd_plot, _cmd_run, _cmd_sweep,
@@ -12,9 +13,18 @@ from cosim.cli.commands import (_cmd_bench, _cmd_info, _cmd_plot, _cmd_run, _cmd
 __all__ = ["build_parser"]
 
 
+#: a number as an option takes it: ASCII digits in the usual syntax (float() also
+#: reads `٥` and `1_0`), or inf or nan, which the caller refuses by name
+_NUMBER = re.compile(r"\s*[+-]?(?:(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?"
+                     r"|inf|infinity|nan)\s*", re.ASCII | re.IGNORECASE)
+
+
 def _floats(text: str) -> list[float]:
     try:
-        return [float(x) for x in text.split(",") if x.strip()]
+        parts = [x for x in text.split(",") if x.strip()]
+        if not all(_NUMBER.fullmatch(x) for x in parts):
+            raise ValueError(text)
+        return [float(x) for x in parts]
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected numbers separated by commas, got "
                                          f"{_shown(repr(text))}")
@@ -35,7 +45,8 @@ def _steps(text: str) -> list[float]:
 
 
 def _schemes(text: str) -> list[str]:
-    """`--schemes`: one or more names (each checked against the scene before any run)."""
+    """`--schemes`: one or more names (each checked against the known schemes before any
+    run, :func:`cosim.cli.bench_command._check_scheme`)."""
     names = [x.strip() for x in text.split(",") if x.strip()]
     if not names:
         raise argparse.ArgumentTypeError(f"expected one or more scheme names separated by "

@@ -74,7 +74,8 @@ def _cmd_sweep(args) -> int:
     out = Path(args.out) if args.out else default_out
     where = (f"Dask scheduler {args.scheduler}" if args.scheduler
              else f"{workers} process(es)" if workers > 1 else "this process")
-    print(f"sweep {shown(os.path.normpath(scene), 500)}: {n} point(s) on {where}, into {out}", flush=True)
+    print(f"sweep {shown(os.path.normpath(scene), 500)}: {n} point(s) on {where}, into {out}",
+          flush=True)
     with sw.sweep_folder(out) as folder:        # held from the first point to the figure
         return _sweep_into(folder, args, study, scene, variants, grid, contact, joint,
                            workers, timeout, n)

@@ -21,8 +21,7 @@ import os
 from pathlib import Path
 
 __all__ = ["shipped_folder", "shipped_scenes", "find_scene", "scene_file", "find_study",
-           "describe",
-           "not_found", "scene_variants", "shipped_list"]
+           "describe", "not_found", "scene_variants", "shipped_list"]
 
 #: the folders shipped, as the repository and the package name them
 KINDS = ("cases", "studies")
