@@ -124,14 +124,19 @@ def test_a_variant_named_dot_dot_is_refused(tmp_path):
 
 
 def test_a_sweep_point_never_lands_outside_the_sweep_folder(tmp_path):
-    """`--variants ..` names no variant of the scene: its point is refused,
-    and its folder is a plain name inside the sweep's folder."""
+    """A scene whose variants are named `..` and `.` (names the loader
+    refuses): each point is refused, and its folder is a plain name inside
+    the sweep's folder.  (A name of `--variants` that the scene does not
+    have at all is refused before any point: tests/test_cli_edges.py.)"""
+    table = spring_drop()
+    table["variants"][".."] = table["variants"]["."] = {"t_end": 0.01}
+    path = scene_file(tmp_path, table)
     out = tmp_path / "sweep"
-    proc = cosim("sweep", CASES / "spring_drop.toml", "--variants", "..,.", "--set",
+    proc = cosim("sweep", path, "--variants", "..,.", "--set",
                  "t_end=0.001", "--workers", "1", "--no-plot", "--out", out, cwd=tmp_path)
     assert proc.returncode == 1, proc.stderr
     assert "Traceback" not in proc.stderr
-    assert tree(tmp_path)[0] == "sweep"
+    assert {p.split("/")[0] for p in tree(tmp_path)} == {"scene.toml", "sweep"}
     points = sorted(p.name for p in out.iterdir() if p.is_dir())
     assert len(points) == 2 and all(re.fullmatch(r"_\.?,t_end=0\.001-[0-9a-f]{10}", p)
                                     for p in points), points

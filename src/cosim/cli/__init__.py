@@ -4,7 +4,8 @@
 is the console script (``cosim = "cosim.cli:console"``) and ``python -m
 cosim.cli``: :func:`main`, then the process ends cheaper.  The parser is in
 :mod:`cosim.cli.parser`, the sub-commands in :mod:`cosim.cli.commands` (``sweep`` in
-:mod:`cosim.cli.sweep_command`), the progress line and the
+:mod:`cosim.cli.sweep_command`, ``bench`` in :mod:`cosim.cli.bench_command`), the
+environment checked before any command, the progress line and the
 escaping of control characters in :mod:`cosim.cli.terminal`, the stop on
 SIGTERM and SIGHUP in :mod:`cosim.cli.signals`.
 """
@@ -50,11 +51,22 @@ def console(argv=None) -> int:
 EXIT_BROKEN_PIPE = 141
 
 
+def _check_environment() -> None:
+    """Read each environment variable cosim reads (``COSIM_KERNEL``,
+    ``COSIM_DRIVER``, ``COSIM_FMU_UNPACK_LIMIT``), so that a bad value is
+    refused before any work; a ValueError names the first bad one."""
+    from cosim.core.schemes.driver import driver_choice
+    from cosim.sides.fmu_unpack import unpack_limit
+    from cosim.sides.kernel import kernel_choice
+    kernel_choice()
+    driver_choice()
+    unpack_limit()
+
+
 def _main(argv) -> int:
     args = build_parser().parse_args(argv)
-    from cosim.sides.kernel import kernel_choice
-    try:                                 # a bad COSIM_KERNEL is said before anything runs
-        kernel_choice()
+    try:                                 # a bad COSIM_* variable is said before anything runs
+        _check_environment()
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -2,7 +2,6 @@
 its exit status (the parser in :mod:`cosim.cli.parser` names them)."""
 from __future__ import annotations
 
-import contextlib
 import sys
 from pathlib import Path
 
@@ -99,16 +98,15 @@ def _estimate(scene, res, out: Path, request=None) -> None:
     summary and rewrite ``summary.json`` through the checked writer; a run
     asked for an accuracy (``request``: :class:`cosim.cli.accuracy.Request`)
     is checked and refined once (:mod:`cosim.studies.accurate`) first."""
-    import json
-
     from cosim.io.rundir import OutputFolder
+    from cosim.io.strict_json import json_writer
     from cosim.studies.estimate import estimate_errors
 
     res.summary["accuracy"] = estimate_errors(scene, res, contact=request and request.contact)
     if request is not None:
         res = request.check(res)
     with OutputFolder(out) as folder:
-        folder.write("summary.json", lambda fh: json.dump(res.summary, fh, indent=2), "w")
+        folder.write("summary.json", json_writer(res.summary, indent=2), "w")
     return res
 
 
@@ -221,8 +219,7 @@ def _fmt(v):
 
 
 def _cmd_info(args) -> int:
-    import json
-
+    from cosim.io.strict_json import dumps
     from cosim.scene.info import scene_info
     from cosim.scene.load import load_scene
 
@@ -236,7 +233,7 @@ def _cmd_info(args) -> int:
         from cosim.studies.choose import choose
         info["accuracy"] = {"from": source, **choose(scene, accuracy).as_dict()}
     if args.json:
-        print(json.dumps(info, indent=2))
+        print(dumps(info, indent=2))        # strict: a value not finite as null, noted
         return 0
     print(f"scene {info['scene']}" + (f"  variant {info['variant']}" if info["variant"] else "")
           + f"  scheme {info['scheme']}  t_end {info['t_end']:g} s")
@@ -336,8 +333,7 @@ def _print_variants(info: dict) -> None:
 
 def _list_scenes(args) -> int:
     """`cosim info` without a scene, or `--list`: the scenes cosim ships."""
-    import json
-
+    from cosim.io.strict_json import dumps
     from cosim.scene.shipped import shipped_list
 
     if args.variant or args.set or args.run_fmu:
@@ -345,7 +341,7 @@ def _list_scenes(args) -> int:
         return 2
     scenes = shipped_list()
     if args.json:
-        print(json.dumps(scenes, indent=2))
+        print(dumps(scenes, indent=2))
         return 0
     width = max((len(s["name"]) for s in scenes), default=0)
     print(f"{len(scenes)} scenes ship with cosim (`cosim run NAME`, `cosim info NAME` for "
@@ -359,104 +355,10 @@ def _list_scenes(args) -> int:
     return 0
 
 
-def _machine() -> str:
-    import os
-    import platform
-    return (f"{platform.machine()} {platform.processor() or ''}".strip()
-            + f", {os.cpu_count()} cores, Python {platform.python_version()}, "
-            f"{platform.system()} {platform.release()}")
-
-
 def _cmd_bench(args) -> int:
-    from cosim.io.rundir import OutputFolder
-    from cosim.scene.shipped import find_scene
-    from cosim.studies.strike import find_strike
-
-    args.scene = find_scene(args.scene)     # a path, or the name of a shipped scene
-    # the contact and joint compared, as `cosim sweep` chooses them: checked
-    # (and a scene that leaves no single choice refused, naming its contacts)
-    # before a folder is made or anything runs
-    args.contact, args.joint = find_strike(args.scene, args.contact, args.joint,
-                                           variant=args.variant)
-    out = Path(args.out) if args.out else Path("runs") / (
-        Path(args.scene).stem + (f"-{args.variant}" if args.variant else "") + "-bench")
-    # the folder is opened (a link or a file at its place refused) and locked
-    # before anything runs, and held until the last file is written
-    folder = OutputFolder(out).open()
-    wrote = False
-    try:
-        wrote = _bench(args, folder)
-    finally:
-        folder.close()
-        if folder.created and not wrote:      # made for a bench that wrote nothing
-            with contextlib.suppress(OSError):
-                out.rmdir()
-    return 0
-
-
-def _bench(args, folder) -> bool:
-    """The bench of :func:`_cmd_bench` into the open, locked ``folder``;
-    whether it wrote its files."""
-    import math
-
-    from cosim.studies.bench import cheapest_within, run_bench, write_csv, write_reference
-    from cosim.studies.bench_plot import plot
-
-    out = folder.path
-    spread = args.spread
-    print(f"bench {args.scene}" + (f" --variant {args.variant}" if args.variant else "")
-          + f" on {_machine()}")
-    print(f"contact {args.contact}, exit velocity of joint {args.joint}")
-    print(f"each row: the scene and {spread - 1} round-off copies; errors median / worst, "
-          f"contact counts min-max, CPU median" if spread > 1 else "each row: one run")
-    print(f"{'scheme':<14}{'step [s]':>10}{'rtol':>9}{'CPU [s]':>9}{'peak':>20}{'contacts':>9}"
-          f"{'exit vel.':>20}{'energy':>20}  status")
-
-    def fmt(x, spec):
-        width = int(spec.split(".")[0])
-        return "-".rjust(width) if isinstance(x, float) and math.isnan(x) else format(x, spec)
-
-    def band(med, worst):
-        if math.isnan(med):
-            return "-".rjust(20)
-        return (f"{med:.2e} / {worst:.2e}" if spread > 1 else f"{med:.2e}").rjust(20)
-
-    def show(r):
-        counts = ("-" if math.isnan(r.count_min) else f"{r.count_min:.0f}"
-                  if r.count_min == r.count_max else f"{r.count_min:.0f}-{r.count_max:.0f}")
-        print(f"{r.label:<14}{fmt(r.macro_step, '10.1e')}{fmt(r.tolerance, '9.0e')}"
-              f"{fmt(r.cpu_time_s, '9.2f')}{band(r.err_peak, r.err_peak_worst)}{counts:>9}"
-              f"{band(r.err_exit_velocity, r.err_exit_velocity_worst)}"
-              f"{band(r.err_energy, r.err_energy_worst)}  {r.status}", flush=True)
-
-    ref, rows = run_bench(args.scene, args.variant, args.schemes, args.steps, args.contact,
-                          args.joint, args.set or (), cache_dir=Path("runs") / ".bench-cache",
-                          progress=show, spread=spread)
-    print(f"reference (monolithic DOP853, rtol 1e-11, one run): {ref['count']} contacts of "
-          f"{args.contact}, peak {ref['peak']:.6g} m, exit velocity {ref['exit_velocity']:.6g}, "
-          f"CPU {ref['cpu_time_s']:.2f} s")
-    best = cheapest_within(rows, 0.01)
-    print("cheapest within 1 % (exact count; peak and exit velocity within 1 %"
-          + (", every copy" if spread > 1 else "") + "):")
-    for kind in ("cosim", "monolithic", "paper_rk45"):
-        r = best[kind]
-        print(f"  {kind:<11}" + ("none" if r is None else
-                                 f"{r.label} {fmt(r.macro_step, '1.1e').strip()} "
-                                 f"{fmt(r.tolerance, '1.0e').strip()}: {r.cpu_time_s:.2f} s"))
-    if best["cosim"] is not None:
-        print(f"  co-simulation / monolithic CPU {best['ratio_monolithic']:.2f}, "
-              f"/ paper_rk45 CPU {best['ratio_paper_rk45']:.2f}")
-    write_csv(rows, "bench.csv", folder)
-    write_reference(ref, "reference.json", folder)
-    print(f"wrote {out / 'bench.csv'} and {out / 'reference.json'}")
-    try:
-        plot(rows, "bench.png", title=f"{Path(args.scene).stem} {args.variant or ''}",
-             folder=folder)
-        print(f"wrote {out / 'bench.png'}")
-    except ImportError:
-        print('no plot: matplotlib is not installed (pip install "cosim[plot]")',
-              file=sys.stderr)
-    return True
+    """`cosim bench`, in :mod:`cosim.cli.bench_command` (loaded when run)."""
+    from cosim.cli.bench_command import _cmd_bench as bench
+    return bench(args)
 
 
 def _cmd_plot(args) -> int:

@@ -4,6 +4,7 @@ sweep, plot and verify, each bound to its ``_cmd_NAME`` in
 from __future__ import annotations
 
 import argparse
+import re
 
 from cosim import __version__
 from cosim.cli.commands import (_cmd_bench, _cmd_info, _cmd_plot, _cmd_run, _cmd_sweep,
@@ -12,11 +13,50 @@ from cosim.cli.commands import (_cmd_bench, _cmd_info, _cmd_plot, _cmd_run, _cmd
 __all__ = ["build_parser"]
 
 
+#: a number as an option takes it: ASCII digits in the usual syntax (float() also
+#: reads `٥` and `1_0`), or inf or nan, which the caller refuses by name
+_NUMBER = re.compile(r"\s*[+-]?(?:(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?"
+                     r"|inf|infinity|nan)\s*", re.ASCII | re.IGNORECASE)
+
+
 def _floats(text: str) -> list[float]:
     try:
-        return [float(x) for x in text.split(",") if x.strip()]
+        parts = [x for x in text.split(",") if x.strip()]
+        if not all(_NUMBER.fullmatch(x) for x in parts):
+            raise ValueError(text)
+        return [float(x) for x in parts]
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected numbers separated by commas, got {text!r}")
+        raise argparse.ArgumentTypeError(f"expected numbers separated by commas, got "
+                                         f"{_shown(repr(text))}")
+
+
+def _steps(text: str) -> list[float]:
+    """`--steps`: one or more finite step sizes > 0 [s], checked before any run."""
+    import math
+    steps = _floats(text)
+    if not steps:
+        raise argparse.ArgumentTypeError(f"expected one or more step sizes [s] separated by "
+                                         f"commas, got {_shown(repr(text))}")
+    bad = [x for x in steps if not (math.isfinite(x) and x > 0)]
+    if bad:
+        raise argparse.ArgumentTypeError(f"each step must be a finite number of seconds > 0, "
+                                         f"got {bad[0]!r}")
+    return steps
+
+
+def _schemes(text: str) -> list[str]:
+    """`--schemes`: one or more names (each checked against the known schemes before any
+    run, :func:`cosim.cli.bench_command._check_scheme`)."""
+    names = [x.strip() for x in text.split(",") if x.strip()]
+    if not names:
+        raise argparse.ArgumentTypeError(f"expected one or more scheme names separated by "
+                                         f"commas, got {_shown(repr(text))}")
+    return names
+
+
+def _shown(text: str) -> str:
+    from cosim.errors import shown
+    return shown(text)
 
 
 def _accuracy(text: str) -> float:
@@ -126,10 +166,10 @@ def build_parser() -> argparse.ArgumentParser:
     bn.add_argument("scene", help=_SCENE_HELP)
     bn.add_argument("--variant", help="apply the scene's [variants.NAME] table (default: the "
                                       "scene's default_variant)")
-    bn.add_argument("--schemes", type=lambda t: [x for x in t.split(",") if x],
+    bn.add_argument("--schemes", type=_schemes,
                     help="co-simulation schemes, comma separated (default: the scene's "
                          "own, if it is one, and implicit)")
-    bn.add_argument("--steps", type=_floats, help="step sizes [s], comma separated (default "
+    bn.add_argument("--steps", type=_steps, help="step sizes [s], comma separated (default "
                                                   "1e-4,5e-5,2e-5,1e-5)")
     bn.add_argument("--contact", help="contact whose peak penetration and count are compared "
                                       "(default: the scene's only contact, else its only "

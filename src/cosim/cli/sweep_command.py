@@ -18,13 +18,15 @@ def _cmd_sweep(args) -> int:
     from cosim.studies import sweep as sw
     from cosim.studies.sweep.driver import _check_options
 
-    from cosim.scene.shipped import find_scene, find_study, not_found
+    from cosim.errors import shown
+    from cosim.scene.shipped import find_study, not_found, scene_file
 
-    if args.study:
+    if args.study is not None:
         path = find_study(args.study)
-        if not path.exists():
-            print(f"error: {args.study}: cannot be read: {not_found(args.study, 'studies')}",
-                  file=sys.stderr)
+        if not args.study or not path.exists():
+            why = ("the study is an empty name" if not args.study else
+                   f"{shown(args.study)}: cannot be read: {not_found(args.study, 'studies')}")
+            print(f"error: {why}", file=sys.stderr)
             return 2
         study = sw.load_study(path)
         if args.scene or args.variants or args.set:
@@ -35,9 +37,9 @@ def _cmd_sweep(args) -> int:
         contact, joint = study.contact, study.joint
         timeout = args.timeout if args.timeout is not None else study.timeout
         default_out = Path("runs") / study.name
-    elif args.scene:
+    elif args.scene is not None:
         study = None
-        scene = find_scene(args.scene)        # a path, or the name of a shipped scene
+        scene = scene_file(args.scene)        # a path, or the name of a shipped scene
         variants = [v for v in (args.variants or "").split(",") if v]
         grid = {}
         try:
@@ -56,6 +58,7 @@ def _cmd_sweep(args) -> int:
         print("error: give a SCENE or --study", file=sys.stderr)
         return 2
     try:
+        _check_names(scene, variants if study is None else [], args.scheme)
         n = len(sw.grid_points(variants or None, grid))
         workers = args.workers if args.workers is not None else sw.default_workers()
         _check_options(workers, timeout, ("--workers", "--timeout"))
@@ -71,10 +74,29 @@ def _cmd_sweep(args) -> int:
     out = Path(args.out) if args.out else default_out
     where = (f"Dask scheduler {args.scheduler}" if args.scheduler
              else f"{workers} process(es)" if workers > 1 else "this process")
-    print(f"sweep {os.path.normpath(scene)}: {n} point(s) on {where}, into {out}", flush=True)
+    print(f"sweep {shown(os.path.normpath(scene), 500)}: {n} point(s) on {where}, into {out}",
+          flush=True)
     with sw.sweep_folder(out) as folder:        # held from the first point to the figure
         return _sweep_into(folder, args, study, scene, variants, grid, contact, joint,
                            workers, timeout, n)
+
+
+def _check_names(scene, variants, scheme) -> None:
+    """Refuse, before any point runs, a `--scheme` no scheme has and a name
+    of `--variants` the scene has no variant of (a ValueError naming the
+    option and the known names).  A scene that cannot be read is left to
+    its points, which say why."""
+    from cosim.errors import shown
+    if scheme is not None:
+        from cosim.cli.bench_command import _check_scheme
+        _check_scheme(scheme, "--scheme")
+    if variants:
+        from cosim.scene.shipped import scene_variants
+        known, _ = scene_variants(scene)
+        unknown = [v for v in variants if v not in known]
+        if known and unknown:
+            raise ValueError(f"--variants: {shown(str(scene), 500)} has no variant "
+                             f"{shown(repr(unknown[0]))}; its variants are {list(known)}")
 
 
 def _sweep_into(folder, args, study, scene, variants, grid, contact, joint, workers, timeout,
@@ -125,7 +147,11 @@ def _sweep_into(folder, args, study, scene, variants, grid, contact, joint, work
               + (f" ({never} never started are left out)" if never else "")
               + "; sweep again to run them", file=sys.stderr)
         return 128 + int(getattr(signal, stopped))
-    if not args.no_plot:
+    if not args.no_plot and not any(r["status"] == "finished" for r in rows):
+        # nothing to draw: no empty figure, and none of an earlier sweep left to mislead
+        folder.remove(sw.PLOT)
+        print(f"no plot: no point finished (their messages are in {out / sw.TABLE})")
+    elif not args.no_plot:
         try:
             png = sw.plot_sweep(rows, folder.path_of(sw.PLOT), contact=contact,
                                 x=study.x if study else None,

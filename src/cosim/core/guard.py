@@ -330,7 +330,10 @@ class Guard:
         if self.scale is None:
             self._start(t, d, dd, f)
         s = d.sum() + dd.sum() + f.sum()
-        if s - s != 0 or not created <= self._bound(self.scale, supplied):
+        # created - created is 0 only for a finite ledger: an infinite one is
+        # judged (and stopped) even when the energy bound is off (infinite)
+        if s - s != 0 or created - created != 0 or not created <= self._bound(self.scale,
+                                                                             supplied):
             self._judge(t, d, dd, f, created, supplied, dissipated, work, peak)
 
     def check_block(self, t, d, dd, f, created, supplied, dissipated, work=None,

@@ -66,8 +66,8 @@ def check_block(guard, t, d, dd, f, created, supplied, dissipated, work=None,
         s = d[j].sum() + dd[j].sum() + f[j].sum()
         odd[j] = s - s != 0
     while i < m:
-        if guard.growth == math.inf:
-            bad = odd[i:]
+        if guard.growth == math.inf:    # the energy bound off: a ledger not finite still stops
+            bad = odd[i:] | ~np.isfinite(created[i:])
         else:
             bound = np.maximum(guard.growth * (guard.scale + np.abs(supplied[i:])),
                                guard.options.energy_floor)

@@ -1,7 +1,6 @@
 """The outcome of a run, and writing it to disk atomically."""
 from __future__ import annotations
 
-import json
 import os
 import shutil
 from dataclasses import dataclass
@@ -136,8 +135,11 @@ def check_output_dir(out_dir, overwrite: bool = False, exports=()) -> Path:
 
 
 def write_summary(summary: dict, path) -> None:
-    """Write ``summary.json`` atomically (keys in their order, two-space indent)."""
-    _atomic_write(Path(path), lambda fh: json.dump(summary, fh, indent=2), "w")
+    """Write ``summary.json`` atomically (keys in their order, two-space
+    indent), as strict JSON: a value that is not finite is written as null
+    and noted under ``not_finite`` (:mod:`cosim.io.strict_json`)."""
+    from cosim.io.strict_json import json_writer
+    _atomic_write(Path(path), json_writer(summary, indent=2), "w")
 
 
 def write_scene(scene, out_dir) -> Path:

@@ -32,6 +32,10 @@ _MISSING = object()
 _RECORDERS: list[set] = []
 
 
+#: longest text of a file's name that a scene error shows [characters]
+FILE_SHOWN_LIMIT = 500
+
+
 class SceneError(ValueError):
     """A scene file that cannot be used, with the file and key path.
 
@@ -42,7 +46,10 @@ class SceneError(ValueError):
     def __init__(self, file, key: str, message: str):
         self.file, self.key = str(file), key
         where = f"`{shown(key)}` " if key else ""
-        super().__init__(f"{self.file}: {where}{message}")
+        # the file's name too is shown escaped and capped: a scene named on
+        # the command line may hold a line break, or be 100 000 characters
+        super().__init__((f"{shown(self.file, FILE_SHOWN_LIMIT)}: " if self.file else "")
+                         + f"{where}{message}")
 
 
 def echo(value) -> str:
@@ -330,6 +337,10 @@ def floats(t: Table, k: str) -> tuple:
     return tuple(out)
 
 
+#: a number as --accuracy takes it: ASCII digits, a point, an exponent
+_DECIMAL = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?", re.ASCII)
+
+
 def parse_accuracy(text, name: str = "--accuracy") -> float:
     """A relative accuracy from ``"1%"``, ``"0.5 %"``, ``"0.01"`` or a number.
 
@@ -344,7 +355,9 @@ def parse_accuracy(text, name: str = "--accuracy") -> float:
         s = text.strip()
         if s.endswith("%"):
             s, scale = s[:-1].strip(), 0.01
-        try:
+        try:        # ASCII digits in the usual syntax: no `٥`, no `1_0` (float() takes both)
+            if not _DECIMAL.fullmatch(s):
+                raise ValueError(s)
             value = float(s) * scale
         except ValueError:
             raise ValueError(f"`{name}` must be a relative accuracy such as 1%, 0.5 % or 0.01, "

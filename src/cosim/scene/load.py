@@ -14,14 +14,12 @@ typed specs (:mod:`cosim.scene.specs`).  It never imports the builder.
 """
 from __future__ import annotations
 
-import os
-
 from cosim.core.guard import GuardOptions
 from cosim.scene.checks import (MAX_ELEMENTS, MAX_STEPS, SceneError, Table, check_name,
                                  echo, nearest)
 from cosim.scene.contacts import check_conditions, contact_spec
 from cosim.scene.read import parse_override, read_scene, read_toml_file
-from cosim.scene.shipped import find_scene, not_found
+from cosim.scene.shipped import scene_file
 from cosim.scene.specs import (STRUCTURE_TYPES, SUBSYSTEM_TYPES, Scene, StructureSpec,
                                resolve_scheme)
 from cosim.scene.subsystems import subsystem_spec
@@ -65,9 +63,7 @@ def load_scene(path, variant: str | None = None, overrides=(), scheme: str | Non
     ------
     SceneError
     """
-    file = find_scene(path)
-    if not os.path.lexists(file):       # the shipped names, when it reads as a name
-        raise SceneError(file, "", f"cannot be read: {not_found(path)}")
+    file = scene_file(path)             # an empty name, or none found, refused
     data, chosen = read_scene(file, variant, overrides, scheme)
     return _validate(data, file, chosen, scheme is not None)
 

@@ -67,6 +67,9 @@ def simulate(scene: Scene, *, scheme: str | None = None, progress=None,
 
     Raises
     ------
+    ValueError
+        If ``COSIM_KERNEL`` or ``COSIM_DRIVER`` holds a value they do not
+        take; nothing has run or been written then.
     UnsafeStepError
         If an explicit scheme's macro step is too large for a contact (the
         pre-flight check); nothing has run then.
@@ -113,6 +116,10 @@ def _simulate(scene, scheme, progress, progress_interval, out, overwrite):
     from cosim.scene.plausible import gap_warnings, scene_size, structure_warnings
     from cosim.scene.work import warn_work
 
+    from cosim.core.schemes.driver import driver_choice
+    from cosim.sides.kernel import kernel_choice
+    kernel_choice()                     # a bad COSIM_KERNEL or COSIM_DRIVER: refused
+    driver_choice()                     # here, before anything is written or runs
     if out is not None:
         check_output_dir(out, overwrite, scene.export)
     system, sch = scene.build(scheme)

@@ -11,15 +11,17 @@ A scene is given by a path or by the name of a shipped scene
 (:func:`find_scene`): ``spring_drop`` is ``cases/spring_drop.toml`` from any
 folder.  A file that exists always wins over a name, and a relative path
 ``cases/NAME.toml`` (the form the documentation uses) that does not exist
-where it is given names the shipped scene ``NAME``.
+where it is given names the shipped scene ``NAME``.  A folder is no scene:
+a name that is a folder where it is given (the run folder of ``cosim run
+spring_drop --out spring_drop``) names the shipped scene of that name too.
 """
 from __future__ import annotations
 
 import os
 from pathlib import Path
 
-__all__ = ["shipped_folder", "shipped_scenes", "find_scene", "find_study", "describe",
-           "not_found", "scene_variants", "shipped_list"]
+__all__ = ["shipped_folder", "shipped_scenes", "find_scene", "scene_file", "find_study",
+           "describe", "not_found", "scene_variants", "shipped_list"]
 
 #: the folders shipped, as the repository and the package name them
 KINDS = ("cases", "studies")
@@ -67,18 +69,39 @@ def _as_name(text: str, kind: str) -> str | None:
 
 def _find(text, kind: str) -> Path:
     path = Path(text)
-    if os.path.lexists(path):
+    folder = os.path.isdir(path)            # no scene: a shipped name it also is wins
+    if os.path.lexists(path) and not folder:
         return path
     name = _as_name(str(text), kind)
     found = _named(kind).get(name) if name else None
     return found if found is not None else path
 
 
+def scene_file(text) -> Path:
+    """:func:`find_scene`, refusing a name that names nothing: the file a
+    command reads, checked before any work.
+
+    Raises
+    ------
+    SceneError
+        If ``text`` is empty, or names neither a file nor a shipped scene (the
+        shipped ones listed); ``text`` is shown escaped and capped.
+    """
+    from cosim.scene.checks import SceneError
+    if not str(text):
+        raise SceneError("", "", "the scene is an empty name: give a scene file or the name of "
+                                 "a shipped scene (`cosim info --list` lists them)")
+    file = find_scene(text)
+    if not os.path.lexists(file):       # the shipped names, when it reads as a name
+        raise SceneError(file, "", f"cannot be read: {not_found(text)}")
+    return file
+
+
 def find_scene(text) -> Path:
     """The scene file ``text`` names: the file itself when it exists, else
     the shipped scene of that name (``spring_drop``, ``spring_drop.toml`` or
-    ``cases/spring_drop.toml``), else ``text`` as a path (whose reading
-    then fails, naming it)."""
+    ``cases/spring_drop.toml``; also when ``text`` is a folder), else
+    ``text`` as a path (whose reading then fails, naming it)."""
     return _find(text, "cases")
 
 
@@ -87,7 +110,7 @@ def find_study(text) -> Path:
     ``studies/NAME.toml`` in the present folder, else the shipped study of
     that name, else ``text`` as a path."""
     path = Path(text)
-    if os.path.lexists(path):
+    if os.path.lexists(path) and not os.path.isdir(path):
         return path
     name = _as_name(str(text), "studies")
     if name and os.path.lexists(Path("studies") / f"{name}.toml"):

@@ -208,7 +208,8 @@ def write_reference(ref: dict, path, folder: OutputFolder | None = None) -> Path
     """The reference's metrics (as :func:`reference` returns them) as JSON,
     written whole through the checked writer (see :func:`write_csv` for
     ``path`` and ``folder``)."""
-    return _write(path, folder, lambda fh: json.dump(ref, fh, indent=1), "w")
+    from cosim.io.strict_json import json_writer
+    return _write(path, folder, json_writer(ref, indent=1), "w")
 
 
 def _once(path, variant, overrides, scheme, ref, contact, joint) -> tuple:

@@ -117,8 +117,14 @@ def impact_metrics(result, contact: str, joint: str) -> dict:
 
 def relative_errors(run: dict, reference: dict) -> dict:
     """Errors of :func:`impact_metrics` ``run`` against ``reference``: the
-    absolute difference in count, relative errors in peak and exit velocity."""
+    absolute difference in count, relative errors in peak and exit velocity.
+
+    A quantity whose reference is zero (a rigid contact's peak penetration)
+    has no relative error: its error is 0 where the run's is zero too, else
+    NaN (not a number: no error to compare, never "within" a tolerance)."""
     def rel(k):
+        if reference[k] == 0:
+            return 0.0 if run[k] == 0 else math.nan
         return abs(run[k] - reference[k]) / abs(reference[k])
     return {"count": abs(run["count"] - reference["count"]), "peak": rel("peak"),
             "exit_velocity": rel("exit_velocity")}

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import contextlib
 import itertools
-import json
 import logging
 import math
 import os
@@ -20,6 +19,7 @@ from cosim.core.result import resolved_scene_text
 from cosim.core.series import npz_writer
 from cosim.errors import shown
 from cosim.io.rundir import OutputFolder
+from cosim.io.strict_json import json_writer
 from cosim.scene.load import SceneError, load_scene, read_toml_file
 from cosim.studies.strike import find_strike
 from cosim.studies.sweep.backends import _Runner
@@ -453,8 +453,8 @@ def _finish(point, key, folder, res, scene, status, message, rows, contact, join
                 d.write("scene.toml", lambda fh: fh.write(text), "w")
             if res is not None:
                 d.write("series.npz", npz_writer(series), "wb")
-                d.write("summary.json", lambda fh: json.dump(summary, fh, indent=2), "w")
-            d.write("point.json", lambda fh: json.dump(meta, fh, indent=2), "w")
+                d.write("summary.json", json_writer(summary, indent=2), "w")
+            d.write("point.json", json_writer(meta, indent=2), "w")
     if status not in ("finished",):
         log.info("point %s: %s: %s", point.name, status, message)
     rows[point.index] = _record(point, meta, summary, series, contact, joint)

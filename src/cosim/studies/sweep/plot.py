@@ -72,7 +72,8 @@ def plot_sweep(rows: list[dict], path, *, contact: str | None = None, x: str | N
     Raises
     ------
     ValueError
-        If ``contact`` is given and the table holds other contacts only.
+        If ``contact`` is given and the table holds other contacts only, or
+        if no point finished (nothing to draw: no empty figure is written).
     """
     named = list(dict.fromkeys(k.split(".")[1] for r in rows for k in r
                                if k.startswith("contacts.") and k.endswith(".count")))
@@ -81,6 +82,9 @@ def plot_sweep(rows: list[dict], path, *, contact: str | None = None, x: str | N
     elif named and contact not in named:
         raise ValueError(f"`contact` must be one of the table's contacts "
                          f"({', '.join(named)}), got {contact!r}")
+    if not any(r.get(f"contacts.{contact}.count") is not None for r in rows):
+        raise ValueError(f"no point of the sweep finished ({len(rows)} in the table): "
+                         f"nothing to draw")
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
