@@ -283,8 +283,12 @@ def _cmd_info(args) -> int:
                 print(f"    at the initial pose: reduced mass {p0['reduced_mass']:.4g} kg, "
                       f"frequency {p0['frequency_hz']:.4g} Hz, contact time "
                       f"{p0['contact_time_s']:.4g} s (the stable steps below are judged there)")
+            kinds = c.get("max_macro_step_kind", {})
             print("    largest stable macro step [s]: " + ", ".join(
-                f"{k} {_fmt(v)}" for k, v in c["max_macro_step_s"].items()))
+                f"{k} {_fmt(v)}" + (f" ({kinds[k]})" if kinds.get(k) else "")
+                for k, v in c["max_macro_step_s"].items()))
+            for k, why in c.get("max_macro_step_why", {}).items():
+                print(f"    {k}: necessary bound only, not a step known to run: {why}")
             if "max_integrator_step_s" in c:
                 print("    largest stable integrator step [s]: " + ", ".join(
                     f"{k} {_fmt(v)}" for k, v in c["max_integrator_step_s"].items()))

@@ -27,6 +27,7 @@ from cosim.core import preflight
 from cosim.core.preflight import contact_time, stiffest_normal
 from cosim.core.schemes import COUPLING_SCHEMES
 from cosim.errors import shown
+from cosim.scene.stable_step import CONFIRM_BUDGET_S, NECESSARY, RUNS, confirm, model_bound
 
 __all__ = ["scene_info", "fmu_info", "first_touch", "contact_time", "FIRST_TOUCH_BUDGET_S"]
 
@@ -214,18 +215,21 @@ def _contact_info(system, c, scene, touch=None, why_not=None) -> dict:
                                "frequency_hz": math.sqrt(k / m0) / (2 * math.pi),
                                "contact_time_s": contact_time(m0, k, cd)}
     out.update(_sampling(system, c, scene, t_c, ln.contact.name))
-    m, omega = m0, math.sqrt(k / m0)  # the stable steps: as the checks judge them
+    m, omega = m0, math.sqrt(k / m0)  # the stable steps: at the initial pose
     opts = scene.scheme_options
     order, gain = opts.get("extrapolation_order", 0), opts.get("max_energy_gain", 0.01)
-    steps = {}
+    steps, checks = {}, {}
     for name, cls in COUPLING_SCHEMES.items():
-        if ln.placement == "embedded" or not cls.explicit:
-            steps[name] = None       # not limited by this contact
-        else:
-            steps[name] = preflight.largest_safe_step(
-                m, k, cd, 10 * math.pi / omega, order, gain,
-                preflight.partner_first(system, c, name, order))
+        first = preflight.partner_first(system, c, name, order)
+        steps[name] = model_bound(system, c, cls, order, gain, scene.t_end, first,
+                                  opts.get("sequence"))
+        if ln.placement == "coupler" and cls.explicit:   # what the pre-flight check refuses
+            checks[name] = preflight.largest_safe_step(m, k, cd, 10 * math.pi / omega, order,
+                                                       gain, first)
     out["max_macro_step_s"] = steps
+    out["max_macro_step_kind"] = {n: None for n in steps}    # scene_info confirms them
+    if checks:
+        out["preflight_step_s"] = checks
     if ln.placement == "embedded":
         host = system.embedded[c][0]
         if c in system.hosted:   # the host's spring runs against a prescribed point
@@ -280,7 +284,8 @@ def fmu_info(sub) -> dict:
                           for v in sub.variables.values()]}
 
 
-def scene_info(scene, *, budget_s: float = FIRST_TOUCH_BUDGET_S, run_fmu: bool = False) -> dict:
+def scene_info(scene, *, budget_s: float = FIRST_TOUCH_BUDGET_S, run_fmu: bool = False,
+               confirm_budget_s: float = CONFIRM_BUDGET_S) -> dict:
     """DOFs and natural frequencies of each subsystem, and each contact's
     frequency, contact time, largest stable macro step per scheme, and how
     often the series will sample it (``sampling_interval_s``,
@@ -335,6 +340,9 @@ def scene_info(scene, *, budget_s: float = FIRST_TOUCH_BUDGET_S, run_fmu: bool =
     from cosim.scene.shipped import scene_variants
 
     variants, default = scene_variants(scene.path)
+    contacts = {name: _contact_info(system, c, scene, touches.get(c), why_not)
+                for c, name in enumerate(system.contact_names)}
+    _confirm_steps(scene, contacts, confirm_budget_s if not has_fmu or run_fmu else 0.0)
     return {
         "scene": scene.name, "variant": scene.variant, "default_variant": default,
         "variants": variants, "scheme": scene.scheme,
@@ -342,6 +350,33 @@ def scene_info(scene, *, budget_s: float = FIRST_TOUCH_BUDGET_S, run_fmu: bool =
         "fmu_code_run": bool(has_fmu and run_fmu),
         "subsystems": subs,
         "work": scene.work(system=system).as_dict(),
-        "contacts": {name: _contact_info(system, c, scene, touches.get(c), why_not)
-                     for c, name in enumerate(system.contact_names)},
+        "contacts": contacts,
     }
+
+
+def _confirm_steps(scene, contacts: dict, budget_s: float) -> None:
+    """Turn each explicit scheme's model bounds into a step that runs
+    (:func:`cosim.scene.stable_step.confirm`): the scene at the smallest
+    bound of its contacts, halved while a run is stopped.  A contact with a
+    bound then gets the confirmed step, kind ``runs``; without one, its
+    model bound stays, kind ``necessary bound only``, with ``why``."""
+    for name, cls in COUPLING_SCHEMES.items():
+        bounds = {n: c["max_macro_step_s"][name] for n, c in contacts.items()
+                  if c.get("max_macro_step_s", {}).get(name) is not None}
+        if not bounds or not cls.explicit:
+            continue
+        least = min(bounds.values())
+        if budget_s <= 0:
+            step, why = None, "no run was made to confirm it"
+        elif least <= 0:
+            step, why = None, "no step is safe on the contact's coupled model"
+        else:
+            step, why = confirm(scene, name, least, budget_s)
+        for n in bounds:
+            c = contacts[n]
+            if step is not None:
+                c["max_macro_step_s"][name] = step
+                c["max_macro_step_kind"][name] = RUNS
+            else:
+                c["max_macro_step_kind"][name] = NECESSARY
+                c.setdefault("max_macro_step_why", {})[name] = why
