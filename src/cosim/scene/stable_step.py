@@ -38,7 +38,7 @@ from cosim.core.preflight import stiffest_normal
 __all__ = ["model_bound", "second_side", "confirm", "CONFIRM_BUDGET_S", "HALVINGS", "RUNS", "NECESSARY"]
 
 #: [s] CPU time the runs that confirm one scheme's step may take together
-CONFIRM_BUDGET_S = 5.0
+CONFIRM_BUDGET_S = 3.0
 
 #: most times a step the run refuses is halved
 HALVINGS = 8
