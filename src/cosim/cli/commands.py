@@ -202,14 +202,35 @@ def _run(args) -> int:
 def _cmd_verify(args) -> int:
     from cosim.studies.verify import run_checks
 
+    if args.scene is not None:
+        if args.cases is not None:
+            return _usage("give a SCENE or --cases DIR, not both")
+        from cosim.scene.load import load_scene
+        from cosim.studies.verify_scene import scene_checks
+        scene = load_scene(args.scene, args.variant, args.set or (), args.scheme)
+        return _report(scene_checks(scene))
+    if args.variant or args.set or args.scheme:
+        return _usage("--variant, --set and --scheme apply to a SCENE: give one")
     cases = args.cases
     if cases is None:                   # the scenes cosim ships, from any folder
         from cosim.scene.shipped import shipped_folder
         cases = shipped_folder("cases") or "cases"
+        return _report(run_checks(cases, hard=args.hard))
+    from cosim.studies.verify import folder_checks
+    return _report(folder_checks(cases, hard=args.hard))
+
+
+def _usage(message: str) -> int:
+    print(f"error: cosim verify: {message}", file=sys.stderr)
+    return 2
+
+
+def _report(checks) -> int:
     failed = 0
-    for check in run_checks(cases, hard=args.hard):
+    for check in checks:
         failed += not check.passed
-        print(f"{'PASS' if check.passed else 'FAIL'}  {check.name}: {check.detail}", flush=True)
+        word = "SKIP" if check.skipped else "PASS" if check.passed else "FAIL"
+        print(f"{word}  {check.name}: {check.detail}", flush=True)
     print(f"{'all checks passed' if not failed else f'{failed} check(s) failed'}")
     return 1 if failed else 0
 
