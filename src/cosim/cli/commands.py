@@ -226,12 +226,16 @@ def _usage(message: str) -> int:
 
 
 def _report(checks) -> int:
-    failed = 0
+    """Print one line per check (PASS, FAIL or SKIP) and the tally; exit 1
+    if any failed."""
+    failed = skipped = 0
     for check in checks:
         failed += not check.passed
+        skipped += check.skipped
         word = "SKIP" if check.skipped else "PASS" if check.passed else "FAIL"
         print(f"{word}  {check.name}: {check.detail}", flush=True)
-    print(f"{'all checks passed' if not failed else f'{failed} check(s) failed'}")
+    tail = f" ({skipped} skipped)" if skipped else ""
+    print(f"{'all checks passed' if not failed else f'{failed} check(s) failed'}{tail}")
     return 1 if failed else 0
 
 
