@@ -177,3 +177,31 @@ def test_the_coupled_map_of_one_free_mode_is_the_preflight_model():
         gain = preflight.contact_energy_gain(m, k, 0.0, H, 0)
         created = stability.energy_created(np.zeros(1), np.zeros(1), p, k, 0.0, H, 0)
         assert created == pytest.approx(gain - 1.0, rel=1e-9, abs=1e-12)
+
+
+# ------------------------------------------------ the numbers the pages print
+from documented import Claim, assert_printed, assert_reproduced  # noqa: E402
+
+SC, CM = "docs/schemes.md", "docs/commands.md"
+
+
+def test_the_pages_numbers_of_the_stable_step(tmp_path):
+    from cosim.scene import stable_step
+    halvings = Claim(SC, "halved while the guard stops it (at most 8 times)",
+                     "cosim.scene.stable_step.HALVINGS", 8.0)
+    budget = Claim(CM, "`cosim.scene.stable_step.CONFIRM_BUDGET_S`, 3 s, of CPU time per scheme",
+                   "cosim.scene.stable_step.CONFIRM_BUDGET_S", 3.0)
+    zeta = Claim(SC, "damping ratio 0.5 against the cable's local mass",
+                 "cosim info (the pendulum-on-cable scene of tests/stable_scenes.py)", 0.5,
+                 abs=0.05)
+    factor = Claim(SC, "Gauss-Seidel at 0.9 times the one-mass model's step",
+                   "tests/test_stable_step.py", 0.9)
+    for c in (halvings, budget, zeta, factor):
+        assert_printed(c)
+    assert_reproduced(halvings, stable_step.HALVINGS)
+    assert_reproduced(budget, stable_step.CONFIRM_BUDGET_S)
+    path = stable_scenes.write(tmp_path, "pendulum", "cable", "kelvin_voigt", "coupler", 1e6,
+                               221.0, t_end=0.02)
+    c = scene_info(load_scene(path), budget_s=0, confirm_budget_s=0)["contacts"]["hit"]
+    assert_reproduced(zeta, c["damping"] / (2 * math.sqrt(c["stiffness"] * c["reduced_mass"])))
+    assert_reproduced(factor, 0.9)       # the factor test_the_reduced_mass_step... runs at

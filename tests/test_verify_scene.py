@@ -177,3 +177,66 @@ def test_scene_checks_name_the_four_checks():
         warnings.simplefilter("ignore")
         checks = list(scene_checks(load_scene(CASES / "spring_drop.toml")))
     assert [c.name.split(": ")[-1] for c in checks] == list(NAMES)
+
+
+# ------------------------------------------------ the numbers the pages print
+from documented import Claim, assert_printed, assert_reproduced  # noqa: E402
+
+V, CM = "docs/verification.md", "docs/commands.md"
+PAGE = {
+    "copies": Claim(V, "two copies whose initial state is moved by +2 and −2 ulps",
+                    "cosim.studies.verify_scene.ROUNDOFF_COPIES", 2.0),
+    "copies_cm": Claim(CM, "the contact counts under ±2 ulps",
+                       "cosim.studies.verify_scene.ROUNDOFF_COPIES", 2.0),
+    "margin": Claim(V, "never below 10 times its spread over the moved copies",
+                    "cosim.studies.verify_scene.ROUNDOFF_MARGIN", 10.0),
+    "safety": Claim(V, "by at most 4 times the run's estimate of its error",
+                    "cosim.studies.verify_scene.SAFETY", 4.0),
+}
+THREE_MASS = (Claim(V, "differs from the reference by 4.19e-05", "cosim verify three_mass",
+                    4.19e-05, abs=5e-08),
+              Claim(V, "where four times its estimate allows 4.7e-06", "cosim verify three_mass",
+                    4.7e-06, abs=5e-08),
+              Claim(V, "the energy ledger's 0.000383 J", "cosim verify three_mass",
+                    0.000383, abs=5e-07),
+              Claim(V, "above the 0.000106 J its estimate accounts for",
+                    "cosim verify three_mass", 0.000106, abs=5e-07))
+
+
+def test_the_pages_numbers_of_verify_scene():
+    from cosim.studies import verify_scene as vs
+    for c in PAGE.values():
+        assert_printed(c)
+    assert sorted(vs.ROUNDOFF_COPIES) == [-2, 2]
+    assert_reproduced(PAGE["copies"], max(vs.ROUNDOFF_COPIES))
+    assert_reproduced(PAGE["copies_cm"], max(vs.ROUNDOFF_COPIES))
+    assert_reproduced(PAGE["margin"], vs.ROUNDOFF_MARGIN)
+    assert_reproduced(PAGE["safety"], vs.SAFETY)
+    from cosim.studies.estimate import DEFAULT_FACTOR
+    assert vs.SAFETY == DEFAULT_FACTOR      # "the estimate's factor r"
+
+
+def test_three_mass_fails_two_checks_as_the_page_says(capsys):
+    """The page's three_mass finding: the ledger and the agreement fail, with
+    the figures it quotes (the scene and two copies moved by round-off give
+    the same verdicts)."""
+    for c in THREE_MASS:
+        assert_printed(c)
+    for moved in cli_copies(load_scene("three_mass"), 3):
+        assert cli.main(["verify", "three_mass", *moved]) == 1
+        lines = _lines(capsys)
+        assert _verdicts(lines) == {"energy ledger": "FAIL", "schemes agree": "FAIL",
+                                    "counts robust to round-off": "PASS",
+                                    "estimate order": "SKIP"}
+        if not moved:
+            agree = next(ln for ln in lines if ": schemes agree: " in ln)
+            assert "worst exit rate of robot/y" in agree
+            actual, allowed = (float(x) for x in re.search(
+                r": (\S+) from the monolithic reference, allowed (\S+) ", agree).groups())
+            assert_reproduced(THREE_MASS[0], actual)
+            assert_reproduced(THREE_MASS[1], allowed)
+            ledger = next(ln for ln in lines if ": energy ledger: " in ln)
+            imb, tol = (float(x) for x in re.search(r"= (\S+) J, tolerance (\S+) J",
+                                                    ledger).groups())
+            assert_reproduced(THREE_MASS[2], imb)
+            assert_reproduced(THREE_MASS[3], tol)

@@ -35,7 +35,8 @@ import numpy as np
 from cosim.core import preflight, stability
 from cosim.core.preflight import stiffest_normal
 
-__all__ = ["model_bound", "second_side", "confirm", "CONFIRM_BUDGET_S", "HALVINGS", "RUNS", "NECESSARY"]
+__all__ = ["model_bound", "second_side", "confirm", "CONFIRM_BUDGET_S", "HALVINGS", "RUNS",
+           "NECESSARY"]
 
 #: [s] CPU time the runs that confirm one scheme's step may take together
 CONFIRM_BUDGET_S = 3.0
