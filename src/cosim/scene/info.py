@@ -7,8 +7,10 @@ by running the scene, with its own scheme, until every contact has closed
 once, and evaluates them there; the run stops at the end time or after
 :data:`FIRST_TOUCH_BUDGET_S` of CPU time, whichever comes first, and a
 contact it did not see close is evaluated at the initial pose.  Each contact
-says which pose it used.  The largest stable steps are those the pre-flight
-and build checks judge, at the initial pose.
+says which pose it used.  The largest stable steps are judged at the initial
+pose: an integrator's as the build's check does; an explicit scheme's macro
+step on the coupled system and confirmed by a run of the scene
+(:mod:`cosim.scene.stable_step`), or marked a necessary bound only.
 
 An FMU's code runs only when asked (``run_fmu``, ``cosim info --run-fmu``):
 by default an FMU side is read from its model description alone
@@ -300,8 +302,16 @@ def scene_info(scene, *, budget_s: float = FIRST_TOUCH_BUDGET_S, run_fmu: bool =
     ``why`` the initial pose was used), and ``initial_pose`` holds the
     values at the start when they differ.  The contact time is that of the
     linearised spring and dashpot (:func:`contact_time`).  The largest
-    stable steps are judged at the initial pose, as the pre-flight check
-    and the build do.  ``work`` is the count of the run's integrator steps
+    stable steps are judged at the initial pose.  ``max_macro_step_s`` of
+    an explicit scheme is the largest step safe on the contact's coupled
+    system (:func:`cosim.scene.stable_step.model_bound`), confirmed by a run
+    of the scene at the smallest of its contacts' steps, halved while the
+    run is stopped, within ``confirm_budget_s`` of CPU time per scheme (0:
+    no run): ``max_macro_step_kind`` is ``"runs"`` (the step a run
+    confirmed) or ``"necessary bound only"`` (the model's, with
+    ``max_macro_step_why``); None where the scheme does not limit the
+    contact.  ``preflight_step_s`` of an exchanged contact is the step the
+    pre-flight check refuses above (its one-mass model).  ``work`` is the count of the run's integrator steps
     made before it starts (:func:`cosim.scene.work.estimate_work`:
     ``steps``, ``bound``, ``how`` and the ``key`` that makes most of it).
 
