@@ -9,9 +9,12 @@ normalised) moves the port by ``r_i q_i``, and a force held or extrapolated
 over a macro step lags each mode by a phase ``omega_i H / 2``.  The dashpot
 then feeds a mode whose ``omega_i H`` is large with the wrong sign and pumps
 energy into it although the reduced-mass model, whose one frequency is low,
-is strongly damped (a 1 kg pendulum on a tensioned cable: the model problem
-allowed 1.4e-4 s; the run at 1.25e-4 s was stopped by the guard within its
-first contact).
+is strongly damped.  Under Gauss-Seidel between two moving sides, the side
+that steps second gets the force the law gives with its partner's new state,
+not the force its partner got: the two impulses differ.  (A 1 kg pendulum on
+a tensioned cable, ``tests/test_stable_step.py``: Gauss-Seidel at 0.9 times
+the one-mass model's step is stopped by the guard within the first
+contact.)
 
 Here both sides are their port's modes, along the contact's normal: a
 structure's kept modes (``r_i`` its mode shapes' rows at the port), a

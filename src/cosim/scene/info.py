@@ -311,7 +311,8 @@ def scene_info(scene, *, budget_s: float = FIRST_TOUCH_BUDGET_S, run_fmu: bool =
     confirmed) or ``"necessary bound only"`` (the model's, with
     ``max_macro_step_why``); None where the scheme does not limit the
     contact.  ``preflight_step_s`` of an exchanged contact is the step the
-    pre-flight check refuses above (its one-mass model).  ``work`` is the count of the run's integrator steps
+    pre-flight check refuses above (its one-mass model).  ``work`` is the
+    count of the run's integrator steps
     made before it starts (:func:`cosim.scene.work.estimate_work`:
     ``steps``, ``bound``, ``how`` and the ``key`` that makes most of it).
 

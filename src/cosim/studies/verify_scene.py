@@ -124,7 +124,8 @@ def _ledger(label, res, acc, copies) -> Check:
     else:
         why = "; ".join(acc.get("why", [])[:1]) or "no estimated quantity"
         tol, source = floor, (f"round-off only ({ROUNDOFF_MARGIN:g} x the moved copies' spread "
-                              f"{spread:.3g} J, or an ulp of {scale:.6g} J per step): the estimate gives no error ({why})")
+                              f"{spread:.3g} J, or an ulp of {scale:.6g} J per step): the "
+                              f"estimate gives no error ({why})")
     ok = abs(imb) <= tol
     return Check(f"{label}: energy ledger", ok,
                  f"initial + supplied - final - dissipated = {imb:.3g} J, tolerance {tol:.3g} J "
@@ -215,7 +216,8 @@ def _order(label, acc) -> Check:
                      "not available: the estimate's entries carry no measured order", True)
     bad = [o for o in orders if not (isinstance(o, (int, float)) and math.isfinite(o) and o > 0)]
     kinds = sorted({str(e["kind"]) for e in entries if "kind" in e})
+    shown = ", ".join(f"{o:.3g}" if isinstance(o, float) else str(o) for o in orders)
     return Check(f"{label}: estimate order", not bad,
-                 f"orders {', '.join(f'{o:.3g}' if isinstance(o, float) else str(o) for o in orders)}"
+                 f"orders {shown}"
                  + (f" ({', '.join(kinds)})" if kinds else "")
                  + (f"; not finite and positive: {bad}" if bad else ""))
