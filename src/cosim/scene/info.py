@@ -29,7 +29,7 @@ from cosim.core import preflight
 from cosim.core.preflight import contact_time, stiffest_normal
 from cosim.core.schemes import COUPLING_SCHEMES
 from cosim.errors import shown
-from cosim.scene.stable_step import CONFIRM_BUDGET_S, NECESSARY, RUNS, confirm, model_bound
+from cosim.scene.stable_step import CONFIRM_STEPS, NECESSARY, RUNS, confirm, model_bound
 
 __all__ = ["scene_info", "fmu_info", "first_touch", "contact_time", "FIRST_TOUCH_BUDGET_S"]
 
@@ -287,7 +287,7 @@ def fmu_info(sub) -> dict:
 
 
 def scene_info(scene, *, budget_s: float = FIRST_TOUCH_BUDGET_S, run_fmu: bool = False,
-               confirm_budget_s: float = CONFIRM_BUDGET_S) -> dict:
+               confirm_steps: float = CONFIRM_STEPS) -> dict:
     """DOFs and natural frequencies of each subsystem, and each contact's
     frequency, contact time, largest stable macro step per scheme, and how
     often the series will sample it (``sampling_interval_s``,
@@ -306,8 +306,8 @@ def scene_info(scene, *, budget_s: float = FIRST_TOUCH_BUDGET_S, run_fmu: bool =
     an explicit scheme is the largest step safe on the contact's coupled
     system (:func:`cosim.scene.stable_step.model_bound`), confirmed by a run
     of the scene at the smallest of its contacts' steps, halved while the
-    run is stopped, within ``confirm_budget_s`` of CPU time per scheme (0:
-    no run): ``max_macro_step_kind`` is ``"runs"`` (the step a run
+    run is stopped, its runs making at most ``confirm_steps`` integrator
+    steps per scheme, as counted before they start (0: no run): ``max_macro_step_kind`` is ``"runs"`` (the step a run
     confirmed) or ``"necessary bound only"`` (the model's, with
     ``max_macro_step_why``); None where the scheme does not limit the
     contact.  ``preflight_step_s`` of an exchanged contact is the step the
@@ -353,7 +353,7 @@ def scene_info(scene, *, budget_s: float = FIRST_TOUCH_BUDGET_S, run_fmu: bool =
     variants, default = scene_variants(scene.path)
     contacts = {name: _contact_info(system, c, scene, touches.get(c), why_not)
                 for c, name in enumerate(system.contact_names)}
-    _confirm_steps(scene, contacts, confirm_budget_s if not has_fmu or run_fmu else 0.0)
+    _confirm_steps(scene, contacts, confirm_steps if not has_fmu or run_fmu else 0.0)
     return {
         "scene": scene.name, "variant": scene.variant, "default_variant": default,
         "variants": variants, "scheme": scene.scheme,
@@ -365,7 +365,7 @@ def scene_info(scene, *, budget_s: float = FIRST_TOUCH_BUDGET_S, run_fmu: bool =
     }
 
 
-def _confirm_steps(scene, contacts: dict, budget_s: float) -> None:
+def _confirm_steps(scene, contacts: dict, budget: float) -> None:
     """Turn each explicit scheme's model bounds into a step that runs
     (:func:`cosim.scene.stable_step.confirm`): the scene at the smallest
     bound of its contacts, halved while a run is stopped.  A contact with a
@@ -377,12 +377,12 @@ def _confirm_steps(scene, contacts: dict, budget_s: float) -> None:
         if not bounds or not cls.explicit:
             continue
         least = min(bounds.values())
-        if budget_s <= 0:
+        if budget <= 0:
             step, why = None, "no run was made to confirm it"
         elif least <= 0:
             step, why = None, "no step is safe on the contact's coupled model"
         else:
-            step, why = confirm(scene, name, least, budget_s)
+            step, why = confirm(scene, name, least, budget)
         for n in bounds:
             c = contacts[n]
             if step is not None:
