@@ -162,7 +162,8 @@ def test_verify_cases_with_spring_drop_runs_its_checks(tmp_path, capsys):
 
 @pytest.mark.parametrize("args, text", [
     (["verify", "no_such_scene"], "no shipped scene has that name"),
-    (["verify", "spring_drop", "--cases", "cases"], "give a SCENE or --cases DIR"),
+    (["verify", "spring_drop", "--cases", "cases"], "give them without a SCENE"),
+    (["verify", "spring_drop", "--hard"], "give them without a SCENE"),
     (["verify", "--set", "t_end=1"], "apply to a SCENE"),
     (["verify", "spring_drop", "--set", "t_end=-1"], "t_end"),
 ])

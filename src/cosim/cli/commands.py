@@ -203,8 +203,9 @@ def _cmd_verify(args) -> int:
     from cosim.studies.verify import run_checks
 
     if args.scene is not None:
-        if args.cases is not None:
-            return _usage("give a SCENE or --cases DIR, not both")
+        if args.cases is not None or args.hard:
+            return _usage("--cases and --hard run the verification cases: give them "
+                          "without a SCENE")
         from cosim.scene.load import load_scene
         from cosim.studies.verify_scene import scene_checks
         scene = load_scene(args.scene, args.variant, args.set or (), args.scheme)
