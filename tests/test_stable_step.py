@@ -207,3 +207,16 @@ def test_the_pages_numbers_of_the_stable_step(tmp_path):
     c = scene_info(load_scene(path), budget_s=0, confirm_steps=0)["contacts"]["hit"]
     assert_reproduced(zeta, c["damping"] / (2 * math.sqrt(c["stiffness"] * c["reduced_mass"])))
     assert_reproduced(factor, 0.9)       # the factor test_the_reduced_mass_step... runs at
+
+
+@pytest.mark.parametrize("scheme", EXPLICIT)
+def test_not_limited_means_the_macro_step_does_not_limit_it(scheme):
+    """spring_drop's wall is resolved inside the body's integrator: info says
+    "not limited", and runs at 10 and 100 times the scene's macro step (the
+    longest: half the run) finish with the one contact."""
+    c = scene_info(load_scene(CASES / "spring_drop.toml"), budget_s=0)["contacts"]["wall"]
+    assert c["max_macro_step_s"][scheme] is None
+    for step in (1e-3, 1e-2):
+        assert_robust(_at(CASES / "spring_drop.toml", None, (), scheme, step),
+                      lambda r: (r.status, r.summary["contacts"]["wall"]["count"]),
+                      ("finished", 1), copies=COPIES)
