@@ -200,15 +200,41 @@ def _run(args) -> int:
 def _cmd_verify(args) -> int:
     from cosim.studies.verify import run_checks
 
+    if args.scene is not None:
+        if args.cases is not None or args.hard:
+            return _usage("--cases and --hard run the verification cases: give them "
+                          "without a SCENE")
+        from cosim.scene.load import load_scene
+        from cosim.studies.verify_scene import scene_checks
+        scene = load_scene(args.scene, args.variant, args.set or (), args.scheme)
+        return _report(scene_checks(scene))
+    if args.variant or args.set or args.scheme:
+        return _usage("--variant, --set and --scheme apply to a SCENE: give one")
     cases = args.cases
     if cases is None:                   # the scenes cosim ships, from any folder
         from cosim.scene.shipped import shipped_folder
         cases = shipped_folder("cases") or "cases"
-    failed = 0
-    for check in run_checks(cases, hard=args.hard):
+        return _report(run_checks(cases, hard=args.hard))
+    from cosim.studies.verify import folder_checks
+    return _report(folder_checks(cases, hard=args.hard))
+
+
+def _usage(message: str) -> int:
+    print(f"error: cosim verify: {message}", file=sys.stderr)
+    return 2
+
+
+def _report(checks) -> int:
+    """Print one line per check (PASS, FAIL or SKIP) and the tally; exit 1
+    if any failed."""
+    failed = skipped = 0
+    for check in checks:
         failed += not check.passed
-        print(f"{'PASS' if check.passed else 'FAIL'}  {check.name}: {check.detail}", flush=True)
-    print(f"{'all checks passed' if not failed else f'{failed} check(s) failed'}")
+        skipped += check.skipped
+        word = "SKIP" if check.skipped else "PASS" if check.passed else "FAIL"
+        print(f"{word}  {check.name}: {check.detail}", flush=True)
+    tail = f" ({skipped} skipped)" if skipped else ""
+    print(f"{'all checks passed' if not failed else f'{failed} check(s) failed'}{tail}")
     return 1 if failed else 0
 
 
@@ -280,8 +306,12 @@ def _cmd_info(args) -> int:
                 print(f"    at the initial pose: reduced mass {p0['reduced_mass']:.4g} kg, "
                       f"frequency {p0['frequency_hz']:.4g} Hz, contact time "
                       f"{p0['contact_time_s']:.4g} s (the stable steps below are judged there)")
+            kinds = c.get("max_macro_step_kind", {})
             print("    largest stable macro step [s]: " + ", ".join(
-                f"{k} {_fmt(v)}" for k, v in c["max_macro_step_s"].items()))
+                f"{k} {_fmt(v)}" + (f" ({kinds[k]})" if kinds.get(k) else "")
+                for k, v in c["max_macro_step_s"].items()))
+            for k, why in c.get("max_macro_step_why", {}).items():
+                print(f"    {k}: necessary bound only, not a step known to run: {why}")
             if "max_integrator_step_s" in c:
                 print("    largest stable integrator step [s]: " + ", ".join(
                     f"{k} {_fmt(v)}" for k, v in c["max_integrator_step_s"].items()))

@@ -240,9 +240,21 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--quiet", action="store_true",
                     help="no progress bar for the animation (it shows only on a terminal)")
     pl.set_defaults(func=_cmd_plot)
-    v = sub.add_parser("verify", help="run the verification cases; exit 1 if any fails")
+    v = sub.add_parser("verify", help="run the verification cases, or check what holds on "
+                                      "any scene (SCENE); exit 1 if any check fails")
+    v.add_argument("scene", nargs="?",
+                   help=_SCENE_HELP + "; checks its energy ledger, its scheme against the "
+                        "monolithic reference within the run's estimate, its contact counts "
+                        "under round-off and the estimate's order (without it: the "
+                        "verification cases)")
+    v.add_argument("--variant", help="apply the scene's [variants.NAME] table")
+    v.add_argument("--scheme", help="coupling scheme of the run checked")
+    v.add_argument("--set", action="append", metavar="KEY=VALUE",
+                   help="override a scene value (after the variant); repeatable")
     v.add_argument("--cases", help="folder of the scene files (default: the cases cosim "
-                                   "ships, from any folder)")
+                                   "ships, from any folder): spring_drop.toml's analytic "
+                                   "checks if it is there, the checks of SCENE on every "
+                                   "other scene file there")
     v.add_argument("--hard", action="store_true",
                    help="also run the hard-case matrix (three_mass f1000 and ms0.01, every "
                         "scheme and placement of C, steps up to ten times the stability limit)")

@@ -7,8 +7,10 @@ by running the scene, with its own scheme, until every contact has closed
 once, and evaluates them there; the run stops at the end time or after
 :data:`FIRST_TOUCH_BUDGET_S` of CPU time, whichever comes first, and a
 contact it did not see close is evaluated at the initial pose.  Each contact
-says which pose it used.  The largest stable steps are those the pre-flight
-and build checks judge, at the initial pose.
+says which pose it used.  The largest stable steps are judged at the initial
+pose: an integrator's as the build's check does; an explicit scheme's macro
+step on the coupled system and confirmed by a run of the scene
+(:mod:`cosim.scene.stable_step`), or marked a necessary bound only.
 
 An FMU's code runs only when asked (``run_fmu``, ``cosim info --run-fmu``):
 by default an FMU side is read from its model description alone
@@ -27,6 +29,7 @@ from cosim.core import preflight
 from cosim.core.preflight import contact_time, stiffest_normal
 from cosim.core.schemes import COUPLING_SCHEMES
 from cosim.errors import shown
+from cosim.scene.stable_step import CONFIRM_STEPS, NECESSARY, RUNS, confirm, model_bound
 
 __all__ = ["scene_info", "fmu_info", "first_touch", "contact_time", "FIRST_TOUCH_BUDGET_S"]
 
@@ -214,18 +217,21 @@ def _contact_info(system, c, scene, touch=None, why_not=None) -> dict:
                                "frequency_hz": math.sqrt(k / m0) / (2 * math.pi),
                                "contact_time_s": contact_time(m0, k, cd)}
     out.update(_sampling(system, c, scene, t_c, ln.contact.name))
-    m, omega = m0, math.sqrt(k / m0)  # the stable steps: as the checks judge them
+    m, omega = m0, math.sqrt(k / m0)  # the stable steps: at the initial pose
     opts = scene.scheme_options
     order, gain = opts.get("extrapolation_order", 0), opts.get("max_energy_gain", 0.01)
-    steps = {}
+    steps, checks = {}, {}
     for name, cls in COUPLING_SCHEMES.items():
-        if ln.placement == "embedded" or not cls.explicit:
-            steps[name] = None       # not limited by this contact
-        else:
-            steps[name] = preflight.largest_safe_step(
-                m, k, cd, 10 * math.pi / omega, order, gain,
-                preflight.partner_first(system, c, name, order))
+        first = preflight.partner_first(system, c, name, order)
+        steps[name] = model_bound(system, c, cls, order, gain, scene.t_end, first,
+                                  opts.get("sequence"))
+        if ln.placement == "coupler" and cls.explicit:   # what the pre-flight check refuses
+            checks[name] = preflight.largest_safe_step(m, k, cd, 10 * math.pi / omega, order,
+                                                       gain, first)
     out["max_macro_step_s"] = steps
+    out["max_macro_step_kind"] = {n: None for n in steps}    # scene_info confirms them
+    if checks:
+        out["preflight_step_s"] = checks
     if ln.placement == "embedded":
         host = system.embedded[c][0]
         if c in system.hosted:   # the host's spring runs against a prescribed point
@@ -280,7 +286,8 @@ def fmu_info(sub) -> dict:
                           for v in sub.variables.values()]}
 
 
-def scene_info(scene, *, budget_s: float = FIRST_TOUCH_BUDGET_S, run_fmu: bool = False) -> dict:
+def scene_info(scene, *, budget_s: float = FIRST_TOUCH_BUDGET_S, run_fmu: bool = False,
+               confirm_steps: float = CONFIRM_STEPS) -> dict:
     """DOFs and natural frequencies of each subsystem, and each contact's
     frequency, contact time, largest stable macro step per scheme, and how
     often the series will sample it (``sampling_interval_s``,
@@ -295,8 +302,17 @@ def scene_info(scene, *, budget_s: float = FIRST_TOUCH_BUDGET_S, run_fmu: bool =
     ``why`` the initial pose was used), and ``initial_pose`` holds the
     values at the start when they differ.  The contact time is that of the
     linearised spring and dashpot (:func:`contact_time`).  The largest
-    stable steps are judged at the initial pose, as the pre-flight check
-    and the build do.  ``work`` is the count of the run's integrator steps
+    stable steps are judged at the initial pose.  ``max_macro_step_s`` of
+    an explicit scheme is the largest step safe on the contact's coupled
+    system (:func:`cosim.scene.stable_step.model_bound`), confirmed by a run
+    of the scene at the smallest of its contacts' steps, halved while the
+    run is stopped, its runs making at most ``confirm_steps`` integrator
+    steps per scheme, as counted before they start (0: no run): ``max_macro_step_kind`` is ``"runs"`` (the step a run
+    confirmed) or ``"necessary bound only"`` (the model's, with
+    ``max_macro_step_why``); None where the scheme does not limit the
+    contact.  ``preflight_step_s`` of an exchanged contact is the step the
+    pre-flight check refuses above (its one-mass model).  ``work`` is the
+    count of the run's integrator steps
     made before it starts (:func:`cosim.scene.work.estimate_work`:
     ``steps``, ``bound``, ``how`` and the ``key`` that makes most of it).
 
@@ -335,6 +351,9 @@ def scene_info(scene, *, budget_s: float = FIRST_TOUCH_BUDGET_S, run_fmu: bool =
     from cosim.scene.shipped import scene_variants
 
     variants, default = scene_variants(scene.path)
+    contacts = {name: _contact_info(system, c, scene, touches.get(c), why_not)
+                for c, name in enumerate(system.contact_names)}
+    _confirm_steps(scene, contacts, confirm_steps if not has_fmu or run_fmu else 0.0)
     return {
         "scene": scene.name, "variant": scene.variant, "default_variant": default,
         "variants": variants, "scheme": scene.scheme,
@@ -342,6 +361,33 @@ def scene_info(scene, *, budget_s: float = FIRST_TOUCH_BUDGET_S, run_fmu: bool =
         "fmu_code_run": bool(has_fmu and run_fmu),
         "subsystems": subs,
         "work": scene.work(system=system).as_dict(),
-        "contacts": {name: _contact_info(system, c, scene, touches.get(c), why_not)
-                     for c, name in enumerate(system.contact_names)},
+        "contacts": contacts,
     }
+
+
+def _confirm_steps(scene, contacts: dict, budget: float) -> None:
+    """Turn each explicit scheme's model bounds into a step that runs
+    (:func:`cosim.scene.stable_step.confirm`): the scene at the smallest
+    bound of its contacts, halved while a run is stopped.  A contact with a
+    bound then gets the confirmed step, kind ``runs``; without one, its
+    model bound stays, kind ``necessary bound only``, with ``why``."""
+    for name, cls in COUPLING_SCHEMES.items():
+        bounds = {n: c["max_macro_step_s"][name] for n, c in contacts.items()
+                  if c.get("max_macro_step_s", {}).get(name) is not None}
+        if not bounds or not cls.explicit:
+            continue
+        least = min(bounds.values())
+        if budget <= 0:
+            step, why = None, "no run was made to confirm it"
+        elif least <= 0:
+            step, why = None, "no step is safe on the contact's coupled model"
+        else:
+            step, why = confirm(scene, name, least, budget)
+        for n in bounds:
+            c = contacts[n]
+            if step is not None:
+                c["max_macro_step_s"][name] = step
+                c["max_macro_step_kind"][name] = RUNS
+            else:
+                c["max_macro_step_kind"][name] = NECESSARY
+                c.setdefault("max_macro_step_why", {})[name] = why

@@ -186,6 +186,13 @@ class StructureSubsystem(ClosedFormContacts, Subsystem):
         c = float(np.asarray(direction, float) @ self._dir)
         return c * c * float(self._R[port] @ self._R[port])
 
+    def port_participation(self, port, direction) -> np.ndarray:
+        """How each kept mode moves a port along ``direction``: ``(n . dir)
+        R_p`` (mass-normalised modes; its square sums to
+        :meth:`port_mobility`)."""
+        c = float(np.asarray(direction, float) @ self._dir)
+        return c * np.array(self._R[port], float)
+
     @property
     def natural_frequencies_hz(self) -> np.ndarray:
         return self.omega / (2 * math.pi)

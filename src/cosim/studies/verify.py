@@ -13,15 +13,18 @@ from cosim.core.guard import energy_scale, peak_stored_energy
 from cosim.scene.run import simulate
 from cosim.scene.load import SceneError, load_scene
 
-__all__ = ["Check", "run_checks", "CHECKS", "HardCase", "hard_matrix", "run_hard_case",
+__all__ = ["Check", "run_checks", "folder_checks", "CHECKS", "HardCase", "hard_matrix", "run_hard_case",
            "hard_checks", "hard_line", "robustness", "HARD_COPIES"]
 
 
 @dataclass(frozen=True)
 class Check:
+    """One verdict: ``passed`` and a one-line ``detail``; ``skipped`` for a
+    check that could not be made here (it passes, and says why)."""
     name: str
     passed: bool
     detail: str
+    skipped: bool = False
 
 
 def _rel(a, b):
@@ -307,6 +310,33 @@ def hard_line(r: dict) -> str:
     grew = _GREW.search(detail)
     figures = f": created {grew.group(1)} J, bound {grew.group(2)} J" if grew else ""
     return f"{verdict.replace('stopped', 'stopped by the guard' + at, 1)}{figures}; {tail}"
+
+
+def folder_checks(cases_dir, hard: bool = False):
+    """Yield the checks of a folder of scene files (``cosim verify --cases
+    DIR``): spring_drop's analytic checks if ``spring_drop.toml`` is there,
+    else one skipped line that says so (any scene is checked by ``cosim
+    verify SCENE``, :mod:`cosim.studies.verify_scene`); with ``hard``, the
+    hard-case matrix, which needs ``three_mass.toml``.  A folder that is
+    not one, holds no scene file, or lacks the file ``hard`` runs is
+    refused (:class:`~cosim.scene.load.SceneError`) before anything runs."""
+    cases = Path(cases_dir)
+    if not cases.is_dir():
+        raise SceneError(cases, "", "is not a folder of scene files (`--cases DIR`)")
+    if not any(cases.glob("*.toml")):
+        raise SceneError(cases, "", "holds no scene file (*.toml) to verify")
+    if hard and not (cases / "three_mass.toml").is_file():
+        raise SceneError(cases / "three_mass.toml", "",
+                         "not found: the hard-case matrix (`--hard`) runs it")
+    if (cases / "spring_drop.toml").is_file():
+        for fn in CHECKS.values():
+            yield from fn(cases)
+    else:
+        yield Check("spring_drop", True,
+                    f"not run: no spring_drop.toml in {cases}; `cosim verify SCENE` checks any "
+                    f"scene", skipped=True)
+    if hard:
+        yield from hard_checks(cases)
 
 
 def run_checks(cases_dir="cases", hard: bool = False):
