@@ -94,21 +94,37 @@ def _print_summary(s: dict, out: Path | None, units=None) -> None:
         print(f"  wrote {out / 'summary.json'}, {out / 'series.npz'} and {out / 'scene.toml'}")
 
 
-def _estimate(scene, res, out: Path, request=None) -> None:
+def _estimate(scene, res, out: Path, request=None):
     """Add the run's error estimate (summary key ``accuracy``) to its
     summary and rewrite ``summary.json`` through the checked writer; a run
     asked for an accuracy (``request``: :class:`cosim.cli.accuracy.Request`)
-    is checked and refined once (:mod:`cosim.studies.accurate`) first."""
+    is checked and refined once (:mod:`cosim.studies.accurate`) first.  The
+    folder is held (locked) from the estimate to the summary.
+
+    Raises
+    ------
+    OutputError
+        If the folder cannot be held or the summary not written (a full
+        disk): the message says that the run is kept as it finished, with
+        the summary it wrote, without the estimate.
+    """
     import json
 
+    from cosim.errors import OutputError
     from cosim.io.rundir import OutputFolder
-    from cosim.studies.estimate import estimate_errors
+    from cosim.scene.run import _lost, estimated
 
-    res.summary["accuracy"] = estimate_errors(scene, res, contact=request and request.contact)
-    if request is not None:
-        res = request.check(res)
-    with OutputFolder(out) as folder:
-        folder.write("summary.json", lambda fh: json.dump(res.summary, fh, indent=2), "w")
+    try:
+        with OutputFolder(out) as folder:
+            res.summary["accuracy"] = estimated(scene, res,
+                                                contact=request and request.contact)
+            if request is not None:
+                res = request.check(res, folder)
+            folder.write("summary.json", lambda fh: json.dump(res.summary, fh, indent=2),
+                         "w")
+    except OutputError as exc:
+        raise _lost(exc, "the run finished and is kept, with the summary.json it wrote "
+                         "without its estimate (`accuracy`)", out) from None
     return res
 
 
@@ -145,7 +161,8 @@ def _run(args) -> int:
 
     scene = load_scene(args.scene, args.variant, args.set or (), args.scheme)
     request = None
-    if args.accuracy is not None or "accuracy" in scene.data.get("scheme", {}):
+    table = scene.data.get("scheme")
+    if args.accuracy is not None or isinstance(table, dict) and "accuracy" in table:
         from cosim.cli.accuracy import Request
         request = Request.make(args, scene)      # the scene with the steps chosen for it
         scene = request.scene
@@ -159,10 +176,11 @@ def _run(args) -> int:
     progress = _progress_line(args.quiet)
     code, crash = None, None
     if request is not None:
-        request.run = lambda sc: simulate(sc, progress=_progress_line(args.quiet), out=out,
-                                          overwrite=True)
+        request.run = lambda sc, where: simulate(sc, progress=_progress_line(args.quiet),
+                                                 out=where, overwrite=True, estimate=False)
     try:
-        res = simulate(scene, progress=progress, out=out, overwrite=args.overwrite)
+        res = simulate(scene, progress=progress, out=out, overwrite=args.overwrite,
+                       estimate=False)
     except RunInterrupted as exc:
         res, code = exc.result, _stop_code(exc.__cause__)
     except Exception as exc:
@@ -181,6 +199,8 @@ def _run(args) -> int:
             res = _estimate(scene, res, out, request)
         except RunInterrupted as exc:      # the run is kept as it finished, without estimate
             code = _stop_code(exc.__cause__)
+        if request is not None and request.stopped is not None:
+            code = _stop_code(request.stopped)       # the refinement's: the first run kept
     _print_summary(res.summary, out, _units(scene))
     for name in scene.export:
         print(f"  wrote {out / (name + '.xdmf')} (open in ParaView)")
@@ -196,7 +216,27 @@ def _run(args) -> int:
               "scene file and the lines above", file=sys.stderr)
     if code is not None:
         return code
-    return 0 if res.success else 1
+    if not res.success:
+        return 1
+    return _outcome(res.summary)
+
+
+def _outcome(summary: dict) -> int:
+    """The exit status of a finished run: 3 when the accuracy asked of it
+    was not met; 0 else, with a warning when it could not be checked."""
+    from cosim.studies.accurate import EXIT_NOT_MET, percent
+    req = summary.get("accuracy", {}).get("request")
+    if req is None:
+        return 0
+    if req["outcome"] == "not met":
+        print(f"error: the accuracy asked ({100 * req['accuracy']:.3g} %, {req['from']}) was "
+              f"not met: the run's error is estimated at "
+              f"{percent(req['estimated_error'], req['accuracy'])}", file=sys.stderr)
+        return EXIT_NOT_MET
+    if req["outcome"] == "unchecked":
+        print(f"warning: the accuracy asked ({100 * req['accuracy']:.3g} %, {req['from']}) "
+              f"was not checked: {req['unchecked']}", file=sys.stderr)
+    return 0
 
 
 def _cmd_verify(args) -> int:
@@ -230,11 +270,12 @@ def _cmd_info(args) -> int:
         return _list_scenes(args)
     scene = load_scene(args.scene, args.variant, args.set or ())
     info = scene_info(scene, run_fmu=args.run_fmu)
-    if args.accuracy is not None or "accuracy" in scene.data.get("scheme", {}):
+    table = scene.data.get("scheme")
+    if args.accuracy is not None or isinstance(table, dict) and "accuracy" in table:
         from cosim.studies.accurate import asked
         accuracy, source = asked(scene, args.accuracy)
         from cosim.studies.choose import choose
-        info["accuracy"] = {"from": source, **choose(scene, accuracy).as_dict()}
+        info["accuracy"] = {"from": source, **choose(scene, accuracy, source=source).as_dict()}
     if args.json:
         print(json.dumps(info, indent=2))
         return 0
