@@ -415,7 +415,8 @@ def _candidate(scene, k: Knob, scheme: str, accuracy: float, checkable: bool = T
         system, sch = s.build()
         sch.preflight(system)
     except (UnsafeStepError, SceneError) as exc:
-        return {**out, "step": h, "refused": f"the step it needs, {h:.3g} s, is refused: {exc}"}
+        return {**out, "step": h, "refused": f"the pre-flight check refuses the step it needs, "
+                                               f"{h:.3g} s: {exc}"}
     steps = s.work().steps
     return {**out, "step": h, "overrides": ov,
             "predicted_error": predicted_error(k.regime, scheme, k.omega * h),
