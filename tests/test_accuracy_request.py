@@ -23,6 +23,7 @@ import pytest
 
 from conftest import CASES, ROOT
 from cosim import cli
+from documented import Claim, assert_printed
 
 SPRING_DROP = str(CASES / "spring_drop.toml")
 THREE_MASS = str(CASES / "three_mass.toml")
@@ -60,6 +61,9 @@ def test_not_met_is_exit_3_with_the_estimate(tmp_path, capsys):
     assert cap.out.splitlines()[-2].endswith("asked 0.0001 %: not met")
     assert cap.err.startswith("error: the accuracy asked (0.0001 %, --accuracy) was not met: "
                               "the run's error is estimated at ")
+    # docs/troubleshooting.md quotes this line (`cosim run spring_drop --accuracy 1e-6`)
+    assert_printed(Claim("docs/troubleshooting.md", cap.err.strip(),
+                         "cosim run spring_drop --accuracy 1e-6", 0.0))
     assert sorted(p.name for p in out.iterdir()) == ["scene.toml", "series.npz",
                                                      "summary.json"]
 

@@ -171,8 +171,9 @@ def knob(scene, contact: str | None = None) -> Knob:
     same function at the initial pose, and :attr:`Knob.check_omega` is
     what it reads there (the largest over the contacts whose steps set the
     companion's factor: every contact the sides exchange, or every contact
-    the host side steps), so that the cap on a checkable step
-    (:data:`CHECKABLE`) is the companion's own.
+    the host side steps).  The cap on a checkable step (:data:`CHECKABLE`)
+    takes the higher of the two, so that the companion checks the step
+    chosen whichever pose is the stiffer.
 
     Raises
     ------
@@ -401,7 +402,9 @@ def _candidate(scene, k: Knob, scheme: str, accuracy: float, checkable: bool = T
         why = ("not measured in this regime" if _params(k.regime, scheme) is None else
                "its error floor lies above the accuracy asked")
         return {**out, "refused": why}
-    w = k.check_omega if math.isfinite(k.check_omega) else k.omega   # what the check reads
+    # within the range at the frequency the companion reads (so that it checks the step)
+    # and at the model's (the range it was measured in): the higher of the two
+    w = max(k.omega, k.check_omega) if math.isfinite(k.check_omega) else k.omega
     cap = _floor2(CHECKABLE[k.regime] / w) if checkable else math.inf
     if h > at_most:                  # a refinement: shorter than the model says
         out["model_step"], out["capped"], h = h, "refined", _floor2(at_most)
