@@ -147,7 +147,7 @@ def default_run(name, variant, contact, joint, ref) -> dict:
     try:
         scene = load_scene(name, variant)
         t0 = time.process_time()
-        res = simulate(scene)
+        res = simulate(scene, estimate=False)
         t1 = time.process_time()
         acc = estimate_errors(scene, res, contact=contact)     # the exit at the strike's release
         t2 = time.process_time()
@@ -170,20 +170,26 @@ def request_run(name, variant, contact, joint, ref, accuracy=ACCURACY):
     from cosim.scene.load import load_scene
     from cosim.scene.run import simulate
     from cosim.studies.estimate import estimate_errors
+    import tempfile
+
+    from cosim.io.rundir import OutputFolder
     args = SimpleNamespace(scene=name, variant=variant, set=[], scheme=None,
-                           accuracy=accuracy, no_estimate=False)
+                           accuracy=accuracy, no_estimate=False, yes=True)
     ctx = _quiet()
+    where = tempfile.TemporaryDirectory()
     try:
+        out = Path(where.name) / "run"
         t = [time.process_time()]
         req = Request.make(args, load_scene(name, variant))
-        req.run = simulate
+        req.run = lambda sc, to: simulate(sc, out=to, overwrite=True, estimate=False)
         first = req.choice.step
         t.append(time.process_time())
-        res = simulate(req.scene)
+        res = simulate(req.scene, out=out, estimate=False)
         t.append(time.process_time())
         res.summary["accuracy"] = estimate_errors(req.scene, res, contact=req.contact)
         t.append(time.process_time())
-        res = req.check(res)
+        with OutputFolder(out) as folder:      # the refinement runs beside it, then replaces it
+            res = req.check(res, folder)
         t.append(time.process_time())
     finally:
         ctx.__exit__(None, None, None)
@@ -221,7 +227,8 @@ def bench_rows(name, variant, contact, joint, ref, choice, accuracy=ACCURACY) ->
             ctx = _quiet()
             try:
                 t0 = time.process_time()
-                res = simulate(load_scene(name, variant, k.overrides(h), scheme))
+                res = simulate(load_scene(name, variant, k.overrides(h), scheme),
+                               estimate=False)
                 row["cpu_s"] = time.process_time() - t0
             except (UnsafeStepError, SceneError):
                 rows.append({**row, "status": "refused"})

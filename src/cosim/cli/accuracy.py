@@ -135,19 +135,22 @@ class Request:
         if estimated2 is None or estimated2 >= estimated:
             self.scene, self.choice = self_scene, self_choice
             _discard(folder)
-            shown = "not estimated" if estimated2 is None else \
-                f"estimated at {100 * estimated2:.2g} %"
+            shown = (f"not estimated ({why2})" if estimated2 is None else
+                     f"estimated at {100 * estimated2:.2g} %, no lower: the steps refined are "
+                     f"not what limits its estimate")
             res.summary["accuracy"]["request"] = record(
                 self.choice, estimated, "",
-                note=f"the refined run, at {choice.step:.3g} s in contact, was {shown}: no "
-                     f"better, so this run is kept (the steps refined are not what limits its "
-                     f"estimate)" + (f"; {why2}" if why2 else ""))
+                note=f"the refined run, at {choice.step:.3g} s in contact, was {shown}; this "
+                     f"run is kept")
             return res
         again.summary["accuracy"]["request"] = record(choice, estimated2, why2,
                                                       (self_choice, estimated))
         stopped = _swap(folder, again.summary)
         if stopped is not None:
             self.stopped = stopped
+        from cosim.core.series import SeriesFile
+        if isinstance(again.series, SeriesFile):       # read where its file is now
+            again.series.path = folder.path / "series.npz"
         return again
 
     def _refine(self, scene, folder):
