@@ -97,7 +97,7 @@ def measure(folder, cache, quick: bool = False) -> list[dict]:
                 s = _load(scene, ov, scheme)
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")
-                    res = simulate(s, estimate=False)
+                    res = simulate(s)
             except (UnsafeStepError, SceneError):
                 points.append({**p, "status": "refused"})
                 print(f"{name} {variant} {scheme} {h:.3g}: refused", flush=True)
@@ -251,8 +251,7 @@ def check(cache, accuracies=(0.01, 0.001)) -> str:
                 c = choose(scene, acc, contact)
                 contact_, joint = find_strike(scene, c.knob.contact)
                 ref = reference(name, variant, contact_, joint, cache_dir=cache)
-                res = simulate(load_scene(name, variant, list(c.overrides), c.scheme),
-                               estimate=False)
+                res = simulate(load_scene(name, variant, list(c.overrides), c.scheme))
                 m = impact_metrics(res, contact_, joint)
                 e = relative_errors(m, ref)
                 pe = c.predicted_error

@@ -147,7 +147,7 @@ def default_run(name, variant, contact, joint, ref) -> dict:
     try:
         scene = load_scene(name, variant)
         t0 = time.process_time()
-        res = simulate(scene, estimate=False)
+        res = simulate(scene)
         t1 = time.process_time()
         acc = estimate_errors(scene, res, contact=contact)     # the exit at the strike's release
         t2 = time.process_time()
@@ -181,10 +181,10 @@ def request_run(name, variant, contact, joint, ref, accuracy=ACCURACY):
         out = Path(where.name) / "run"
         t = [time.process_time()]
         req = Request.make(args, load_scene(name, variant))
-        req.run = lambda sc, to: simulate(sc, out=to, overwrite=True, estimate=False)
+        req.run = lambda sc, to: simulate(sc, out=to, overwrite=True)
         first = req.choice.step
         t.append(time.process_time())
-        res = simulate(req.scene, out=out, estimate=False)
+        res = simulate(req.scene, out=out)
         t.append(time.process_time())
         res.summary["accuracy"] = estimate_errors(req.scene, res, contact=req.contact)
         t.append(time.process_time())
@@ -227,8 +227,7 @@ def bench_rows(name, variant, contact, joint, ref, choice, accuracy=ACCURACY) ->
             ctx = _quiet()
             try:
                 t0 = time.process_time()
-                res = simulate(load_scene(name, variant, k.overrides(h), scheme),
-                               estimate=False)
+                res = simulate(load_scene(name, variant, k.overrides(h), scheme))
                 row["cpu_s"] = time.process_time() - t0
             except (UnsafeStepError, SceneError):
                 rows.append({**row, "status": "refused"})

@@ -18,7 +18,7 @@ from __future__ import annotations
 import warnings
 from dataclasses import dataclass, field
 
-__all__ = ["Request", "REFINING"]
+__all__ = ["Request", "REFINING", "estimate_and_check", "exit_status"]
 
 #: the folder, inside the run's, that a refined run is written to before it
 #: replaces the first
@@ -157,7 +157,8 @@ class Request:
         """Run ``scene`` into :data:`REFINING` and estimate it: ``(result,
         accuracy, "")``, or ``(None, None, why the first run is kept)``
         with the refined folder removed."""
-        from cosim.scene.run import RunInterrupted, estimated
+        from cosim.api import estimated
+        from cosim.scene.run import RunInterrupted
 
         _discard(folder)                     # a refinement killed outright before
         try:
@@ -186,7 +187,7 @@ class Request:
         or did not finish (a step that long is unstable), a second one at 2x
         the step (half the run's cost, paid only then) gives the estimate,
         which replaces the summary's ``accuracy``."""
-        from cosim.scene.run import estimated as estimate
+        from cosim.api import estimated as estimate
         from cosim.studies.accurate import verdict
 
         acc = res.summary["accuracy"]
@@ -202,6 +203,61 @@ class Request:
                 return estimated, why2
             why = f"{why}; at 2x the step too: {why2}"
         return estimated, why
+
+
+def estimate_and_check(scene, res, out, request=None):
+    """Add the run's error estimate (summary key ``accuracy``) to its
+    summary and rewrite ``summary.json`` through the checked writer; a run
+    asked for an accuracy (``request``: :class:`cosim.cli.accuracy.Request`)
+    is checked and refined once (:mod:`cosim.studies.accurate`) first.  The
+    folder is held (locked) from the estimate to the summary.
+
+    Raises
+    ------
+    OutputError
+        If the folder cannot be held or the summary not written (a full
+        disk): the message says that the run is kept as it finished, with
+        the summary it wrote, without the estimate.
+    """
+    import json
+
+    from cosim.errors import OutputError
+    from cosim.io.rundir import OutputFolder
+    from cosim.api import estimated
+    from cosim.scene.run import _lost
+
+    try:
+        with OutputFolder(out) as folder:
+            res.summary["accuracy"] = estimated(scene, res,
+                                                contact=request and request.contact)
+            if request is not None:
+                res = request.check(res, folder)
+            folder.write("summary.json", lambda fh: json.dump(res.summary, fh, indent=2),
+                         "w")
+    except OutputError as exc:
+        raise _lost(exc, "the run finished and is kept, with the summary.json it wrote "
+                         "without its estimate (`accuracy`)", out) from None
+    return res
+
+
+def exit_status(summary: dict) -> int:
+    """The exit status of a finished run: 3 when the accuracy asked of it
+    was not met; 0 else, with a warning when it could not be checked."""
+    import sys
+
+    from cosim.studies.accurate import EXIT_NOT_MET, percent
+    req = summary.get("accuracy", {}).get("request")
+    if req is None:
+        return 0
+    if req["outcome"] == "not met":
+        print(f"error: the accuracy asked ({100 * req['accuracy']:.3g} %, {req['from']}) was "
+              f"not met: the run's error is estimated at "
+              f"{percent(req['estimated_error'], req['accuracy'])}", file=sys.stderr)
+        return EXIT_NOT_MET
+    if req["outcome"] == "unchecked":
+        print(f"warning: the accuracy asked ({100 * req['accuracy']:.3g} %, {req['from']}) "
+              f"was not checked: {req['unchecked']}", file=sys.stderr)
+    return 0
 
 
 def _limit() -> float:

@@ -94,38 +94,16 @@ def _print_summary(s: dict, out: Path | None, units=None) -> None:
         print(f"  wrote {out / 'summary.json'}, {out / 'series.npz'} and {out / 'scene.toml'}")
 
 
-def _estimate(scene, res, out: Path, request=None):
-    """Add the run's error estimate (summary key ``accuracy``) to its
-    summary and rewrite ``summary.json`` through the checked writer; a run
-    asked for an accuracy (``request``: :class:`cosim.cli.accuracy.Request`)
-    is checked and refined once (:mod:`cosim.studies.accurate`) first.  The
-    folder is held (locked) from the estimate to the summary.
+def _estimate(scene, res, out, request=None):
+    """:func:`cosim.cli.accuracy.estimate_and_check`."""
+    from cosim.cli.accuracy import estimate_and_check
+    return estimate_and_check(scene, res, out, request)
 
-    Raises
-    ------
-    OutputError
-        If the folder cannot be held or the summary not written (a full
-        disk): the message says that the run is kept as it finished, with
-        the summary it wrote, without the estimate.
-    """
-    import json
 
-    from cosim.errors import OutputError
-    from cosim.io.rundir import OutputFolder
-    from cosim.scene.run import _lost, estimated
-
-    try:
-        with OutputFolder(out) as folder:
-            res.summary["accuracy"] = estimated(scene, res,
-                                                contact=request and request.contact)
-            if request is not None:
-                res = request.check(res, folder)
-            folder.write("summary.json", lambda fh: json.dump(res.summary, fh, indent=2),
-                         "w")
-    except OutputError as exc:
-        raise _lost(exc, "the run finished and is kept, with the summary.json it wrote "
-                         "without its estimate (`accuracy`)", out) from None
-    return res
+def _outcome(summary: dict) -> int:
+    """:func:`cosim.cli.accuracy.exit_status`."""
+    from cosim.cli.accuracy import exit_status
+    return exit_status(summary)
 
 
 def _default_name(scene) -> str:
@@ -177,10 +155,9 @@ def _run(args) -> int:
     code, crash = None, None
     if request is not None:
         request.run = lambda sc, where: simulate(sc, progress=_progress_line(args.quiet),
-                                                 out=where, overwrite=True, estimate=False)
+                                                 out=where, overwrite=True)
     try:
-        res = simulate(scene, progress=progress, out=out, overwrite=args.overwrite,
-                       estimate=False)
+        res = simulate(scene, progress=progress, out=out, overwrite=args.overwrite)
     except RunInterrupted as exc:
         res, code = exc.result, _stop_code(exc.__cause__)
     except Exception as exc:
@@ -219,24 +196,6 @@ def _run(args) -> int:
     if not res.success:
         return 1
     return _outcome(res.summary)
-
-
-def _outcome(summary: dict) -> int:
-    """The exit status of a finished run: 3 when the accuracy asked of it
-    was not met; 0 else, with a warning when it could not be checked."""
-    from cosim.studies.accurate import EXIT_NOT_MET, percent
-    req = summary.get("accuracy", {}).get("request")
-    if req is None:
-        return 0
-    if req["outcome"] == "not met":
-        print(f"error: the accuracy asked ({100 * req['accuracy']:.3g} %, {req['from']}) was "
-              f"not met: the run's error is estimated at "
-              f"{percent(req['estimated_error'], req['accuracy'])}", file=sys.stderr)
-        return EXIT_NOT_MET
-    if req["outcome"] == "unchecked":
-        print(f"warning: the accuracy asked ({100 * req['accuracy']:.3g} %, {req['from']}) "
-              f"was not checked: {req['unchecked']}", file=sys.stderr)
-    return 0
 
 
 def _cmd_verify(args) -> int:

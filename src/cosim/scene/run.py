@@ -1,7 +1,6 @@
 """Running a scene."""
 from __future__ import annotations
 
-import contextvars
 import logging
 import sys
 import time
@@ -12,7 +11,7 @@ from cosim.core.recorder import Recorder
 from cosim.scene.load import Scene, load_scene
 from cosim.errors import FMUError, OutputError, SimulationError, UnsafeStepError
 
-__all__ = ["simulate", "run_scene", "estimated", "RunInterrupted", "stop_message"]
+__all__ = ["simulate", "run_scene", "RunInterrupted", "stop_message"]
 
 log = logging.getLogger(__name__)
 
@@ -28,14 +27,8 @@ class RunInterrupted(KeyboardInterrupt):
         self.result = result
 
 
-#: set while a run's error is estimated: the companion runs it makes get no
-#: estimate of their own
-_ESTIMATING = contextvars.ContextVar("cosim_estimating", default=False)
-
-
 def simulate(scene: Scene, *, scheme: str | None = None, progress=None,
-             progress_interval: float = 0.2, out=None, overwrite: bool = False,
-             estimate: bool | None = None):
+             progress_interval: float = 0.2, out=None, overwrite: bool = False):
     """Run a validated scene and return its :class:`~cosim.core.result.SimulationResult`.
 
     Parameters
@@ -61,15 +54,6 @@ def simulate(scene: Scene, *, scheme: str | None = None, progress=None,
         writes them).
     overwrite : bool
         Allow ``out`` to hold a previous run, which is replaced.
-    estimate : bool, optional
-        Estimate the finished run's error with a companion run
-        (:func:`cosim.studies.estimate.estimate_errors`, about a quarter of
-        the run's cost) into ``result.summary["accuracy"]`` (and
-        ``summary.json``), as ``cosim run`` does.  Default: the scene's
-        ``output.estimate`` (true unless the scene turns it off), as for
-        ``cosim run``.  A run that does not finish gets none.  A scene's
-        ``scheme.accuracy`` is not acted on here: ``cosim run`` chooses the
-        steps for it.
 
     Returns
     -------
@@ -101,9 +85,7 @@ def simulate(scene: Scene, *, scheme: str | None = None, progress=None,
         On Ctrl-C (a :class:`KeyboardInterrupt`; also SIGTERM and SIGHUP
         under ``cosim run``, whose handlers raise one), after the result up
         to that point, ``status`` ``interrupted``, is complete (and written
-        to ``out``); it is the exception's ``result``.  Stopped while the
-        error is estimated, the result is the finished run (``status``
-        ``finished``), without ``accuracy``.
+        to ``out``); it is the exception's ``result``.
     Exception
         Any other exception during the run is re-raised after the result up
         to that point, ``status`` ``error``, is complete (and written to
@@ -116,17 +98,8 @@ def simulate(scene: Scene, *, scheme: str | None = None, progress=None,
         out = Path(out)
         # refuses a link, a root, or a folder another run is writing
         folder = OutputFolder(out).open()
-    if estimate is None:
-        estimate = bool(scene.estimate)
-    estimate = estimate and not _ESTIMATING.get()
     try:
-        res = _simulate(scene, scheme, progress, progress_interval, out, overwrite)
-        if estimate and res.status == "finished":
-            if scheme not in (None, scene.scheme):       # the companion runs that scheme too
-                from cosim.studies.choose import _load
-                scene = _load(scene, [], scheme)
-            _estimate(scene, res, out)
-        return res
+        return _simulate(scene, scheme, progress, progress_interval, out, overwrite)
     finally:
         if folder is not None:
             folder.close()
@@ -218,39 +191,6 @@ def _simulate(scene, scheme, progress, progress_interval, out, overwrite):
     return res
 
 
-def estimated(scene, res, **options) -> dict:
-    """:func:`cosim.studies.estimate.estimate_errors` of ``res``, a finished
-    run of ``scene`` (``options`` passed on): the companion runs it makes
-    get no estimate of their own, whatever their scene's
-    ``output.estimate``."""
-    from cosim.studies.estimate import estimate_errors
-    token = _ESTIMATING.set(True)
-    try:
-        return estimate_errors(scene, res, **options)
-    finally:
-        _ESTIMATING.reset(token)
-
-
-def _estimate(scene, res, out) -> None:
-    """``res.summary["accuracy"]``: the finished run's error estimate, and
-    ``summary.json`` in ``out`` written again with it.  Stopped meanwhile
-    (Ctrl-C), :class:`RunInterrupted` with ``res`` as it finished."""
-    from cosim.core.result import write_summary
-    from cosim.io.rundir import inside
-
-    try:
-        acc = estimated(scene, res)
-    except KeyboardInterrupt as exc:
-        raise RunInterrupted(res) from exc
-    res.summary["accuracy"] = acc
-    if out is not None:
-        try:
-            write_summary(res.summary, inside(out, "summary.json"))
-        except OutputError as exc:
-            raise _lost(exc, "the run finished and its summary.json was written without the "
-                             "estimate (`accuracy`), which could not be added", out) from None
-
-
 def stop_message(exc: SimulationError, t_stop: float) -> str:
     """The message of a run that ``exc`` stopped, its last kept sample at
     ``t_stop`` [s].
@@ -303,11 +243,9 @@ def _reached(rec: Recorder) -> float:
 
 
 def run_scene(path, *, variant=None, scheme=None, overrides=(), out=None,
-              overwrite: bool = False, estimate: bool | None = None):
-    """Load and run a scene file in one call (see :func:`simulate`, whose
-    ``estimate`` defaults to the scene's ``output.estimate``, as ``cosim
-    run``); ``path`` may name a shipped scene (``"spring_drop"``: a file of
-    that name wins)."""
+              overwrite: bool = False):
+    """Load and run a scene file in one call (see :func:`simulate`); ``path``
+    may name a shipped scene (``"spring_drop"``: a file of that name wins)."""
     from cosim.scene.shipped import find_scene
     return simulate(load_scene(find_scene(path), variant, overrides, scheme), out=out,
-                    overwrite=overwrite, estimate=estimate)
+                    overwrite=overwrite)

@@ -196,7 +196,7 @@ def _run_reference(path, variant, overrides, contact, joint) -> dict:
     ov = list(overrides) + _monolithic(REFERENCE)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        res = simulate(load_scene(path, variant, ov, "monolithic"), estimate=False)
+        res = simulate(load_scene(path, variant, ov, "monolithic"))
     if not res.success:
         raise SimulationError(f"the reference run failed: {res.message}")
     ref = _metrics(res, contact, joint)
@@ -216,8 +216,7 @@ def _once(path, variant, overrides, scheme, ref, contact, joint) -> tuple:
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            res = simulate(load_scene(path, variant, list(overrides), scheme),
-                           estimate=False)
+            res = simulate(load_scene(path, variant, list(overrides), scheme))
     except UnsafeStepError:
         return "refused", math.nan, None
     cpu = res.summary["cpu_time_s"]

@@ -47,10 +47,11 @@ import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from cosim.core.schemes.base import MIN_SOLVER_RTOL
 from cosim.errors import UnsafeStepError
 from cosim.scene.checks import parse_accuracy
-from cosim.studies.companion import ASYMPTOTIC_OMEGA_H, MIN_FACTOR, OMEGA_H_MAX, contact_omega
+from cosim.studies.companion import ASYMPTOTIC_OMEGA_H, MIN_FACTOR, OMEGA_H_MAX
+from cosim.studies.reach import (DOUBLE_PRECISION_FLOOR, MIN_RTOL, check_omega, reachable,
+                                 refusal)
 
 __all__ = ["Choice", "Knob", "MODEL", "MONOLITHIC_MODEL", "COST", "SAFETY",
            "DOUBLE_PRECISION_FLOOR", "MIN_RTOL", "parse_accuracy", "knob", "predicted_error",
@@ -95,23 +96,6 @@ SAFETY = 0.9
 
 #: the quantities predicted
 QUANTITIES = ("peak", "exit_velocity")
-
-#: the smallest relative accuracy a request may ask of any scene.  A double
-#: holds a number to eps = 2.2e-16 relative; each step of a run rounds its
-#: state at least once, and the shortest runs the model was measured on take
-#: about 1e4 steps: their quantities carry up to 1e4 eps = 2.2e-12 of
-#: rounding (a random walk of the roundings, sqrt(1e4) eps = 2e-14, is the
-#: least of it), and a companion's difference, which the estimate reads, as
-#: much again.  Below 1e-12 what a run and its estimate report is round-off,
-#: not the method's error, whatever the step.
-DOUBLE_PRECISION_FLOOR = 1e-12
-
-#: the smallest ``rtol`` the monolithic scheme's solvers honour: scipy's
-#: ``solve_ivp`` raises a smaller one to ``100 eps`` (2.2e-14) and runs
-#: at that; the scene refuses one below it
-#: (:data:`cosim.core.schemes.base.MIN_SOLVER_RTOL`)
-MIN_RTOL = MIN_SOLVER_RTOL
-
 
 @dataclass(frozen=True)
 class Knob:
@@ -216,7 +200,7 @@ def knob(scene, contact: str | None = None) -> Knob:
                              "frequency: the accuracy model needs a linearisable penalty law")
     ln = system.links[c]
     opts = scene.scheme_options
-    check = _check_omega(system, c)
+    check = check_omega(system, c)
     H = opts.get("macro_step") or math.nan
     rigid = [system.subsystems[s].rigid for s in (ln.sub_a, ln.sub_b)]
     grasp = ln.connection is not None and ln.connection.grasp is not None
@@ -234,31 +218,6 @@ def knob(scene, contact: str | None = None) -> Knob:
     key = "scheme.contact_step" if opts.get("contact_step") else "scheme.macro_step"
     return Knob(ln.contact.name, "exchanged", key, opts.get(key.split(".")[1]), omegas[c], H,
                 grasp, check)
-
-
-def _hosted(system, c: int) -> bool:
-    """Whether contact ``c`` is stepped by a side's own integrator against a
-    rigid partner (else the sides exchange it)."""
-    ln = system.links[c]
-    return ln.placement == "embedded" and any(
-        system.subsystems[s].rigid for s in (ln.sub_a, ln.sub_b))
-
-
-def _check_omega(system, c: int) -> float:
-    """The frequency [rad/s] the companion judges contact ``c``'s step with
-    (:func:`~cosim.studies.companion.contact_omega`, the system at its
-    initial pose): the largest over the contacts the sides exchange where
-    ``c`` is one (their largest omega h sets the companion's factor), else
-    over the contacts ``c``'s host steps (the largest sets whether the host's
-    step is coarsened); nan where none has a linear stiffness."""
-    if _hosted(system, c):
-        own = system.embedded[c][0]
-        group = [d for d, (host, _) in system.embedded.items() if host == own]
-    else:
-        group = [d for d in range(len(system.links)) if not _hosted(system, d)]
-    ws = [w for d in group if not system.links[d].contact.law.rigid
-          for w in [contact_omega(system, d)] if math.isfinite(w)]
-    return max(ws) if ws else math.nan
 
 
 def _params(regime: str, scheme: str, model=None) -> dict | None:
@@ -442,39 +401,6 @@ def _rtol_for(accuracy: float) -> float | None:
     where it would lie below :data:`MIN_RTOL`."""
     r = _largest_x(MONOLITHIC_MODEL, SAFETY * accuracy)
     return None if r is None or r < MIN_RTOL else _floor2(min(r, 1e-3))
-
-
-def reachable(k: Knob, schemes) -> float:
-    """The smallest relative accuracy a request may ask of a contact
-    (``k``, :func:`knob`) with ``schemes``: the least, over the schemes the
-    model covers, of the largest error it predicts at the finest step or
-    tolerance the scheme can be given (a co-simulation scheme's error
-    ``floor`` in :data:`MODEL`; the monolithic scheme's error at
-    :data:`MIN_RTOL`), over :data:`SAFETY`, and never below
-    :data:`DOUBLE_PRECISION_FLOOR`.  A step's cost (``guard.max_steps``) is
-    not counted here: the pre-flight check refuses a step too short for it."""
-    best = math.inf
-    for s in schemes:
-        if s == "monolithic":
-            e = max(_bound(v, MIN_RTOL) for v in MONOLITHIC_MODEL.values())
-        else:
-            par = _params(k.regime, s)
-            if par is None:
-                continue
-            e = max(floor for _, _, floor in par.values())
-        best = min(best, e / SAFETY)
-    return max(DOUBLE_PRECISION_FLOOR, best)
-
-
-def refusal(scene, source: str, text: str):
-    """A :class:`~cosim.scene.checks.SceneError` about an accuracy asked by
-    ``source`` (``--accuracy``, ``scheme.accuracy``, or a Python argument
-    such as ``accuracy``): at that key of the scene, or naming the flag or
-    argument, which is not a key of it."""
-    from cosim.scene.checks import SceneError
-    if source == "scheme.accuracy":
-        return SceneError(scene.path, source, text)
-    return SceneError(scene.path, "", f"{source} {text}")
 
 
 def choose(scene, accuracy: float, contact: str | None = None,

@@ -130,7 +130,6 @@ def coarsened(scene, factor: float, kept: list | None = None, system=None):
         warnings.simplefilter("ignore")
         spec = scene.scheme_spec()
     data = copy.deepcopy(scene.data)
-    data.setdefault("output", {})["estimate"] = False     # a companion is not estimated
     sch = data.setdefault("scheme", {})
     sch["name"] = spec.name
     own = sch.setdefault(spec.name, {})      # a [scheme.NAME] table wins over [scheme]

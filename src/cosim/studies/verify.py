@@ -33,7 +33,7 @@ def _spring_drop(cases: Path, variant: str, scheme: str | None, tol_t: float,
     with warnings.catch_warnings():   # switching scheme drops options: expected here
         warnings.simplefilter("ignore")
         scene = load_scene(cases / "spring_drop.toml", variant, scheme=scheme)
-    res = simulate(scene, estimate=False)
+    res = simulate(scene)
     label = f"spring_drop/{variant}/{res.summary['scheme']}"
     law = scene.contacts[0]["law"]
     m = scene.subsystems[0]["bodies"][0]["mass"]
@@ -184,7 +184,7 @@ def _run_one(case: HardCase, scene) -> dict:
     """Run one scene of a hard case and judge its outcome (see
     :func:`run_hard_case`)."""
     try:
-        res = simulate(scene, estimate=False)
+        res = simulate(scene)
     except (UnsafeStepError, SceneError) as exc:
         msg = str(exc)
         ok = "contact `C`" in msg and (case.step is None or f"{case.step:.3g} s" in msg)

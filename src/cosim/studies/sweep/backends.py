@@ -36,7 +36,7 @@ def _simulate(scene):
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")     # the client showed them when it loaded
-            return "ran", simulate(scene, estimate=False)   # a sweep pays for no estimate
+            return "ran", simulate(scene)
     except (UnsafeStepError, SceneError) as exc:
         return "refused", str(exc)
     except Exception as exc:                     # noqa: BLE001 - recorded, the sweep goes on
