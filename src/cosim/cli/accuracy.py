@@ -131,7 +131,14 @@ class Request:
         again.summary["accuracy"] = acc2
         self_choice, self_scene = self.choice, self.scene
         self.scene, self.choice = scene, choice
-        estimated2, why2 = self._verdict(again)
+        try:
+            estimated2, why2 = self._verdict(again)
+        except KeyboardInterrupt as exc:
+            self.scene, self.choice = self_scene, self_choice
+            _discard(folder)
+            res.summary["accuracy"]["request"] = record(self.choice, estimated, "",
+                                                        note=self._stop(exc))
+            return res
         if estimated2 is None or estimated2 >= estimated:
             self.scene, self.choice = self_scene, self_choice
             _discard(folder)
@@ -158,7 +165,6 @@ class Request:
         accuracy, "")``, or ``(None, None, why the first run is kept)``
         with the refined folder removed."""
         from cosim.api import estimated
-        from cosim.scene.run import RunInterrupted
 
         _discard(folder)                     # a refinement killed outright before
         try:
@@ -171,15 +177,23 @@ class Request:
                                     f"{again.message}): this run is kept")
             acc = estimated(scene, again, contact=self.contact)
         except KeyboardInterrupt as exc:
-            self.stopped = exc.__cause__ if isinstance(exc, RunInterrupted) and \
-                exc.__cause__ is not None else exc
             _discard(folder)
-            name = getattr(self.stopped, "signal_name", None) or "Ctrl-C"
-            return None, None, f"the refinement was stopped ({name}): this run is kept"
-        except BaseException:
+            return None, None, self._stop(exc)
+        except Exception as exc:         # noqa: BLE001 - the first run is kept, and says why
             _discard(folder)
-            raise
+            return None, None, (f"the refined run stopped on {type(exc).__name__}: {exc}; "
+                                f"this run is kept")
         return again, acc, ""
+
+    def _stop(self, exc) -> str:
+        """Note the signal ``exc`` (a KeyboardInterrupt, or the
+        :class:`~cosim.scene.run.RunInterrupted` it caused) as what stopped
+        the refinement; the note that says so."""
+        from cosim.scene.run import RunInterrupted
+        self.stopped = exc.__cause__ if isinstance(exc, RunInterrupted) and \
+            exc.__cause__ is not None else exc
+        name = getattr(self.stopped, "signal_name", None) or "Ctrl-C"
+        return f"the refinement was stopped ({name}): this run is kept"
 
     def _verdict(self, res):
         """:func:`cosim.studies.accurate.verdict` of ``res``; where the
