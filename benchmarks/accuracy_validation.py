@@ -170,20 +170,26 @@ def request_run(name, variant, contact, joint, ref, accuracy=ACCURACY):
     from cosim.scene.load import load_scene
     from cosim.scene.run import simulate
     from cosim.studies.estimate import estimate_errors
+    import tempfile
+
+    from cosim.io.rundir import OutputFolder
     args = SimpleNamespace(scene=name, variant=variant, set=[], scheme=None,
-                           accuracy=accuracy, no_estimate=False)
+                           accuracy=accuracy, no_estimate=False, yes=True)
     ctx = _quiet()
+    where = tempfile.TemporaryDirectory()
     try:
+        out = Path(where.name) / "run"
         t = [time.process_time()]
         req = Request.make(args, load_scene(name, variant))
-        req.run = simulate
+        req.run = lambda sc, to: simulate(sc, out=to, overwrite=True)
         first = req.choice.step
         t.append(time.process_time())
-        res = simulate(req.scene)
+        res = simulate(req.scene, out=out)
         t.append(time.process_time())
         res.summary["accuracy"] = estimate_errors(req.scene, res, contact=req.contact)
         t.append(time.process_time())
-        res = req.check(res)
+        with OutputFolder(out) as folder:      # the refinement runs beside it, then replaces it
+            res = req.check(res, folder)
         t.append(time.process_time())
     finally:
         ctx.__exit__(None, None, None)

@@ -40,7 +40,7 @@ _IN_MEMORY = """
 import sys, warnings
 import cosim
 scene = cosim.load_scene(sys.argv[1], overrides=[f"t_end={sys.argv[2]}"])
-res = cosim.simulate(scene)
+res = cosim.simulate(scene, estimate=False)
 print(len(res.t))
 """
 

@@ -35,7 +35,7 @@ def run(name, variant, overrides, kernel):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         scene = cosim.load_scene(f"cases/{name}.toml", variant, list(overrides), "monolithic")
-    return cosim.simulate(scene).summary
+    return cosim.simulate(scene, estimate=False).summary
 
 
 def profile(name, variant, overrides, kernel, lines=15):

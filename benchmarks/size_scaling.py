@@ -176,7 +176,7 @@ def robot_state(series: str, t_start: float = T_START) -> dict:
     scene of a series (C has not touched yet, so the structure plays no part)."""
     from cosim import load_scene, simulate
     path, variant = _scene_file(series)
-    res = simulate(load_scene(path, variant, [f"t_end={t_start!r}"]))
+    res = simulate(load_scene(path, variant, [f"t_end={t_start!r}"]), estimate=False)
     if res.summary["contacts"]["C"]["count"]:
         raise ValueError(f"C touched before `t_start` = {t_start} s in {path.name}; start "
                          f"earlier")
@@ -252,7 +252,7 @@ def run_point(series: str, size: int, robot: dict, window: float = WINDOW) -> Po
     sub = next(s for s in system.subsystems if isinstance(s, StructureSubsystem))
     with _StructureClock() as clock:
         t0 = time.process_time()
-        res = simulate(scene)
+        res = simulate(scene, estimate=False)
         cpu_sim = time.process_time() - t0
     s = res.summary
     solve, steps = float(s["cpu_time_s"]), int(s["macro_steps"])

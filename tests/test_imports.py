@@ -174,7 +174,7 @@ def test_every_public_name_imports_as_before(package):
 def test_cosim_submodules_load_on_attribute_access():
     code = ("import sys, cosim\n"
             "assert 'cosim.scene.run' not in sys.modules\n"
-            "assert cosim.simulate.__module__ == 'cosim.scene.run'\n"
+            "assert cosim.simulate.__module__ == 'cosim.api'\n"
             "assert 'cosim.studies' not in sys.modules\n"
             "assert cosim.studies.__name__ == 'cosim.studies'\n"
             "assert cosim.plot.__name__ == 'cosim.plot'\n")

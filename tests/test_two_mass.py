@@ -406,7 +406,7 @@ def test_system_rollback_repeats_advance_bit_identically(two_mass, monkeypatch, 
         warnings.simplefilter("ignore")
         scene = cosim.load_scene(path, overrides=[
             *overrides, f"scheme.extrapolation_order={order}", f"t_end={t_end}"], scheme=scheme)
-    plain = cosim.simulate(scene)
+    plain = cosim.simulate(scene, estimate=False)      # advance counted: no companion
     assert plain.success, plain.message
 
     cls = cosim.COUPLING_SCHEMES[scheme]
@@ -427,7 +427,7 @@ def test_system_rollback_repeats_advance_bit_identically(two_mass, monkeypatch, 
         return again
 
     monkeypatch.setattr(cls, "advance", advance_twice)
-    doubled = cosim.simulate(scene)
+    doubled = cosim.simulate(scene, estimate=False)
     assert doubled.success, doubled.message
     assert n[0] == plain.n_windows and n[0] > 10
     assert not mismatches, f"advance not repeatable at t = {mismatches[:5]} ({label})"

@@ -24,7 +24,7 @@ __all__ = ["Subsystem", "RigidReference", "StepInput", "SimulationResult", "writ
 #: public name -> the submodule that defines it, imported on first use
 _LAZY = {**dict.fromkeys(("INTEGRATORS", "RK4", "TimeStepper"), "core.ode"),
          **dict.fromkeys(("SimulationResult", "write_outputs"), "core.result"),
-         **dict.fromkeys(("simulate", "run_scene"), "scene.run"),
+         **dict.fromkeys(("simulate", "run_scene"), "api"),
          **dict.fromkeys(("Scene", "SceneError", "load_scene"), "scene.load"),
          "COUPLING_SCHEMES": "core.schemes",
          **dict.fromkeys(("RigidReference", "StepInput", "Subsystem"), "core.subsystem")}

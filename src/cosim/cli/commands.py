@@ -93,21 +93,16 @@ def _print_summary(s: dict, out: Path | None, units=None) -> None:
         print(f"  wrote {out / 'summary.json'}, {out / 'series.npz'} and {out / 'scene.toml'}")
 
 
-def _estimate(scene, res, out: Path, request=None) -> None:
-    """Add the run's error estimate (summary key ``accuracy``) to its
-    summary and rewrite ``summary.json`` through the checked writer; a run
-    asked for an accuracy (``request``: :class:`cosim.cli.accuracy.Request`)
-    is checked and refined once (:mod:`cosim.studies.accurate`) first."""
-    from cosim.io.rundir import OutputFolder
-    from cosim.io.strict_json import json_writer
-    from cosim.studies.estimate import estimate_errors
+def _estimate(scene, res, out, request=None):
+    """:func:`cosim.cli.accuracy.estimate_and_check`."""
+    from cosim.cli.accuracy import estimate_and_check
+    return estimate_and_check(scene, res, out, request)
 
-    res.summary["accuracy"] = estimate_errors(scene, res, contact=request and request.contact)
-    if request is not None:
-        res = request.check(res)
-    with OutputFolder(out) as folder:
-        folder.write("summary.json", json_writer(res.summary, indent=2), "w")
-    return res
+
+def _outcome(summary: dict) -> int:
+    """:func:`cosim.cli.accuracy.exit_status`."""
+    from cosim.cli.accuracy import exit_status
+    return exit_status(summary)
 
 
 def _default_name(scene) -> str:
@@ -143,7 +138,8 @@ def _run(args) -> int:
 
     scene = load_scene(args.scene, args.variant, args.set or (), args.scheme)
     request = None
-    if args.accuracy is not None or "accuracy" in scene.data.get("scheme", {}):
+    table = scene.data.get("scheme")
+    if args.accuracy is not None or isinstance(table, dict) and "accuracy" in table:
         from cosim.cli.accuracy import Request
         request = Request.make(args, scene)      # the scene with the steps chosen for it
         scene = request.scene
@@ -157,8 +153,8 @@ def _run(args) -> int:
     progress = _progress_line(args.quiet)
     code, crash = None, None
     if request is not None:
-        request.run = lambda sc: simulate(sc, progress=_progress_line(args.quiet), out=out,
-                                          overwrite=True)
+        request.run = lambda sc, where: simulate(sc, progress=_progress_line(args.quiet),
+                                                 out=where, overwrite=True)
     try:
         res = simulate(scene, progress=progress, out=out, overwrite=args.overwrite)
     except RunInterrupted as exc:
@@ -179,6 +175,8 @@ def _run(args) -> int:
             res = _estimate(scene, res, out, request)
         except RunInterrupted as exc:      # the run is kept as it finished, without estimate
             code = _stop_code(exc.__cause__)
+        if request is not None and request.stopped is not None:
+            code = _stop_code(request.stopped)       # the refinement's: the first run kept
     _print_summary(res.summary, out, _units(scene))
     for name in scene.export:
         print(f"  wrote {out / (name + '.xdmf')} (open in ParaView)")
@@ -194,7 +192,9 @@ def _run(args) -> int:
               "scene file and the lines above", file=sys.stderr)
     if code is not None:
         return code
-    return 0 if res.success else 1
+    if not res.success:
+        return 1
+    return _outcome(res.summary)
 
 
 def _cmd_verify(args) -> int:
@@ -253,11 +253,12 @@ def _cmd_info(args) -> int:
         return _list_scenes(args)
     scene = load_scene(args.scene, args.variant, args.set or ())
     info = scene_info(scene, run_fmu=args.run_fmu)
-    if args.accuracy is not None or "accuracy" in scene.data.get("scheme", {}):
+    table = scene.data.get("scheme")
+    if args.accuracy is not None or isinstance(table, dict) and "accuracy" in table:
         from cosim.studies.accurate import asked
         accuracy, source = asked(scene, args.accuracy)
         from cosim.studies.choose import choose
-        info["accuracy"] = {"from": source, **choose(scene, accuracy).as_dict()}
+        info["accuracy"] = {"from": source, **choose(scene, accuracy, source=source).as_dict()}
     if args.json:
         print(dumps(info, indent=2))        # strict: a value not finite as null, noted
         return 0

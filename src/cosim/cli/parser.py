@@ -135,7 +135,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="choose the scheme and steps expected to meet a relative accuracy X "
                         "(1%%, 0.5 %%, 0.01) of the strike's peak and exit velocity at the "
                         "least CPU, check the run's estimate and refine once (default: the "
-                        "scene's scheme.accuracy)")
+                        "scene's scheme.accuracy); exit 3 when it is not met")
+    r.add_argument("--yes", action="store_true",
+                   help="with --accuracy: run a refinement counted at more than 10 times the "
+                        "first run's steps (not run without it)")
     r.add_argument("--quiet", action="store_true",
                    help="no progress line (it shows only on a terminal, after a second)")
     r.set_defaults(func=_cmd_run)

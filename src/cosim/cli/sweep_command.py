@@ -65,6 +65,17 @@ def _cmd_sweep(args) -> int:
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    if args.accuracy is not None:
+        from cosim.studies.accurate import conflicts
+        from cosim.studies.choose import DOUBLE_PRECISION_FLOOR
+        why = conflicts([f"{k}={','.join(map(str, v))}" for k, v in grid.items()], "--accuracy")
+        if why is None and args.accuracy < DOUBLE_PRECISION_FLOOR:
+            why = (f"--accuracy {args.accuracy:.3g} lies below {DOUBLE_PRECISION_FLOOR:g}, the "
+                   f"smallest relative accuracy a run in double precision can be asked "
+                   f"(`cosim.studies.choose.DOUBLE_PRECISION_FLOOR`)")
+        if why is not None:
+            print(f"error: {why}", file=sys.stderr)
+            return 2
     if n > sw.LARGE_GRID and not args.yes:
         print(f"error: the sweep has {n} points, more than {sw.LARGE_GRID}: each runs and gets "
               f"a folder of its own; check --set and --variants, or pass --yes to run them "

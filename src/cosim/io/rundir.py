@@ -183,9 +183,11 @@ class RunLock:
         try:
             os.ftruncate(fd, 0)
             os.write(fd, f"{os.getpid()}\n".encode())
-        except OSError as exc:
-            os.close(fd)
-            raise output_error(exc, self.path) from None
+        except OSError:
+            # the lock is the flock, held; the process id only names the owner to a
+            # second run.  A full disk here is said by the first file the run writes
+            # (naming that file), and the lock file goes on release as always
+            pass
         self._fd = fd
         return self
 

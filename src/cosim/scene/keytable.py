@@ -210,7 +210,7 @@ _MULTIBODY_INTEGRATOR = (
     K("max_step", "s", Varies(f"rk4: the macro step, at most {DEFAULT_MULTIBODY_STEP:g} s; "
                               "adaptive methods: not set"), "> 0",
       "the (largest) integrator step"),
-    K("rtol", "", None, "> 0; adaptive methods only", "relative tolerance"),
+    K("rtol", "", None, ">= 2.22e-14 (100 eps); adaptive methods only", "relative tolerance"),
     K("atol", "", None, "> 0; adaptive methods only", "absolute tolerance"),
     K("free_step", "s", None, "> 0; rk4 only",
       "a longer rk4 step while no contact the side hosts is closed"),

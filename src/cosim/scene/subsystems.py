@@ -62,6 +62,10 @@ def _multibody_spec(name: str, t: Table) -> MultibodySpec:
     method = integ.string("method", choices=INTEGRATORS)
     max_step = integ.number("max_step", None, rule=">0", unit="s")
     opts = {k: integ.number(k, rule=">0") for k in ("rtol", "atol") if integ.has(k)}
+    if "rtol" in opts:
+        from cosim.core.schemes.base import MIN_SOLVER_RTOL, SOLVER_RTOL_RULE
+        if not opts["rtol"] >= MIN_SOLVER_RTOL:
+            integ.error("rtol", f"must be {SOLVER_RTOL_RULE}, got {opts['rtol']!r}")
     if opts and method == "rk4":
         integ.error(sorted(opts)[0], "is not an option of the fixed-step `rk4` (it takes "
                                      "`max_step` and `free_step`); adaptive methods take "

@@ -11,13 +11,22 @@ and the striker's exit velocity (:func:`cosim.studies.strike.find_strike`).
 2. the run goes as any other, and the companion run estimates its error
    (:mod:`cosim.studies.estimate`);
 3. :func:`verdict` compares the estimate with the accuracy asked.  Where
-   the estimate says it is not met, :func:`refined` asks the model once
-   more for the accuracy scaled by how far the estimate missed (``X * X /
-   estimate``, times the model's safety factor), and that run is the one
-   kept.  Where the estimate is not reliable (a count that differs in the
-   companion, the monolithic scheme's no companion), the request is said
-   to be unchecked, with why, and nothing is refined.
+   the estimate says it is not met, :func:`refined` shortens the steps the
+   estimate depends on (those its companion coarsened, a side's step the
+   companion kept excepted) by ``(estimate / (SAFETY X)) ** (1 / p)``, ``p``
+   the model's lowest order for the scheme, and that run goes into a
+   folder of its own: the finished first run is replaced only when the
+   refined one finished with a lower estimate (a refined run whose estimate
+   did not fall with its steps says that those steps are not what limits
+   it).  A refinement counted at more than :data:`REFINE_WORK_LIMIT` times
+   the first run's steps is not run unless asked (``--yes``).  Where the
+   estimate is not reliable (a count that differs in the companion, the
+   monolithic scheme's no companion), the request is unchecked, with why,
+   and nothing is refined.
 
+A request always ends in one of :data:`OUTCOMES`: ``met`` (the estimate is
+at most the accuracy asked), ``not met`` (larger; ``cosim run`` exits with
+status 3) or ``unchecked`` (no reliable estimate; exit 0 with a warning).
 What was asked, chosen, estimated and decided is the summary's
 ``accuracy.request`` (:func:`request_record`).
 """
@@ -25,26 +34,69 @@ from __future__ import annotations
 
 import warnings
 
-__all__ = ["plan", "verdict", "judged", "refined", "request_record", "request_text", "asked"]
+__all__ = ["plan", "verdict", "judged", "refined", "request_record", "request_text", "asked",
+           "conflicts", "OUTCOMES", "REFINE_WORK_LIMIT", "EXIT_NOT_MET"]
+
+#: how a request ends
+OUTCOMES = ("met", "not met", "unchecked")
+
+#: the exit status of ``cosim run`` whose request was not met
+EXIT_NOT_MET = 3
+
+#: a refinement counted (:meth:`cosim.Scene.work`) at more than this many
+#: times the first run's steps runs only when asked (``cosim run --yes``),
+#: as a sweep of more than ``LARGE_GRID`` points does: the first run's cost
+#: was accepted, ten times it was not
+REFINE_WORK_LIMIT = 10.0
 
 
 def asked(scene, flag) -> tuple[float | None, str]:
     """The accuracy a run is asked for: ``flag`` (``--accuracy``, a string
     or a number) wins over the scene's ``scheme.accuracy``; ``(None, "")``
     when neither gives one.  Returns ``(accuracy, where it came from)``."""
-    from cosim.scene.checks import parse_accuracy
+    from cosim.scene.checks import SceneError, parse_accuracy
     if flag is not None:
         return parse_accuracy(flag, "--accuracy"), "--accuracy"
     table = scene.data.get("scheme", {})
     if isinstance(table, dict) and "accuracy" in table:
-        return parse_accuracy(table["accuracy"], "scheme.accuracy"), "scheme.accuracy"
+        try:
+            return parse_accuracy(table["accuracy"], "scheme.accuracy"), "scheme.accuracy"
+        except ValueError as exc:
+            raise SceneError(scene.path, "", str(exc)) from None
     return None, ""
 
 
-def plan(path, variant, overrides, accuracy: float, scheme=None, first=None):
+#: the keys whose values an accuracy request chooses: the co-simulation
+#: steps (``scheme.macro_step``, ``scheme.contact_step``, also under
+#: ``[scheme.NAME]``), the monolithic tolerances, and a side's own steps
+_CHOSEN = (r"scheme(\.[A-Za-z0-9_]+)?\.(macro_step|contact_step|rtol|atol)",
+           r"subsystems\.[^.=]+\.integrator\.(max_step|free_step|contact_step)")
+
+
+def conflicts(keys, source: str, no_estimate: str | None = None) -> str | None:
+    """Why an accuracy asked by ``source`` cannot go with the keys the user
+    set (``keys``: ``--set`` strings or key paths), or with ``no_estimate``
+    (what turned the estimate off, e.g. ``--no-estimate``); None when it
+    can.  The request chooses those steps itself and is checked against
+    the estimate."""
+    import re
+    if no_estimate:
+        return (f"{source} asks for an accuracy, which is checked against the run's error "
+                f"estimate: it cannot go with {no_estimate}; give one of them")
+    for text in keys:
+        key = str(text).split("=", 1)[0].strip()
+        if any(re.fullmatch(p, key) for p in _CHOSEN):
+            return (f"{source} chooses the steps itself: it cannot go with `{key}` set "
+                    f"(`{str(text).strip()}`); give one of them")
+    return None
+
+
+def plan(path, variant, overrides, accuracy: float, scheme=None, first=None,
+         source: str = "accuracy"):
     """The scene loaded with the scheme and steps :func:`choose` picks for
     ``accuracy``: ``(scene, choice)``; ``scheme``, when given, is the only
-    candidate; ``first``: the scene as given, when the caller loaded it."""
+    candidate; ``first``: the scene as given, when the caller loaded it;
+    ``source``: where the accuracy was asked (what a refusal names)."""
     from cosim.scene.load import load_scene
     from cosim.studies.choose import choose
 
@@ -52,7 +104,7 @@ def plan(path, variant, overrides, accuracy: float, scheme=None, first=None):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")      # shown again when the chosen scene loads
             first = load_scene(path, variant, list(overrides), scheme)
-    choice = choose(first, accuracy, schemes=[scheme] if scheme else None)
+    choice = choose(first, accuracy, schemes=[scheme] if scheme else None, source=source)
     return _load(path, variant, overrides, choice), choice
 
 
@@ -98,48 +150,89 @@ def verdict(acc: dict, choice, scene) -> tuple[float | None, str]:
     return max(e["relative_error"] for e in entries), ""
 
 
-def refined(path, variant, overrides, choice, estimated: float):
-    """The scene and choice of the one refinement: the model asked for
-    ``X * X / estimated`` (what it must aim at for the run to land on X,
-    when its prediction missed by ``estimated / X``), the scheme kept, and
-    the step no longer than the first times ``(SAFETY X / estimated) **
-    (1 / p)``, ``p`` the scheme's lower order in
-    :data:`cosim.studies.estimate.ORDERS` (the error falls as the step to
-    that power)."""
-    from cosim.scene.load import load_scene
-    from cosim.studies.choose import choose
+def _order(choice) -> float:
+    """The lowest order ``p`` the model gives the chosen scheme in the
+    contact's regime (the errors fall as the step to that power)."""
+    from cosim.studies.choose import MODEL, _params
+    par = _params(choice.knob.regime, choice.scheme, MODEL) or {}
+    return min((p for _, p, _ in par.values()), default=1.0)
 
-    from cosim.studies.choose import SAFETY
-    from cosim.studies.estimate import ORDERS
 
-    target = choice.accuracy * min(1.0, choice.accuracy / estimated)
-    # the estimate's own order says how much shorter the step must be (the
-    # model's step may be capped at the first one, so asking it alone may not
-    # shorten it)
-    p = min(ORDERS[choice.scheme].values())   # a scheme with an estimate has orders
-    at_most = choice.step * (SAFETY * choice.accuracy / estimated) ** (1.0 / p)
+def refined(path, variant, overrides, choice, scene, estimated: float, factor: float = 4.0):
+    """The scene and choice of the one refinement, or ``(None, None, why)``.
+
+    Every step the run's estimate depends on -- the steps its companion
+    made ``factor`` times longer (:func:`cosim.studies.companion.coarsened`:
+    the scheme's macro and contact steps, a side's own step unless the
+    companion kept it) -- is made ``f = (estimated / (SAFETY X)) ** (1 /
+    p)`` times shorter, ``p`` the model's lowest order for the scheme
+    (:func:`_order`), rounded down to two digits; a step the companion did
+    not change is not one the estimate depends on, and stays.  The
+    pre-flight check and the scene's work limit are the run's.
+
+    Returns
+    -------
+    (Scene, Choice, str)
+        The scene, its choice (the step in contact and the predicted errors
+        at it), and "" -- or None, None and why it cannot be refined.
+    """
+    import dataclasses
+
+    from cosim.errors import UnsafeStepError
+    from cosim.scene.checks import SceneError
+    from cosim.studies.choose import SAFETY, _floor2, predicted_error
+    from cosim.studies.companion import coarsened
+
+    f = (estimated / (SAFETY * choice.accuracy)) ** (1.0 / _order(choice))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        first = load_scene(path, variant, list(overrides), choice.scheme)
-    again = choose(first, target, choice.knob.contact, schemes=[choice.scheme],
-                   at_most=at_most)
-    return _load(path, variant, overrides, again), again
+        _, changed = coarsened(scene, factor)
+    ov = [f"{key}={_floor2(v / factor / f)!r}" for key, v in changed.items()
+          if not key.endswith((".approach_horizon", ".interface_tolerance"))]
+    step = _floor2(choice.step / f)
+    pred = predicted_error(choice.knob.regime, choice.scheme, choice.knob.omega * step)
+    again = dataclasses.replace(
+        choice, overrides=tuple(choice.overrides) + tuple(ov), step=step,
+        predicted_error=pred or dict(choice.predicted_error),
+        why=f"{choice.why}; refined: its steps {f:.3g} times shorter, as the first run's "
+            f"estimate asks")
+    shorter = f"its steps {f:.3g} times shorter"
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            # counted first without the scene's limit, so that a refusal says it in its words
+            counted = _load(path, variant, list(overrides) + ["guard.max_steps=1e300"], again)
+            work = counted.work().steps
+            if work > scene.max_steps:
+                return None, None, (f"{shorter} would take {work:.3g} integrator steps, more "
+                                    f"than the {scene.max_steps:.3g} a run may take "
+                                    f"(`guard.max_steps`)")
+            s = _load(path, variant, overrides, again)
+            system, sch = s.build()
+            sch.preflight(system)
+    except (SceneError, UnsafeStepError) as exc:
+        return None, None, f"{shorter} are refused: {exc}"
+    return s, again, ""
 
 
 def request_record(accuracy: float, source: str, choice, estimated, why: str,
-                   first=None, scene=None) -> dict:
+                   first=None, scene=None, note: str = "") -> dict:
     """The summary's ``accuracy.request``.
 
     ``first`` is ``(choice, estimated)`` of the run a refinement replaced.
-    ``met`` is True or False when the estimate was reliable, else None
-    (``unchecked`` says why)."""
+    ``outcome`` is one of :data:`OUTCOMES`; ``met`` is True or False when
+    the estimate was reliable, else None (``unchecked`` says why);
+    ``note`` says what became of a refinement (not run, stopped, or not
+    kept)."""
+    met = None if estimated is None else bool(estimated <= accuracy)
     out = {"accuracy": accuracy, "from": source, "scheme": choice.scheme,
            "overrides": list(choice.overrides), "step": choice.step,
            "contact": choice.knob.contact, "judged_on": judged(choice, scene),
            "predicted_error": dict(choice.predicted_error),
            "why": choice.why, "caveat": choice.caveat, "estimated_error": estimated,
-           "met": None if estimated is None else bool(estimated <= accuracy),
-           "unchecked": why or None, "refined": first is not None}
+           "outcome": "unchecked" if met is None else "met" if met else "not met",
+           "met": met, "unchecked": why or None, "refined": first is not None,
+           "note": note or None}
     if first is not None:
         out["first"] = {"overrides": list(first[0].overrides), "step": first[0].step,
                         "estimated_error": first[1]}
@@ -147,7 +240,7 @@ def request_record(accuracy: float, source: str, choice, estimated, why: str,
 
 
 def request_text(req: dict) -> list[str]:
-    """The terminal's lines of a request."""
+    """The terminal's lines of a request; the last says its outcome."""
     pct = f"{100 * req['accuracy']:.3g} %"
 
     def step(x):
@@ -157,13 +250,25 @@ def request_text(req: dict) -> list[str]:
         f = req["first"]
         lines.append(f"  the first run, at {step(f['step'])}, was estimated at "
                      f"{100 * f['estimated_error']:.2g} %: refined once, to {step(req['step'])}")
-    if req["estimated_error"] is None:
-        lines.append(f"  not checked: {req['unchecked']}")
-    else:
-        verdict_ = "met" if req["met"] else "NOT met after one refinement" if req["refined"] \
-            else "NOT met"
-        lines.append(f"  estimated {100 * req['estimated_error']:.2g} % on {req['judged_on']}: "
-                     f"{verdict_}")
+    if req.get("note"):
+        lines.append(f"  {req['note']}")
     if req["caveat"]:
         lines.append(f"  caveat: {req['caveat']}")
+    outcome = req.get("outcome") or ("unchecked" if req["met"] is None else
+                                     "met" if req["met"] else "not met")
+    if outcome == "unchecked":
+        lines.append(f"  unchecked: {req['unchecked']}")
+    else:
+        lines.append(f"  estimated {percent(req['estimated_error'], req['accuracy'])} on "
+                     f"{req['judged_on']}, asked {pct}: {outcome}")
     return lines
+
+
+def percent(x: float, asked: float) -> str:
+    """``x`` in percent at two digits, or more where two would show it equal
+    to ``asked`` (an estimate just past the accuracy asked)."""
+    for digits in (2, 3, 4, 6):
+        text = f"{100 * x:.{digits}g}"
+        if x == asked or text != f"{100 * asked:.{digits}g}":
+            return f"{text} %"
+    return f"{100 * x:.8g} %"

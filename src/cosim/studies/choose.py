@@ -50,9 +50,12 @@ from pathlib import Path
 from cosim.errors import UnsafeStepError
 from cosim.scene.checks import parse_accuracy
 from cosim.studies.companion import ASYMPTOTIC_OMEGA_H, MIN_FACTOR, OMEGA_H_MAX
+from cosim.studies.reach import (DOUBLE_PRECISION_FLOOR, MIN_RTOL, check_omega, reachable,
+                                 refusal)
 
 __all__ = ["Choice", "Knob", "MODEL", "MONOLITHIC_MODEL", "COST", "SAFETY",
-           "parse_accuracy", "knob", "predicted_error", "step_for", "choose"]
+           "DOUBLE_PRECISION_FLOOR", "MIN_RTOL", "parse_accuracy", "knob", "predicted_error",
+           "step_for", "reachable", "choose"]
 
 #: (regime, scheme) -> quantity -> (a, p, floor) of
 #: ``e = max(a (omega h) ** p, floor)``, from ``python
@@ -94,7 +97,6 @@ SAFETY = 0.9
 #: the quantities predicted
 QUANTITIES = ("peak", "exit_velocity")
 
-
 @dataclass(frozen=True)
 class Knob:
     """The step that integrates a contact, and the contact's frequency.
@@ -112,6 +114,14 @@ class Knob:
         The contact's angular frequency at its first touch [rad/s].
     macro_step : float
         The scheme's ``macro_step`` [s].
+    grasp : bool
+        Whether the contact is a grasp.
+    check_omega : float
+        The frequency [rad/s] at which the run's error estimate judges the
+        step (:func:`cosim.studies.companion.contact_omega` at the initial
+        pose, the largest over the contacts that limit the companion's
+        factor, see :func:`knob`): the step chosen is capped with it, so
+        that a step chosen checkable is the one the companion checks.
     """
 
     contact: str
@@ -121,6 +131,7 @@ class Knob:
     omega: float
     macro_step: float
     grasp: bool = False
+    check_omega: float = math.nan
 
     def overrides(self, h: float) -> list[str]:
         """The ``--set`` strings that make the step ``h`` [s]: the macro
@@ -135,6 +146,18 @@ def knob(scene, contact: str | None = None) -> Knob:
     """The step that integrates ``contact`` (the scene's strike by default,
     :func:`cosim.studies.strike.find_strike`; else its contact of the
     highest frequency) and its frequency at its first touch.
+
+    Two frequencies, one definition: a contact's frequency is ``sqrt(k m)``,
+    ``k`` its linearised normal stiffness and ``m`` the two sides' mobility
+    along its normal (:func:`cosim.studies.companion.contact_omega`).  The
+    model (:attr:`Knob.omega`) reads it at the contact's first touch, the
+    pose it was fitted at; the error estimate's companion reads it with that
+    same function at the initial pose, and :attr:`Knob.check_omega` is
+    what it reads there (the largest over the contacts whose steps set the
+    companion's factor: every contact the sides exchange, or every contact
+    the host side steps).  The cap on a checkable step (:data:`CHECKABLE`)
+    takes the higher of the two, so that the companion checks the step
+    chosen whichever pose is the stiffer.
 
     Raises
     ------
@@ -177,6 +200,7 @@ def knob(scene, contact: str | None = None) -> Knob:
                              "frequency: the accuracy model needs a linearisable penalty law")
     ln = system.links[c]
     opts = scene.scheme_options
+    check = check_omega(system, c)
     H = opts.get("macro_step") or math.nan
     rigid = [system.subsystems[s].rigid for s in (ln.sub_a, ln.sub_b)]
     grasp = ln.connection is not None and ln.connection.grasp is not None
@@ -190,10 +214,10 @@ def knob(scene, contact: str | None = None) -> Knob:
                              f"(it was measured where the sides exchange a contact and where "
                              f"a multibody's rk4 hosts one)")
         return Knob(ln.contact.name, "host_rk4", f"{spec.key}.integrator.max_step",
-                    spec.max_step, omegas[c], H, grasp)
+                    spec.max_step, omegas[c], H, grasp, check)
     key = "scheme.contact_step" if opts.get("contact_step") else "scheme.macro_step"
     return Knob(ln.contact.name, "exchanged", key, opts.get(key.split(".")[1]), omegas[c], H,
-                grasp)
+                grasp, check)
 
 
 def _params(regime: str, scheme: str, model=None) -> dict | None:
@@ -230,11 +254,13 @@ def step_for(regime: str, scheme: str, omega: float, accuracy: float, model=None
     where the model has no such scheme or its floor lies above that."""
     par = _params(regime, scheme, model)
     x = None if par is None else _largest_x(par, SAFETY * accuracy)
-    return None if x is None else _floor2(x / omega)
+    return None if x is None or not x / omega > 0.0 else _floor2(x / omega)
 
 
 def _floor2(h: float) -> float:
-    """``h`` rounded down to two significant digits."""
+    """``h`` (finite, > 0) rounded down to two significant digits."""
+    if not (math.isfinite(h) and h > 0.0):
+        raise ValueError(f"a step must be a finite number > 0, got {h!r}")
     e = math.floor(math.log10(h)) - 1
     return float(f"{math.floor(h / 10.0 ** e * (1 + 1e-12))}e{e}")
 
@@ -335,7 +361,10 @@ def _candidate(scene, k: Knob, scheme: str, accuracy: float, checkable: bool = T
         why = ("not measured in this regime" if _params(k.regime, scheme) is None else
                "its error floor lies above the accuracy asked")
         return {**out, "refused": why}
-    cap = _floor2(CHECKABLE[k.regime] / k.omega) if checkable else math.inf
+    # within the range at the frequency the companion reads (so that it checks the step)
+    # and at the model's (the range it was measured in): the higher of the two
+    w = max(k.omega, k.check_omega) if math.isfinite(k.check_omega) else k.omega
+    cap = _floor2(CHECKABLE[k.regime] / w) if checkable else math.inf
     if h > at_most:                  # a refinement: shorter than the model says
         out["model_step"], out["capped"], h = h, "refined", _floor2(at_most)
     elif h > cap:                    # the model allows a longer step than can be checked
@@ -348,7 +377,8 @@ def _candidate(scene, k: Knob, scheme: str, accuracy: float, checkable: bool = T
         system, sch = s.build()
         sch.preflight(system)
     except (UnsafeStepError, SceneError) as exc:
-        return {**out, "step": h, "refused": f"the pre-flight check refuses it: {exc}"}
+        return {**out, "step": h, "refused": f"the pre-flight check refuses the step it needs, "
+                                               f"{h:.3g} s: {exc}"}
     steps = s.work().steps
     return {**out, "step": h, "overrides": ov,
             "predicted_error": predicted_error(k.regime, scheme, k.omega * h),
@@ -367,13 +397,15 @@ CHECKABLE = {"exchanged": ASYMPTOTIC_OMEGA_H / MIN_FACTOR, "host_rk4": OMEGA_H_M
 
 
 def _rtol_for(accuracy: float) -> float | None:
-    """The monolithic scheme's rtol for ``accuracy`` (at most 1e-3)."""
+    """The monolithic scheme's rtol for ``accuracy`` (at most 1e-3); None
+    where it would lie below :data:`MIN_RTOL`."""
     r = _largest_x(MONOLITHIC_MODEL, SAFETY * accuracy)
-    return None if r is None else _floor2(min(r, 1e-3))
+    return None if r is None or r < MIN_RTOL else _floor2(min(r, 1e-3))
 
 
 def choose(scene, accuracy: float, contact: str | None = None,
-           schemes=None, checkable: bool = True, at_most: float = math.inf) -> Choice:
+           schemes=None, checkable: bool = True, at_most: float = math.inf,
+           source: str = "accuracy") -> Choice:
     """The scheme and steps that meet ``accuracy`` at the least predicted CPU.
 
     Parameters
@@ -395,6 +427,9 @@ def choose(scene, accuracy: float, contact: str | None = None,
         model's choice alone, at the least predicted CPU.
     at_most : float
         The longest step [s] (a refinement's, from the run's estimate).
+    source : str
+        Where the accuracy was asked (``--accuracy``, ``scheme.accuracy``,
+        ``accuracy``): what a refusal names.
 
     Returns
     -------
@@ -405,23 +440,28 @@ def choose(scene, accuracy: float, contact: str | None = None,
     ValueError
         If ``accuracy`` is not in (0, 1).
     SceneError
-        If no candidate meets it (every one refused), or the scene has no
-        contact the model knows.
+        If ``accuracy`` lies below what the scene can reach
+        (:func:`reachable`), if no candidate meets it (every one refused),
+        or if the scene has no contact the model knows.
     """
-    from cosim.scene.checks import SceneError
-    accuracy = parse_accuracy(accuracy, "accuracy")
+    accuracy = parse_accuracy(accuracy, source)
     k = knob(scene, contact)
     if schemes is None:         # host_rk4: the scheme does not matter, the scene's runs
         schemes = ([] if k.regime == "host_rk4" else
                    sorted({s for (r, s) in MODEL if r == k.regime} - {scene.scheme}))
         schemes = [scene.scheme] + schemes + (["monolithic"] if scene.scheme != "monolithic"
                                               else [])
+    low = reachable(k, schemes)
+    if accuracy < low:
+        raise refusal(scene, source, f"{accuracy:.3g} lies below {low:.2g}, the smallest "
+                      f"relative accuracy this scene can be asked of `{k.contact}` (with "
+                      f"{', '.join(schemes)}: the schemes' error floors and the precision of "
+                      f"doubles, see `cosim.studies.choose.reachable`); ask {low:.2g} or more")
     cands = [_candidate(scene, k, s, accuracy, checkable, at_most) for s in schemes]
     ok = [c for c in cands if "refused" not in c]
     if not ok:
-        raise SceneError(scene.path, "scheme.accuracy",
-                         f"no scheme meets {accuracy:.3g} by the model: " + "; ".join(
-                             f"{c['scheme']}: {c['refused']}" for c in cands))
+        raise refusal(scene, source, f"{accuracy:.3g}: no scheme meets it by the model: "
+                      + "; ".join(f"{c['scheme']}: {c['refused']}" for c in cands))
     best = min(ok, key=lambda c: (checkable and c["scheme"] == "monolithic",
                                   c["predicted_cpu_s"], c["scheme"] != scene.scheme))
     return Choice(best["scheme"], tuple(best["overrides"]), accuracy,

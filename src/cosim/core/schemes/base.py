@@ -50,6 +50,20 @@ def _relative(v):
 RELATIVE_RULE = (f">= {MIN_RELATIVE_TOLERANCE:.3g} (relative; float64 resolves no finer, "
                  f"`cosim.core.schemes.base.MIN_RELATIVE_TOLERANCE`)")
 
+#: the smallest ``rtol`` scipy's ``solve_ivp`` honours: it raises a smaller
+#: one to ``100 eps`` (with a warning) and runs at that, so a scene asking
+#: less would be run at another tolerance than it says
+MIN_SOLVER_RTOL = 100 * MIN_RELATIVE_TOLERANCE
+
+
+def _solver_rtol(v):
+    return math.isfinite(v) and v >= MIN_SOLVER_RTOL
+
+
+#: the rule of a solver's ``rtol``, as an error states it
+SOLVER_RTOL_RULE = (f">= {MIN_SOLVER_RTOL:.3g} (100 machine epsilons: scipy's solvers raise a "
+                    f"smaller rtol to it)")
+
 
 #: j + 1 for the rows j of force polynomials: int s^j ds over [0, 1] is 1 / (j + 1)
 _POWERS_PLUS_ONE = np.arange(1.0, 9.0)[:, None]

@@ -6,7 +6,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from .base import CouplingError, CouplingScheme, Option, _pos
+from .base import SOLVER_RTOL_RULE, CouplingError, CouplingScheme, Option, _pos, _solver_rtol
 
 __all__ = ["Monolithic"]
 
@@ -123,7 +123,7 @@ class Monolithic(CouplingScheme):
     options: ClassVar[dict] = {
         "method": Option(str, "DOP853", lambda v: v in _METHODS,
                          "one of " + ", ".join(_METHODS)),
-        "rtol": Option(float, 1e-10, _pos, "> 0"),
+        "rtol": Option(float, 1e-10, _solver_rtol, SOLVER_RTOL_RULE),
         "atol": Option(float, 1e-12, _pos, "> 0"),
         "max_step": Option(float, math.inf, lambda v: v > 0, "> 0 s"),
         "output_interval": Option(float, None, _pos, "> 0 s"),
