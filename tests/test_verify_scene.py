@@ -202,10 +202,10 @@ PAGE = {
     "slack": Claim(V, "falls short of the estimate's by more than 1",
                    "cosim.studies.verify_scene.ORDER_SLACK", 1.0),
 }
-THREE_MASS = (Claim(V, "confirmed order 6.16 for contact A's peak", "cosim verify three_mass",
-                    6.16, abs=0.005),
-              Claim(V, "the reference measures 2.54", "cosim verify three_mass", 2.54,
-                    abs=0.005))
+THREE_MASS = (Claim(V, "confirmed order 2.07 for the exit rate of `robot/x`",
+                    "cosim verify three_mass --variant f10", 2.07, abs=0.005),
+              Claim(V, "where the reference measures 0.859", "cosim verify three_mass --variant f10",
+                    0.859, abs=5e-4))
 
 
 def test_the_pages_numbers_of_verify_scene():
@@ -220,25 +220,39 @@ def test_the_pages_numbers_of_verify_scene():
     assert_reproduced(PAGE["slack"], vs.ORDER_SLACK)
 
 
-def test_three_mass_fails_the_order_check_as_the_page_says(capsys):
-    """The page's three_mass finding: the ledger, the agreement and the counts
-    pass, the order the estimate confirmed on contact A's peak is not the one
-    the reference measures, with the figures the page quotes (the scene and
-    two copies moved by round-off give the same verdicts)."""
+def test_three_mass_f10_fails_the_order_check_as_the_page_says(capsys):
+    """The page's three_mass f10 finding: the ledger, the agreement and the
+    counts pass, the order the estimate confirmed on the exit rate of
+    `robot/x` is not the one the reference measures, with the figures the
+    page quotes (the scene and two copies moved by round-off give the same
+    verdicts)."""
     for c in THREE_MASS:
         assert_printed(c)
-    for moved in cli_copies(load_scene("three_mass"), 3):
-        assert cli.main(["verify", "three_mass", *moved]) == 1
+    for moved in cli_copies(load_scene("three_mass", "f10"), 3):
+        assert cli.main(["verify", "three_mass", "--variant", "f10", *moved]) == 1
         lines = _lines(capsys)
         assert _verdicts(lines) == {"energy ledger": "PASS", "schemes agree": "PASS",
                                     "counts robust to round-off": "PASS",
                                     "estimate order confirmed": "FAIL"}
         order = next(ln for ln in lines if ": estimate order confirmed: " in ln)
-        assert "peak of A: the estimate confirmed order" in order
+        assert "exit rate of robot/x: the estimate confirmed order" in order
         if not moved:
             claimed, measured = (float(x) for x in re.search(
-                r"peak of A: the estimate confirmed order (\S+), the reference measures (\S+) ",
+                r"robot/x: the estimate confirmed order (\S+), the reference measures (\S+) ",
                 order).groups())
             assert_reproduced(THREE_MASS[0], claimed)
             assert_reproduced(THREE_MASS[1], measured)
             assert claimed - measured > 1.0
+
+
+def test_three_mass_passes_since_orders_past_the_band_are_bounds(capsys):
+    """The page: three_mass passes every check now that an order above 5 is a
+    bound, not a confirmed order (its three runs showed 6.16 on A's peak);
+    the same verdicts on copies moved by round-off."""
+    from cosim.studies.ladder import ORDER_BAND
+    assert_printed(Claim(V, "an order above 5, one above RK4's", "cosim.studies.ladder.ORDER_BAND",
+                         ORDER_BAND[1]))
+    for moved in cli_copies(load_scene("three_mass"), 3):
+        assert cli.main(["verify", "three_mass", *moved]) == 0
+        lines = _lines(capsys)
+        assert set(_verdicts(lines).values()) == {"PASS"}
