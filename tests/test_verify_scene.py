@@ -52,7 +52,8 @@ normal = [0.0, 1.0]
 law = { type = "kelvin_voigt", contact_stiffness = 2e5, contact_damping = 40.0 }
 """
 
-NAMES = ("energy ledger", "schemes agree", "counts robust to round-off", "estimate order")
+NAMES = ("energy ledger", "schemes agree", "counts robust to round-off",
+         "estimate order confirmed")
 
 
 def _lines(capsys):
@@ -64,19 +65,23 @@ def _verdicts(lines):
     return {n: next(ln.split("  ", 1)[0] for ln in lines if f": {n}: " in ln) for n in NAMES}
 
 
-@pytest.mark.parametrize("args", [["spring_drop"], ["spring_drop", "--variant", "kelvin_voigt"],
-                                  ["manipulator_wall", "--variant", "penalty"]])
-def test_verify_a_shipped_scene(args, capsys):
-    """Every check passes (the order is not in the estimate yet: SKIP), one
-    line each, exit 0; the same for copies moved by round-off."""
+@pytest.mark.parametrize("args, order", [
+    (["spring_drop"], "SKIP"), (["spring_drop", "--variant", "kelvin_voigt"], "PASS"),
+    (["manipulator_wall", "--variant", "penalty"], "SKIP")])
+def test_verify_a_shipped_scene(args, order, capsys):
+    """Every check passes, one line each, exit 0; the order check is skipped
+    where the estimate bounds every quantity (it claims no order), and passes
+    on kelvin_voigt, whose exit rate's confirmed order the reference does
+    not contradict; the same for copies moved by round-off."""
     variant = args[2] if len(args) > 2 else None
     for moved in cli_copies(load_scene(args[0], variant), 3):
         assert cli.main(["verify", *args, *moved]) == 0
         lines = _lines(capsys)
         assert _verdicts(lines) == {"energy ledger": "PASS", "schemes agree": "PASS",
                                     "counts robust to round-off": "PASS",
-                                    "estimate order": "SKIP"}
-        assert lines[-1] == "all checks passed (1 skipped)"
+                                    "estimate order confirmed": order}
+        assert lines[-1] == ("all checks passed (1 skipped)" if order == "SKIP"
+                             else "all checks passed")
         assert len(lines) == 5
 
 
@@ -115,12 +120,13 @@ def test_verify_a_scene_written_here(tmp_path, capsys):
 
 
 def test_a_step_the_guard_lets_pass_fails_the_ledger(capsys):
-    """spring_drop's body integrated at 0.2 ms (omega dt = 0.2): RK4 loses
+    """spring_drop's body integrated at 0.4 ms (omega dt = 0.4): RK4 loses
     energy through the contact, which the guard (it stops growth) lets pass
-    and no estimate accounts for (the companion keeps that step): the ledger
-    fails, exit 1.  The loss is measured here too: far above round-off."""
-    over = ["--set", "subsystems.body.integrator.max_step=2e-4", "--set",
-            "scheme.macro_step=2e-4"]
+    and no estimate accounts for (the companions keep that step, which 1.41x
+    would take past omega h = 0.5): the ledger fails, exit 1.  The loss is
+    measured here too: far above round-off."""
+    over = ["--set", "subsystems.body.integrator.max_step=4e-4", "--set",
+            "scheme.macro_step=4e-4"]
     for moved in cli_copies(load_scene("spring_drop"), 3)[1:]:   # under round-off too
         assert cli.main(["verify", "spring_drop", *over, *moved]) == 1
     capsys.readouterr()
@@ -130,7 +136,7 @@ def test_a_step_the_guard_lets_pass_fails_the_ledger(capsys):
     assert "round-off only" in next(ln for ln in lines if ": energy ledger: " in ln)
     assert lines[-1].startswith("1 check(s) failed")
     res = simulate(load_scene("spring_drop", overrides=[
-        "subsystems.body.integrator.max_step=2e-4", "scheme.macro_step=2e-4"]))
+        "subsystems.body.integrator.max_step=4e-4", "scheme.macro_step=4e-4"]))
     e = res.summary["energy"]
     assert res.status == "finished"
     assert e["initial"] - e["final"] > 1e-9 * e["initial"]      # lost, not round-off
@@ -191,17 +197,15 @@ PAGE = {
                        "cosim.studies.verify_scene.ROUNDOFF_COPIES", 2.0),
     "margin": Claim(V, "never below 10 times its spread over the moved copies",
                     "cosim.studies.verify_scene.ROUNDOFF_MARGIN", 10.0),
-    "safety": Claim(V, "by at most 4 times the run's estimate of its error",
-                    "cosim.studies.verify_scene.SAFETY", 4.0),
+    "safety": Claim(V, "by at most 3 times the run's estimate of its error",
+                    "cosim.studies.verify_scene.SAFETY", 3.0),
+    "slack": Claim(V, "falls short of the estimate's by more than 1",
+                   "cosim.studies.verify_scene.ORDER_SLACK", 1.0),
 }
-THREE_MASS = (Claim(V, "differs from the reference by 4.19e-05", "cosim verify three_mass",
-                    4.19e-05, abs=5e-08),
-              Claim(V, "where four times its estimate allows 4.7e-06", "cosim verify three_mass",
-                    4.7e-06, abs=5e-08),
-              Claim(V, "the energy ledger's 0.000383 J", "cosim verify three_mass",
-                    0.000383, abs=5e-07),
-              Claim(V, "above the 0.000106 J its estimate accounts for",
-                    "cosim verify three_mass", 0.000106, abs=5e-07))
+THREE_MASS = (Claim(V, "confirmed order 2.07 for the exit rate of `robot/x`",
+                    "cosim verify three_mass --variant f10", 2.07, abs=0.005),
+              Claim(V, "where the reference measures 0.859", "cosim verify three_mass --variant f10",
+                    0.859, abs=5e-4))
 
 
 def test_the_pages_numbers_of_verify_scene():
@@ -213,31 +217,42 @@ def test_the_pages_numbers_of_verify_scene():
     assert_reproduced(PAGE["copies_cm"], max(vs.ROUNDOFF_COPIES))
     assert_reproduced(PAGE["margin"], vs.ROUNDOFF_MARGIN)
     assert_reproduced(PAGE["safety"], vs.SAFETY)
-    from cosim.studies.estimate import DEFAULT_FACTOR
-    assert vs.SAFETY == DEFAULT_FACTOR      # "the estimate's factor r"
+    assert_reproduced(PAGE["slack"], vs.ORDER_SLACK)
 
 
-def test_three_mass_fails_two_checks_as_the_page_says(capsys):
-    """The page's three_mass finding: the ledger and the agreement fail, with
-    the figures it quotes (the scene and two copies moved by round-off give
-    the same verdicts)."""
+def test_three_mass_f10_fails_the_order_check_as_the_page_says(capsys):
+    """The page's three_mass f10 finding: the ledger, the agreement and the
+    counts pass, the order the estimate confirmed on the exit rate of
+    `robot/x` is not the one the reference measures, with the figures the
+    page quotes (the scene and two copies moved by round-off give the same
+    verdicts)."""
     for c in THREE_MASS:
         assert_printed(c)
-    for moved in cli_copies(load_scene("three_mass"), 3):
-        assert cli.main(["verify", "three_mass", *moved]) == 1
+    for moved in cli_copies(load_scene("three_mass", "f10"), 3):
+        assert cli.main(["verify", "three_mass", "--variant", "f10", *moved]) == 1
         lines = _lines(capsys)
-        assert _verdicts(lines) == {"energy ledger": "FAIL", "schemes agree": "FAIL",
+        assert _verdicts(lines) == {"energy ledger": "PASS", "schemes agree": "PASS",
                                     "counts robust to round-off": "PASS",
-                                    "estimate order": "SKIP"}
+                                    "estimate order confirmed": "FAIL"}
+        order = next(ln for ln in lines if ": estimate order confirmed: " in ln)
+        assert "exit rate of robot/x: the estimate confirmed order" in order
         if not moved:
-            agree = next(ln for ln in lines if ": schemes agree: " in ln)
-            assert "worst exit rate of robot/y" in agree
-            actual, allowed = (float(x) for x in re.search(
-                r": (\S+) from the monolithic reference, allowed (\S+) ", agree).groups())
-            assert_reproduced(THREE_MASS[0], actual)
-            assert_reproduced(THREE_MASS[1], allowed)
-            ledger = next(ln for ln in lines if ": energy ledger: " in ln)
-            imb, tol = (float(x) for x in re.search(r"= (\S+) J, tolerance (\S+) J",
-                                                    ledger).groups())
-            assert_reproduced(THREE_MASS[2], imb)
-            assert_reproduced(THREE_MASS[3], tol)
+            claimed, measured = (float(x) for x in re.search(
+                r"robot/x: the estimate confirmed order (\S+), the reference measures (\S+) ",
+                order).groups())
+            assert_reproduced(THREE_MASS[0], claimed)
+            assert_reproduced(THREE_MASS[1], measured)
+            assert claimed - measured > 1.0
+
+
+def test_three_mass_passes_since_orders_past_the_band_are_bounds(capsys):
+    """The page: three_mass passes every check now that an order above 5 is a
+    bound, not a confirmed order (its three runs showed 6.16 on A's peak);
+    the same verdicts on copies moved by round-off."""
+    from cosim.studies.ladder import ORDER_BAND
+    assert_printed(Claim(V, "an order above 5, one above RK4's", "cosim.studies.ladder.ORDER_BAND",
+                         ORDER_BAND[1]))
+    for moved in cli_copies(load_scene("three_mass"), 3):
+        assert cli.main(["verify", "three_mass", *moved]) == 0
+        lines = _lines(capsys)
+        assert set(_verdicts(lines).values()) == {"PASS"}
