@@ -23,7 +23,7 @@ from cosim.core.schemes import get_scheme
 from cosim.core.subsystem import RigidReference
 from cosim.core.system import ContactLink, CoupledSystem
 
-__all__ = ["build_system", "build_side"]
+__all__ = ["build_system", "build_side", "embedded_step_limit"]
 
 #: RK4's stability limit on an undamped oscillator is omega*dt = 2*sqrt(2).
 _RK4_LIMIT = 2.0 * math.sqrt(2.0)
@@ -198,6 +198,36 @@ def build_side(side, scene, default_step: float, macro_step: float | None = None
     return _structure(side, scene, macro_step)
 
 
+def embedded_step_limit(system, c: int):
+    """The largest RK4 step the build accepts for the side that integrates
+    embedded contact ``c`` of ``system`` (half RK4's stability limit,
+    ``sqrt(2) / omega``, with ``omega`` the contact's frequency against that
+    side's port mobility and, for a structure, its highest kept mode, which
+    the same RK4 steps while the contact is closed): ``(limit, the side's
+    step, its key, omega)``, or None where no RK4 step integrates ``c`` (a
+    coupler contact, a rigid law, another integrator).  ``cosim info``
+    prints this limit, so the step it prints is one the build accepts."""
+    ln = system.links[c]
+    if ln.placement != "embedded" or ln.contact.law.rigid:
+        return None
+    subs = system.subsystems
+    s = system.embedded[c][0]
+    port = ln.port_a if s == ln.sub_a else ln.port_b
+    mob = subs[s].port_mobility(port, ln.contact.normal)
+    omega = math.sqrt(stiffest_normal(ln)[0] * mob)
+    if isinstance(subs[s], MultibodySubsystem):
+        if subs[s].integrator.name != "rk4":
+            return None
+        dt, key = subs[s].integrator.max_step, "max_step"
+    else:   # a structure: RK4 while the contact is closed, over every kept mode
+        rk4 = getattr(subs[s], "_rk4", None)
+        if rk4 is None:
+            return None
+        omega = max(omega, float(np.max(subs[s].omega)))
+        dt, key = rk4.max_step, "contact_step"
+    return 0.5 * _RK4_LIMIT / omega, dt, key, omega
+
+
 def build_system(scene, scheme: str | None = None, *, run_fmu: bool = True):
     """Build the subsystems, contacts and the coupling scheme of ``scene``.
 
@@ -263,23 +293,12 @@ def build_system(scene, scheme: str | None = None, *, run_fmu: bool = True):
         links = settle_fmu_contacts(scene, subs, links)
     system = CoupledSystem(subs, links)
     for c, ln in enumerate(links):
-        if ln.placement != "embedded":
+        found = embedded_step_limit(system, c)
+        if found is None:
             continue
+        limit, dt, key, omega = found
         s = system.embedded[c][0]
-        port = ln.port_a if s == ln.sub_a else ln.port_b
-        if ln.contact.law.rigid:
-            continue
-        mob = subs[s].port_mobility(port, ln.contact.normal)
-        omega = math.sqrt(stiffest_normal(ln)[0] * mob)
-        if isinstance(subs[s], MultibodySubsystem):
-            if subs[s].integrator.name != "rk4":
-                continue
-            dt, key = subs[s].integrator.max_step, "max_step"
-        else:   # a structure: RK4 while the contact is closed, over every kept mode
-            omega = max(omega, float(np.max(subs[s].omega)))
-            dt, key = subs[s]._rk4.max_step, "contact_step"
-        if omega * dt > 0.5 * _RK4_LIMIT:
-            limit = 0.5 * _RK4_LIMIT / omega
+        if dt > limit:
             advised = _printed_below(limit, lambda h, w=omega: not w * h > 0.5 * _RK4_LIMIT)
             raise SceneError(scene.path, f"subsystems.{subs[s].name}.integrator.{key}",
                              f"is {dt:.3g} s, too large for contact `{ln.contact.name}` "

@@ -36,9 +36,6 @@ __all__ = ["scene_info", "fmu_info", "first_touch", "contact_time", "FIRST_TOUCH
 #: [s] CPU time the run that finds each contact's first touch may take
 FIRST_TOUCH_BUDGET_S = 2.0
 
-#: RK4's stability limit on an undamped oscillator, omega * dt.
-RK4_LIMIT = 2.0 * math.sqrt(2.0)
-
 #: fewest samples in a contact's duration that draw it as a shape
 SAMPLES_TO_DRAW = 4
 
@@ -239,8 +236,13 @@ def _contact_info(system, c, scene, touch=None, why_not=None) -> dict:
             own = ln.port_a if host == ln.sub_a else ln.port_b
             omega = math.sqrt(k * system.subsystems[host].port_mobility(own, n))
         closed_form = system.subsystems[host].closed_form_contacts
-        out["max_integrator_step_s"] = ({"closed_form": None} if closed_form
-                                       else {"rk4": RK4_LIMIT / omega})
+        from cosim.scene.build import embedded_step_limit
+        found = None if closed_form else embedded_step_limit(system, c)
+        # an adaptive integrator (DOP853, RK45, ...): its error control sets the step
+        method = getattr(getattr(system.subsystems[host], "integrator", None), "name", None)
+        out["max_integrator_step_s"] = ({"closed_form": None} if closed_form else
+                                       {"rk4": found[0]} if found is not None else
+                                       {method: None} if method else {})
     return out
 
 
