@@ -291,6 +291,8 @@ def _cmd_info(args) -> int:
                 unit = f" [{v['unit']}]" if v["unit"] else ""
                 print(f"      {v['name']}{start}{unit}: {v['causality']} {v['variability']} "
                       f"{v['type']}" + (f", {v['description']}" if v["description"] else ""))
+    for w in info.get("warnings", []):
+        print(f"  warning: {w['message']}")
     for name, c in info["contacts"].items():
         where = c["placement"] + (f" in {c['host']}" if "host" in c else "")
         print(f"  contact {name}: {c['law']} ({where}) between {c['between'][0]} and "

@@ -364,7 +364,15 @@ def scene_info(scene, *, budget_s: float = FIRST_TOUCH_BUDGET_S, run_fmu: bool =
         "subsystems": subs,
         "work": scene.work(system=system).as_dict(),
         "contacts": contacts,
+        "warnings": _plausibility(scene, system),
     }
+
+
+def _plausibility(scene, system) -> list[dict]:
+    """What looks like a unit slip in the scene's structures, as a run's
+    summary lists it (:func:`cosim.scene.plausible.structure_warnings`)."""
+    from cosim.scene.plausible import structure_warnings
+    return structure_warnings(scene, system)
 
 
 def _confirm_steps(scene, contacts: dict, budget: float) -> None:
