@@ -384,6 +384,43 @@ def verdicts_text(t: dict, scenes: int) -> str:
                       for k, (a, b, ok) in v.items())
 
 
+#: the summary table's rows: target key -> what it holds
+SUMMARY_ROWS = {"agree": "the estimate within 3x (below X/10 under X/100), ≥ 90 % of pairs",
+                "met": "`--accuracy 1%` met, on ≥ 90 % of the scenes",
+                "honest": "met, or said not met / unchecked, on every scene",
+                "own_cpu": "the request's own run within 1.5x of the cheapest row that meets 1 %",
+                "whole_cpu": "the request with its estimates within 3x of that row"}
+
+#: the same, short: the columns of the summary across
+SUMMARY_SHORT = {"agree": "estimate within 3x (≥ 90 %)", "met": "1 % met (≥ 90 %)",
+                 "honest": "met or said not (all)", "own_cpu": "own run ≤ 1.5x (all)",
+                 "whole_cpu": "with estimates ≤ 3x (all)"}
+
+
+def _cell(t: dict, n: int, key: str) -> str:
+    a, b, ok = verdicts(t, n)[key]
+    return f"{a} of {b}: {'met' if ok else '**NOT met**'}"
+
+
+def summary_table(runs: list[tuple[str, dict, int]], across: bool = False,
+                  head: str = "run") -> str:
+    """The targets against each run (its heading, totals and scenes), met /
+    total and the verdict: a row per target (docs/accuracy.md), or with
+    ``across`` a row per run (docs/performance.md), ``head`` the first
+    column's heading."""
+    if across:
+        return "\n".join([f"| {head} | " + " | ".join(SUMMARY_SHORT.values()) + " |",
+                          "|---|" + "---|" * len(SUMMARY_SHORT)] +
+                         [f"| {h} | " + " | ".join(_cell(t, n, k) for k in SUMMARY_SHORT) + " |"
+                          for h, t, n in runs])
+    lines = ["| target | " + " | ".join(h for h, _, _ in runs) + " |",
+             "|---|" + "---|" * len(runs)]
+    for key, what in SUMMARY_ROWS.items():
+        lines.append(f"| {what} | " + " | ".join(_cell(t, n, key) for _, t, n in runs) + " |")
+    return "\n".join(lines)
+
+
+
 def _x(r) -> str:
     return "-" if r is None else f"{r:.2g}x"
 
