@@ -6,7 +6,7 @@ compared with the fine monolithic reference of
 :func:`cosim.studies.bench.reference`:
 
 - the scene's default run (its own scheme and steps), its error estimated
-  by the companion run (:func:`cosim.studies.estimate.estimate_errors`);
+  by its companions (:func:`cosim.studies.estimate.estimate_errors`);
 - the run ``cosim run --accuracy 1%`` keeps (:class:`cosim.cli.accuracy.Request`:
   the model's choice, its estimate, one refinement where the estimate
   misses).
@@ -39,8 +39,7 @@ Run from the project root::
     python benchmarks/accuracy_validation.py --table DIR    # the table of a finished run
 
 It writes ``DIR/validation.json`` through cosim's checked writer and prints
-the Markdown table and totals of docs/accuracy.md ("Accuracy on request:
-validation").  The published run is in
+the tables and totals of docs/accuracy.md; the published run is in
 ``benchmarks/results/accuracy_validation``.
 """
 from __future__ import annotations
@@ -338,14 +337,13 @@ def pair_totals(pairs: list[dict]) -> dict:
 
 def cpu_totals(own: list, whole: list) -> dict:
     """The CPU ratios (None: no bench row meets X) against their targets."""
-    own = [r for r in own if r is not None]
-    whole = [r for r in whole if r is not None]
-    return {"cpu_cases": len(own), "own_within": sum(r <= CPU_TARGET for r in own),
-            "own_median": statistics.median(own) if own else None,
-            "own_max": max(own) if own else None,
-            "whole_within": sum(r <= ESTIMATE_TARGET for r in whole),
-            "whole_median": statistics.median(whole) if whole else None,
-            "whole_max": max(whole) if whole else None}
+    out = {}
+    for key, rs, target in (("own", own, CPU_TARGET), ("whole", whole, ESTIMATE_TARGET)):
+        rs = [r for r in rs if r is not None]
+        out |= {"cpu_cases": len(rs), f"{key}_within": sum(r <= target for r in rs),
+                f"{key}_median": statistics.median(rs) if rs else None,
+                f"{key}_max": max(rs) if rs else None}
+    return out
 
 
 def totals(cases: list[dict]) -> dict:
@@ -418,7 +416,6 @@ def summary_table(runs: list[tuple[str, dict, int]], across: bool = False,
     for key, what in SUMMARY_ROWS.items():
         lines.append(f"| {what} | " + " | ".join(_cell(t, n, key) for _, t, n in runs) + " |")
     return "\n".join(lines)
-
 
 
 def _x(r) -> str:
