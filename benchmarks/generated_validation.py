@@ -242,9 +242,8 @@ def totals_text(data: dict) -> str:
             f"{t['integrator_steps']}); "
             f"{t['step_bound_stopped']} of the {t['step_bound']} printed as a necessary bound "
             f"only were stopped or refused.")
-    if t["validated"]:
-        out += "\n\n" + _av().verdicts_text(t, t["validated"])
-    out += (f"\n- every printed step that runs runs at {STEP_FRACTION}x: "
+    out += "\n\n" + (_av().verdicts_text(t, t["validated"]) + "\n" if t["validated"] else "")
+    out += (f"- every printed step that runs runs at {STEP_FRACTION}x: "
             f"{t['step_runs_finished']} of {t['step_runs']}, "
             f"**{'met' if t['step_runs_finished'] == t['step_runs'] else 'NOT met'}**")
     return out
