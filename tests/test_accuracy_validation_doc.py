@@ -1,6 +1,7 @@
-"""The numbers of docs/accuracy.md, "Accuracy on request: validation",
-held to the published run of benchmarks/accuracy_validation.py, and one
-cheap case of it run again here."""
+"""The numbers of docs/accuracy.md, "Accuracy on request: validation", held
+to the published runs of benchmarks/accuracy_validation.py (the shipped
+scenes) and benchmarks/generated_validation.py (scenes no one chose), and
+one cheap case of the first run again here."""
 import json
 import math
 
@@ -11,6 +12,10 @@ from documented import flat as _flat, load_script, page_section
 
 SCRIPT = ROOT / "benchmarks" / "accuracy_validation.py"
 RUN = ROOT / "benchmarks" / "results" / "accuracy_validation"
+GENERATED = ROOT / "benchmarks" / "results" / "generated_validation"
+
+#: relative errors below this are round-off: only their size is compared
+ROUNDOFF = 1e-8
 
 
 @pytest.fixture(scope="module")
@@ -19,8 +24,18 @@ def av():
 
 
 @pytest.fixture(scope="module")
+def gv():
+    return load_script(ROOT / "benchmarks" / "generated_validation.py", "generated_validation")
+
+
+@pytest.fixture(scope="module")
 def data():
     return json.loads((RUN / "validation.json").read_text())
+
+
+@pytest.fixture(scope="module")
+def gen():
+    return json.loads((GENERATED / "validation.json").read_text())
 
 
 @pytest.fixture(scope="module")
@@ -35,40 +50,208 @@ def test_the_run_covers_every_case_and_its_totals_are_its_own(av, data):
     assert data["accuracy"] == av.ACCURACY == 0.01
 
 
-def test_the_table_is_the_published_runs(av, data, section):
+def test_the_generated_run_has_forty_scenes_and_its_own_totals(gv, gen):
+    assert gen["n"] >= 40 and len(gen["cases"]) == gen["n"]
+    assert gen["totals"] == gv.totals(gen["cases"])
+    assert all(c["validation"] is not None for c in gen["cases"])
+
+
+def test_the_tables_are_the_published_runs(av, data, section):
     assert av.table(data) in section
 
 
-def test_the_verdicts_follow_from_the_errors(av, data):
-    for c in data["cases"]:
-        for run in ("default", "request"):
-            for p in c[run]["pairs"].values():
+def _judged(av, run):
+    for c in run:
+        for part in ("default", "request"):
+            for p in c[part]["pairs"].values():
                 assert p["agrees"] == av.agrees(p["estimated"], p["actual"])
         r = c["request"]
         assert r["met"] == (r["count"] == r["count_ref"] and all(
             r["pairs"][q]["actual"] is not None and r["pairs"][q]["actual"] <= 0.01
             for q in av.QUANTITIES))
+        assert r["outcome"] == ("unchecked" if r["request_met"] is None else
+                                "met" if r["request_met"] else "not met")
         if c["cheapest"] is not None:
             ok = [b for b in c["bench"] if b.get("meets")]
             assert c["cheapest"]["cpu_s"] == min(b["cpu_s"] for b in ok)
             assert math.isclose(c["cpu_ratio"], r["cpu_s"] / c["cheapest"]["cpu_s"])
+            assert math.isclose(c["own_ratio"], r["own_cpu_s"] / c["cheapest"]["cpu_s"])
+            assert r["own_cpu_s"] <= r["cpu_s"]
 
 
-def test_agreement_is_within_3x_or_both_round_off(av):
+def test_the_verdicts_follow_from_the_errors(av, data, gen):
+    _judged(av, data["cases"])
+    _judged(av, [c["validation"] for c in gen["cases"]])
+
+
+def test_agreement_is_within_3x_or_below_x_over_10_where_the_error_is_below_x_over_100(av):
     assert av.agrees(0.01, 0.0034) and av.agrees(0.01, 0.029)
     assert not av.agrees(0.01, 0.0032) and not av.agrees(0.01, 0.031)
-    assert av.agrees(1e-17, 3e-9) and not av.agrees(1e-17, 2e-8)
+    assert av.agrees(9e-4, 1e-17) and not av.agrees(1.1e-3, 9e-5)
+    assert av.agrees(1e-3, 1.01e-4) is False
     assert av.agrees(None, 0.01) is None and av.agrees(0.01, None) is None
 
 
-def test_the_totals_the_page_states(data, section):
-    t, text = data["totals"], _flat(section)
-    assert f"agree within 3x on {t['agree']} of the {t['with_estimate']} pairs" in text
-    assert f"{t['without_estimate']} of the {t['pairs']} pairs have no estimate" in text
-    assert f"1 % is met on {t['met']} of {t['cases']} scenes" in text
-    assert (f"within 1.5x of the cheapest bench row on {t['cpu_within_target']} of "
-            f"{t['cases'] - t['no_bench_row']}") in text
-    assert f"median {t['cpu_ratio_median']:.2g}x, worst {t['cpu_ratio_max']:.2g}x" in text
+def test_honest_is_met_or_said_not_met_or_unchecked(av):
+    assert av.honest({"met": True, "outcome": "met"})
+    assert av.honest({"met": False, "outcome": "not met"})
+    assert av.honest({"met": False, "outcome": "unchecked"})
+    assert not av.honest({"met": False, "outcome": "met"})
+
+
+def _runs(data, gen):
+    t, g = data["totals"], gen["totals"]
+    return [(f"shipped scenes ({t['cases']})", t, t["cases"]),
+            (f"generated scenes ({g['validated']})", g, g["validated"])]
+
+
+def test_the_totals_the_pages_state(av, data, gen, section):
+    """Both runs' totals against each target stand on docs/accuracy.md (a
+    row per target) and docs/performance.md (a row per run), as the script
+    makes them from the published JSON."""
+    assert av.summary_table(_runs(data, gen)) in section
+    perf = page_section("docs/performance.md", "Accuracy on request")
+    assert av.summary_table(_runs(data, gen), across=True, head=(
+        "the issue's targets, 2026-12-02 (runs, misses: {doc}`accuracy`)")) in perf
+    # what a cell says, from the counts
+    v = av.verdicts(data["totals"], data["totals"]["cases"])
+    assert v["honest"] == (data["totals"]["honest"], 8, data["totals"]["honest"] == 8)
+    assert v["agree"][2] == (v["agree"][0] >= 0.9 * v["agree"][1])
+
+
+def test_the_stable_steps_the_page_states(gen, section):
+    g, text = gen["totals"], _flat(section)
+    assert (f"run at 0.9x on the generated scenes: {g['step_runs_finished']} of the "
+            f"{g['step_runs']} steps printed as ones that run (or unmarked) finished (the "
+            f"integrator steps, unmarked: {g['integrator_finished']} of "
+            f"{g['integrator_steps']}); none was printed as a necessary bound only") in text
+    assert g["step_bound"] == 0
+    steps = [s for c in gen["cases"] for s in c["at_0.9"]]
+    # every macro step printed `runs` finished; every integrator step was refused
+    assert all(s["status"] == "finished" for s in steps if s["scheme"] is not None)
+    assert all(s["kind"] == "runs" for s in steps if s["scheme"] is not None)
+    assert all(s["status"] == "refused" and "too large for contact" in s["message"]
+               for s in steps if s["scheme"] is None)
+    assert "Every macro step `cosim info` prints as one that `runs` ran at 0.9x" in text
+    assert "each of those runs was refused" in text
+
+
+def _pairs(cases):
+    return [p for c in cases for run in ("default", "request") for p in c[run]["pairs"].values()
+            if p["actual"] is not None]
+
+
+def _range(xs, fmt):
+    return f"{min(xs):{fmt}}x to {max(xs):{fmt}}x"
+
+
+def test_what_decides_the_estimates_misses(data, gen, section):
+    text = _flat(section)
+    shipped, generated = data["cases"], [c["validation"] for c in gen["cases"]]
+    said = []
+    for cases in (shipped, generated):
+        ps = _pairs(cases)
+        rich = [p for p in ps if p["kind"] == "richardson"]
+        bound = [p for p in ps if p["kind"] == "bound"]
+        miss = [p for p in ps if not p["agrees"]]
+        over = [p for p in miss if p["kind"] == "bound" and p["estimated"] > p["actual"]]
+        said.append((sum(p["agrees"] for p in rich), len(rich), sum(p["agrees"] for p in bound),
+                     len(bound), len(over), len(miss),
+                     [p["estimated"] / p["actual"] for p in over if p["actual"] >= 1e-4]))
+    (r1, n1, b1, m1, o1, x1, q1), (r2, n2, b2, m2, o2, x2, q2) = said
+    assert (f"agrees on {r1} of the {n1} such pairs of the shipped scenes and {r2} of the {n2} "
+            f"of the generated ones") in text
+    assert f"{b1} of {m1} bounds agree on the shipped scenes and {b2} of {m2} on the" in text
+    assert (f"Of the misses, {o1} of {x1} on the shipped scenes and {o2} of {x2} on the "
+            f"generated ones are bounds above the actual error") in text
+    assert (f"{_range(q1, '.1f')} above it on the shipped scenes and {min(q2):.1f}x to "
+            f"{max(q2):.0f}x on the generated ones") in text
+    rich_over = [p["estimated"] / p["actual"] for p in _pairs(generated)
+                 if p["kind"] == "richardson" and not p["agrees"]]
+    assert all(r > 3 for r in rich_over)
+    assert (f"Richardson over-estimates {len(rich_over)} generated pairs "
+            f"({_range(rich_over, '.1f')})") in text
+    under = [(c["scene"], run, q, p) for c in generated for run in ("default", "request")
+             for q, p in c[run]["pairs"].items() if p["actual"] is not None
+             and p["estimated"] is not None and p["estimated"] < p["actual"] / 3]
+    (scene, run, q, p), = under
+    assert (scene.endswith("gen0-013.toml"), run, q, p["kind"]) == (True, "request", "peak",
+                                                                    "bound")
+    assert f"a bound at {p['estimated'] / p['actual']:.2f}x the actual peak error" in text
+    assert not [p for p in _pairs(shipped) if p["estimated"] is not None
+                and p["estimated"] < p["actual"] / 3]
+    none = [(c["scene"], c["variant"]) for c in shipped for run in ("default", "request")
+            for p in c[run]["pairs"].values() if p["estimated"] is None]
+    assert sorted(set(none)) == [("brachiation", None), ("three_mass", "f1000")]
+    assert all("past 0.4" in p["why"] for c in shipped for p in c["default"]["pairs"].values()
+               if p["estimated"] is None)
+    g25 = _gen(gen, "gen0-025")
+    assert all("closed 4 times, 3 in the finer companion" in p["why"]
+               for p in g25["default"]["pairs"].values())
+    assert "gen0-025's finer companion closes the strike 3 times, the run 4" in text
+
+
+def _gen(gen, name):
+    c, = [c for c in gen["cases"] if c["scene"] == name]
+    return c["validation"]
+
+
+def test_what_decides_the_requests_misses(data, gen, section):
+    text = _flat(section)
+    b = _case(data, "brachiation")["request"]
+    assert (b["met"], b["outcome"]) == (False, "unchecked") and "is a grasp" in b["unchecked"]
+    assert f"{100 * b['pairs']['exit_velocity']['actual']:.2g} %" == "3.4 %"
+    assert "brachiation misses 1 % on the exit velocity (3.4 %) and says `unchecked`" in text
+    reqs = {c["scene"]: c["validation"]["request"] for c in gen["cases"]}
+    missed = {k: r for k, r in reqs.items() if not r["met"]}
+    said_not = [k for k, r in missed.items() if r["outcome"] != "met"]
+    wrong = sorted(k for k, r in missed.items() if r["outcome"] == "met")
+    assert wrong == ["gen0-017", "gen0-025"]
+    assert (f"Of the {len(missed)} generated scenes that miss, {len(said_not)} say `not met`; "
+            f"two say `met` wrongly") in text
+    p = reqs["gen0-017"]["pairs"]["peak"]
+    assert (f"{100 * p['estimated']:.2g} %", f"{100 * p['actual']:.2g} %") == ("0.89 %", "1.1 %")
+    assert p["agrees"] and p["estimated"] <= 0.01 < p["actual"]
+    assert "gen0-017's estimate of the peak error, 0.89 %, is within 3x of the actual 1.1 %" \
+        in text
+    r = reqs["gen0-025"]
+    assert (r["count"], r["count_ref"]) == (4, 3)
+    assert all(r["pairs"][q]["actual"] <= 0.01 for q in ("peak", "exit_velocity"))
+    assert "gen0-025's request closes the strike 4 times where the reference closes it 3" in text
+    shy = [r for r in reqs.values() if r["met"] and r["outcome"] == "not met"]
+    kinds = [max(r["pairs"].values(), key=lambda p: p["estimated"])["kind"] for r in shy]
+    assert all(r["request_estimate"] > 0.01 for r in shy)
+    assert (f"{len(shy)} generated requests that meet 1 % say `not met`: an over-estimate above "
+            f"1 % after the refinement ({kinds.count('bound')} of them bounds)") in text
+
+
+def test_what_decides_the_cpu(data, gen, section):
+    text = _flat(section)
+    t, g = data["totals"], gen["totals"]
+    assert (f"The request's own run costs {t['own_median']:.2g}x the cheapest row (median) on "
+            f"the shipped scenes and {g['own_median']:.2g}x on the generated ones") in text
+    x = [c["choice_over_cheapest"] for c in data["cases"]]
+    assert f"costs {min(x):.2g} to {max(x):.2g} times the cheapest row on the shipped" in text
+    plan = [c["request"]["stages_s"]["plan"] / c["request"]["stages_s"]["run"]
+            for c in data["cases"]]
+    assert f"{min(plan):.2g} to {max(plan):.2g} times the run on the shipped scenes" in text
+    s33, s34 = (_gen(gen, n)["request"] for n in ("gen0-033", "gen0-034"))
+    assert s33["scheme"] == s34["scheme"] == "implicit"
+    assert (f"{s33['stages_s']['plan']:.2g} and {s34['stages_s']['plan']:.2g} s against runs "
+            f"of {s33['stages_s']['run']:.2g} and {s34['stages_s']['run']:.2g} s") in text
+    cases = [c["validation"] for c in gen["cases"]]
+    within = [c for c in cases if c["own_ratio"] <= 1.5]
+    largest = sorted(cases, key=lambda c: -c["cheapest"]["cpu_s"])[:len(within)]
+    assert sorted(id(c) for c in within) == sorted(id(c) for c in largest)
+    low = min(c["cheapest"]["cpu_s"] for c in within)
+    assert (f"The {len(within)} generated scenes within 1.5x are the {len(within)} whose "
+            f"cheapest row takes {low:.2g} s or more") in text
+    share = [c["default"]["stages_s"]["estimate"] / c["default"]["stages_s"]["run"]
+             for c in data["cases"] if c["default"]["companion"] != "not run"]
+    assert f"cost {min(share):.2g} to {max(share):.2g} times the run they check" in text
+    whole = [c["request"]["cpu_s"] / c["request"]["own_cpu_s"] for c in data["cases"]]
+    assert (f"the request with its estimates costs {min(whole):.2g} to {max(whole):.2g} times "
+            f"its own run") in text
 
 
 def _case(data, scene):
@@ -78,138 +261,45 @@ def _case(data, scene):
 
 def test_spring_drop_runs_again_as_published(av, data, tmp_path):
     """spring_drop undamped run here against the published run: the same
-    scheme and step, errors within 1e-6 of their value (one contact, no
-    train to amplify another machine's round-off), the same verdicts; each
-    verdict is held away from its threshold by a margin far above that, so
-    a few ulps cannot turn it."""
+    scheme, step and outcome, errors within 1e-6 of their value (one contact,
+    no train to amplify another machine's round-off; round-off itself by its
+    size), the same verdicts; each verdict is held away from its threshold by
+    a margin far above that, so a few ulps cannot turn it."""
     pub = _case(data, "spring_drop")
     name, variant, contact = next(c for c in av.CASES if c[0] == "spring_drop")
     now = av.validate_case(name, variant, contact, tmp_path / "cache", repeat=1)
     assert now["reference"]["count"] == pub["reference"]["count"]
+    x = av.ACCURACY
     for run in ("default", "request"):
         for q in av.QUANTITIES:
             a, b = now[run]["pairs"][q], pub[run]["pairs"][q]
             assert a["agrees"] == b["agrees"], (run, q)
+            assert a["kind"] == b["kind"], (run, q)
             for k in ("estimated", "actual"):
                 if b[k] is None:
                     assert a[k] is None
-                elif b[k] < av.ROUNDOFF:             # round-off itself: its size only
-                    assert a[k] < av.ROUNDOFF
+                elif b[k] < ROUNDOFF:
+                    assert a[k] < ROUNDOFF
                 else:
                     assert a[k] == pytest.approx(b[k], rel=1e-6), (run, q, k)
-            if b["estimated"] is not None and min(b["estimated"], b["actual"]) >= av.ROUNDOFF:
+            if b["estimated"] is None:
+                continue
+            if b["actual"] < x / av.SMALL:       # judged on the estimate below X/10
+                assert abs(math.log(b["actual"] / (x / av.SMALL))) > 0.05, (run, q)
+                assert abs(math.log(b["estimated"] / (x / 10))) > 0.05, (run, q)
+            else:
                 r = math.log(b["estimated"] / b["actual"])
                 assert abs(abs(r) - math.log(av.AGREE)) > 0.05, (run, q)
     r, p = now["request"], pub["request"]
-    assert (r["scheme"], r["step"], r["refined"], r["met"]) == \
-        (p["scheme"], p["step"], p["refined"], p["met"])
+    assert (r["scheme"], r["step"], r["refined"], r["met"], r["outcome"]) == \
+        (p["scheme"], p["step"], p["refined"], p["met"], p["outcome"])
     assert max(p["pairs"][q]["actual"] for q in av.QUANTITIES) < 0.9 * av.ACCURACY
-
-
-def _pct(x):
-    return f"{100 * x:.2g} %"
-
-
-def test_what_the_page_says_decides_the_misses(data, section):
-    text, t = _flat(section), data["totals"]
-    assert f"(it is {round(100 * t['agree'] / t['with_estimate'])} % of the estimates given" \
-        in text
-    assert f"an estimate is given for {t['with_estimate']} of the {t['pairs']} pairs" in text
-    # every estimate reads the exit velocity at the strike contact's release, as the bench
-    assert all(c[run]["exit_at"].startswith(f"release of {c['contact']} ")
-               for c in data["cases"] for run in ("request",))
-    f1 = _case_v(data, "f1")
-    off = [(max(p["estimated"] / p["actual"], p["actual"] / p["estimated"]), p["actual"])
-           for run in ("default", "request") for p in f1[run]["pairs"].values()
-           if p["agrees"] is False]
-    lo, hi = min(o for o, _ in off), max(o for o, _ in off)
-    assert f"On three_mass f1 {len(off)} of 4 pairs lie {lo:.1f}x to {hi:.1f}x off" \
-        .lower() in text.lower()
-    assert f"{min(a for _, a in off):.0e}" == "2e-06" and f"{max(a for _, a in off):.0e}" \
-        == "4e-05" and "at errors of 2e-6 to 4e-5" in text
-    g = _case(data, "ground_multicontact")["default"]["pairs"]["exit_velocity"]
-    assert f"{g['estimated'] / g['actual']:.0f}" == "13" and "estimated 13x too high" in text
-    # within the range the request's estimates on f100 agree as the page says
-    f100 = _case_v(data, "f100")["request"]["pairs"]
-    assert (_pct(f100["peak"]["estimated"]), _pct(f100["peak"]["actual"])) == \
-        ("0.025 %", "0.026 %")
-    assert (_pct(f100["exit_velocity"]["estimated"]), _pct(f100["exit_velocity"]["actual"])) \
-        == ("0.05 %", "0.041 %")
-    assert "0.025 % against 0.026 % on the peak and 0.05 % against 0.041 %" in text
-
-
-def _case_v(data, variant):
-    c, = [c for c in data["cases"] if c["variant"] == variant]
-    return c
-
-
-def test_the_scatter_past_the_range_the_page_quotes(data, section):
-    """C's peak error on three_mass f100 at 55, 77 and 110 us (the bench rows
-    of the request at 18 us are elsewhere: this reads the published
-    reference's peak and runs the three steps)."""
-    import warnings
-    import cosim
-    from conftest import CASES
-    from cosim.studies.metrics import impact_metrics
-    ref = _case_v(data, "f100")["reference"]
-    got = []
-    for h in (5.5e-5, 7.7e-5, 1.1e-4):
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            scene = cosim.load_scene(CASES / "three_mass.toml", "f100",
-                                     [f"scheme.contact_step={h}"])
-            m = impact_metrics(cosim.simulate(scene), "C", "robot/arm")
-        got.append(f"{100 * (m['peak'] / ref['peak'] - 1):+.2f} %")
-    assert got == ["-0.24 %", "+0.38 %", "-0.25 %"]
-    assert ("C's peak error is -0.24 % at 55 us, +0.38 % at 77 us, -0.25 % at 110 us"
-            in _flat(section))
-
-
-def test_the_counts_and_the_grasp_the_page_names(data, section):
-    text = _flat(section)
-    f1000 = _case_v(data, "f1000")
-    r = f1000["request"]
-    assert (r["scheme"], r["step"]) == ("jacobi", 5.8e-6) and "Jacobi at 5.8 us" in text
-    assert "closed 9 times, 10 in the companion; at 2x the step too" in r["unchecked"]
-    assert all("past 0.4" in q["why"] for q in f1000["default"]["pairs"].values())
-    assert f1000["default"]["companion"] == "not run"
-    assert "f1000's own run (C at omega h 1.0) gets no companion" in text
-    b = _case(data, "brachiation")
-    r = b["request"]
-    assert r["count"] == b["reference"]["count"] == 3 and not r["met"]
-    assert _pct(r["pairs"]["exit_velocity"]["actual"]) == "3.4 %"
-    assert r["request_met"] is None and "is a grasp" in r["unchecked"]
-    assert "not 1 % on the exit velocity (3.4 %), and it says it is not checked (a grasp)" in text
-
-
-def test_where_the_cpu_goes(av, data, section):
-    text = _flat(section)
-    x = [c["choice_over_cheapest"] for c in data["cases"] if c["choice_over_cheapest"]]
-    assert f"costs {min(x):.1f} to {max(x):.1f} times the cheapest row" in text
-    b = _case(data, "brachiation")["request"]["stages_s"]
-    assert f"{b['plan']:.2g} s on brachiation against a run of {b['run']:.2g} s" in text
-    share = [c["request"]["stages_s"]["estimate"] / c["request"]["stages_s"]["run"]
-             for c in data["cases"] if c["scene"] == "three_mass"]
-    assert f"({min(share):.1f} to {max(share):.1f} of the run's CPU on three_mass" in text
-    t = data["totals"]
-    assert (f"the default run's estimate costs at most 30 % of the run's CPU on "
-            f"{t['estimate_within_target']} of {t['cases']} (median "
-            f"{t['estimate_share_median']:.2f})") in text
-    own = {av.case_label(c): (c["default"]["factor"], av.estimate_share(c["default"]),
-                              c["default"]["companion"]) for c in data["cases"]}
-    assert f"{own['three_mass f1'][1]:.2f} of the run on f1, {own['three_mass f10'][1]:.2f} " \
-        f"on f10, {own['ground_multicontact kA1e6'][1]:.2f} on ground_multicontact, " \
-        f"{own['spring_drop undamped'][1]:.1f} on spring_drop" in text
-    assert own["beam_impact"][0] == 2 and f"factor is 2 ({own['beam_impact'][1]:.2f})" in text
-    blind = [v[1] for v in own.values() if v[2] == "not run"]
-    assert f"no companion runs ({min(blind):.2f} to {max(blind):.2f}" in text
 
 
 def test_the_companions_take_2_24_of_the_runs_macro_steps_on_f10():
     """The finer companion (at 0.71x the steps) takes 1.49 of the run's
     macro steps, the coarser (1.41x) 0.75: the approach to each onset adds
-    steps that do not scale (the single 4x companion that docs/performance.md
-    describes took 0.27)."""
+    steps that do not scale."""
     import warnings
     import cosim
     from conftest import CASES
@@ -222,22 +312,20 @@ def test_the_companions_take_2_24_of_the_runs_macro_steps_on_f10():
     assert [f"{c['work_share']['macro_steps']:.2f}" for c in acc["companions"]] == ["1.49", "0.75"]
 
 
-def test_on_three_mass_the_cheapest_row_lies_past_the_cap(data, section):
-    """What makes 1.5x out of reach there: the cheapest row that meets 1 %
-    takes a longer step than the request may (the cap), so the request's run
-    costs at least the row's before its companion."""
-    rows = [c for c in data["cases"] if c["scene"] == "three_mass"]
-    assert len(rows) == 4
-    for c in rows:
-        assert c["cheapest"]["step"] > c["request"]["step"], c["variant"]
-        assert c["cpu_ratio"] > 1.5
-    assert "cheapest row's step is longer than the cap (every three_mass variant)" in \
-        _flat(section)
-
-
-def test_the_changelog_quotes_the_published_totals(data):
-    t = data["totals"]
-    text = _flat((ROOT / "CHANGELOG.md").read_text(encoding="utf-8").split("## 0.12.0")[0])
-    assert (f"{t['agree']} of the {t['with_estimate']} estimates given agree within 3x with "
-            f"the bench's reference, {t['without_estimate']} of {t['pairs']} pairs get none"
-            ) in text
+def test_the_changelog_quotes_the_published_totals(av, data, gen):
+    text = _flat((ROOT / "CHANGELOG.md").read_text(encoding="utf-8").split("## 0.13.0")[0])
+    for t, n, what in ((data["totals"], data["totals"]["cases"], "shipped"),
+                       (gen["totals"], gen["totals"]["validated"], "generated")):
+        v = av.verdicts(t, n)
+        assert (f"{what}: estimates within 3x on {v['agree'][0]} of {v['agree'][1]} pairs, "
+                f"1 % met on {v['met'][0]} of {v['met'][1]} scenes, honest on "
+                f"{v['honest'][0]}, own run within 1.5x on {v['own_cpu'][0]} of "
+                f"{v['own_cpu'][1]}, with estimates within 3x on {v['whole_cpu'][0]}") in text
+    rich = [p for cases in (data["cases"], [c["validation"] for c in gen["cases"]])
+            for p in _pairs(cases) if p["kind"] == "richardson"]
+    assert (f"Richardson's estimate agrees on {sum(p['agrees'] for p in rich)} of {len(rich)} "
+            f"pairs") in text
+    runs = ((data["totals"], data["totals"]["cases"]), (gen["totals"], gen["totals"]["validated"]))
+    assert "No target is met on both" in text and not any(
+        all(av.verdicts(t, n)[k][2] for t, n in runs)
+        for k in ("agree", "met", "honest", "own_cpu", "whole_cpu"))
