@@ -48,7 +48,7 @@ def test_met_is_exit_0(tmp_path, capsys):
 
 
 def test_not_met_is_exit_3_with_the_estimate(tmp_path, capsys):
-    """1e-4 %: the first run is estimated at 0.07 %; its refinement would take
+    """1e-4 %: the first run is estimated at 0.1 % (a bound); its refinement would take
     38 times its steps, more than 10 times, so it is not run without --yes."""
     out = tmp_path / "run"
     assert cli.main(["run", SPRING_DROP, "--accuracy", "1e-6", "--out", str(out),
@@ -241,11 +241,13 @@ def test_the_step_chosen_checkable_is_checked_by_the_companion(monkeypatch):
     """A contact whose first touch comes at a pose of lower mobility than the
     start (a user's scene: 502.8 Hz at the first touch, 518.7 Hz at the
     start): the cap on a checkable step is read at the companion's own
-    frequency, so the companion at 2x the step stays within omega h 0.4."""
+    frequency, so both companions (the coarser at sqrt(2) times the step) stay
+    within omega h 0.4: every contact is read from the whole ladder."""
     from cosim.scene import info
     from cosim.scene.load import load_scene
     from cosim.studies.choose import _load, choose
-    from cosim.studies.companion import exchanged_omega_h, fitting_factor
+    from cosim.studies.companion import exchanged_omega_h, ladder_plan
+    from cosim.studies.estimate import DEFAULT_FACTOR
 
     touch = info.first_touch
 
@@ -260,8 +262,8 @@ def test_the_step_chosen_checkable_is_checked_by_the_companion(monkeypatch):
         chosen = _load(scene, c.overrides, c.scheme)
         system = chosen.build()[0]
     assert c.knob.check_omega > c.knob.omega * 1.05        # 0.969 / sqrt(0.8) = 1.08
-    factor, beyond = fitting_factor(4, exchanged_omega_h(chosen, system))
-    assert beyond == {} and factor >= 2
+    finer_only, run_past = ladder_plan(DEFAULT_FACTOR, exchanged_omega_h(chosen, system))
+    assert finer_only == {} and run_past == {}
 
 
 # ------------------------------------------------------------ a full disk
@@ -304,7 +306,7 @@ def test_python_gives_the_estimate_as_the_command_line(tmp_path):
         quiet = cosim.run_scene(SPRING_DROP, overrides=["output.estimate=false"])
         on = cosim.run_scene(SPRING_DROP, overrides=["output.estimate=false"], estimate=True)
     acc = res.summary["accuracy"]
-    assert acc["exit"]["body/x"]["reliable"] and acc["factor"] == 4
+    assert acc["exit"]["body/x"]["reliable"] and acc["factor"] == pytest.approx(2 ** 0.5)
     assert _summary(tmp_path / "a")["accuracy"] == json.loads(json.dumps(acc))
     assert cli.main(["run", SPRING_DROP, "--out", str(tmp_path / "b"), "--quiet"]) == 0
     cli_acc = _summary(tmp_path / "b")["accuracy"]
