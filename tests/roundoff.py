@@ -17,13 +17,15 @@ from cosim.studies.roundoff import perturbed_overrides, spread
 COPIES = 5
 
 
-def outcomes(scene, outcome, copies: int = COPIES, scheme=None) -> list:
-    """``outcome(result)`` of the scene and of each moved copy."""
+def outcomes(scene, outcome, copies: int = COPIES, scheme=None, estimate: bool = False) -> list:
+    """``outcome(result)`` of the scene and of each moved copy (the run
+    alone: its error estimate, whose companions are runs of their own, only
+    with ``estimate``)."""
     out = []
     with warnings.catch_warnings():     # the copies repeat the warnings of the scene's load
         warnings.simplefilter("ignore")
         for s in spread(scene, copies):
-            out.append(outcome(cosim.simulate(s, scheme=scheme)))
+            out.append(outcome(cosim.simulate(s, scheme=scheme, estimate=estimate)))
     return out
 
 

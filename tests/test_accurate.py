@@ -110,12 +110,12 @@ def test_the_exit_rate_is_read_at_the_strikes_release():
 
 def test_the_scenes_scheme_accuracy_asks_too_and_the_flag_wins(tmp_path):
     out = tmp_path / "a"
-    assert cli.main(["run", str(CASES / "spring_drop.toml"), "--set", "scheme.accuracy=0.001",
+    assert cli.main(["run", str(CASES / "spring_drop.toml"), "--set", "scheme.accuracy=0.01",
                      "--out", str(out), "--quiet"]) == 0
     req = _summary(out)["accuracy"]["request"]
-    assert (req["accuracy"], req["from"]) == (0.001, "scheme.accuracy")
+    assert (req["accuracy"], req["from"]) == (0.01, "scheme.accuracy")
     out = tmp_path / "b"
-    assert cli.main(["run", str(CASES / "spring_drop.toml"), "--set", "scheme.accuracy=0.001",
+    assert cli.main(["run", str(CASES / "spring_drop.toml"), "--set", "scheme.accuracy=0.01",
                      "--accuracy", "5%", "--out", str(out), "--quiet"]) == 0
     req = _summary(out)["accuracy"]["request"]
     assert (req["accuracy"], req["from"]) == (0.05, "--accuracy")

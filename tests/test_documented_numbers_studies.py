@@ -77,10 +77,12 @@ def row(page: str, prefix: str, cells: list[str], command: str) -> list[Claim]:
     return out
 
 
-def simulate(scene):
+def simulate(scene, estimate: bool = False):
+    """The run alone (its estimate only with ``estimate``: a test of the
+    estimate calls :func:`cosim.studies.estimate.estimate_errors`)."""
     with warnings.catch_warnings():      # options the scheme ignores, unsafe steps asked for
         warnings.simplefilter("ignore")
-        return cosim.simulate(scene)
+        return cosim.simulate(scene, estimate=estimate)
 
 
 def load(path, variant=None, overrides=(), scheme=None):
@@ -1130,7 +1132,7 @@ def test_the_summary_keys_are_the_pages(tmp_path):
     """Every key the page lists is in a real summary.json (a run with a
     connection and a rigid impact is not needed: the keys are always there),
     and every key there is on the page."""
-    res = simulate(load(THREE_MASS, "f100"))
+    res = simulate(load(THREE_MASS, "f100"))        # `accuracy` has its own paragraph
     cosim.write_outputs(res, tmp_path / "run", load(THREE_MASS, "f100"))
     s = json.loads((tmp_path / "run" / "summary.json").read_text())
     text = _section(CM, "`summary.json` has", "`accuracy` (left out")

@@ -64,7 +64,7 @@ def test_a_step_longer_than_the_run_is_judged_as_the_whole_run(key, step, tmp_pa
                                            "--set", f"scheme.{key}={step!r}"])
     assert code == 2 and s is None
     assert cap.err.startswith("error: ") and "Traceback" not in cap.err
-    assert f"macro step 0.02 s (the whole run: `{key}` = {step:.3g} s is longer)" in cap.err
+    assert f"macro step 0.02 s (the whole run: `scheme.{key}` = {step:.3g} s is longer)" in cap.err
     assert "overflow" not in cap.err and "nan" not in cap.err
     safe = float(cap.err.split("largest safe macro step is ")[1].split(" s")[0])
     assert 0.0 < safe < 1.0 / 1000.0     # below 1/omega: a few per cent of a period

@@ -78,10 +78,13 @@ def test_load_and_build_do_not_import_each_other():
     assert not any(m.startswith("cosim.scene.build") for m in _imports(SCENE / "load.py"))
     assert not any(m.startswith("cosim.scene.load") for m in _imports(SCENE / "build.py"))
     # the builder reads the specs it is handed: of the scene package it
-    # needs only the scene error
+    # needs only the scene error and, for a cutoff that keeps no mode, the
+    # plausibility judgments (a leaf: they import nothing of cosim)
     # (and the FMU side's builder, which imports neither the loader nor the builder)
     assert {m for m in _imports(SCENE / "build.py") if not m.startswith("cosim.scene.fmu_build")} \
-        <= {"cosim.scene.checks", "cosim.scene.checks.SceneError"}
+        <= {"cosim.scene.checks", "cosim.scene.checks.SceneError", "cosim.scene.plausible",
+            "cosim.scene.plausible.HIGH_HZ", "cosim.scene.plausible.section_problem"}
+    assert not any(m.startswith("cosim") for m in _imports(SCENE / "plausible.py"))
     assert not any(m.startswith(("cosim.scene.load", "cosim.scene.build"))
                    for m in _imports(SCENE / "fmu_build.py"))
 

@@ -55,12 +55,15 @@ def _check_environment() -> None:
     """Read each environment variable cosim reads (``COSIM_KERNEL``,
     ``COSIM_DRIVER``, ``COSIM_FMU_UNPACK_LIMIT``), so that a bad value is
     refused before any work; a ValueError names the first bad one."""
+    import os
+
     from cosim.core.schemes.driver import driver_choice
-    from cosim.sides.fmu_unpack import unpack_limit
     from cosim.sides.kernel import kernel_choice
     kernel_choice()
     driver_choice()
-    unpack_limit()
+    if "COSIM_FMU_UNPACK_LIMIT" in os.environ:    # read by the FMU's module: loaded only then
+        from cosim.sides.fmu_unpack import unpack_limit
+        unpack_limit()
 
 
 def _main(argv) -> int:

@@ -237,7 +237,7 @@ def structure_warnings(scene, system) -> list[dict]:
     out = []
     for spec in scene.subsystems:
         sub = subs.get(spec.name)
-        if sub is None or not hasattr(spec, "model") or not hasattr(sub, "structure"):
+        if sub is None or not hasattr(spec, "model") or "modes" not in sub.capabilities:
             continue
         found = [w for w in (section_problem(scene, spec), _sag_warning(scene, spec, sub))
                  if w is not None]
@@ -254,7 +254,7 @@ def scene_size(system) -> float:
     included; the other sides at their start)."""
     pts = []
     for sub in system.subsystems:
-        structure = getattr(sub, "structure", None)
+        structure = sub.structure if "modes" in sub.capabilities else None
         if structure is not None:
             pts += [structure.reference_position(s) for s in sub.port_coordinates]
             nodes = np.asarray(structure.nodes(), float)

@@ -187,9 +187,8 @@ class StructureSubsystem(ClosedFormContacts, Subsystem):
         return c * c * float(self._R[port] @ self._R[port])
 
     def port_participation(self, port, direction) -> np.ndarray:
-        """How each kept mode moves a port along ``direction``: ``(n . dir)
-        R_p`` (mass-normalised modes; its square sums to
-        :meth:`port_mobility`)."""
+        """``(n . dir) R_p``: how each mass-normalised kept mode moves a port
+        along ``direction`` (its squares sum to :meth:`port_mobility`)."""
         c = float(np.asarray(direction, float) @ self._dir)
         return c * np.array(self._R[port], float)
 
