@@ -221,3 +221,15 @@ def test_one_version():
     installed = Path(dist.locate_file("cosim/__init__.py")).resolve()
     if installed == Path(cosim.__file__).resolve():
         assert dist.version == cosim.__version__
+
+
+def test_the_suite_runs_on_every_core_as_the_readme_says():
+    """README: the test command runs the suite on every core, through
+    pytest-xdist in the test extra and `-n auto` in the project's pytest
+    options (so the command itself stays `python -m pytest`)."""
+    pyproject = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
+    test = {re.split(r"[<>=\[ ]", r)[0] for r in pyproject["project"]["optional-dependencies"]["test"]}
+    assert "pytest-xdist" in test
+    assert "-n auto" in pyproject["tool"]["pytest"]["ini_options"]["addopts"]
+    readme = " ".join((ROOT / "README.md").read_text(encoding="utf-8").split())
+    assert "The suite then runs on every core (pytest-xdist, `-n auto` in `pyproject.toml`" in readme
