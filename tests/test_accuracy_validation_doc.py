@@ -127,13 +127,14 @@ def test_the_stable_steps_the_page_states(gen, section):
             f"{g['integrator_steps']}); none was printed as a necessary bound only") in text
     assert g["step_bound"] == 0
     steps = [s for c in gen["cases"] for s in c["at_0.9"]]
-    # every macro step printed `runs` finished; every integrator step was refused
+    # every macro step printed `runs` finished, and so did every integrator step
     assert all(s["status"] == "finished" for s in steps if s["scheme"] is not None)
     assert all(s["kind"] == "runs" for s in steps if s["scheme"] is not None)
-    assert all(s["status"] == "refused" and "too large for contact" in s["message"]
-               for s in steps if s["scheme"] is None)
-    assert "Every macro step `cosim info` prints as one that `runs` ran at 0.9x" in text
-    assert "each of those runs was refused" in text
+    integrator = [s for s in steps if s["scheme"] is None]
+    assert len(integrator) == g["integrator_steps"] == 19
+    assert all(s["status"] == "finished" for s in integrator)
+    assert "Every macro step `cosim info` prints as one that `runs` ran at 0.9x, and so" in text
+    assert "until this run showed all 19 refused" in text
 
 
 def _pairs(cases):
@@ -241,11 +242,11 @@ def test_what_decides_the_cpu(data, gen, section):
             f"of {s33['stages_s']['run']:.2g} and {s34['stages_s']['run']:.2g} s") in text
     cases = [c["validation"] for c in gen["cases"]]
     within = [c for c in cases if c["own_ratio"] <= 1.5]
-    largest = sorted(cases, key=lambda c: -c["cheapest"]["cpu_s"])[:len(within)]
-    assert sorted(id(c) for c in within) == sorted(id(c) for c in largest)
     low = min(c["cheapest"]["cpu_s"] for c in within)
-    assert (f"The {len(within)} generated scenes within 1.5x are the {len(within)} whose "
-            f"cheapest row takes {low:.2g} s or more") in text
+    long = [c for c in cases if c["cheapest"]["cpu_s"] >= low]
+    assert all(any(c is d for d in long) for c in within)
+    assert (f"The {len(within)} generated scenes within 1.5x are {len(within)} of the "
+            f"{len(long)} whose cheapest row takes {low:.2g} s or more") in text
     share = [c["default"]["stages_s"]["estimate"] / c["default"]["stages_s"]["run"]
              for c in data["cases"] if c["default"]["companion"] != "not run"]
     assert f"cost {min(share):.2g} to {max(share):.2g} times the run they check" in text
