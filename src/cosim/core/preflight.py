@@ -22,6 +22,7 @@ import math
 import numpy as np
 
 __all__ = ["contact_time", "step_map", "contact_energy_gain", "is_safe", "largest_safe_step",
+           "bisect_log",
            "advised_step",
            "partner_first", "stiffest_normal", "EXPLICIT_STABILITY", "stiffest_mode"]
 
@@ -147,20 +148,28 @@ def is_safe(m, k, c, H, order, max_energy_gain, gs_partner_first=False) -> bool:
     return True
 
 
-def largest_safe_step(m, k, c, H, order, max_energy_gain, gs_partner_first=False) -> float:
-    """Largest safe step below ``H`` (bisection in log H)."""
-    lo, hi = H * 1e-8, H
-    if not is_safe(m, k, c, lo, order, max_energy_gain, gs_partner_first):
-        return 0.0
-    for _ in range(50):
+def bisect_log(safe, lo: float, hi: float, rounds: int = 50) -> float:
+    """The largest step between ``lo`` (safe) and ``hi`` (not) that
+    ``safe(step)`` accepts, by bisection in log step to 0.1 %."""
+    for _ in range(rounds):
         mid = math.sqrt(lo * hi)
-        if is_safe(m, k, c, mid, order, max_energy_gain, gs_partner_first):
+        if safe(mid):
             lo = mid
         else:
             hi = mid
         if hi / lo < 1.001:
             break
     return lo
+
+
+def largest_safe_step(m, k, c, H, order, max_energy_gain, gs_partner_first=False) -> float:
+    """Largest safe step below ``H`` (bisection in log H)."""
+    def safe(h):
+        return is_safe(m, k, c, h, order, max_energy_gain, gs_partner_first)
+    lo = H * 1e-8
+    if not safe(lo):
+        return 0.0
+    return bisect_log(safe, lo, H)
 
 
 def advised_step(problems, H) -> float:

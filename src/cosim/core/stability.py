@@ -62,7 +62,7 @@ import math
 import numpy as np
 from scipy.linalg import expm
 
-from cosim.core.preflight import _poly_rows, contact_time
+from cosim.core.preflight import _poly_rows, bisect_log, contact_time
 
 __all__ = ["port_modes", "coupled_modes", "side_mask", "coupled_step_map", "is_safe_coupled",
            "largest_safe_step_coupled", "LINEAR_LAWS"]
@@ -308,14 +308,6 @@ def largest_safe_step_coupled(omega, damping, p, k, c, order, max_energy_gain,
     while lo < top:
         hi = min(lo * SCAN_RATIO, top)
         if not safe(hi):
-            for _ in range(30):
-                mid = math.sqrt(lo * hi)
-                if safe(mid):
-                    lo = mid
-                else:
-                    hi = mid
-                if hi / lo < 1.001:
-                    break
-            return lo
+            return bisect_log(safe, lo, hi, rounds=30)
         lo = hi
     return lo
