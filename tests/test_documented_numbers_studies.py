@@ -1142,6 +1142,16 @@ def test_the_summary_keys_are_the_pages(tmp_path):
     if "`contacts.NAME`" in text:
         named.add("contacts")
     top = set(s) | set(s["energy"]) | set(s["contacts"]["C"])
+    # the names the paragraph gives beside the keys: a warning's fields and the plausibility
+    # kinds (each a `_warning("KIND", ...)` of cosim.scene.plausible), and the strict JSON's
+    # note of a value not finite, written as null
+    from pathlib import Path
+
+    from cosim.io.strict_json import NOTE_KEY
+    from cosim.scene import plausible
+    kinds = set(re.findall(r'_warning\(\s*"([a-z_]+)"', Path(plausible.__file__).read_text()))
+    assert kinds == {"static_deflection", "frequency", "section", "contact_gap"}, kinds
+    named -= kinds | {"kind", "key", NOTE_KEY, "null"}
     assert top <= named, f"not on the page: {sorted(top - named)}"
     assert named <= top, f"on the page, not in summary.json: {sorted(named - top)}"
     assert "`contacts.NAME`" in text and "`final_state.SUBSYSTEM.JOINT.{q,dq}`" in text
