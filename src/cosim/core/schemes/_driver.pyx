@@ -24,6 +24,7 @@ from libc.math cimport isfinite, isnan, NAN
 from libc.string cimport memcpy
 
 from cosim.core.subsystem import StepInput
+from cosim.core.schemes.step_control import LAND_MARGIN, ONSET_WINDOW, onset_contacts
 
 #: kinds of side
 cdef enum:
@@ -49,9 +50,9 @@ cdef class Driver:
         Whether the step is controlled (``contact_step`` given and rows exchanged).
     """
 
-    cdef object system, subs, laws, hosted_embs, step_input
+    cdef object system, subs, laws, hosted_embs, step_input, scheme
     cdef int nsub, nports, nc, nr, order, width_gs, n_order, n_hosted, n_coupler, n_exch
-    cdef bint gs, controlled
+    cdef bint gs, controlled, land
     cdef double H, contact_step, horizon
     # layout
     cdef long[::1] kind, port0, nport, seq, rigid
@@ -95,6 +96,7 @@ cdef class Driver:
     def __init__(self, scheme, system, order, state, d, dd, bint controlled):
         cdef int s, c, r, k, i
         self.system = system
+        self.scheme = scheme
         self.subs = system.subsystems
         self.nsub = len(self.subs)
         self.gs = scheme.name == "gauss_seidel"
@@ -103,6 +105,7 @@ cdef class Driver:
         self.horizon = scheme.horizon
         self.contact_step = scheme.contact_step if scheme.contact_step is not None else NAN
         self.controlled = controlled
+        self.land = bool(getattr(scheme, "land_onsets", False))
         self.nc = system.n_contacts
         self.nr = system.n_rows
         self.laws = [ln.contact.law for ln in system.links]
@@ -251,6 +254,8 @@ cdef class Driver:
         cdef int i, c, r
         cdef double dl, late
         if not h > self.contact_step:
+            if self.land and not self.aimed:
+                return self._landing(t, h)
             return None
         if not self.aimed:
             onset = self._onset(t, h)
@@ -268,6 +273,29 @@ cdef class Driver:
             if self.dv[c] <= 0 and self.d1[c] > late * self.contact_step:
                 return 0.5 * h, False
         return None
+
+    cdef object _landing(self, double t, double h):
+        """StepController.landing (numpy only where a contact closed)."""
+        cdef int i, c, k
+        cdef double tau
+        cdef bint closed = False, hosted = False
+        for i in range(self.n_coupler):
+            c = self.coupler[i]
+            if c < self.nc and self.dv[c] <= 0 and self.d1[c] > 0:
+                closed = True
+        for k in range(self.n_hosted):
+            log = self.subs[self.h_host[k]].switch_log
+            if log:
+                for ts, j, on in log:
+                    if j == self.h_slot[k] and on:
+                        hosted = True
+        if not (closed or hosted):
+            return None
+        onset = self._onset(t, h)
+        if onset is None or not onset[1]:
+            return None
+        tau = onset[0] + (LAND_MARGIN if hosted else -LAND_MARGIN) * self.contact_step
+        return (tau, True) if tau > ONSET_WINDOW * self.contact_step else None
 
     cdef object _onset(self, double t, double h):
         """StepController.onset (its root finding, a rare path, in numpy)."""
@@ -548,8 +576,8 @@ cdef class Driver:
                     ftilde = self._force(r, d, dd)
                     for j in range(width):
                         self.coeffs[j, r] = 0.0
-                    self.coeffs[0, r] = self.fv[r]
-                    self.coeffs[1, r] = ftilde - self.fv[r]
+                    self.coeffs[0, r] = self.hist[self.nhist - 1, r]
+                    self.coeffs[1, r] = ftilde - self.hist[self.nhist - 1, r]
             got = self._step_side(s, t, h, width)
             for r in mine:
                 if self.sub_a[r] == s or self.rigid[self.sub_a[r]]:
@@ -588,8 +616,9 @@ cdef class Driver:
         ``h_fixed``).  Leaves the rows, forces, impulse and work of the step
         in :attr:`d`, :attr:`dd`, :attr:`f`, :attr:`stepped`, :attr:`work`
         and returns its length [s]."""
-        cdef double h, ratio
-        cdef int c, r, k
+        cdef double h, ratio, w
+        cdef int c, r, k, i
+        cdef bint was_aimed, at_onset
         while True:
             if self.controlled:
                 h = self._propose(remaining)
@@ -616,7 +645,16 @@ cdef class Driver:
                     continue
             break
         # accept
+        was_aimed, at_onset = self.aimed, False
+        w = ONSET_WINDOW * self.contact_step
         self.aimed = False
+        if self.controlled and self.land:
+            for i in range(self.n_coupler):
+                c = self.coupler[i]
+                if c < self.nc and (self.d1[c] <= 0 and self.d1[c] + w * self.dd1[c] > 0 or (
+                        was_aimed and self.f1[c] != 0 and self.fv[c] == 0)):
+                    at_onset = True
+        f_was = self.f
         for r in range(self.nr):
             self.dd_prev[r] = self.ddv[r]
         self.has_dd_prev = True
@@ -638,6 +676,17 @@ cdef class Driver:
         self.dd = np.array(self.dd1)
         self.fv, self.dv, self.ddv = self.f, self.d, self.dd
         self.h_prev = h
+        if at_onset:                    # the history starts again at the onset
+            onsets = onset_contacts(self.system, self.contact_step, self.d, self.dd, self.f,
+                                    f_was, was_aimed)
+            if len(onsets):
+                hist = self.scheme._onset_history(self.system, self.d, self.dd, self.f, onsets,
+                                                  self.contact_step)
+                self.nhist = len(hist)
+                for k in range(self.nhist):
+                    for r in range(self.nr):
+                        self.hist[k, r] = hist[k][r]
+                self.h_prev = self.contact_step
         self.n_steps += 1
         self._book(h)
         return h

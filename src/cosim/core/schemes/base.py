@@ -147,6 +147,7 @@ class CoSimulationScheme(InputExtrapolation, CouplingScheme):
         "contact_step": Option(float, None, _pos, "> 0 s"),
         "approach_horizon": Option(float, None, _pos, "> 0 s"),
         "interface_tolerance": Option(float, None, _relative, RELATIVE_RULE),
+        "land_onsets": Option(bool, True, lambda v: True, "true or false"),
         "substeps": Option(dict, None, _substeps_ok,
                            "a table of subsystem name = number of sub-steps (>= 1)"),
     }
@@ -309,9 +310,15 @@ class CoSimulationScheme(InputExtrapolation, CouplingScheme):
             if system.connections is not None and system.switch_modes(t + h, d1, dd1):
                 d1, dd1 = system.penetrations(outs)     # a grasp moves the tangential anchor
                 f = system.forces(d1, dd1)
+            f_was, was_aimed = st.f, st.aimed
             ctl.accept(dd, h, outs, f)
             d, dd = d1, dd1
             h_prev = h
+            if controlled and ctl.land:
+                onsets = ctl.at_onset(d, dd, f, f_was, was_aimed)
+                if len(onsets):             # the history starts again at the onset
+                    h_prev = self.contact_step
+                    st.hist = self._onset_history(system, d, dd, f, onsets, h_prev)
             k += 1
             self.n_windows = k          # kept as they go: a run that fails reports them
             books.book(t + h, h, d, dd, f, stepped)
@@ -352,7 +359,9 @@ class CoSimulationScheme(InputExtrapolation, CouplingScheme):
     # the implicit scheme reads the loop's state by these names
     @property
     def _f(self):
-        return self._state.f
+        """The forces the next step starts from: the last of the history
+        (the forces at the point, or a contact's at its onset)."""
+        return self._state.hist[-1]
 
     @property
     def _outs(self):

@@ -87,8 +87,8 @@ class GaussSeidel(CoSimulationScheme):
                 if other in done:
                     ftilde = float(f_pred[c])
                     coeffs[:, c] = 0.0
-                    coeffs[0, c] = self._state.f[c]
-                    coeffs[1, c] = ftilde - self._state.f[c]
+                    coeffs[0, c] = self._f[c]
+                    coeffs[1, c] = ftilde - self._f[c]
             sub = system.subsystems[s]
             got = self._step_side(system, s, t, h, coeffs, after)
             for c in mine:

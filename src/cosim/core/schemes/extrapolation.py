@@ -44,6 +44,13 @@ class InputExtrapolation:
         cap quadratic extrapolation at second order from a generic start."""
         if self.extrapolation_order == 0 or not np.any(f):
             return [f]
+        rate = self._law_rates(system, d, dd, f)
+        return [f - H * rate, f]
+
+    @staticmethod
+    def _law_rates(system, d, dd, f) -> np.ndarray:
+        """Each closed contact's force rate ``f'(d) d'`` [N/s] from its law
+        (a central difference along the motion); zero elsewhere."""
         rate = np.zeros_like(f)
         for c in np.flatnonzero(f[:system.n_contacts]):
             if system.links[c].connection is not None:
@@ -53,6 +60,29 @@ class InputExtrapolation:
             fp = float(law.force_active(d[c] + eps, dd[c]))
             fm = float(law.force_active(d[c] - eps, dd[c]))
             rate[c] = (fp - fm) / (2 * eps) * dd[c]
+        return rate
+
+    def _onset_history(self, system, d, dd, f, onsets, H):
+        """The force history to extrapolate the next step from when the
+        coupler contacts ``onsets`` start it at their onset
+        (``land_onsets``): as at a run's start (:meth:`_starting_history`,
+        points ``H`` apart), with each open one of ``onsets`` given the
+        law's force at touch-down (``force_active(0, d')``: a Kelvin-Voigt
+        law's ``c d'``) and its one-sided rate there.  The recorded forces
+        are not changed: only what the next step is given."""
+        f = np.array(f, dtype=float)
+        rate = self._law_rates(system, d, dd, f)
+        for c in onsets:
+            if f[c] != 0.0 or system.links[c].connection is not None:
+                continue                # closed in an aimed step: its own force
+            law = system.links[c].contact.law
+            v = max(float(dd[c]), 0.0)
+            eps = max(1e-6 * v * H, 1e-300)
+            f0 = max(float(law.force_active(0.0, v)), 0.0)
+            f[c] = f0
+            rate[c] = (max(float(law.force_active(eps, v)), 0.0) - f0) / eps * v
+        if self.extrapolation_order == 0:
+            return [f]
         return [f - H * rate, f]
 
     def _extrapolated(self, ratio: float) -> np.ndarray:

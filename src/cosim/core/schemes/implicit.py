@@ -414,7 +414,10 @@ class Implicit(CoSimulationScheme):
     def _not_converged(self, system, t, h, f_n, guess, r, coupler, hosted):
         """The step did not converge: retried shorter (flagged for the macro
         loop) where a long step may be, a :class:`CouplingError` otherwise."""
-        if self.contact_step is not None and h > self.contact_step * (1 + 1e-9):
+        if self.contact_step is not None and (h > self.contact_step * (1 + 1e-9)
+                                              or self._state.aimed):
+            # (a step landed on an onset may end just past it, with no fixed
+            # point either: it is retried shorter too)
             # a long step over a contact that touches and leaves inside it (a
             # vibrating side): no fixed point to find; the step is retried shorter
             self._unconverged = True

@@ -16,7 +16,18 @@ import numpy as np
 
 from cosim.core.guard import GuardError, nonfinite_cause
 
-__all__ = ["StepState", "StepController"]
+__all__ = ["StepState", "StepController", "LAND_MARGIN", "ONSET_WINDOW", "onset_contacts"]
+
+#: a contact step over which an exchanged contact closes is retried to end
+#: this fraction of ``contact_step`` before the predicted onset
+#: (``land_onsets``): the contact then closes at the next step's start, not at
+#: a phase of the step that changes with the step
+LAND_MARGIN = 1e-5
+
+#: a coupler contact open at a step's start that its gap rate closes within
+#: this fraction of ``contact_step`` is at its onset: the next step takes its
+#: force from the law's value at touch-down (``land_onsets``)
+ONSET_WINDOW = 1e-4
 
 
 class StepState:
@@ -74,6 +85,8 @@ class StepController:
 
     def __init__(self, scheme, system, state: StepState):
         self.scheme, self.system, self.state = scheme, system, state
+        #: land each contact step on the onsets inside it (``land_onsets``)
+        self.land = bool(getattr(scheme, "land_onsets", False))
         self.macro_step = scheme.macro_step
         self.contact_step = scheme.contact_step
         #: how far ahead [s] a contact predicted to close shortens the step
@@ -132,7 +145,45 @@ class StepController:
                     onset = 0.5 * h, False
                 return onset
             return self.overshot(d, d1, dd1, h)     # the predicted onset may come too late
+        if self.land:
+            if st.unconverged:              # a landing step found no fixed point
+                return 0.5 * h, False
+            if not st.aimed:
+                return self.landing(d, dd, d1, dd1, t, h)
         return None
+
+    def landing(self, d0, dd0, d1, dd1, t, h):
+        """The step to retry a contact step with when an exchanged contact
+        closed inside it (``land_onsets``): ending :data:`LAND_MARGIN` times
+        ``contact_step`` after the onset its host located, or as long before
+        the onset predicted for a coupler contact (:meth:`onset`), so that
+        every onset falls at a step's end whatever the step; None where
+        none closed, where an onset is not predicted, or where it lies within
+        :data:`ONSET_WINDOW` of the start (the contact is at its onset
+        there already)."""
+        onset = self.onset(d0, dd0, d1, dd1, t, h)
+        if onset is None or not onset[1]:
+            return None
+        # past a located onset (its host sees it inside the step, not at
+        # the step's end give or take round-off), short of a predicted one
+        tau = onset[0] + (LAND_MARGIN if self.hosted_closed() else -LAND_MARGIN) \
+            * self.contact_step
+        return (tau, True) if tau > ONSET_WINDOW * self.contact_step else None
+
+    def hosted_closed(self) -> bool:
+        """Whether a hosted contact closed in the step just taken (its host
+        located the onset)."""
+        system = self.system
+        return any(on and j == slot for c, (host, slot, _, _, _) in system.hosted.items()
+                   for _, j, on in system.subsystems[host].switch_log)
+
+    def at_onset(self, d, dd, f, f_was, aimed) -> np.ndarray:
+        """The coupler contacts that start the next step at their onset
+        (``land_onsets``): open, and closed by their gap rate within
+        :data:`ONSET_WINDOW` times ``contact_step``; after a step aimed at an
+        onset, also those that closed in it."""
+        return onset_contacts(self.system, self.contact_step, d, dd, f, f_was, aimed)
+
 
     def retry(self, saved, h_retry, aimed) -> None:
         """Roll the system back to ``saved`` and ask for a step of ``h_retry``
@@ -249,6 +300,17 @@ class StepController:
         if np.any(late):
             return 0.5 * h, False
         return None
+
+
+def onset_contacts(system, contact_step, d, dd, f, f_was, aimed) -> np.ndarray:
+    """:meth:`StepController.at_onset` (the compiled loop calls it too)."""
+    c = np.asarray(system.coupler)
+    c = c[c < system.n_contacts]
+    w = ONSET_WINDOW * contact_step
+    hit = (d[c] <= 0) & (d[c] + w * dd[c] > 0)
+    if aimed:
+        hit |= (f[c] != 0) & (f_was[c] == 0)
+    return c[hit]
 
 
 class StepBooks:
