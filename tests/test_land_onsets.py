@@ -94,3 +94,31 @@ def test_without_landing_the_onset_phase_scatters_the_peak(tmp_path):
     monotone in the step (the reason the option exists)."""
     vals = _values(_scene(0, tmp_path, overrides=["scheme.land_onsets=false"]))
     assert not _confirmed(vals[:, 1]), vals[:, 1]
+
+
+def _published_reference(name):
+    import json
+    from documented import ROOT
+    data = json.loads((ROOT / "benchmarks/results/generated_validation/validation.json")
+                      .read_text())
+    return next(c for c in data["cases"] if c["scene"] == name)["validation"]["reference"]
+
+
+@pytest.mark.parametrize("land, printed", [
+    ("false", ("−0.16 %", "−0.57 %", "+0.36 %")), ("true", ("−0.12 %", "−0.18 %", "−0.26 %"))])
+def test_the_errors_docs_schemes_quotes(land, printed, tmp_path):
+    """docs/schemes.md's errors of gen0-000's peak penetration against the
+    published run's reference, without and with landing."""
+    from documented import Claim, assert_printed, assert_reproduced
+    ref = _published_reference("gen0-000")["peak"]
+    scene = _scene(0, tmp_path, overrides=[f"scheme.land_onsets={land}"])
+    for f, text in zip((LADDER[1], 1.0, LADDER[3]), printed):
+        sc = scene if f == 1.0 else coarsened(scene, float(f), judged_at=LADDER[-1])[0]
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            peak = simulate(sc).summary["contacts"]["strike"]["peak_penetration"]
+        value = float(text.replace("−", "-").rstrip(" %")) / 100
+        claim = Claim("docs/schemes.md", f"{text}", f"gen0-000 at {f:.2f}x, land_onsets={land}",
+                      value, abs=5e-5)
+        assert_printed(claim)
+        assert_reproduced(claim, (peak - ref) / ref)

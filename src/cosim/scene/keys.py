@@ -55,6 +55,7 @@ SCHEME_OPTIONS = {
     "approach_horizon": "how far ahead a coupler contact predicted to close shortens the "
                         "step to `contact_step` (default: `macro_step`)",
     "interface_tolerance": "refine the step while the interface error estimate exceeds this",
+    "land_onsets": "end a contact step at an onset inside it (with `contact_step`)",
     "substeps": "sub-steps per macro step of each named subsystem (multirate)",
     "sequence": "the order in which Gauss-Seidel advances the moving subsystems",
     "max_iterations": "most fixed-point iterations per macro step",

@@ -13,7 +13,13 @@ step makes them), both above round-off (:data:`ROUNDOFF`) and ``p`` within
 Richardson's extrapolation with that ``p``: with ``Q* = Q0 - (Q1 - Q0) /
 (r**p - 1)``, the run's error is ``|Q_run - Q*|`` (for the run at ``h1``,
 ``|Q1 - Q0| r**p / (r**p - 1)``; at ``h0``, ``|Q1 - Q0| / (r**p - 1)``).
-Where it is not, :func:`judge` gives a bound at order 1 (:func:`bound`):
+Where the three are monotone but ``p`` lies above the band (the coarser
+difference grows faster than any order the schemes have: the coarser
+companion is past the range where the error is one power of the step), the
+run's error is bounded from the finer pair alone at order 1, ``|Q_h -
+Q_(h/r)| r / (r - 1)`` (the run's error at order 1; above it at any order
+from 1 up, and within 3x of it up to order 5.5).  Otherwise, where the order
+is not confirmed, :func:`judge` gives a bound at order 1 (:func:`bound`):
 the difference between the run and its coarser companion times ``r / (r -
 1)`` (the error at order 1 of the coarser of the two), or between the run
 and its finer companion times ``(2 r - 1) / (r - 1)``, whichever is larger;
@@ -114,6 +120,16 @@ def judge(value: float, finer: float | None, coarser: float | None, r: float) ->
             out.update(kind="richardson", estimate=richardson(values, r, p, 1))
             return out
         out["order_why"] = why
+        lo, hi = ORDER_BAND
+        if p is not None and p > hi and (finer - value > 0) == (value - coarser > 0):
+            # monotone, but the coarser difference grows faster than any order
+            # the schemes have: the coarser companion is past the range where
+            # the error is one power of the step; the finer pair at order 1
+            out["order_why"] = (f"{why}: the coarser companion lies past the range where "
+                                f"the error is one power of the step; the bound is the "
+                                f"finer one's at order 1")
+            out.update(kind="bound", estimate=abs(value - finer) * r / (r - 1.0))
+            return out
     else:
         out["order_why"] = ("one companion alone: two runs do not tell an order"
                             if finer is not None or coarser is not None else "no companion")
