@@ -3,8 +3,8 @@
 :meth:`Request.make` chooses the scheme and steps before the run (the
 scene that runs), after refusing what cannot go with a request (a step it
 chooses set by ``--set``, the estimate turned off); :meth:`Request.check`,
-once the run's error is estimated, refines once where the estimate misses
-the accuracy, and adds ``accuracy.request`` to the summary.
+once the run's error is estimated, refines once where the estimate lies above
+``CHECK_MARGIN`` times the accuracy, and adds ``accuracy.request`` to the summary.
 
 The refined run goes into a folder of its own inside the run's
 (:data:`REFINING`), the first run's files untouched: only when it finished
@@ -92,23 +92,27 @@ class Request:
     def check(self, res, folder):
         """The run ``res`` (its summary's ``accuracy`` estimated, its files
         in ``folder``, an open :class:`~cosim.io.rundir.OutputFolder`)
-        checked, and refined once when the estimate misses: the run kept,
-        its summary with ``accuracy.request``."""
-        from cosim.studies.accurate import refined, request_record
+        checked, and refined once when the estimate lies above
+        :data:`~cosim.studies.accurate.CHECK_MARGIN` times the accuracy asked
+        (met stays: the estimate at most that accuracy): the run kept, its
+        summary with ``accuracy.request``."""
+        from cosim.studies.accurate import (CHECK_MARGIN, limiting_order, refined,
+                                            request_record)
 
         estimated, why = self._verdict(res)
         record = (lambda choice, e, w, first=None, note="":
                   request_record(self.accuracy, self.source, choice, e, w, first, self.scene,
                                  note))
-        if estimated is None or estimated <= self.accuracy:
+        if estimated is None or estimated <= CHECK_MARGIN * self.accuracy:
             res.summary["accuracy"]["request"] = record(self.choice, estimated, why)
             return res
         args = self.args
         factor = res.summary["accuracy"].get("factor") or 4.0
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            scene, choice, refused = refined(args.scene, args.variant, args.set or (),
-                                             self.choice, self.scene, estimated, factor)
+            scene, choice, refused = refined(
+                args.scene, args.variant, args.set or (), self.choice, self.scene, estimated,
+                factor, limiting_order(res.summary["accuracy"], self.choice, self.scene))
         if scene is not None:
             work, first = scene.work().steps, self.scene.work().steps
             if work > _limit() * first and not getattr(args, "yes", False):
