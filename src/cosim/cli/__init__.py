@@ -91,7 +91,7 @@ def _main(argv) -> int:
             except (SceneError, UnsafeStepError, OutputError, PluginError) as exc:
                 print(f"error: {exc}", file=sys.stderr)
                 return 2
-            except Exception as exc:           # an installed plug-in's failure: exit 2
+            except (Exception, SystemExit) as exc:     # an installed plug-in's failure
                 from cosim.core.plugin_guard import blame
                 blamed = blame(exc)
                 if blamed is None:

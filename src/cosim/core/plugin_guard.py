@@ -63,6 +63,8 @@ def origin_of(obj) -> str | None:
 def refuse(obj, what: str, returned, expected: str) -> PluginError:
     """The error of plug-in ``obj`` whose ``what`` (``assemble()``) returned
     ``returned`` where cosim expected ``expected``."""
+    if isinstance(returned, (np.ndarray, np.generic)) and np.ndim(returned) == 0:
+        returned = returned.item()                 # a number numpy gave
     got = (shown(repr(returned)) if isinstance(returned, str) else
            shown(returned) if isinstance(returned, numbers.Number) or returned is None else
            _described(returned))
@@ -79,7 +81,13 @@ def call(obj, method: str, *args):
         raise
     except BaseException as exc:
         raise PluginError(f"the plug-in {origin_of(obj)}: its {method}() raised "
-                          f"{type(exc).__name__}: {shown(str(exc))}") from None
+                          f"{_what(exc)}") from None
+
+
+def _what(exc: BaseException) -> str:
+    """``TypeError: its text``, or the type alone when it has no text."""
+    text = shown(str(exc))
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
 
 
 def blame(exc: BaseException) -> PluginError | None:
@@ -104,24 +112,24 @@ def blame(exc: BaseException) -> PluginError | None:
         where = f"{frame.f_code.co_name}()"
         if top in _PACKAGES:
             origin = _PACKAGES[top]
-            how = f"raised {type(exc).__name__} in its {where}"
+            how = f"raised {_what(exc)}, in its {where}"
         elif top in _OURS:
             origin = origin_of(frame.f_locals.get("self"))
             if origin is None:
                 return None
-            how = (f"made cosim's {where}, which its class inherits, raise "
-                   f"{type(exc).__name__}, on what its own methods returned")
+            how = (f"made cosim's {where}, which its class inherits, raise {_what(exc)}, "
+                   f"on what its own methods returned")
         else:
             continue
-        err = PluginError(f"the plug-in {origin}: {how}: {shown(str(exc))}")
+        err = PluginError(f"the plug-in {origin}: {how}")
         err.partial_result = getattr(exc, "partial_result", None)
         return err
     return None
 
 
 def _described(value) -> str:
-    """A returned value in a few words: its type, and shape and a few
-    entries for an array."""
+    """A returned value in a few words: an array's shape and dtype, a
+    sequence's length and first entries, another object's type and repr."""
     if isinstance(value, np.ndarray):
         return f"an array of shape {value.shape} and dtype {value.dtype}"
     if isinstance(value, (tuple, list)):
@@ -173,7 +181,7 @@ def check_law(law) -> None:
             raise
         except BaseException as exc:
             raise PluginError(f"the plug-in {origin_of(law)}: its `{attr}` raised "
-                              f"{type(exc).__name__}: {shown(str(exc))}") from None
+                              f"{_what(exc)}") from None
         if isinstance(v, (bool, np.bool_)) or not isinstance(v, numbers.Real) or v < 0:
             unit = "N/m" if attr == "stiffness" else "N s/m"
             raise refuse(law, f"`{attr}`", v, f"a real number >= 0 [{unit}], inf for a rigid "

@@ -25,10 +25,16 @@ worker process finds it the same way) and `cosim info` alike.  The groups:
 The entry point's name is the name a scene writes, and must be the class's
 own ``name``.  Entry points are read only when a scene asks for a name that
 is not registered: a run that uses built-in names reads no package metadata
-and imports no plug-in.  A plug-in is refused, with the distribution and the
-entry point named (:class:`~cosim.errors.PluginError`), when its name is a
-built-in one, two distributions declare the same name, it fails to import,
-or it is not a class of its group.
+and imports no plug-in.  A plug-in named like a built-in is never loaded;
+a name that two distributions declare is refused when a scene names it,
+the group's other names working.  A plug-in is refused, with the
+distribution and the entry point named (:class:`~cosim.errors.PluginError`),
+when its name clashes so, it fails to import (whatever it raises,
+``SystemExit`` included), it is not a class of its group, or cosim cannot
+read it (a scheme without ``macro_step``; a structure's fields, which the
+scene loader judges as it asks for one).  Once
+loaded, what it returns and raises is judged at the boundary
+(:mod:`cosim.core.plugin_guard`).
 
 Trust: an installed package's code runs when a scene names it, as any
 package the user installed; a scene names a registered name, never a module
@@ -129,8 +135,8 @@ def find(group: str, name) -> bool:
     PluginError
         If ``name`` is declared twice, or the entry point fails to import
         (anything it raises, ``SystemExit`` included, Ctrl-C aside), is not
-        a class of its group named ``name``, or (a structure, a scheme)
-        declares what cosim cannot read.  Another name of the group is not
+        a class of its group named ``name``, or (a scheme) declares what
+        cosim cannot read.  Another name of the group is not
         concerned.
     """
     if not isinstance(name, str):
@@ -152,7 +158,7 @@ def find(group: str, name) -> bool:
         if isinstance(cls, type) and issubclass(cls, base):
             if getattr(cls, "name", None) != name:
                 raise PluginError(f"the plug-in {_origin(ep)} loads {cls.__qualname__}, whose "
-                                  f"`name` is {shown(getattr(cls, 'name', None))}, not "
+                                  f"`name` is {shown(repr(getattr(cls, 'name', None)))}, not "
                                   f"{name!r}: the two must agree")
             problem = _class_problem(group, cls)
             if problem:
@@ -168,10 +174,9 @@ def find(group: str, name) -> bool:
 
 def _class_problem(group: str, cls) -> str:
     """What cosim cannot read in plug-in class ``cls`` of ``group`` (a
-    structure's fields and their metadata, a scheme's options), or ``""``."""
-    if group == "cosim.structures":
-        from cosim.scene.plugin_structure import model_class_problem
-        return model_class_problem(cls)
+    scheme's options), or ``""``.  A structure's fields are the scene
+    loader's to judge (:func:`cosim.scene.plugin_structure.model_class_problem`),
+    as it provides one."""
     if group == "cosim.schemes":
         options = getattr(cls, "options", None)
         if not isinstance(options, dict):

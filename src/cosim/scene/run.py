@@ -7,7 +7,6 @@ import time
 from pathlib import Path
 
 from cosim.core.guard import Guard, GuardError
-from cosim.core.plugin_guard import blame, origin_of
 from cosim.core.recorder import Recorder
 from cosim.scene.load import Scene, load_scene
 from cosim.errors import FMUError, OutputError, PluginError, SimulationError, UnsafeStepError
@@ -160,8 +159,11 @@ def _simulate(scene, scheme, progress, progress_interval, out, overwrite):
         stop = exc
         cause = getattr(exc, "signal_name", None) or "Ctrl-C"
         status, message = "interrupted", f"interrupted ({cause}) at t = {_reached(rec):.6g} s"
-    except Exception as exc:       # a bug or a model's own error: keep what was done
-        stop = blame(exc)          # an installed plug-in's: it failed, not cosim
+    except (Exception, SystemExit) as exc:   # a bug or a model's error: keep what was done
+        from cosim.core.plugin_guard import blame
+        stop = blame(exc)          # an installed plug-in's, sys.exit() too: it failed, not cosim
+        if stop is None and isinstance(exc, SystemExit):
+            raise
         if stop is not None:
             status, message = "failed", f"run stopped at t = {_reached(rec):.6g} s: {stop}"
         else:
@@ -173,6 +175,7 @@ def _simulate(scene, scheme, progress, progress_interval, out, overwrite):
         status = "error"
         message = (f"scheme `{sch.name}` returned at t = {_reached(rec):.6g} s, short of "
                    f"t_end = {scene.t_end:.6g} s: a bug of cosim, not of the scene")
+        from cosim.core.plugin_guard import origin_of
         if origin_of(sch) is not None:
             stop = PluginError(f"the plug-in {origin_of(sch)}: its run() returned at t = "
                                f"{_reached(rec):.6g} s, short of t_end = {scene.t_end:.6g} s")
