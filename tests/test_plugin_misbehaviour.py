@@ -176,6 +176,11 @@ def test_the_law_check_accepts_every_built_in_law(monkeypatch):
               "flores": dict(contact_stiffness=1e9, exponent=1.5, restitution=0.8,
                              impact_speed=1.0)}
     assert set(params) == set(CONTACT_LAWS)
+    # docs/plugins.md says which states these are
+    page = " ".join((ROOT / "docs" / "plugins.md").read_text(encoding="utf-8").split())
+    assert "penetrations from -0.1 mm to 0.1 mm, rates of -1, 0 and 1 m/s" in page
+    assert (min(plugin_guard._PENETRATIONS), max(plugin_guard._PENETRATIONS)) == (-1e-4, 1e-4)
+    assert plugin_guard._RATES == (-1.0, 0.0, 1.0)
     for name, kw in params.items():
         cls = CONTACT_LAWS[name]
         monkeypatch.setitem(plugin_guard._ORIGINS, cls, f"built-in {name}")

@@ -181,8 +181,8 @@ def _class_problem(group: str, cls) -> str:
         options = getattr(cls, "options", None)
         if not isinstance(options, dict):
             return f"its `options` is {shown(options)}, not a dict of option name -> Option"
-        from cosim.core.schemes.monolithic import Monolithic
-        if "macro_step" not in options and not issubclass(cls, Monolithic):
+        monolithic = any(k.__module__ == "cosim.core.schemes.monolithic" for k in cls.__mro__)
+        if "macro_step" not in options and not monolithic:     # (its module left unloaded)
             return (f"its `options` ({shown(sorted(map(str, options)))}) has no "
                     f"`macro_step`: a co-simulation scheme takes its communication step as "
                     f"`macro_step` (or subclass cosim.core.schemes.Monolithic)")
