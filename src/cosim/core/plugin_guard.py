@@ -110,8 +110,8 @@ def blame(exc: BaseException) -> PluginError | None:
     for frame in reversed(frames):
         top = str(frame.f_globals.get("__name__", "")).split(".")[0]
         where = f"{frame.f_code.co_name}()"
-        if top in _PACKAGES:
-            origin = _PACKAGES[top]
+        if top in _PACKAGES:          # its own code: its class's origin, else its package's
+            origin = origin_of(frame.f_locals.get("self")) or _PACKAGES[top]
             how = f"raised {_what(exc)}, in its {where}"
         elif top in _OURS:
             origin = origin_of(frame.f_locals.get("self"))
@@ -215,4 +215,3 @@ def check_law(law) -> None:
                 raise refuse(law, f"evaluate() at d = {x!r} m, dd = {v!r} m/s", out,
                              "a tuple of three finite floats (force, dissipated power, "
                              "switch)")
-

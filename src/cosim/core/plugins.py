@@ -32,9 +32,8 @@ distribution and the entry point named (:class:`~cosim.errors.PluginError`),
 when its name clashes so, it fails to import (whatever it raises,
 ``SystemExit`` included), it is not a class of its group, or cosim cannot
 read it (a scheme without ``macro_step``; a structure's fields, which the
-scene loader judges as it asks for one).  Once
-loaded, what it returns and raises is judged at the boundary
-(:mod:`cosim.core.plugin_guard`).
+scene loader judges as it asks for one).  Once loaded, what it returns and
+raises is judged at the boundary (:mod:`cosim.core.plugin_guard`).
 
 Trust: an installed package's code runs when a scene names it, as any
 package the user installed; a scene names a registered name, never a module
@@ -87,9 +86,10 @@ def _built_in(registry) -> set:
 
 def _origin(ep) -> str:
     dist = getattr(ep, "dist", None)
-    where = f"distribution `{dist.name}` {dist.version}" if dist is not None else \
-        "an unnamed distribution"
-    return f"{where}, entry point `{ep.name} = {ep.value}` in group `{ep.group}`"
+    # the metadata's text, shown escaped: a name cannot start a line of its own
+    where = f"distribution `{shown(dist.name)}` {shown(dist.version)}" if dist is not None \
+        else "an unnamed distribution"
+    return f"{where}, entry point `{shown(ep.name)} = {shown(ep.value)}` in group `{ep.group}`"
 
 
 def _scan(group: str) -> tuple[dict, dict]:
@@ -136,8 +136,7 @@ def find(group: str, name) -> bool:
         If ``name`` is declared twice, or the entry point fails to import
         (anything it raises, ``SystemExit`` included, Ctrl-C aside), is not
         a class of its group named ``name``, or (a scheme) declares what
-        cosim cannot read.  Another name of the group is not
-        concerned.
+        cosim cannot read.  Another name of the group is not concerned.
     """
     if not isinstance(name, str):
         return False
