@@ -183,15 +183,17 @@ def test_without_the_package_the_type_is_unknown(tmp_path):
 
 
 def test_bad_plugin_structures_are_refused(tmp_path):
-    """Named like a built-in (never imported), a field no scene value gives,
-    a class that is not a StructureModel."""
+    """Named like a built-in (never imported, blocking no other name), a field
+    no scene value gives, a class that is not a StructureModel."""
     site = bare_dist(tmp_path / "a", "shadow-string", "cosim.structures",
                      {"string": "shadow:S"}, "shadow", "raise SystemExit('imported')\n")
     scene = tmp_path / "scene.toml"
     scene.write_text(SCENE.read_text().replace('"foundation_string"', '"other_string"'))
     proc = run_cosim(["run", scene, "--out", tmp_path / "r1"], child_env(site), tmp_path)
     assert proc.returncode == 2
-    assert "is named like the built-in structure `string`" in proc.stderr, proc.stderr
+    # never loaded, and blocking no other name: `other_string` is unknown, as without it
+    assert "`subsystems.string.type` must be one of" in proc.stderr, proc.stderr
+    assert "got 'other_string'" in proc.stderr and "shadow" not in proc.stderr
     assert "imported" not in proc.stderr
     code = """
         from dataclasses import dataclass

@@ -91,6 +91,13 @@ def _main(argv) -> int:
             except (SceneError, UnsafeStepError, OutputError, PluginError) as exc:
                 print(f"error: {exc}", file=sys.stderr)
                 return 2
+            except (Exception, SystemExit) as exc:     # an installed plug-in's failure
+                from cosim.core.plugin_guard import blame
+                blamed = blame(exc)
+                if blamed is None:
+                    raise
+                print(f"error: {blamed}", file=sys.stderr)
+                return 2
             except KeyboardInterrupt as exc:   # outside a run (a run's own is handled there)
                 name = getattr(exc, "signal_name", None)
                 print("error: interrupted" + (f" ({name})" if name else ""), file=sys.stderr)

@@ -135,6 +135,7 @@ def _cmd_run(args) -> int:
 
 
 def _run(args) -> int:
+    from cosim.errors import PluginError
     from cosim.io.rundir import fresh_folder
     from cosim.scene.run import RunInterrupted, simulate
     from cosim.scene.load import load_scene
@@ -188,6 +189,8 @@ def _run(args) -> int:
         print(f"error: the run did not finish ({res.status}): {message}"
               f"{'' if message.endswith('.') else '.'} Its series and summary up to "
               f"t = {res.summary['t_end']:.6g} s are in {out}", file=sys.stderr)
+    if isinstance(crash, PluginError):  # an installed plug-in failed, said above: not cosim
+        return 2
     if crash is not None:
         import traceback
         traceback.print_exception(crash, file=sys.stderr)

@@ -25,10 +25,15 @@ worker process finds it the same way) and `cosim info` alike.  The groups:
 The entry point's name is the name a scene writes, and must be the class's
 own ``name``.  Entry points are read only when a scene asks for a name that
 is not registered: a run that uses built-in names reads no package metadata
-and imports no plug-in.  A plug-in is refused, with the distribution and the
-entry point named (:class:`~cosim.errors.PluginError`), when its name is a
-built-in one, two distributions declare the same name, it fails to import,
-or it is not a class of its group.
+and imports no plug-in.  A plug-in named like a built-in is never loaded;
+a name that two distributions declare is refused when a scene names it,
+the group's other names working.  A plug-in is refused, with the
+distribution and the entry point named (:class:`~cosim.errors.PluginError`),
+when its name clashes so, it fails to import (whatever it raises,
+``SystemExit`` included), it is not a class of its group, or cosim cannot
+read it (a scheme without ``macro_step``; a structure's fields, which the
+scene loader judges as it asks for one).  Once loaded, what it returns and
+raises is judged at the boundary (:mod:`cosim.core.plugin_guard`).
 
 Trust: an installed package's code runs when a scene names it, as any
 package the user installed; a scene names a registered name, never a module
@@ -36,7 +41,7 @@ to import.
 """
 from __future__ import annotations
 
-from cosim.errors import PluginError
+from cosim.errors import PluginError, shown
 
 __all__ = ["GROUPS", "find", "provide", "declared"]
 
@@ -81,34 +86,44 @@ def _built_in(registry) -> set:
 
 def _origin(ep) -> str:
     dist = getattr(ep, "dist", None)
-    where = f"distribution `{dist.name}` {dist.version}" if dist is not None else \
-        "an unnamed distribution"
-    return f"{where}, entry point `{ep.name} = {ep.value}` in group `{ep.group}`"
+    # the metadata's text, shown escaped: a name cannot start a line of its own
+    where = f"distribution `{shown(dist.name)}` {shown(dist.version)}" if dist is not None \
+        else "an unnamed distribution"
+    return f"{where}, entry point `{shown(ep.name)} = {shown(ep.value)}` in group `{ep.group}`"
 
 
-def declared(group: str) -> dict:
-    """The entry points of ``group`` by name, checked: none has a built-in
-    name, and no two distributions declare the same name.
+def _scan(group: str) -> tuple[dict, dict]:
+    """The entry points of ``group``: ``(usable, refused)``, each by name.
 
-    Raises
-    ------
-    PluginError
-        On such a clash, naming the distributions and entry points.
+    A name that is a built-in one, or that two distributions declare, is
+    refused (its message naming them) and never loaded; the other names of
+    the group stay usable.
     """
     from importlib.metadata import entry_points
 
     built_in = set().union(*(_built_in(reg) for _, reg in _targets(group)))
-    found = {}
+    usable, refused, seen = {}, {}, {}
     for ep in entry_points(group=group):
         if ep.name in built_in:
-            raise PluginError(f"the plug-in {_origin(ep)} is named like the built-in "
-                              f"{GROUPS[group]} `{ep.name}`, which it may not replace: "
-                              f"rename it in that package's entry points")
-        if ep.name in found and found[ep.name].value != ep.value:
-            raise PluginError(f"two plug-ins are named `{ep.name}`: {_origin(found[ep.name])}, "
-                              f"and {_origin(ep)}; uninstall or rename one")
-        found[ep.name] = ep
-    return found
+            refused[ep.name] = (f"the plug-in {_origin(ep)} is named like the built-in "
+                                f"{GROUPS[group]} `{ep.name}`, which it may not replace: "
+                                f"rename it in that package's entry points")
+            continue
+        first = seen.setdefault(ep.name, ep)
+        if first is not ep and first.value != ep.value:
+            refused[ep.name] = (f"two plug-ins are named `{ep.name}`: {_origin(first)}, "
+                                f"and {_origin(ep)}; uninstall or rename one")
+        if ep.name not in refused:
+            usable[ep.name] = ep
+    for name in refused:
+        usable.pop(name, None)
+    return usable, refused
+
+
+def declared(group: str) -> dict:
+    """The usable entry points of ``group`` by name: those whose name is
+    neither a built-in one nor declared by two distributions (:func:`_scan`)."""
+    return _scan(group)[0]
 
 
 def find(group: str, name) -> bool:
@@ -118,30 +133,59 @@ def find(group: str, name) -> bool:
     Raises
     ------
     PluginError
-        If the group has a clash (:func:`declared`), or the entry point
-        fails to import or is not a class of its group named ``name``.
+        If ``name`` is declared twice, or the entry point fails to import
+        (anything it raises, ``SystemExit`` included, Ctrl-C aside), is not
+        a class of its group named ``name``, or (a scheme) declares what
+        cosim cannot read.  Another name of the group is not concerned.
     """
     if not isinstance(name, str):
         return False
-    ep = declared(group).get(name)
+    usable, refused = _scan(group)
+    if name in refused:
+        raise PluginError(refused[name])
+    ep = usable.get(name)
     if ep is None:
         return False
     try:
         cls = ep.load()
-    except Exception as exc:                 # whatever the plug-in's import raised
+    except KeyboardInterrupt:
+        raise
+    except BaseException as exc:    # whatever the plug-in's import raised, sys.exit() too
         raise PluginError(f"the plug-in {_origin(ep)} cannot be imported: "
-                          f"{type(exc).__name__}: {exc}") from exc
+                          f"{type(exc).__name__}: {shown(str(exc))}") from None
     for base, registry in _targets(group):
         if isinstance(cls, type) and issubclass(cls, base):
             if getattr(cls, "name", None) != name:
                 raise PluginError(f"the plug-in {_origin(ep)} loads {cls.__qualname__}, whose "
-                                  f"`name` is {getattr(cls, 'name', None)!r}, not {name!r}: "
-                                  f"the two must agree")
+                                  f"`name` is {shown(repr(getattr(cls, 'name', None)))}, not "
+                                  f"{name!r}: the two must agree")
+            problem = _class_problem(group, cls)
+            if problem:
+                raise PluginError(f"the plug-in {_origin(ep)} is refused: {problem}")
+            from cosim.core.plugin_guard import loaded
+            loaded(cls, _origin(ep))
             registry[name] = cls
             return True
     bases = " or ".join(f"{b.__module__}.{b.__qualname__}" for b, _ in _targets(group))
-    raise PluginError(f"the plug-in {_origin(ep)} loads {cls!r}, which is not a subclass "
+    raise PluginError(f"the plug-in {_origin(ep)} loads {shown(cls)}, which is not a subclass "
                       f"of {bases}")
+
+
+def _class_problem(group: str, cls) -> str:
+    """What cosim cannot read in plug-in class ``cls`` of ``group`` (a
+    scheme's options), or ``""``.  A structure's fields are the scene
+    loader's to judge (:func:`cosim.scene.plugin_structure.model_class_problem`),
+    as it provides one."""
+    if group == "cosim.schemes":
+        options = getattr(cls, "options", None)
+        if not isinstance(options, dict):
+            return f"its `options` is {shown(options)}, not a dict of option name -> Option"
+        monolithic = any(k.__module__ == "cosim.core.schemes.monolithic" for k in cls.__mro__)
+        if "macro_step" not in options and not monolithic:     # (its module left unloaded)
+            return (f"its `options` ({shown(sorted(map(str, options)))}) has no "
+                    f"`macro_step`: a co-simulation scheme takes its communication step as "
+                    f"`macro_step` (or subclass cosim.core.schemes.Monolithic)")
+    return ""
 
 
 def provide(registry, group: str, name) -> None:

@@ -18,6 +18,7 @@ from multibody import Body, Joint, TreeModel
 from cosim.sides.multibody import MultibodySubsystem
 from cosim.core.ode import get_integrator
 from cosim.core.preflight import stiffest_normal
+from cosim.errors import PluginError
 from cosim.scene.checks import SceneError
 from cosim.core.schemes import get_scheme
 from cosim.core.subsystem import RigidReference
@@ -72,14 +73,31 @@ def _check_mass_matrix(model, q0, spec, scene) -> None:
                          f"or change the joints' axes")
 
 
+def _assembled(model):
+    """``model.assemble()``, a plug-in structure's checked to be a
+    :class:`fem.LinearStructure` (:class:`~cosim.errors.PluginError` else;
+    what it raises is blamed on it by :func:`cosim.core.plugin_guard.blame`,
+    its ValueError aside, which names a key of the scene)."""
+    structure = model.assemble()
+    if type(model).__module__.split(".")[0] != "fem":        # a plug-in's? its return checked
+        import fem
+
+        from cosim.core.plugin_guard import origin_of, refuse
+        if origin_of(model) is not None and not isinstance(structure, fem.LinearStructure):
+            raise refuse(model, "assemble()", structure, "a fem.LinearStructure")
+    return structure
+
+
 def _structure(spec, scene, macro_step):
     """Assemble a structure, keep its modes, set its initial state."""
     import fem
 
     from cosim.sides.fem import StructureSubsystem
     try:
-        structure = spec.model.assemble()
+        structure = _assembled(spec.model)
         basis = fem.modes(structure, **{k: v for k, v in spec.modes.items() if v})
+    except PluginError:                 # a plug-in's assemble() returned what is no structure
+        raise
     except ValueError as exc:
         msg = _unit_slip_first(str(exc), spec, scene)
         for arg, key in (("cutoff_hz", "cutoff_hz"), ("n_modes", "count")):

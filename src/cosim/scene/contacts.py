@@ -55,6 +55,9 @@ def contact_spec(name: str, t: Table, subs: list) -> ContactSpec:
                         + law_t.misspelt(f.name))
     law_t.finish()
     law = build_model(law_t, law_cls, **params)
+    if type(law).__module__.split(".")[0] != "couplers":   # a plug-in's? judged once
+        from cosim.core.plugin_guard import check_law
+        check_law(law)
     kinds = {s.name: s.type for s in subs}
     structures = {s.name for s in subs if isinstance(s, StructureSpec)}
     rigid_side = kinds[a[0]] == "rigid" or kinds[b[0]] == "rigid"

@@ -270,8 +270,21 @@ def spec_memory(spec) -> tuple[int, int, str, str]:
     elif spec.type in STRUCTURE_TYPES:
         kind, size, key = spec.type, model.n_elements, ".elements"
     else:                                          # a plug-in's bound
-        kind, size, key = "dofs", int(model.dof_bound()), ""
+        kind, size, key = "dofs", _dof_bound(model), ""
     return (*structure_memory(kind, size, spec.n_modes, spec.cutoff_hz), spec.key + key)
+
+
+def _dof_bound(model) -> int:
+    """A plug-in structure's ``dof_bound()``: an integer >= 1, else a
+    :class:`~cosim.errors.PluginError` naming the plug-in."""
+    import numbers
+
+    from cosim.core.plugin_guard import call, refuse
+    n = call(model, "dof_bound")
+    if isinstance(n, bool) or not isinstance(n, numbers.Integral) or n < 1:
+        raise refuse(model, "dof_bound()", n, "an integer >= 1, the most degrees of freedom "
+                                               "its assembled structure has")
+    return int(n)
 
 
 def _check_memory(subs: list, file) -> None:

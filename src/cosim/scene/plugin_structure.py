@@ -15,9 +15,19 @@ from __future__ import annotations
 import dataclasses
 import typing
 
-from cosim.errors import PluginError
+from cosim.errors import PluginError, shown
 
-__all__ = ["fields_of", "field_reader"]
+__all__ = ["fields_of", "field_reader", "model_class_problem", "SHARED_KEYS"]
+
+#: the keys every structure's table has, read by cosim itself: no field may take one
+#: (``rayleigh`` aside, which the model receives when it declares it)
+SHARED_KEYS = ("type", "points", "modes", "integrator", "initial_velocity",
+               "static_equilibrium", "static_loads")
+#: metadata key -> the reader of the fields that may give it, and what it must be
+_META = {"rule": ("number", '">0" or ">=0"'), "low": ("integer", "an integer"),
+         "high": ("integer", "an integer"), "choices": ("string", "a non-empty list of strings"),
+         "nonzero": ("vec2", "true or false"), "unit": (None, "a string"),
+         "doc": (None, "a string")}
 
 #: annotation -> (how the field is read, the check its key's reference gives)
 _KINDS = {float: ("number", "a finite number"), int: ("integer", "an integer"),
@@ -62,13 +72,13 @@ def fields_of(cls) -> list:
                               f"tuple[float, float] or tuple[float, ...] (or one of these "
                               f"| None)")
         check = kind[1]
-        meta = f.metadata
-        if meta.get("rule") in _RULE_TEXT:
+        meta = f.metadata              # as model_class_problem checked it when loaded
+        if isinstance(meta.get("rule"), str) and meta["rule"] in _RULE_TEXT:
             check = _RULE_TEXT[meta["rule"]]
         if "low" in meta or "high" in meta:
             check += f" in [{meta.get('low', '-inf')}, {meta.get('high', 'inf')}]"
-        if meta.get("choices"):
-            check = "one of " + ", ".join(f'"{c}"' for c in meta["choices"])
+        if isinstance(meta.get("choices"), (list, tuple)) and meta["choices"]:
+            check = "one of " + ", ".join(f'"{shown(c)}"' for c in meta["choices"])
         if meta.get("nonzero"):
             check += ", not both 0"
         out.append((f, check))
@@ -82,3 +92,61 @@ def field_reader(cls, name: str) -> str:
     """How field ``name`` of ``cls`` is read from a scene: ``number``,
     ``integer``, ``boolean``, ``string``, ``vec2`` or ``numbers``."""
     return _kind(typing.get_type_hints(cls)[name])[0]
+
+
+def _plain(text) -> bool:
+    """``text`` is a string without control characters (a line break, an
+    escape), which a message could not print as it is."""
+    return isinstance(text, str) and shown(text, len(text) + 1) == text
+
+
+def _meta_ok(key: str, value) -> bool:
+    if key in ("unit", "doc"):
+        return _plain(value)
+    if key == "rule":
+        return value in _RULE_TEXT
+    if key in ("low", "high"):
+        return isinstance(value, int) and not isinstance(value, bool)
+    if key == "choices":
+        return (isinstance(value, (list, tuple)) and len(value) > 0
+                and all(_plain(c) for c in value))
+    return isinstance(value, bool)                  # nonzero
+
+
+def model_class_problem(cls) -> str:
+    """What cosim cannot read in plug-in structure ``cls`` (checked when it
+    is loaded, so that a scene never meets it): its fields
+    (:func:`fields_of`), a field named like a key every structure shares
+    (:data:`SHARED_KEYS`), or metadata of the wrong kind (``rule``,
+    ``low``/``high``, ``choices``, ``nonzero`` each for the annotation that
+    takes it; ``unit`` and ``doc`` text without control characters).
+    ``""`` when none."""
+    try:
+        fields = fields_of(cls)
+    except PluginError as exc:
+        return str(exc)
+    except Exception as exc:              # an annotation typing cannot resolve
+        return f"its fields cannot be read: {type(exc).__name__}: {shown(str(exc))}"
+    for f, _ in fields:
+        if f.name in SHARED_KEYS:
+            return (f"it has a field `{f.name}`, a key every structure shares, which cosim "
+                    f"reads itself (the shared keys: {', '.join(SHARED_KEYS)}): rename the field")
+        reader = field_reader(cls, f.name)
+        if f.name == "rayleigh" and reader != "numbers":
+            return ("its field `rayleigh` is not `tuple[float, ...] | None`: cosim gives it "
+                    "the scene's [a0, a1]")
+        for key, value in f.metadata.items():
+            if key not in _META:
+                continue
+            takes, want = _META[key]
+            if takes is not None and reader != takes:
+                return (f"its field `{f.name}` ({reader}) has metadata `{key}`, which only a "
+                        f"{takes} field takes")
+            if not _meta_ok(key, value):
+                return (f"its field `{f.name}` has metadata `{key}` = {shown(repr(value))}, "
+                        f"expected {want}" + (" without control characters"
+                                              if want == "a string" or key == "choices" else ""))
+        low, high = f.metadata.get("low"), f.metadata.get("high")
+        if low is not None and high is not None and low > high:
+            return f"its field `{f.name}` has metadata `low` = {low} > `high` = {high}"
+    return ""

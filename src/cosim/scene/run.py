@@ -9,7 +9,7 @@ from pathlib import Path
 from cosim.core.guard import Guard, GuardError
 from cosim.core.recorder import Recorder
 from cosim.scene.load import Scene, load_scene
-from cosim.errors import FMUError, OutputError, SimulationError, UnsafeStepError
+from cosim.errors import FMUError, OutputError, PluginError, SimulationError, UnsafeStepError
 
 __all__ = ["simulate", "run_scene", "RunInterrupted", "stop_message"]
 
@@ -159,16 +159,29 @@ def _simulate(scene, scheme, progress, progress_interval, out, overwrite):
         stop = exc
         cause = getattr(exc, "signal_name", None) or "Ctrl-C"
         status, message = "interrupted", f"interrupted ({cause}) at t = {_reached(rec):.6g} s"
-    except Exception as exc:       # a bug or a model's own error: keep what was done
-        stop = exc
-        status = "error"
-        message = (f"stopped by {type(exc).__name__} at t = {_reached(rec):.6g} s: {exc}")
+    except (Exception, SystemExit) as exc:   # a bug or a model's error: keep what was done
+        from cosim.core.plugin_guard import blame
+        stop = blame(exc)          # an installed plug-in's, sys.exit() too: it failed, not cosim
+        if stop is None and isinstance(exc, SystemExit):
+            raise
+        if stop is not None:
+            status, message = "failed", f"run stopped at t = {_reached(rec):.6g} s: {stop}"
+        else:
+            stop = exc
+            status = "error"
+            message = (f"stopped by {type(exc).__name__} at t = {_reached(rec):.6g} s: {exc}")
     if status == "finished" and not _reached(rec) >= scene.t_end * (1.0 - 1e-9):
         # a scheme that returns short of t_end has not finished, whatever it says
         status = "error"
         message = (f"scheme `{sch.name}` returned at t = {_reached(rec):.6g} s, short of "
                    f"t_end = {scene.t_end:.6g} s: a bug of cosim, not of the scene")
-        log.error("%s", message)
+        from cosim.core.plugin_guard import origin_of
+        if origin_of(sch) is not None:
+            stop = PluginError(f"the plug-in {origin_of(sch)}: its run() returned at t = "
+                               f"{_reached(rec):.6g} s, short of t_end = {scene.t_end:.6g} s")
+            status, message = "failed", f"run stopped at t = {_reached(rec):.6g} s: {stop}"
+        else:
+            log.error("%s", message)
     if status != "finished":            # the counters up to where the run stopped
         counters = sch.counters()
     if status != "finished":             # the result says it; a caller decides to show it

@@ -31,6 +31,7 @@ def subsystem_spec(name: str, t: Table):
             t.error("type", f"must be one of {sorted(SUBSYSTEM_TYPES + plugins)}, got "
                             f"{echo(kind)}; nor does an installed package declare a "
                             f"structure of that name (entry point `cosim.structures`)")
+        _readable(STRUCTURE_MODELS[kind])
         t.string("type")
     else:
         kind = t.string("type", choices=SUBSYSTEM_TYPES)
@@ -51,6 +52,19 @@ def subsystem_spec(name: str, t: Table):
         spec = _multibody_spec(name, t)
     t.finish()
     return spec
+
+
+def _readable(cls) -> None:
+    """Refuse plug-in structure ``cls`` if its fields cannot be read from a
+    scene (:func:`cosim.scene.plugin_structure.model_class_problem`),
+    naming the plug-in, not a key of the scene."""
+    from cosim.core.plugin_guard import origin_of
+    from cosim.errors import PluginError
+    from cosim.scene.plugin_structure import model_class_problem
+    problem = model_class_problem(cls)
+    if problem:
+        who = origin_of(cls) or f"structure {cls.__module__}.{cls.__qualname__}"
+        raise PluginError(f"the plug-in {who} is refused: {problem}")
 
 
 def _multibody_spec(name: str, t: Table) -> MultibodySpec:

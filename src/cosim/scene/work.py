@@ -138,9 +138,9 @@ def estimate_work(spec, t_end: float, subsystems=(), contacts=(), system=None
     -------
     WorkEstimate
     """
-    if spec.name == "monolithic":
-        return _monolithic(spec, t_end, system)
     from cosim.core.schemes import get_scheme
+    if spec.name == "monolithic" or "macro_step" not in get_scheme(spec.name).options:
+        return _monolithic(spec, t_end, system)      # (a plug-in that subclasses it)
 
     opts = spec.options
     H = opts["macro_step"]

@@ -105,7 +105,7 @@ class StructureSubsystem(ClosedFormContacts, Subsystem):
         q0, dq0 = self._stepper.to_modal(u0, v0)
         self.x = np.concatenate([q0, dq0])
         self.integrator = integrator
-        self._ts = None
+        self._ts = self._ts_checked = None
         if integrator != "exact":
             from cosim.core.plugins import provide
             from fem import STRUCTURAL_INTEGRATORS, get_structural_integrator
@@ -115,6 +115,9 @@ class StructureSubsystem(ClosedFormContacts, Subsystem):
             self._ts = cls(np.eye(m), np.diag(self.modal_damping) if np.any(
                 self.modal_damping) else None, np.diag(self.omega ** 2),
                 **(integrator_options or {}))
+            from cosim.core.plugin_guard import origin_of
+            if origin_of(cls) is not None:
+                self._ts_checked = self._check_step
         self._acc = self._modal_acceleration(self.x, None, 0.0)
         self.aux = np.zeros(2)
         self._embedded = []
@@ -129,6 +132,15 @@ class StructureSubsystem(ClosedFormContacts, Subsystem):
         self.switch_log: list[tuple[float, int, bool]] = []
         self.impact_log: list[dict] = []
         self._names = [f"{d}" for d in structure.dof_names]
+
+    def _check_step(self, out, m: int) -> None:
+        """Refuse what a plug-in structural integrator's ``step`` returned,
+        unless three float arrays of shape ``(m,)``."""
+        from cosim.core.plugin_guard import refuse
+        ok = isinstance(out, tuple) and len(out) == 3 and all(
+            np.shape(x) == (m,) and np.asarray(x).dtype.kind == "f" for x in out)
+        if not ok:
+            raise refuse(self._ts, "step()", out, f"three arrays (u, v, a) of shape ({m},)")
 
     # ------------------------------------------------------------- ports
     def move_port(self, port: int, s: float) -> float:
@@ -428,7 +440,10 @@ class StructureSubsystem(ClosedFormContacts, Subsystem):
                 q1, dq1 = self._stepper.step_modal(self.x[:m], self.x[m:], h, G)
                 a1 = None
             else:
-                q1, dq1, a1 = self._ts.step(self.x[:m], self.x[m:], self._acc, h, G)
+                out = self._ts.step(self.x[:m], self.x[m:], self._acc, h, G)
+                if self._ts_checked is not None:     # an installed plug-in's: its step
+                    self._ts_checked(out, m)
+                q1, dq1, a1 = out
             y1 = np.concatenate([q1, dq1])
             if not self._embedded or not np.any(self._switch(t + h, y1) > 0):
                 self._account_damping(h, self.x, y1)

@@ -330,6 +330,8 @@ class MultibodySubsystem(SampledSteps, TreeFaceMixin, CompiledFace, Subsystem):
             y1 = integ.integrate(lambda tt, yy: self._rhs(tt, yy, inputs), t, y0, t + h,
                                  switch, self._on_switch, coarse=not self._connections,
                                  probe=probe, peak=self.peak)
+        if np.shape(y1) != y0.shape:     # one comparison a step: an installed plug-in's?
+            _bad_state(integ, y1, y0.shape)
         n2, na = 2 * self.n_dof, self.aux.size
         self.x[:] = y1[:n2]
         self.aux[:] = y1[n2:n2 + na]
@@ -498,3 +500,12 @@ class MultibodySubsystem(SampledSteps, TreeFaceMixin, CompiledFace, Subsystem):
     def coordinates(self):
         n = self.n_dof
         return {name: (i, n + i) for i, name in enumerate(self.model.joint_names)}
+
+
+def _bad_state(integ, y1, shape) -> None:
+    """Refuse the state ``y1`` that integrator ``integ`` returned, not of ``shape``."""
+    from cosim.core.plugin_guard import origin_of, refuse
+    if origin_of(integ) is not None:
+        raise refuse(integ, "integrate()", y1, f"the state, an array of shape {shape}")
+    raise ValueError(f"integrator `{integ.name}` returned a state of shape {np.shape(y1)}, "
+                     f"expected {shape}")
