@@ -20,6 +20,7 @@ import hashlib
 import io
 import json
 import warnings
+import zipfile
 
 import numpy as np
 
@@ -86,7 +87,7 @@ def _unpack(data: bytes, key: dict, n_dof: int):
                 return "does not hold a modal basis"
             key_json, omega, shapes = str(z["key"]), z["omega"], z["shapes"]
             meta, checksum = z["meta"], str(z["checksum"])
-    except (ValueError, OSError, KeyError, EOFError) as exc:
+    except (ValueError, OSError, KeyError, EOFError, zipfile.BadZipFile) as exc:
         return f"cannot be read ({type(exc).__name__}: {exc})"
     if key_json != json.dumps(key, sort_keys=True):
         return "was written for other inputs"
