@@ -21,7 +21,7 @@ __all__ = ["Key", "Section", "SECTIONS", "REQUIRED", "Varies", "DEFAULT_MULTIBOD
            "MAX_STEPS"]
 
 #: the ``type`` of a structure subsystem
-STRUCTURE_TYPES = ("chain", "beam", "cable", "string", "rod")
+STRUCTURE_TYPES = ("chain", "beam", "cable", "string", "rod", "plane")
 #: every ``type`` a subsystem may have (the loader's choices, the table's text)
 SUBSYSTEM_TYPES = ("multibody", "rigid", "fmu") + STRUCTURE_TYPES
 
@@ -496,3 +496,5 @@ SECTIONS: dict[str, Section] = {
     "friction": Section("contacts.NAME.friction", "", _FRICTION),
 }
 SECTIONS["cable"] = SECTIONS["beam"]
+from cosim.scene.keytable_plane import PLANE_SECTIONS  # noqa: E402 (the plane body's keys)
+SECTIONS.update(PLANE_SECTIONS)

@@ -267,6 +267,8 @@ def spec_memory(spec) -> tuple[int, int, str, str]:
     model = spec.model
     if spec.type == "chain":
         kind, size, key = "chain", len(model.masses), ".masses"
+    elif spec.type == "plane":                     # counted from the mesh's cells
+        kind, size, key = "dofs", int(model.dof_bound()), ".mesh"
     elif spec.type in STRUCTURE_TYPES:
         kind, size, key = spec.type, model.n_elements, ".elements"
     else:                                          # a plug-in's bound

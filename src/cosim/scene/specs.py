@@ -223,6 +223,9 @@ class StructureSpec(_ByKey):
         Start at the static state under gravity and ``static_loads``.
     static_loads : dict
         Point name -> force along the direction [N].
+    static_correction : bool
+        A plane body's contacts get the dropped modes' static compliance in
+        series with their spring.
     """
 
     name: str
@@ -238,6 +241,7 @@ class StructureSpec(_ByKey):
     initial_velocity: float = 0.0
     static_equilibrium: bool = False
     static_loads: dict = field(default_factory=dict)
+    static_correction: bool = False
 
     @property
     def modes(self) -> dict:

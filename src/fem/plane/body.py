@@ -63,7 +63,11 @@ class Plane:
     element : str
         ``"P2"`` (default), ``"P1"`` (triangles), ``"Q1"``, ``"Q2"`` (quadrangles).
     fixed : str or tuple of str
-        Boundary groups whose displacement is zero; none for a free body.
+        Groups (curves or points) whose displacement is zero; none for a
+        free body.
+    fixed_x, fixed_y : str or tuple of str
+        Groups whose displacement along the mesh's x (y) is zero: a roller,
+        or a pin at a point group.
     scale : float
         File length unit in metres (``1e-3`` for a millimetre mesh).
     origin : (2,) float
@@ -90,6 +94,8 @@ class Plane:
     model: str = "plane_stress"
     element: str = "P2"
     fixed: tuple = ()
+    fixed_x: tuple = ()
+    fixed_y: tuple = ()
     scale: float = 1.0
     origin: tuple = (0.0, 0.0)
     angle: float = 0.0
@@ -109,13 +115,27 @@ class Plane:
         put(self, "origin", vector(self.origin, "origin", unit=False))
         put(self, "angle", real("angle", self.angle))
         put(self, "rayleigh", _rayleigh(self.rayleigh))
-        fixed = (self.fixed,) if isinstance(self.fixed, str) else tuple(self.fixed)
-        if not all(isinstance(g, str) and g for g in fixed):
-            raise ValueError(f"`fixed` must name boundary groups, got {self.fixed!r}")
-        put(self, "fixed", fixed)
+        for key in ("fixed", "fixed_x", "fixed_y"):
+            value = getattr(self, key)
+            groups = (value,) if isinstance(value, str) else tuple(value)
+            if not all(isinstance(g, str) and g for g in groups):
+                raise ValueError(f"`{key}` must name mesh groups, got {value!r}")
+            put(self, key, groups)
+
+    @property
+    def supports(self) -> dict:
+        """Component (``None`` for both, 0 for x, 1 for y) -> the groups it holds."""
+        return {None: self.fixed, 0: self.fixed_x, 1: self.fixed_y}
 
     def read(self) -> PlaneMesh:
-        """The checked mesh (read from the file, or the one given)."""
+        """The checked mesh (read from the file once, or the one given)."""
+        known = self.__dict__.get("_mesh_read")
+        if known is None:
+            known = self._read()
+            object.__setattr__(self, "_mesh_read", known)
+        return known
+
+    def _read(self) -> PlaneMesh:
         if isinstance(self.mesh, PlaneMesh):
             n = dof_count(self.mesh, self.element)
             if CELL_KINDS[self.element] != self.mesh.kind:
@@ -148,8 +168,9 @@ class Plane:
         from skfem.helpers import ddot, dot, sym_grad, trace
 
         mesh = self.read() if mesh is None else mesh
-        for name in self.fixed:
-            mesh.group(name)                   # refuses a missing or empty group
+        for groups in self.supports.values():
+            for name in groups:
+                mesh.vertices(name)            # refuses a missing or empty group
         cls = skfem.MeshTri if mesh.kind == "triangle" else skfem.MeshQuad
         sk = cls(mesh.points.T.copy(), mesh.cells.T.copy())
         scalar = {"P1": skfem.ElementTriP1, "P2": skfem.ElementTriP2,
@@ -184,5 +205,6 @@ class Plane:
         return {"thickness": self.thickness, "youngs_modulus": self.youngs_modulus,
                 "poisson_ratio": self.poisson_ratio, "density": self.density,
                 "model": self.model, "element": self.element, "fixed": list(self.fixed),
+                "fixed_x": list(self.fixed_x), "fixed_y": list(self.fixed_y),
                 "scale": self.scale}
 

@@ -57,6 +57,8 @@ class PlaneMesh:
         What the mesh came from (a file name), for messages.
     digest : str
         SHA-256 of the file's bytes ("" for a mesh built in code).
+    point_groups : dict
+        Group name -> ndarray (k,) of vertices (a Gmsh physical point).
     """
 
     points: np.ndarray
@@ -65,14 +67,32 @@ class PlaneMesh:
     groups: dict = field(default_factory=dict)
     source: str = "<mesh built in code>"
     digest: str = ""
+    point_groups: dict = field(default_factory=dict)
 
     def __post_init__(self):
         self.points = np.ascontiguousarray(self.points, dtype=float)
         self.cells = np.ascontiguousarray(self.cells, dtype=np.int64)
         self.groups = {str(k): np.asarray(v, dtype=np.int64).reshape(-1, 2)
                        for k, v in self.groups.items()}
+        self.point_groups = {str(k): np.asarray(v, dtype=np.int64).ravel()
+                             for k, v in self.point_groups.items()}
         _check_cells(self)
         _check_groups(self)
+
+    def vertices(self, name: str) -> np.ndarray:
+        """The vertices of a point group, or of a curve group's segments.
+
+        Raises
+        ------
+        MeshError
+            If the mesh has no such group, or it is empty.
+        """
+        if name in self.point_groups:
+            if self.point_groups[name].size == 0:
+                raise MeshError(f"{self.source}: the point group {name!r} holds no vertex; "
+                                f"give its physical point a meshed point")
+            return self.point_groups[name]
+        return np.unique(self.group(name))
 
     def group(self, name: str) -> np.ndarray:
         """The directed vertex pairs of group ``name``.
@@ -84,6 +104,12 @@ class PlaneMesh:
         """
         if name not in self.groups:
             have = ", ".join(repr(g) for g in sorted(self.groups)) or "none"
+            if name in self.point_groups:
+                raise MeshError(f"{self.source}: {name!r} is a point group; a boundary point "
+                                f"needs a curve group (its curve groups: {have})")
+            if self.point_groups:
+                have += "; point groups: " + ", ".join(repr(g)
+                                                       for g in sorted(self.point_groups))
             raise MeshError(f"{self.source}: no boundary group {name!r} (its groups: {have}); "
                             f"name a Physical Curve of the mesh, e.g. in Gmsh "
                             f"`Physical Curve(\"{name}\") = {{...}};`")
@@ -160,6 +186,10 @@ def _check_cells(mesh: PlaneMesh, entity=None) -> None:
 def _check_groups(mesh: PlaneMesh) -> None:
     """Refuse a group whose line cells are not edges of the 2-D cells."""
     edges = {tuple(e) for e in _edges(mesh.cells).tolist()}
+    for name, verts in mesh.point_groups.items():
+        if verts.size and ((verts < 0).any() or (verts >= mesh.points.shape[0]).any()):
+            raise MeshError(f"{mesh.source}: the point group {name!r} names a point that is no "
+                            f"vertex of the 2-D cells; put its physical point on the body")
     for name, pairs in mesh.groups.items():
         if pairs.size and ((pairs < 0).any() or
                            any(tuple(sorted(e)) not in edges for e in pairs.tolist())):
@@ -168,23 +198,23 @@ def _check_groups(mesh: PlaneMesh) -> None:
                             f"together (Gmsh: the curves must bound the Physical Surface)")
 
 
-def _gmsh_groups(msh) -> dict:
-    """Physical curves: name -> directed vertex pairs (in the file's numbering)."""
+def _gmsh_groups(msh, dim: int) -> dict:
+    """Physical groups of dimension ``dim`` (1: curves, 0: points): name ->
+    the cells' vertices in the file's numbering, (k, 2) or (k,)."""
+    kind, width = ("line", 2) if dim == 1 else ("vertex", 1)
     names = {int(v[0]): k for k, v in (msh.field_data or {}).items()
-             if len(v) > 1 and int(v[1]) == 1}
+             if len(v) > 1 and int(v[1]) == dim}
     groups = {k: [] for k in names.values()}
     tags = (msh.cell_data or {}).get("gmsh:physical")
-    if tags is None:
-        return {k: np.zeros((0, 2), np.int64) for k in groups}
-    for block, tag in zip(msh.cells, tags):
-        if block.type != "line":
+    for block, tag in zip(msh.cells, tags if tags is not None else ()):
+        if block.type != kind:
             continue
         tag = np.asarray(tag)
         for t in np.unique(tag):
             if int(t) in names:
                 groups[names[int(t)]].append(np.asarray(block.data)[tag == t])
-    return {k: (np.concatenate(v) if v else np.zeros((0, 2), np.int64)).astype(np.int64)
-            for k, v in groups.items()}
+    return {k: (np.concatenate(v) if v else np.zeros((0, width), np.int64)).astype(np.int64)
+            .reshape(-1, width) for k, v in groups.items()}
 
 
 def read_mesh(path, scale: float = 1.0, element: str = "P2", max_dof: int = MAX_DOF,
@@ -278,7 +308,7 @@ def read_mesh(path, scale: float = 1.0, element: str = "P2", max_dof: int = MAX_
     if geo is not None:
         entity = np.concatenate([np.asarray(g, dtype=np.int64)
                                  for b, g in zip(msh.cells, geo) if b.type == kind])
-    groups = _gmsh_groups(msh)
+    groups, point_groups = _gmsh_groups(msh, 1), _gmsh_groups(msh, 0)
     used = np.unique(cells)
     renumber = np.full(points.shape[0], -1, dtype=np.int64)
     renumber[used] = np.arange(used.size)
@@ -288,6 +318,8 @@ def read_mesh(path, scale: float = 1.0, element: str = "P2", max_dof: int = MAX_
     mesh.source, mesh.digest, mesh.kind = src, digest, kind
     mesh.groups = {name: (renumber[pairs] if pairs.size else pairs).reshape(-1, 2)
                    for name, pairs in groups.items()}
+    mesh.point_groups = {name: (renumber[v] if v.size else v).ravel()
+                         for name, v in point_groups.items()}
     _check_cells(mesh, entity)
     _check_groups(mesh)
     n = dof_count(mesh, element)

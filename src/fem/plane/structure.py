@@ -80,11 +80,12 @@ class PlaneStructure(LinearStructure):
         self.rotation = _rotation(angle)
         n_full = mass_full.shape[0]
         self._sbasis, self._skmesh = scalar_basis, skmesh
-        fixed = self._group_dofs(plane.fixed)
+        fixed = np.unique(np.concatenate([self._group_dofs(groups, c)
+                                          for c, groups in plane.supports.items()]))
         full_map = np.arange(n_full)
         free, dof_map = _reduce(full_map, fixed)
         if free.size == 0:
-            raise MeshError(f"{mesh.source}: the supports {list(plane.fixed)} fix every DOF")
+            raise MeshError(f"{mesh.source}: the supports fix every DOF")
         self.dof_map = dof_map
         self.free = free
         locs = scalar_basis.doflocs                   # (2, n_scalar), mesh frame
@@ -105,13 +106,17 @@ class PlaneStructure(LinearStructure):
         self._chains: dict = {}
 
     # -- groups ---------------------------------------------------------------
-    def _group_dofs(self, groups) -> np.ndarray:
-        """Full DOFs (both components) on the segments of ``groups``."""
+    def _group_dofs(self, groups, component=None) -> np.ndarray:
+        """Full DOFs of ``component`` (0: x, 1: y, None: both) on the
+        segments of curve groups and at the vertices of point groups."""
         out = [np.zeros(0, dtype=np.int64)]
         for name in groups:
-            facets = self._facets(self.mesh.group(name))
-            scalar = self._sbasis.get_dofs(facets=facets).all()
-            out += [2 * scalar, 2 * scalar + 1]
+            if name in self.mesh.point_groups:
+                scalar = self.mesh.vertices(name)       # vertex i is scalar DOF i
+            else:
+                facets = self._facets(self.mesh.group(name))
+                scalar = self._sbasis.get_dofs(facets=facets).all()
+            out += [2 * scalar + c for c in ((0, 1) if component is None else (component,))]
         return np.unique(np.concatenate(out))
 
     def _facets(self, pairs: np.ndarray) -> np.ndarray:
