@@ -80,7 +80,7 @@ def _structure(spec, scene, macro_step):
     try:
         structure = spec.model.assemble()
         if spec.type == "plane":       # its ports move along their segments' normal
-            from cosim.scene.plane import port_direction
+            from cosim.scene.plane_build import port_direction
             port_direction(structure, spec.ports, scene.path, spec.key)
         basis = fem.modes(structure, **{k: v for k, v in spec.modes.items() if v})
     except ValueError as exc:
@@ -280,7 +280,7 @@ def build_system(scene, scheme: str | None = None, *, run_fmu: bool = True):
         pa, pb = subs[sa].port_index(c.a[1]), subs[sb].port_index(c.b[1])
         law = c.law
         if "plane" in (types[c.a[0]], types[c.b[0]]):   # static correction, pre-flight rules
-            from cosim.scene.plane import corrected_law
+            from cosim.scene.plane_build import corrected_law
             law = corrected_law(c, scene, subs, ((sa, pa), (sb, pb)))
         contact = PointContact(c.name, law, c.normal, c.offset)
         # the monolithic ODE evaluates every penalty law itself; a rigid law

@@ -130,7 +130,7 @@ def _structure_spec(name: str, t: Table, kind: str) -> StructureSpec:
     plane = kind == "plane"
     if plane:                                # a body from a mesh: cosim.scene.plane
         from cosim.scene.plane import plane_model
-        model, ports = plane_model(t)
+        model, ports = plane_model(t, _rayleigh(t) if t.has("rayleigh") else None)
     elif kind not in STRUCTURE_TYPES:        # an installed package's (fem.StructureModel)
         model = _plugin_model(t, fem.STRUCTURE_MODELS[kind])
         size = model.length
