@@ -13,6 +13,7 @@ import pytest
 
 import cosim
 from conftest import CASES
+from documented import Claim, assert_printed, assert_reproduced
 from cosim import cli
 from cosim.scene.load import SceneError
 from cosim.sides.fem import StructureSubsystem
@@ -111,6 +112,15 @@ def test_the_twin_of_beam_impact_has_the_beams_frequency_and_first_impact():
                           duration=off - on, count=c["count"], res=res)
     a, b = runs["1d"], runs["2d"]
     assert abs(b["f1"] / a["f1"] - 1) < 1e-3
+    cmd = "tests/test_plane_scene.py, the twin of beam_impact"
+    for printed, value, measured in (
+            ("f1 23.4497 Hz", 23.4497, b["f1"]), ("the 1-D beam's 23.4533", 23.4533, a["f1"]),
+            ("within 0.08 % in peak force", 0.08, 100 * abs(b["peak"] / a["peak"] - 1)),
+            ("0.11 % in duration", 0.11, 100 * abs(b["duration"] / a["duration"] - 1))):
+        claim = Claim("docs/structures.md", printed, cmd, value, abs=0.5 * 10 ** -(
+            len(f"{value}".split(".")[1])))
+        assert_printed(claim)
+        assert_reproduced(claim, measured)
     assert b["k"] < a["k"] == 1.6e6                  # the correction softened C's spring
     assert b["count"] == a["count"] == 2
     # the peak penetration is the first contact's (the second is lighter)

@@ -63,6 +63,9 @@ def plane_model(t: Table, rayleigh=None):
         mesh = model.read()
     except MeshError as exc:
         t.error("mesh", str(exc))
+    except ImportError as exc:          # meshio is an optional extra
+        t.error("type", f"`plane` needs {exc.name or 'a missing package'}, which is not "
+                        f"installed: pip install \"cosim[fem]\"")
     for key, groups in held.items():
         for group in groups:
             try:
