@@ -255,3 +255,73 @@ def test_the_mesh_is_an_input_of_the_scene(tmp_path):
     digests = input_digests(scene)
     assert set(digests) == {"scene", "subsystems.plate.mesh"}
     assert math.isfinite(len(digests["subsystems.plate.mesh"]))
+
+
+# ---------------------------------------------------------------------------
+# The twin of rod_impact: a wall on the whole end face
+# ---------------------------------------------------------------------------
+def test_the_twin_of_rod_impact_is_rod_impact(tmp_path):
+    """rod_impact's rod as a Q1 strip (160 x 1 cells, nu = 0, free), moving
+    at 1 m/s onto the wall through a port on its whole end face: the face's
+    mean normal displacement, with consistent weights (a force on it is a
+    uniform traction).  With nu = 0 the strip's axial motion is the P1 rod's
+    on the same nodes and the face's mean sees no other mode, so the run is
+    rod_impact's: contact intervals to 1e-12 s, impulse and peak to 1e-9
+    (measured: 1.5e-16 s, 2.2e-12 and 3.9e-12)."""
+    import meshio
+    from fem.plane import rectangle
+    m = rectangle(1.0, 0.01, 160, 1, "quad")
+    tags = {"bottom": 1, "right": 2, "top": 3, "left": 4}
+    lines = np.concatenate([m.groups[k] for k in tags])
+    phys = np.concatenate([np.full(len(m.groups[k]), v) for k, v in tags.items()])
+    meshio.write(tmp_path / "rod_2d.msh", meshio.Mesh(
+        np.c_[m.points, np.zeros(len(m.points))],
+        [meshio.CellBlock("line", lines), meshio.CellBlock("quad", m.cells)],
+        cell_data={"gmsh:physical": [phys, np.full(len(m.cells), 9)],
+                   "gmsh:geometrical": [phys, np.full(len(m.cells), 1)]},
+        field_data={**{k: np.array([v, 1]) for k, v in tags.items()},
+                    "rod": np.array([9, 2])}), file_format="gmsh22", binary=False)
+    src = (CASES / "rod_impact.toml").read_text()
+    body = """[subsystems.rod]
+type = "plane"
+mesh = "rod_2d.msh"
+thickness = 0.01              # x 10 mm in the plane: the rod's 1e-4 m^2
+youngs_modulus = 210e9
+poisson_ratio = 0.0
+density = 7850.0
+element = "Q1"
+initial_velocity = [-1.0, 0.0]
+points = { end = { boundary = "left" } }
+integrator = { method = "exact", contact_step = 6e-8 }
+
+"""
+    i, j = src.index("[subsystems.rod]"), src.index("[subsystems.wall]")
+    (tmp_path / "rod_2d.toml").write_text(src[:i] + body + src[j:])
+    rod = cosim.simulate(cosim.load_scene(CASES / "rod_impact.toml")).summary["contacts"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")      # a face's average is no point contact (Flamant)
+        twin = cosim.simulate(cosim.load_scene(tmp_path / "rod_2d.toml")).summary["contacts"]
+    a, b = rod["wall"], twin["wall"]
+    assert a["count"] == b["count"] == 2
+    np.testing.assert_allclose(np.ravel(b["intervals"]), np.ravel(a["intervals"]), rtol=0,
+                               atol=1e-12)
+    assert b["impulse"] == pytest.approx(a["impulse"], rel=1e-9)
+    assert b["peak_penetration"] == pytest.approx(a["peak_penetration"], rel=1e-9)
+
+
+def test_a_faces_average_reads_a_translation_whole_and_a_rotation_not():
+    """The mean normal displacement of the strip's right face (normal +x):
+    a translation's x component whole, a small rotation about the centre
+    line (u_x = -theta y, exact in P1 to Q2) nothing, and its weights sum
+    to one over the face's x components."""
+    from fem.plane import Plane, rectangle
+    for element, kind in (("P2", "triangle"), ("Q1", "quad"), ("Q2", "quad")):
+        st = Plane(rectangle(1.0, 0.1, 4, 3, kind), thickness=0.01, youngs_modulus=210e9,
+                   poisson_ratio=0.3, density=7850.0, element=element).assemble()
+        dofs, w = st.point_operator(("right", None))
+        assert w @ st.translation((0.3, -2.0))[dofs] == pytest.approx(0.3, rel=1e-14)
+        x, y = st._sbasis.doflocs                  # scalar DOF i at (x[i], y[i])
+        spin = np.zeros(2 * x.size)
+        spin[0::2], spin[1::2] = -1e-3 * y, 1e-3 * (x - 0.5)
+        assert abs(w @ spin[st.free][dofs]) < 1e-17
+        assert np.all(w[dofs % 2 == 1] == 0) and w.sum() == pytest.approx(1.0, rel=1e-14)

@@ -113,7 +113,10 @@ def _structure(spec, scene, macro_step):
         except ValueError as exc:         # a structure free to move, or too weakly held
             raise SceneError(scene.path, f"{spec.key}.static_equilibrium",
                              f"cannot be met: {exc}") from None
-    v0 = np.full(n, spec.initial_velocity) if spec.initial_velocity else None
+    if spec.type == "plane":          # a uniform velocity vector
+        v0 = structure.translation(spec.initial_velocity) if any(spec.initial_velocity) else None
+    else:
+        v0 = np.full(n, spec.initial_velocity) if spec.initial_velocity else None
     try:
         cls = StructureSubsystem
         if spec.type == "plane":      # records its modes, never the whole field

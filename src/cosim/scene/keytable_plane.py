@@ -37,6 +37,7 @@ def _plane_keys(K, REQUIRED, subsystem_type, common: tuple) -> dict:
         K("angle", "rad", 0.0, "a finite number", "rotation of the mesh into the world"),
     ) + tuple(k for k in common if k.name not in ("modes", "initial_velocity")) + (
         K("modes", "", {}, _TABLE, "which modes are kept, and the static correction"),
+        K("initial_velocity", "m/s", (0.0, 0.0), _VEC, "uniform initial velocity (world)"),
     )
     groups = "a group of the mesh (a physical curve or point) or an array of them"
     supports = (
@@ -49,8 +50,9 @@ def _plane_keys(K, REQUIRED, subsystem_type, common: tuple) -> dict:
     point = (
         K("boundary", "", REQUIRED, "a boundary group of the mesh: one chain of curves",
           "the group the point lies on"),
-        K("s", "m", REQUIRED, "in [0, the group's length]",
-          "arc length along the group, from the free end of its first line cell in the file"),
+        K("s", "m", None, "in [0, the group's length]; not set: a straight group's average",
+          "arc length along the group, from the free end of its first line cell in the file; "
+          "not set, the group's mean normal displacement (a force on it: uniform traction)"),
     )
     modes = (
         K("count", "", None, "an integer >= 1", "keep the lowest `count` modes"),

@@ -82,11 +82,11 @@ def plane_model(t: Table, rayleigh=None):
         except MeshError as exc:
             pt.error("boundary", str(exc))
         s = pt.number("s", unit="m")
-        if not 0.0 <= s <= length * (1 + 1e-12):
+        if s is not None and not 0.0 <= s <= length * (1 + 1e-12):
             pt.error("s", f"must be an arc length in [0, {length:.6g}] m along `{group}`, got "
                           f"{echo(s)}")
         pt.finish()
-        ports[p] = (group, min(s, length))
+        ports[p] = (group, None if s is None else min(s, length))
     pts.finish()
     if not ports:
         t.error("points", "must name at least one point")

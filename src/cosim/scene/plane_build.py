@@ -78,7 +78,8 @@ def corrected_law(contact, scene, subs: list, sides: tuple):
             continue
         model, key = spec.model, f"subsystems.{sub_name}"
         k = getattr(law, "contact_stiffness", None)
-        if k is not None and not law.rigid:
+        point_contact = spec.ports[point][1] is not None     # not a face's average
+        if k is not None and not law.rigid and point_contact:
             growth = flamant_growth(k, model.youngs_modulus, model.thickness)
             if growth > FLAMANT_WARNING:
                 warnings.warn(f"{scene.path}: contact `{contact.name}` is a point contact on "

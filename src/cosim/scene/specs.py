@@ -217,8 +217,9 @@ class StructureSpec(_ByKey):
         Name in :data:`fem.STRUCTURAL_INTEGRATORS`.
     integrator_options : dict
         ``beta``, ``gamma``, ``alpha`` or ``rho_inf`` as given.
-    initial_velocity : float
-        Uniform initial velocity along the structure's direction [m/s].
+    initial_velocity : float or tuple of float
+        Uniform initial velocity along the structure's direction [m/s] (a
+        plane body's: a world 2-vector).
     static_equilibrium : bool
         Start at the static state under gravity and ``static_loads``.
     static_loads : dict
@@ -238,7 +239,7 @@ class StructureSpec(_ByKey):
     contact_step: float = DEFAULT_CONTACT_STEP
     integrator: str = "exact"
     integrator_options: dict = field(default_factory=dict)
-    initial_velocity: float = 0.0
+    initial_velocity: float | tuple = 0.0
     static_equilibrium: bool = False
     static_loads: dict = field(default_factory=dict)
     static_correction: bool = False

@@ -217,7 +217,8 @@ def _structure_spec(name: str, t: Table, kind: str) -> StructureSpec:
     options = {k: integ.number(k) for k in ("beta", "gamma", "alpha", "rho_inf")
                if integ.has(k)}
     integ.finish()
-    v0 = t.number("initial_velocity", unit="m/s") if not plane else 0.0
+    v0 = t.number("initial_velocity", unit="m/s") if not plane else t.vec2("initial_velocity",
+                                                                           unit="m/s")
     if v0 and kind in ("beam", "cable"):
         t.error("initial_velocity", "a uniform initial velocity is offered for chains, "
                                     "strings and rods, whose DOFs are all translations")

@@ -120,8 +120,10 @@ class PlaneStructure(LinearStructure):
         return np.unique(np.concatenate(out))
 
     def _facets(self, pairs: np.ndarray) -> np.ndarray:
-        f = self._skmesh.facets                     # (2, nf), sorted vertex pairs
-        index = {(int(a), int(b)): i for i, (a, b) in enumerate(f.T)}
+        index = self.__dict__.get("_facet_index")
+        if index is None:                           # facets: (2, nf) sorted vertex pairs
+            index = {(int(a), int(b)): i for i, (a, b) in enumerate(self._skmesh.facets.T)}
+            self._facet_index = index
         return np.array([index[tuple(sorted((int(a), int(b))))] for a, b in pairs],
                         dtype=np.int64)
 
@@ -191,20 +193,29 @@ class PlaneStructure(LinearStructure):
         return float(self.chain(group)[1][-1])
 
     # -- points ---------------------------------------------------------------
-    def boundary_point(self, group: str, s: float) -> BoundaryPoint:
+    def boundary_point(self, group: str, s: float | None) -> BoundaryPoint:
         """The point at arc length ``s`` [m] along ``group`` (see :class:`BoundaryPoint`).
 
         At a vertex between two segments the later segment holds the point
-        (the last one at the group's end).
+        (the last one at the group's end).  ``s = None`` is the group's
+        average: the rows ``(1/L) int N ds`` over its segments (consistent
+        weights: a force on it is a uniform traction), at its mid-length
+        point, ``segment = -1``; the group must be straight.
         """
+        if s is None:
+            return self._average(group)
         pairs, arc = self.chain(group)
         s = float(s)
         tol = 1e-12 * arc[-1]
         if not (-tol <= s <= arc[-1] + tol):
             raise ValueError(f"`s` must be in [0, {arc[-1]:.6g}] m along {group!r}, got {s!r}")
         k = int(np.clip(np.searchsorted(arc, s, side="right") - 1, 0, pairs.shape[0] - 1))
-        a, b = (int(v) for v in pairs[k])
         xi = min(max((s - arc[k]) / (arc[k + 1] - arc[k]), 0.0), 1.0)
+        return self._segment_point(pairs, k, xi)
+
+    def _segment_point(self, pairs, k: int, xi: float) -> BoundaryPoint:
+        """The point at local coordinate ``xi`` in [0, 1] of segment ``k``."""
+        a, b = (int(v) for v in pairs[k])
         facet = int(self._facets(pairs[k:k + 1])[0])
         scalar = [a, b]
         shape = [1.0 - xi, xi]
@@ -233,6 +244,29 @@ class PlaneStructure(LinearStructure):
         return BoundaryPoint(dofs=free[keep], rows=rows[:, keep],
                              normal=self.rotation @ normal, tangent=self.rotation @ tan,
                              position=position, segment=k)
+
+    def _average(self, group: str) -> BoundaryPoint:
+        pairs, arc = self.chain(group)
+        length = arc[-1]
+        # Simpson's rule is exact on a segment for the traces (of degree <= 2)
+        nodes, weights = (0.0, 0.5, 1.0), (1.0 / 6.0, 4.0 / 6.0, 1.0 / 6.0)
+        n_free = self.n_dof
+        total = np.zeros((2, n_free))
+        normal = None
+        for k in range(pairs.shape[0]):
+            h = arc[k + 1] - arc[k]
+            for xi, w in zip(nodes, weights):
+                pt = self._segment_point(pairs, k, xi)
+                if normal is None:
+                    normal = pt.normal
+                elif float(pt.normal @ normal) < 1.0 - 1e-9:
+                    raise MeshError(f"{self.mesh.source}: the group {group!r} is not straight; "
+                                    f"its average needs one normal (give `s`)")
+                np.add.at(total.T, pt.dofs, (w * h / length) * pt.rows.T)
+        dofs = np.flatnonzero(np.any(total != 0.0, axis=0))
+        mid = self.boundary_point(group, 0.5 * length)
+        return BoundaryPoint(dofs=dofs, rows=total[:, dofs], normal=normal,
+                             tangent=mid.tangent, position=mid.position, segment=-1)
 
     def point_operator(self, s):
         """Row of the outward normal displacement at the point ``s = (group, arc)``.
@@ -270,12 +304,19 @@ class PlaneStructure(LinearStructure):
         local = full[..., :2 * n_v].reshape(u.shape[:-1] + (n_v, 2))
         return local @ self.rotation.T
 
+    def translation(self, velocity) -> np.ndarray:
+        """The free DOFs of a uniform world vector ``velocity`` (2,) over the
+        body (zero where fixed): a rigid translation's velocity."""
+        local = self.rotation.T @ np.asarray(velocity, dtype=float)
+        full = np.zeros(self.dof_map.size)
+        full[0::2], full[1::2] = local
+        return full[self.free]
+
     def gravity_load(self, g_vec) -> np.ndarray:
         """Consistent load of the body's weight over the free DOFs [N]."""
         g = np.asarray(g_vec, dtype=float)
         if g.shape != (2,) or not np.all(np.isfinite(g)):
             raise ValueError(f"`g_vec` must be a finite 2-vector [m/s^2], got {g_vec!r}")
-        local = self.rotation.T @ g
         acc = np.zeros(self.dof_map.size)
-        acc[0::2], acc[1::2] = local
+        acc[0::2], acc[1::2] = self.rotation.T @ g
         return (self._m_full @ acc)[self.free]
