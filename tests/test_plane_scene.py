@@ -14,6 +14,7 @@ import pytest
 import cosim
 from conftest import CASES
 from documented import Claim, assert_printed, assert_reproduced
+from plane_files import write_msh
 from cosim import cli
 from cosim.scene.load import SceneError
 from cosim.sides.fem import StructureSubsystem
@@ -268,19 +269,8 @@ def test_the_twin_of_rod_impact_is_rod_impact(tmp_path):
     on the same nodes and the face's mean sees no other mode, so the run is
     rod_impact's: contact intervals to 1e-12 s, impulse and peak to 1e-9
     (measured: 1.5e-16 s, 2.2e-12 and 3.9e-12)."""
-    import meshio
     from fem.plane import rectangle
-    m = rectangle(1.0, 0.01, 160, 1, "quad")
-    tags = {"bottom": 1, "right": 2, "top": 3, "left": 4}
-    lines = np.concatenate([m.groups[k] for k in tags])
-    phys = np.concatenate([np.full(len(m.groups[k]), v) for k, v in tags.items()])
-    meshio.write(tmp_path / "rod_2d.msh", meshio.Mesh(
-        np.c_[m.points, np.zeros(len(m.points))],
-        [meshio.CellBlock("line", lines), meshio.CellBlock("quad", m.cells)],
-        cell_data={"gmsh:physical": [phys, np.full(len(m.cells), 9)],
-                   "gmsh:geometrical": [phys, np.full(len(m.cells), 1)]},
-        field_data={**{k: np.array([v, 1]) for k, v in tags.items()},
-                    "rod": np.array([9, 2])}), file_format="gmsh22", binary=False)
+    write_msh(tmp_path / "rod_2d.msh", rectangle(1.0, 0.01, 160, 1, "quad"), "rod")
     src = (CASES / "rod_impact.toml").read_text()
     body = """[subsystems.rod]
 type = "plane"
