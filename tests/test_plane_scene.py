@@ -199,6 +199,20 @@ def test_the_static_correction_softens_the_spring_by_the_dropped_compliance(tmp_
     assert c_r > 0 and k == pytest.approx(1e7 / (1 + 1e7 * c_r), rel=1e-14)
 
 
+def test_a_second_build_reads_the_modes_from_the_cache(tmp_path, monkeypatch):
+    from fem.plane import cache
+    path = _strike(tmp_path, modes=', cache = "modes-cache"')
+    first, _ = cosim.load_scene(path).build()
+    entries = list((tmp_path / "modes-cache").iterdir())
+    assert len(entries) == 1 and entries[0].suffix == ".npz"
+    monkeypatch.setattr(cache, "modes", lambda *a, **k: pytest.fail("solved again"))
+    again, _ = cosim.load_scene(path).build()
+    assert np.array_equal(again.subsystems[0].omega, first.subsystems[0].omega)
+    (tmp_path / "taken").write_text("")
+    path = _strike(tmp_path, modes=', cache = "taken"')
+    _refused(path, "subsystems.plate.modes.cache", "not a folder")
+
+
 # ---------------------------------------------------------------------------
 # Refusals and warnings
 # ---------------------------------------------------------------------------

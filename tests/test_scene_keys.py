@@ -67,7 +67,7 @@ CONSTRUCTED = [
         'density=7850.0, element="P2", supports={fixed="clamp", fixed_x=["tip"], '
         'fixed_y="tip"}, origin=[0.0, 0.0], angle=0.0, rayleigh=[0.0, 0.0], '
         'points={p={boundary="face", s=0.1}}, modes={count=2, cutoff_hz=1e4, '
-        'static_correction=false}, integrator={method="exact"}, static_equilibrium=true, '
+        'static_correction=false, cache=".plane-modes"}, integrator={method="exact"}, static_equilibrium=true, '
         'static_loads={p=1.0}, initial_velocity=[0.0, 0.0]}']),
     (SPRING_DROP, None, [
         f'{M}.joint.drive={{type="table", times=[0.0, 1.0], torques=[0.0, 0.0]}}']),

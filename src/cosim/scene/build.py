@@ -82,7 +82,11 @@ def _structure(spec, scene, macro_step):
         if spec.type == "plane":       # its ports move along their segments' normal
             from cosim.scene.plane_build import port_direction
             port_direction(structure, spec.ports, scene.path, spec.key)
-        basis = fem.modes(structure, **{k: v for k, v in spec.modes.items() if v})
+        if getattr(spec, "modal_cache", None):     # a plane body's, kept on disk
+            from cosim.scene.plane_build import cached_basis
+            basis = cached_basis(structure, spec, scene.path)
+        else:
+            basis = fem.modes(structure, **{k: v for k, v in spec.modes.items() if v})
     except ValueError as exc:
         msg = _unit_slip_first(str(exc), spec, scene)
         for arg, key in (("cutoff_hz", "cutoff_hz"), ("n_modes", "count")):

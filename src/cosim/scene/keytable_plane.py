@@ -59,6 +59,8 @@ def _plane_keys(K, REQUIRED, subsystem_type, common: tuple) -> dict:
         K("cutoff_hz", "Hz", None, "> 0", "keep the modes below this frequency"),
         K("static_correction", "", False, "true or false; linear contact laws only",
           "add the dropped modes' static compliance in series with each contact's spring"),
+        K("cache", "", None, "a folder, relative to the scene",
+          "keep the modes there, keyed on the mesh's content, material, supports and modes"),
     )
     return {
         "plane": ("subsystems.NAME", body),

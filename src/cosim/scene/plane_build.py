@@ -18,7 +18,7 @@ import numpy as np
 
 from cosim.scene.checks import SceneError
 
-__all__ = ["port_direction", "corrected_law", "FLAMANT_WARNING"]
+__all__ = ["port_direction", "corrected_law", "cached_basis", "FLAMANT_WARNING"]
 
 #: a point contact whose compliance grows by more than this share at every
 #: halving of the mesh (Flamant) is warned as mesh-dependent
@@ -114,3 +114,25 @@ def corrected_law(contact, scene, subs: list, sides: tuple):
         c_r = corr.compliance(spec.ports[point])
         law = dataclasses.replace(law, contact_stiffness=k / (1.0 + k * c_r))
     return law
+
+
+def cached_basis(structure, spec, file):
+    """The modes of a plane body from its ``modes.cache`` folder when an
+    entry there fits (:func:`fem.plane.cache.cached_modes`), else computed
+    and written there through the checked writer.
+
+    Raises
+    ------
+    SceneError
+        If the folder cannot be made, read or written.
+    """
+    from cosim.errors import OutputError
+    from cosim.io.rundir import OutputFolder
+    from fem.plane.cache import cached_modes
+
+    try:
+        with OutputFolder(spec.modal_cache, lock=False) as folder:
+            basis, _ = cached_modes(structure, folder, **spec.modes)
+    except OutputError as exc:
+        raise SceneError(file, f"{spec.key}.modes.cache", str(exc)) from None
+    return basis

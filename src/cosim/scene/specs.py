@@ -227,6 +227,8 @@ class StructureSpec(_ByKey):
     static_correction : bool
         A plane body's contacts get the dropped modes' static compliance in
         series with their spring.
+    modal_cache : str or None
+        The folder where a plane body's modes are kept between runs.
     """
 
     name: str
@@ -243,6 +245,7 @@ class StructureSpec(_ByKey):
     static_equilibrium: bool = False
     static_loads: dict = field(default_factory=dict)
     static_correction: bool = False
+    modal_cache: str | None = None
 
     @property
     def modes(self) -> dict:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from pathlib import Path
 
 from cosim.scene.checks import MAX_ELEMENTS, Table, build_model, check_name, echo, floats
 from cosim.scene.specs import (STRUCTURE_TYPES, SUBSYSTEM_TYPES, BodySpec, JointSpec,
@@ -209,6 +210,9 @@ def _structure_spec(name: str, t: Table, kind: str) -> StructureSpec:
     n_modes = md.integer("count", low=1)
     cutoff_hz = md.number("cutoff_hz", rule=">0", unit="Hz")
     correction = md.boolean("static_correction") if plane else False
+    cache = md.string("cache") if plane else None
+    if cache is not None:
+        cache = str(Path(t.file).parent / cache)
     md.finish()
     integ = t.table("integrator", section="structure.integrator")
     provide(fem.STRUCTURAL_INTEGRATORS, "cosim.integrators", integ.data.get("method"))
@@ -238,7 +242,7 @@ def _structure_spec(name: str, t: Table, kind: str) -> StructureSpec:
                          n_modes=n_modes, cutoff_hz=cutoff_hz, contact_step=contact_step,
                          integrator=method, integrator_options=options, initial_velocity=v0,
                          static_equilibrium=static, static_loads=loads,
-                         static_correction=correction)
+                         static_correction=correction, modal_cache=cache)
 
 
 def _rayleigh(t: Table) -> tuple:
