@@ -258,6 +258,12 @@ def test_a_stiff_point_contact_is_warned_as_mesh_dependent(tmp_path):
         cosim.load_scene(_strike(tmp_path)).build()          # 1e7 N/m: 2e-3, quiet
 
 
+def test_exporting_a_plane_bodys_field_is_refused_not_crashed(tmp_path):
+    path = _strike(tmp_path, **{"t_end = 1e-3": 't_end = 1e-3\n[output]\nexport = ["plate"]'})
+    with pytest.raises(SceneError, match="`output.export` names the plane body 'plate'"):
+        cosim.load_scene(path)
+
+
 def test_follow_is_refused_on_a_plane_body(tmp_path):
     path = _strike(tmp_path, **{'placement = "embedded"': 'placement = "embedded"\nfollow = true'})
     with pytest.raises(SceneError, match="follow"):
