@@ -44,7 +44,8 @@ def plane_model(t: Table, rayleigh=None):
     from fem.plane import PLANE_ELEMENTS, PLANE_MODELS, MeshError, Plane
 
     name = t.string("mesh")
-    path = Path(name) if Path(name).is_absolute() else Path(t.file).parent / name
+    path = Path(name) if Path(name).is_absolute() else Path(t.file).resolve().parent / name
+    t.data["mesh"] = str(path)      # the scene a run writes names it wherever it is read
     kw = dict(scale=t.number("scale", rule=">0", unit="m"),
               model=t.string("model", choices=PLANE_MODELS),
               thickness=t.number("thickness", rule=">0", unit="m"),

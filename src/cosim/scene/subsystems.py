@@ -211,8 +211,8 @@ def _structure_spec(name: str, t: Table, kind: str) -> StructureSpec:
     cutoff_hz = md.number("cutoff_hz", rule=">0", unit="Hz")
     correction = md.boolean("static_correction") if plane else False
     cache = md.string("cache") if plane else None
-    if cache is not None:
-        cache = str(Path(t.file).parent / cache)
+    if cache is not None:               # recorded where it was found, as a mesh is
+        cache = md.data["cache"] = str(Path(t.file).resolve().parent / cache)
     md.finish()
     integ = t.table("integrator", section="structure.integrator")
     provide(fem.STRUCTURAL_INTEGRATORS, "cosim.integrators", integ.data.get("method"))
