@@ -23,6 +23,14 @@ __all__ = ["port_direction", "corrected_law", "cached_basis", "FLAMANT_WARNING"]
 #: a point contact whose compliance grows by more than this share at every
 #: halving of the mesh (Flamant) is warned as mesh-dependent
 FLAMANT_WARNING = 1e-2
+#: the warnings said in this process (a command builds a scene several times)
+_SAID: set = set()
+
+
+def _warn(message: str) -> None:
+    if message not in _SAID:
+        _SAID.add(message)
+        warnings.warn(message, stacklevel=4)
 
 
 def port_direction(structure, ports: dict, file, key: str) -> None:
@@ -82,11 +90,10 @@ def corrected_law(contact, scene, subs: list, sides: tuple):
         if k is not None and not law.rigid and point_contact:
             growth = flamant_growth(k, model.youngs_modulus, model.thickness)
             if growth > FLAMANT_WARNING:
-                warnings.warn(f"{scene.path}: contact `{contact.name}` is a point contact on "
-                              f"the plane body `{sub_name}` whose compliance grows by "
-                              f"{growth:.2g} of the spring's at every halving of the mesh "
-                              f"(Flamant): its result depends on the mesh; spread the contact "
-                              f"or soften the spring", stacklevel=3)
+                _warn(f"{scene.path}: contact `{contact.name}` is a point contact on the plane "
+                      f"body `{sub_name}` whose compliance grows by {growth:.2g} of the "
+                      f"spring's at every halving of the mesh (Flamant): its result depends on "
+                      f"the mesh; spread the contact or soften the spring")
         if not spec.static_correction:
             continue
         if law.name != "linear":
@@ -94,6 +101,7 @@ def corrected_law(contact, scene, subs: list, sides: tuple):
                              f"puts the dropped modes' compliance in series with a linear "
                              f"spring; contact `{contact.name}` has a `{law.name}` law: use "
                              f"`linear`, or turn the correction off")
+        # the contact's frequency: its spring on the other side's port mass
         other = sides[1] if sides[0][0] == s else sides[0]
         mob = subs[other[0]].port_mobility(other[1], contact.normal)
         if not mob > 0.0:
@@ -105,8 +113,7 @@ def corrected_law(contact, scene, subs: list, sides: tuple):
             raise SceneError(scene.path, f"{key}.modes.static_correction",
                              f"for contact `{contact.name}`: {why}")
         if verdict == "warn":
-            warnings.warn(f"{scene.path}: `{key}` with contact `{contact.name}`: {why}",
-                          stacklevel=3)
+            _warn(f"{scene.path}: `{key}` with contact `{contact.name}`: {why}")
         sub = subs[s]
         corr = getattr(sub, "static_correction", None)
         if corr is None:
