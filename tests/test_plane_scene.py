@@ -178,6 +178,16 @@ def test_cosim_info_gives_the_dofs_and_frequencies(tmp_path, capsys):
     f = np.array(plate["natural_frequencies_hz"])
     assert f[0] == pytest.approx(1003, rel=2e-3) and np.all(np.diff(f) > 0)
     assert "frequency_hz" in json.dumps(info["contacts"]["hit"])
+    # the mode rule: the spring on the striker's 0.2 kg, against the top kept mode
+    (rule,) = plate["mode_rule"]
+    assert rule["contact"] == "hit" and rule["static_correction"] is False
+    assert rule["frequency_hz"] == pytest.approx(math.sqrt(1e7 / 0.2) / (2 * math.pi),
+                                                 rel=1e-12)
+    assert rule["kept_to_hz"] == f[-1] and rule["ratio"] == rule["kept_to_hz"] / \
+        rule["frequency_hz"]
+    assert rule["verdict"] == ("ok" if rule["ratio"] >= 10 else "warn")
+    assert cli.main(["info", str(path)]) == 0
+    assert f"{rule['ratio']:.3g} x contact hit's 1125 Hz" in capsys.readouterr().out
 
 
 def test_the_strike_runs_and_closes_its_energy(tmp_path):

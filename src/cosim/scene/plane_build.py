@@ -18,7 +18,7 @@ import numpy as np
 
 from cosim.scene.checks import SceneError
 
-__all__ = ["port_direction", "corrected_law", "cached_basis", "FLAMANT_WARNING"]
+__all__ = ["port_direction", "corrected_law", "cached_basis", "mode_rules", "FLAMANT_WARNING"]
 
 #: a point contact whose compliance grows by more than this share at every
 #: halving of the mesh (Flamant) is warned as mesh-dependent
@@ -64,6 +64,42 @@ def port_direction(structure, ports: dict, file, key: str) -> None:
     structure.direction.setflags(write=False)
 
 
+def _contact_hz(k: float, subs: list, s: int, port: int, other: tuple, normal) -> float:
+    """The frequency [Hz] of a spring ``k`` on the port mass of the side
+    ``other`` (the plane body's own port when that side does not move)."""
+    mob = subs[other[0]].port_mobility(other[1], normal)
+    if not mob > 0.0:
+        mob = subs[s].port_mobility(port, normal)
+    return math.sqrt(k * mob) / (2.0 * math.pi)
+
+
+def mode_rules(system, scene) -> dict:
+    """Plane body -> for each of its contacts with a stiffness, the mode
+    rule (:func:`fem.plane.reduce.mode_rule`): ``contact``,
+    ``frequency_hz`` (its spring on the other side's port mass),
+    ``kept_to_hz``, ``ratio``, ``verdict`` and ``static_correction``;
+    for ``cosim info``."""
+    from fem.plane.reduce import mode_rule
+
+    specs = {s.name: s for s in scene.subsystems}
+    laws = {c.name: c.law for c in scene.contacts}
+    subs, out = system.subsystems, {}
+    for ln in system.links:
+        k = getattr(laws.get(ln.contact.name), "contact_stiffness", None)
+        ends = ((ln.sub_a, ln.port_a), (ln.sub_b, ln.port_b))
+        for (s, port), other in zip(ends, ends[::-1]):
+            spec = specs.get(subs[s].name)
+            if getattr(spec, "type", None) != "plane" or k is None:
+                continue
+            f = _contact_hz(k, subs, s, port, other, ln.contact.normal)
+            top = float(np.max(subs[s].natural_frequencies_hz))
+            out.setdefault(subs[s].name, []).append(
+                {"contact": ln.contact.name, "frequency_hz": f, "kept_to_hz": top,
+                 "ratio": top / f, "verdict": mode_rule(top, f)[0],
+                 "static_correction": bool(spec.static_correction)})
+    return out
+
+
 def corrected_law(contact, scene, subs: list, sides: tuple):
     """The law contact ``contact`` (a :class:`ContactSpec`) runs with: its
     own, or, where a side is a plane body with ``modes.static_correction``,
@@ -101,12 +137,8 @@ def corrected_law(contact, scene, subs: list, sides: tuple):
                              f"puts the dropped modes' compliance in series with a linear "
                              f"spring; contact `{contact.name}` has a `{law.name}` law: use "
                              f"`linear`, or turn the correction off")
-        # the contact's frequency: its spring on the other side's port mass
         other = sides[1] if sides[0][0] == s else sides[0]
-        mob = subs[other[0]].port_mobility(other[1], contact.normal)
-        if not mob > 0.0:
-            mob = subs[s].port_mobility(port, contact.normal)
-        f_contact = math.sqrt(k * mob) / (2.0 * math.pi)
+        f_contact = _contact_hz(k, subs, s, port, other, contact.normal)
         top = float(np.max(subs[s].natural_frequencies_hz))
         verdict, why = mode_rule(top, f_contact)
         if verdict == "refuse":
