@@ -175,3 +175,23 @@ def test_a_mesh_built_in_code_is_checked_as_a_file_is():
         PlaneMesh([[0, 0], [1, 0], [2, 0]], [[0, 1, 2]], "triangle")
     with pytest.raises(MeshError, match="not edges"):
         PlaneMesh(np.array(SQUARE)[:, :2], TRIS, "triangle", {"cut": [[1, 3]]})
+
+
+def test_a_vtu_mesh_is_read_without_groups(tmp_path):
+    """meshio's other formats carry the cells (no Gmsh groups): the same body,
+    the same matrices; a support then names no group the file has.  (XDMF
+    goes the same way through meshio, whose writer needs h5py, so it is not
+    written here.)"""
+    import meshio
+    m = rectangle(1.0, 0.1, 6, 2)
+    pts = np.c_[m.points, np.zeros(len(m.points))]
+    for suffix in (".vtu",):
+        path = tmp_path / f"strip{suffix}"
+        meshio.write(path, meshio.Mesh(pts, [("triangle", m.cells)]))
+        mesh = read_mesh(path)
+        assert mesh.groups == {} and np.array_equal(mesh.points, m.points)
+        a = Plane(path, **STEEL).assemble()
+        b = Plane(m, **STEEL).assemble()
+        assert (a.stiffness != b.stiffness).nnz == 0 and (a.mass != b.mass).nnz == 0
+        with pytest.raises(MeshError, match=r"no boundary group 'left' \(its groups: none\)"):
+            Plane(path, fixed="left", **STEEL).assemble()
