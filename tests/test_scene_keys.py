@@ -62,6 +62,14 @@ CONSTRUCTED = [
         'initial_velocity=0.0, static_equilibrium=true, static_loads={p=1.0}}',
     ]),
     (SPRING_DROP, None, [
+        'subsystems.pl={type="plane", mesh="../tests/data/plate.msh", scale=1e-3, '
+        'model="plane_stress", thickness=0.01, youngs_modulus=2e11, poisson_ratio=0.3, '
+        'density=7850.0, element="P2", supports={fixed="clamp", fixed_x=["tip"], '
+        'fixed_y="tip"}, origin=[0.0, 0.0], angle=0.0, rayleigh=[0.0, 0.0], '
+        'points={p={boundary="face", s=0.1}}, modes={count=2, cutoff_hz=1e4, '
+        'static_correction=false, cache=".plane-modes"}, integrator={method="exact"}, static_equilibrium=true, '
+        'static_loads={p=1.0}, initial_velocity=[0.0, 0.0]}']),
+    (SPRING_DROP, None, [
         f'{M}.joint.drive={{type="table", times=[0.0, 1.0], torques=[0.0, 0.0]}}']),
     (SPRING_DROP, None, [
         f'{M}.joint.drive={{type="pd", kp=0.0, kd=0.0, max_torque=10.0, reference='

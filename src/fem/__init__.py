@@ -8,7 +8,9 @@ base and the modal tools.  The mesh-based models (:mod:`fem.beam`,
 imported when one of their names is first asked for (``from fem import Beam``
 works as before); scipy's submodules load where first used, scikit-fem when a
 mesh-based model is assembled and meshio when a field is exported.  A scene
-with a chain or without any structure pays for none of them.
+with a chain or without any structure pays for none of them.  Plane elastic
+bodies from a mesh file are the subpackage :mod:`fem.plane` (meshio reads
+their mesh, scikit-fem assembles them).
 """
 from .chain import Chain, ChainStructure
 from .linear_structure import LinearStructure, LineStructure

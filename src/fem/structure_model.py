@@ -39,14 +39,14 @@ from typing import ClassVar
 __all__ = ["StructureModel", "STRUCTURE_MODELS", "BUILT_IN_STRUCTURES"]
 
 #: the built-in structure types (the scene loader reads their keys itself)
-BUILT_IN_STRUCTURES = ("chain", "beam", "cable", "string", "rod")
+BUILT_IN_STRUCTURES = ("chain", "beam", "cable", "string", "rod", "plane")
 
 #: scene ``type`` -> model class; the built-in ones by ``"module:Class"``
 #: (read by :mod:`cosim.core.plugins` to refuse a plug-in of the same name;
 #: the scene loader builds those itself), a plug-in's by its class
 STRUCTURE_MODELS: dict = {"chain": "fem.chain:Chain", "beam": "fem.beam:Beam",
                           "cable": "fem.beam:Beam", "string": "fem.beam:String",
-                          "rod": "fem.rod:Rod"}
+                          "rod": "fem.rod:Rod", "plane": "fem.plane:Plane"}
 
 
 class StructureModel(ABC):

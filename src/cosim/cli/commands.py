@@ -281,6 +281,10 @@ def _cmd_info(args) -> int:
             line += ", lowest frequencies [Hz] " + ", ".join(
                 f"{f:.4g}" for f in s["natural_frequencies_hz"][:6])
         print(line)
+        for r in s.get("mode_rule", ()):      # a plane body's modes against a contact
+            print(f"    modes to {r['kept_to_hz']:.4g} Hz: {r['ratio']:.3g} x contact "
+                  f"{r['contact']}'s {r['frequency_hz']:.4g} Hz ({r['verdict']}; 10 x or more "
+                  f"wanted), static correction {'on' if r['static_correction'] else 'off'}")
         if "fmu" in s:                  # an FMU side: its variables (cosim.scene.info.fmu_info)
             f = s["fmu"]                # (its texts escaped and capped there)
             print(f"    model {f['model_name']}"

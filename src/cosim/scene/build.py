@@ -95,7 +95,14 @@ def _structure(spec, scene, macro_step):
     from cosim.sides.fem import StructureSubsystem
     try:
         structure = _assembled(spec.model)
-        basis = fem.modes(structure, **{k: v for k, v in spec.modes.items() if v})
+        if spec.type == "plane":       # its ports move along their segments' normal
+            from cosim.scene.plane_build import port_direction
+            port_direction(structure, spec.ports, scene.path, spec.key)
+        if getattr(spec, "modal_cache", None):     # a plane body's, kept on disk
+            from cosim.scene.plane_build import cached_basis
+            basis = cached_basis(structure, spec, scene.path)
+        else:
+            basis = fem.modes(structure, **{k: v for k, v in spec.modes.items() if v})
     except PluginError:                 # a plug-in's assemble() returned what is no structure
         raise
     except ValueError as exc:
@@ -128,11 +135,16 @@ def _structure(spec, scene, macro_step):
         except ValueError as exc:         # a structure free to move, or too weakly held
             raise SceneError(scene.path, f"{spec.key}.static_equilibrium",
                              f"cannot be met: {exc}") from None
-    v0 = np.full(n, spec.initial_velocity) if spec.initial_velocity else None
+    if spec.type == "plane":          # a uniform velocity vector
+        v0 = structure.translation(spec.initial_velocity) if any(spec.initial_velocity) else None
+    else:
+        v0 = np.full(n, spec.initial_velocity) if spec.initial_velocity else None
     try:
-        sub = StructureSubsystem(spec.name, structure, basis, spec.ports, u0, v0,
-                                 scene.gravity, spec.contact_step, spec.integrator,
-                                 spec.integrator_options)
+        cls = StructureSubsystem
+        if spec.type == "plane":      # records its modes, never the whole field
+            from cosim.sides.plane import PlaneSubsystem as cls
+        sub = cls(spec.name, structure, basis, spec.ports, u0, v0, scene.gravity,
+                  spec.contact_step, spec.integrator, spec.integrator_options)
     except (TypeError, ValueError) as exc:
         raise SceneError(scene.path, f"{spec.key}.integrator", str(exc)) from None
     H = macro_step
@@ -285,15 +297,20 @@ def build_system(scene, scheme: str | None = None, *, run_fmu: bool = True):
         else:
             subs.append(build_side(side, scene, spec.default_step, spec.macro_step))
     names = [s.name for s in subs]
+    types = {side.name: side.type for side in scene.subsystems}
     links = []
     for c in scene.contacts:
         sa, sb = names.index(c.a[0]), names.index(c.b[0])
-        contact = PointContact(c.name, c.law, c.normal, c.offset)
+        pa, pb = subs[sa].port_index(c.a[1]), subs[sb].port_index(c.b[1])
+        law = c.law
+        if "plane" in (types[c.a[0]], types[c.b[0]]):   # static correction, pre-flight rules
+            from cosim.scene.plane_build import corrected_law
+            law = corrected_law(c, scene, subs, ((sa, pa), (sb, pb)))
+        contact = PointContact(c.name, law, c.normal, c.offset)
         # the monolithic ODE evaluates every penalty law itself; a rigid law
         # stays with its moving side, which resolves the impact
         placement = ("coupler" if name == "monolithic" and not c.law.rigid
                      else c.placement)
-        pa, pb = subs[sa].port_index(c.a[1]), subs[sb].port_index(c.b[1])
         host = None
         if placement == "embedded" and not (subs[sa].rigid or subs[sb].rigid):
             if c.host is not None:

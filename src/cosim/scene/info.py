@@ -332,6 +332,10 @@ def scene_info(scene, *, budget_s: float = FIRST_TOUCH_BUDGET_S, run_fmu: bool =
     else:
         touches, why_not = first_touch(scene, budget_s)
     system, _ = scene.build(run_fmu=run_fmu)
+    rules = {}
+    if any(side.type == "plane" for side in scene.subsystems):
+        from cosim.scene.plane_build import mode_rules
+        rules = mode_rules(system, scene)
     subs = {}
     for sub in system.subsystems:
         entry = {"type": "rigid" if sub.rigid else type(sub).__name__, "dofs": sub.n_states // 2,
@@ -349,6 +353,8 @@ def scene_info(scene, *, budget_s: float = FIRST_TOUCH_BUDGET_S, run_fmu: bool =
             entry["modes_dropped"] = int(sub.basis.dropped)
             entry["mode_cutoff_hz"] = sub.basis.cutoff_hz
             entry["natural_frequencies_hz"] = [float(f) for f in sub.natural_frequencies_hz]
+        if sub.name in rules:                 # a plane body: modes against its contacts
+            entry["mode_rule"] = rules[sub.name]
         subs[sub.name] = entry
     from cosim.scene.shipped import scene_variants
 

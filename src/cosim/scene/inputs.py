@@ -8,7 +8,8 @@ on :func:`input_digests`: the SHA-256 of the scene file and of every file it
 names, so that a changed byte in any of them is a new key.
 
 The files a scene names are the ``path`` of its ``type = "fmu"``
-subsystems; no other key of a scene names a file.
+subsystems and the ``mesh`` of its ``type = "plane"`` ones; no other key of
+a scene names a file.
 """
 from __future__ import annotations
 
@@ -29,11 +30,14 @@ _CHUNK = 1 << 20
 
 def input_files(scene) -> dict[str, Path]:
     """The files ``scene`` reads, by what names them: ``"scene"`` (the scene
-    file itself) and ``"subsystems.NAME.path"`` for each FMU side."""
+    file itself), ``"subsystems.NAME.path"`` for each FMU side and
+    ``"subsystems.NAME.mesh"`` for each plane body."""
     files = {"scene": Path(scene.path)}
     for spec in scene.subsystems:
         if isinstance(spec, FMUSpec):
             files[f"subsystems.{spec.name}.path"] = Path(spec.path)
+        elif getattr(spec, "type", None) == "plane":
+            files[f"subsystems.{spec.name}.mesh"] = Path(spec.model.mesh)
     return files
 
 

@@ -15,13 +15,14 @@ from cosim.core.guard import (DEFAULT_CHATTER_SWITCHES, DEFAULT_CHATTER_WINDOW,
                               DEFAULT_COUPLING_WARNING, DEFAULT_ENERGY_FLOOR,
                               DEFAULT_ENERGY_GROWTH, DEFAULT_ENERGY_WARNING)
 from cosim.io.rundir import NAME_MAX
+from cosim.scene.keytable_plane import plane_sections
 
 __all__ = ["Key", "Section", "SECTIONS", "REQUIRED", "Varies", "DEFAULT_MULTIBODY_STEP",
            "DEFAULT_CONTACT_STEP", "STRUCTURE_TYPES", "SUBSYSTEM_TYPES", "NAME_TEXT",
            "MAX_STEPS"]
 
 #: the ``type`` of a structure subsystem
-STRUCTURE_TYPES = ("chain", "beam", "cable", "string", "rod")
+STRUCTURE_TYPES = ("chain", "beam", "cable", "string", "rod", "plane")
 #: every ``type`` a subsystem may have (the loader's choices, the table's text)
 SUBSYSTEM_TYPES = ("multibody", "rigid", "fmu") + STRUCTURE_TYPES
 
@@ -496,3 +497,4 @@ SECTIONS: dict[str, Section] = {
     "friction": Section("contacts.NAME.friction", "", _FRICTION),
 }
 SECTIONS["cable"] = SECTIONS["beam"]
+SECTIONS.update(plane_sections(Key, Section, REQUIRED, _SUBSYSTEM_TYPE, _COMMON_STRUCTURE))

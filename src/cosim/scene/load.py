@@ -118,8 +118,13 @@ def _validate(data: dict, file, variant, scheme_chosen: bool = False) -> Scene:
     if not subs:
         top.error("subsystems", "must declare at least one subsystem")
     _check_memory(subs, file)
-    structures = [s.name for s in subs if isinstance(s, StructureSpec)]
+    structures = [s.name for s in subs if isinstance(s, StructureSpec) and s.type != "plane"]
+    planes = [s.name for s in subs if isinstance(s, StructureSpec) and s.type == "plane"]
     for name_ in export:
+        if name_ in planes:
+            raise SceneError(file, "output.export", f"names the plane body {echo(name_)}, whose "
+                                                    f"field is not exported yet (its modal "
+                                                    f"coordinates are in the series); drop it")
         if name_ not in structures:
             raise SceneError(file, "output.export", f"names {echo(name_)}, which is not a "
                                                     f"structure of this scene; structures are "
@@ -267,6 +272,8 @@ def spec_memory(spec) -> tuple[int, int, str, str]:
     model = spec.model
     if spec.type == "chain":
         kind, size, key = "chain", len(model.masses), ".masses"
+    elif spec.type == "plane":                     # counted from the mesh's cells
+        kind, size, key = "dofs", int(model.dof_bound()), ".mesh"
     elif spec.type in STRUCTURE_TYPES:
         kind, size, key = spec.type, model.n_elements, ".elements"
     else:                                          # a plug-in's bound

@@ -217,12 +217,18 @@ class StructureSpec(_ByKey):
         Name in :data:`fem.STRUCTURAL_INTEGRATORS`.
     integrator_options : dict
         ``beta``, ``gamma``, ``alpha`` or ``rho_inf`` as given.
-    initial_velocity : float
-        Uniform initial velocity along the structure's direction [m/s].
+    initial_velocity : float or tuple of float
+        Uniform initial velocity along the structure's direction [m/s] (a
+        plane body's: a world 2-vector).
     static_equilibrium : bool
         Start at the static state under gravity and ``static_loads``.
     static_loads : dict
         Point name -> force along the direction [N].
+    static_correction : bool
+        A plane body's contacts get the dropped modes' static compliance in
+        series with their spring.
+    modal_cache : str or None
+        The folder where a plane body's modes are kept between runs.
     """
 
     name: str
@@ -235,9 +241,11 @@ class StructureSpec(_ByKey):
     contact_step: float = DEFAULT_CONTACT_STEP
     integrator: str = "exact"
     integrator_options: dict = field(default_factory=dict)
-    initial_velocity: float = 0.0
+    initial_velocity: float | tuple = 0.0
     static_equilibrium: bool = False
     static_loads: dict = field(default_factory=dict)
+    static_correction: bool = False
+    modal_cache: str | None = None
 
     @property
     def modes(self) -> dict:

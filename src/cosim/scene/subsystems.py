@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from pathlib import Path
 
 from cosim.scene.checks import MAX_ELEMENTS, Table, build_model, check_name, echo, floats
 from cosim.scene.specs import (STRUCTURE_TYPES, SUBSYSTEM_TYPES, BodySpec, JointSpec,
@@ -141,7 +142,11 @@ def _structure_spec(name: str, t: Table, kind: str) -> StructureSpec:
     import fem
     from cosim.core.plugins import provide
     kw = {}
-    if kind not in STRUCTURE_TYPES:          # an installed package's (fem.StructureModel)
+    plane = kind == "plane"
+    if plane:                                # a body from a mesh: cosim.scene.plane
+        from cosim.scene.plane import plane_model
+        model, ports = plane_model(t, _rayleigh(t) if t.has("rayleigh") else None)
+    elif kind not in STRUCTURE_TYPES:        # an installed package's (fem.StructureModel)
         model = _plugin_model(t, fem.STRUCTURE_MODELS[kind])
         size = model.length
     elif kind == "chain":
@@ -196,13 +201,14 @@ def _structure_spec(name: str, t: Table, kind: str) -> StructureSpec:
             kw["right"] = t.string("right", choices=fem.ROD_ENDS)
             cls = fem.Rod
         size = kw["length"]
-    if kind in STRUCTURE_TYPES:
+    if kind in STRUCTURE_TYPES and not plane:
         if t.has("rayleigh"):
             kw["rayleigh"] = _rayleigh(t)
         model = build_model(t, cls, **kw)
-    pts = t.table("points", section="structure.points")
-    ports = {}
-    for p in list(pts.data):
+    pts = t.table("points", section="structure.points") if not plane else None
+    if not plane:
+        ports = {}
+    for p in list(pts.data) if not plane else ():
         v = pts.number(p, unit="m" if kind != "chain" else "")
         if kind == "chain":
             if not (v == int(v) and 0 <= v < size):
@@ -210,12 +216,17 @@ def _structure_spec(name: str, t: Table, kind: str) -> StructureSpec:
         elif not 0.0 <= v <= size:
             pts.error(p, f"must be a material coordinate in [0, {size:g}] m, got {echo(v)}")
         ports[p] = v
-    pts.finish()
+    if not plane:
+        pts.finish()
     if not ports:
         t.error("points", "must name at least one point")
-    md = t.table("modes", section="modes")
+    md = t.table("modes", section="plane.modes" if plane else "modes")
     n_modes = md.integer("count", low=1)
     cutoff_hz = md.number("cutoff_hz", rule=">0", unit="Hz")
+    correction = md.boolean("static_correction") if plane else False
+    cache = md.string("cache") if plane else None
+    if cache is not None:               # recorded where it was found, as a mesh is
+        cache = md.data["cache"] = str(Path(t.file).resolve().parent / cache)
     md.finish()
     integ = t.table("integrator", section="structure.integrator")
     provide(fem.STRUCTURAL_INTEGRATORS, "cosim.integrators", integ.data.get("method"))
@@ -224,7 +235,8 @@ def _structure_spec(name: str, t: Table, kind: str) -> StructureSpec:
     options = {k: integ.number(k) for k in ("beta", "gamma", "alpha", "rho_inf")
                if integ.has(k)}
     integ.finish()
-    v0 = t.number("initial_velocity", unit="m/s")
+    v0 = t.number("initial_velocity", unit="m/s") if not plane else t.vec2("initial_velocity",
+                                                                           unit="m/s")
     if v0 and kind in ("beam", "cable"):
         t.error("initial_velocity", "a uniform initial velocity is offered for chains, "
                                     "strings and rods, whose DOFs are all translations")
@@ -243,7 +255,8 @@ def _structure_spec(name: str, t: Table, kind: str) -> StructureSpec:
     return StructureSpec(name=name, key=t.key(), type=kind, model=model, ports=ports,
                          n_modes=n_modes, cutoff_hz=cutoff_hz, contact_step=contact_step,
                          integrator=method, integrator_options=options, initial_velocity=v0,
-                         static_equilibrium=static, static_loads=loads)
+                         static_equilibrium=static, static_loads=loads,
+                         static_correction=correction, modal_cache=cache)
 
 
 def _rayleigh(t: Table) -> tuple:

@@ -56,8 +56,8 @@ class StructureSubsystem(ClosedFormContacts, Subsystem):
     basis : fem.ModalBasis
         Kept modes (mass-normalised).
     ports : dict[str, float]
-        Port name -> material coordinate ``s`` (arc length [m], or the mass
-        index of a chain).
+        Port name -> material coordinate ``s`` (arc length [m], the mass
+        index of a chain, a plane body's ``(group, arc length)``).
     u0, v0 : (n_dof,) arrays, optional
         Initial displacement and velocity of the free DOFs (projected on the
         kept modes).
@@ -93,7 +93,7 @@ class StructureSubsystem(ClosedFormContacts, Subsystem):
             rows.append(w @ self.Phi[dofs])
             refs.append(structure.reference_position(s))
         self._R = np.array(rows).reshape(len(rows), m)
-        self.port_coordinates = [float(s) for s in ports.values()]
+        self.port_coordinates = [s if isinstance(s, tuple) else float(s) for s in ports.values()]
         self._ref = np.array(refs).reshape(-1, 2)
         self._dir = np.asarray(structure.direction, float)
         self._g_modal = np.zeros(m)

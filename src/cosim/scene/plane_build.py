@@ -1,0 +1,177 @@
+"""The builder's part of a plane body (``type = "plane"``; the loader's is
+:mod:`cosim.scene.plane`): the direction its ports move along, and the
+static correction of its contacts with the pre-flight rules that go with
+it.  It imports nothing of the scene package but its error.
+
+A port of a plane body moves along the outward normal of the boundary
+segment that holds it (its row is the normal displacement): the ports of
+one body must share that normal, which is then the structure's
+``direction`` (the compiled kernels take it as they take a beam's).
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import warnings
+
+import numpy as np
+
+from cosim.scene.checks import SceneError
+
+__all__ = ["port_direction", "corrected_law", "cached_basis", "mode_rules", "FLAMANT_WARNING"]
+
+#: a point contact whose compliance grows by more than this share at every
+#: halving of the mesh (Flamant) is warned as mesh-dependent
+FLAMANT_WARNING = 1e-2
+#: the warnings said in this process (a command builds a scene several times)
+_SAID: set = set()
+
+
+def _warn(message: str) -> None:
+    if message not in _SAID:
+        _SAID.add(message)
+        warnings.warn(message, stacklevel=4)
+
+
+def port_direction(structure, ports: dict, file, key: str) -> None:
+    """Give the plane ``structure`` the direction its ports move along: the
+    outward normal their boundary segments share.
+
+    Raises
+    ------
+    SceneError
+        If two ports lie on segments of different normals, or a group is
+        not one chain of boundary curves.
+    """
+    from fem.plane import MeshError
+
+    normals = {}
+    for name, (group, s) in ports.items():
+        try:
+            normals[name] = structure.boundary_point(group, s).normal
+        except MeshError as exc:
+            raise SceneError(file, f"{key}.points.{name}.boundary", str(exc)) from None
+    first = next(iter(normals))
+    for name, n in normals.items():
+        if float(n @ normals[first]) < 1.0 - 1e-9:
+            raise SceneError(file, f"{key}.points.{name}",
+                             f"lies on a boundary segment of outward normal "
+                             f"[{n[0]:.6g}, {n[1]:.6g}], and `{first}` on one of "
+                             f"[{normals[first][0]:.6g}, {normals[first][1]:.6g}]: the points "
+                             f"of one plane body must share their normal (each moves along "
+                             f"it); put them on parallel faces, or in bodies of their own")
+    structure.direction = np.array(normals[first], dtype=float)
+    structure.direction.setflags(write=False)
+
+
+def _contact_hz(k: float, subs: list, s: int, port: int, other: tuple, normal) -> float:
+    """The frequency [Hz] of a spring ``k`` on the port mass of the side
+    ``other`` (the plane body's own port when that side does not move)."""
+    mob = subs[other[0]].port_mobility(other[1], normal)
+    if not mob > 0.0:
+        mob = subs[s].port_mobility(port, normal)
+    return math.sqrt(k * mob) / (2.0 * math.pi)
+
+
+def mode_rules(system, scene) -> dict:
+    """Plane body -> for each of its contacts with a stiffness, the mode
+    rule (:func:`fem.plane.reduce.mode_rule`): ``contact``,
+    ``frequency_hz`` (its spring on the other side's port mass),
+    ``kept_to_hz``, ``ratio``, ``verdict`` and ``static_correction``;
+    for ``cosim info``."""
+    from fem.plane.reduce import mode_rule
+
+    specs = {s.name: s for s in scene.subsystems}
+    laws = {c.name: c.law for c in scene.contacts}
+    subs, out = system.subsystems, {}
+    for ln in system.links:
+        k = getattr(laws.get(ln.contact.name), "contact_stiffness", None)
+        ends = ((ln.sub_a, ln.port_a), (ln.sub_b, ln.port_b))
+        for (s, port), other in zip(ends, ends[::-1]):
+            spec = specs.get(subs[s].name)
+            if getattr(spec, "type", None) != "plane" or k is None:
+                continue
+            f = _contact_hz(k, subs, s, port, other, ln.contact.normal)
+            top = float(np.max(subs[s].natural_frequencies_hz))
+            out.setdefault(subs[s].name, []).append(
+                {"contact": ln.contact.name, "frequency_hz": f, "kept_to_hz": top,
+                 "ratio": top / f, "verdict": mode_rule(top, f)[0],
+                 "static_correction": bool(spec.static_correction)})
+    return out
+
+
+def corrected_law(contact, scene, subs: list, sides: tuple):
+    """The law contact ``contact`` (a :class:`ContactSpec`) runs with: its
+    own, or, where a side is a plane body with ``modes.static_correction``,
+    a linear spring in series with the static compliance of the modes that
+    body dropped at the contact's point, ``k / (1 + k c_r)``.
+
+    Warns when the kept modes reach less than 10 times the contact's
+    frequency, and when the contact's compliance is mesh-dependent
+    (Flamant: ``k x 2 ln 2 / (pi E t)`` over 1e-2); refuses the correction
+    below 1 times the contact's frequency and with a law that is not the
+    linear spring.  ``sides`` are ``(subsystem index, port index)`` of a and b.
+    """
+    from fem.plane.reduce import StaticCorrection, flamant_growth, mode_rule
+
+    law = contact.law
+    specs = {s.name: s for s in scene.subsystems}
+    for (s, port), (sub_name, point) in zip(sides, (contact.a, contact.b)):
+        spec = specs[sub_name]
+        if getattr(spec, "type", None) != "plane":
+            continue
+        model, key = spec.model, f"subsystems.{sub_name}"
+        k = getattr(law, "contact_stiffness", None)
+        point_contact = spec.ports[point][1] is not None     # not a face's average
+        if k is not None and not law.rigid and point_contact:
+            growth = flamant_growth(k, model.youngs_modulus, model.thickness)
+            if growth > FLAMANT_WARNING:
+                _warn(f"{scene.path}: contact `{contact.name}` is a point contact on the plane "
+                      f"body `{sub_name}` whose compliance grows by {growth:.2g} of the "
+                      f"spring's at every halving of the mesh (Flamant): its result depends on "
+                      f"the mesh; spread the contact or soften the spring")
+        if not spec.static_correction:
+            continue
+        if law.name != "linear":
+            raise SceneError(scene.path, f"{key}.modes.static_correction",
+                             f"puts the dropped modes' compliance in series with a linear "
+                             f"spring; contact `{contact.name}` has a `{law.name}` law: use "
+                             f"`linear`, or turn the correction off")
+        other = sides[1] if sides[0][0] == s else sides[0]
+        f_contact = _contact_hz(k, subs, s, port, other, contact.normal)
+        top = float(np.max(subs[s].natural_frequencies_hz))
+        verdict, why = mode_rule(top, f_contact)
+        if verdict == "refuse":
+            raise SceneError(scene.path, f"{key}.modes.static_correction",
+                             f"for contact `{contact.name}`: {why}")
+        if verdict == "warn":
+            _warn(f"{scene.path}: `{key}` with contact `{contact.name}`: {why}")
+        sub = subs[s]
+        corr = getattr(sub, "static_correction", None)
+        if corr is None:
+            corr = sub.static_correction = StaticCorrection(sub.structure, sub.basis)
+        c_r = corr.compliance(spec.ports[point])
+        law = dataclasses.replace(law, contact_stiffness=k / (1.0 + k * c_r))
+    return law
+
+
+def cached_basis(structure, spec, file):
+    """The modes of a plane body from its ``modes.cache`` folder when an
+    entry there fits (:func:`fem.plane.cache.cached_modes`), else computed
+    and written there through the checked writer.
+
+    Raises
+    ------
+    SceneError
+        If the folder cannot be made, read or written.
+    """
+    from cosim.errors import OutputError
+    from cosim.io.rundir import OutputFolder
+    from fem.plane.cache import cached_modes
+
+    try:
+        with OutputFolder(spec.modal_cache, lock=False) as folder:
+            basis, _ = cached_modes(structure, folder, **spec.modes)
+    except OutputError as exc:
+        raise SceneError(file, f"{spec.key}.modes.cache", str(exc)) from None
+    return basis
