@@ -110,8 +110,12 @@ class SampledSteps:
                     self.x, self.aux, self._embedded, k0, k1, H, t_end, sliver,
                     integ.max_step, integ.free_step or 0.0, self._on_switch, self.peak, T, Y,
                     PK, self.port_moments)
-            except Exception:
-                self.status = "failed"
+            except BaseException as exc:
+                # a step that raised (or that Ctrl-C or SIGTERM stopped: the kernel
+                # looks at the signals within its steps) is dropped; the whole
+                # steps before it are the side's, and emitted
+                if isinstance(exc, Exception):
+                    self.status = "failed"
                 done = kernel.n_sampled
                 if done:
                     self._sampled_clock(T, done)

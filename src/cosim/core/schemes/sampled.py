@@ -117,7 +117,8 @@ def run_sampled(scheme, system, t_end: float, recorder) -> dict | None:
             scheme.n_windows = k
             if why == "end":
                 break
-    except Exception:
+    except BaseException:
+        # a signal too (the kernel looks at them within its steps);
         # the loop's count: the steps whose samples were kept, and the step
         # whose sample (or report) was refused; a step that raised is not counted
         scheme.n_windows = recorder._count - (0 if emit.refused else 1)
