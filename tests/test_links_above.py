@@ -72,6 +72,12 @@ def test_a_sweep_into_a_folder_below_a_link_is_refused(linked):
     assert os.listdir(linked / "real") == []
 
 
+def test_a_bench_into_a_folder_below_a_link_is_refused(linked):
+    proc = cosim_cli("bench", SPRING_DROP, "--set", "t_end=0.012", "--out", "lnk/b", cwd=linked)
+    refused(proc, "lnk/b", "lnk", linked.resolve() / "real" / "b")
+    assert os.listdir(linked / "real") == []
+
+
 def test_a_plot_into_a_folder_below_a_link_is_refused(linked):
     run = linked / "run"
     assert cosim_cli("run", SPRING_DROP, *SHORT, "--no-estimate", "--out", run,

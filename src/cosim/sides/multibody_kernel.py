@@ -85,7 +85,9 @@ class SampledSteps:
         :class:`~cosim.core.subsystem.Samples`; ``switch_row`` (or None) is
         the sample before which :attr:`switch_log` and :attr:`impact_log`
         hold switches to report.  Every sample before a step that raises
-        is emitted before the exception goes on.
+        is emitted before the exception goes on, and so is every sample
+        before a step that a signal stopped (the kernel looks at the
+        signals within its steps: Ctrl-C raises there).
 
         Returns
         -------
