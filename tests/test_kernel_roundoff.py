@@ -1,5 +1,5 @@
 """Where round-off makes the compiled kernels' discrete outcomes differ from
-the numpy reference's (docs/performance.md, "Where round-off decides").
+the numpy reference's (docs/schemes.md, "Where round-off decides").
 
 The compiled steps evaluate the reference's formulas with other roundings,
 so the two differ as a run differs from a copy of itself whose initial state
@@ -30,7 +30,7 @@ from cosim.studies.verify import HardCase, reference_step
 from documented import ROOT, flat
 
 THREE_MASS = CASES / "three_mass.toml"
-PAGE = "docs/performance.md"
+PAGE = "docs/schemes.md"
 
 
 def _runs(monkeypatch, case, t_end, copies, reference=1):
