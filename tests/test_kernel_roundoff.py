@@ -21,7 +21,6 @@ import re
 import warnings
 
 import numpy as np
-import pytest
 
 import cosim
 from conftest import CASES

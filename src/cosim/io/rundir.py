@@ -23,8 +23,9 @@ there is replaced, never followed), and subfolders are made and opened the
 same way.  The folder is reached one name at a time from the working folder
 (or ``/``), each opened without following a link (:func:`open_folder`): a
 link anywhere in the path as written, at its place or above it (a ``runs``
-that is a link, ``--out link/sub``), is refused with the path it leads to.  Whatever stops the writing, the name holds its old content or the
-whole new one.
+that is a link, ``--out link/sub``), is refused with the path it leads to.
+Whatever stops the writing, the name holds its old content or the whole new
+one.
 """
 from __future__ import annotations
 
@@ -265,7 +266,6 @@ def open_folder(path, make: bool = True, below: tuple = ()) -> tuple[int, bool]:
     try:
         for i, part in enumerate(parts):
             here = here / part
-            last = i == len(parts) - 1
             made = False
             if make and part != "..":
                 try:
