@@ -18,7 +18,7 @@ from __future__ import annotations
 import warnings
 from dataclasses import dataclass, field
 
-__all__ = ["Request", "REFINING", "estimate_and_check", "exit_status"]
+__all__ = ["Request", "REFINING", "estimate_and_check", "exit_status", "skipped"]
 
 #: the folder, inside the run's, that a refined run is written to before it
 #: replaces the first
@@ -236,26 +236,64 @@ def estimate_and_check(scene, res, out, request=None):
         If the folder cannot be held or the summary not written (a full
         disk): the message says that the run is kept as it finished, with
         the summary it wrote, without the estimate.
+    RunInterrupted
+        When Ctrl-C, SIGTERM or SIGHUP stopped a companion run (or the
+        check before a refinement): the run is kept as it finished, its
+        summary's ``accuracy`` says the estimate was skipped and why
+        (:func:`skipped`; a request is ``unchecked``), and the exception's
+        ``result`` is the run, its cause the signal.
     """
     from cosim.io.strict_json import json_writer
 
     from cosim.errors import OutputError
     from cosim.io.rundir import OutputFolder
     from cosim.api import estimated
-    from cosim.scene.run import _lost
+    from cosim.scene.run import RunInterrupted, _lost
 
+    stop = None
     try:
         with OutputFolder(out) as folder:
-            res.summary["accuracy"] = estimated(scene, res,
-                                                contact=request and request.contact)
-            if request is not None:
-                res = request.check(res, folder)
+            try:
+                res.summary["accuracy"] = estimated(scene, res,
+                                                    contact=request and request.contact)
+                if request is not None:
+                    res = request.check(res, folder)
+            except KeyboardInterrupt as exc:
+                stop = _signal(exc)
+                res.summary["accuracy"] = skipped(stop)
+                if request is not None:
+                    from cosim.studies.accurate import request_record
+                    res.summary["accuracy"]["request"] = request_record(
+                        request.accuracy, request.source, request.choice, None,
+                        res.summary["accuracy"]["skipped"], scene=request.scene)
             folder.write("summary.json", json_writer(res.summary, indent=2),
                          "w")
     except OutputError as exc:
         raise _lost(exc, "the run finished and is kept, with the summary.json it wrote "
                          "without its estimate (`accuracy`)", out) from None
+    if stop is not None:
+        raise RunInterrupted(res) from stop
     return res
+
+
+def _signal(exc: BaseException) -> BaseException:
+    """The signal's KeyboardInterrupt behind ``exc`` (a run's
+    :class:`~cosim.scene.run.RunInterrupted` is caused by it)."""
+    from cosim.scene.run import RunInterrupted
+    if isinstance(exc, RunInterrupted) and exc.__cause__ is not None:
+        return exc.__cause__
+    return exc
+
+
+def skipped(stop: BaseException) -> dict:
+    """The summary's ``accuracy`` of a finished run whose estimate the signal
+    ``stop`` (a KeyboardInterrupt) cut short: ``skipped`` says so, no
+    quantity has an estimate, ``companion.status`` is ``interrupted``."""
+    name = getattr(stop, "signal_name", None) or "Ctrl-C"
+    why = (f"the estimate was skipped: {name} stopped its companion run; the run finished "
+           f"and is kept, without an error estimate")
+    return {"reliable": False, "skipped": why, "companions": [], "contacts": {}, "exit": {},
+            "companion": {"status": "interrupted", "message": why}, "why": [why]}
 
 
 def exit_status(summary: dict) -> int:

@@ -20,8 +20,12 @@ file descriptor that refuses a symbolic link at its place, every name is
 checked (:func:`check_name`), a file is written under a new temporary name
 created exclusively in the folder and renamed over its name (a link planted
 there is replaced, never followed), and subfolders are made and opened the
-same way.  Whatever stops the writing, the name holds its old content or the
-whole new one.
+same way.  The folder is reached one name at a time from the working folder
+(or ``/``), each opened without following a link (:func:`open_folder`): a
+link anywhere in the path as written, at its place or above it (a ``runs``
+that is a link, ``--out link/sub``), is refused with the path it leads to.
+Whatever stops the writing, the name holds its old content or the whole new
+one.
 """
 from __future__ import annotations
 
@@ -35,7 +39,7 @@ from cosim.errors import OutputBusyError, OutputError
 
 __all__ = ["NAME_RULE", "NAME_MAX", "LOCK_NAME", "name_problem", "inside", "RunLock",
            "output_error", "check_name", "OutputFolder", "atomic_write", "run_folder_name",
-           "fresh_folder", "MAX_RERUNS"]
+           "fresh_folder", "MAX_RERUNS", "open_folder"]
 
 #: longest name a scene may give [characters]
 NAME_MAX = 64
@@ -136,14 +140,8 @@ class RunLock:
         OutputBusyError
             If another process holds the lock.
         """
-        if os.path.lexists(self.folder) and not self.folder.is_dir():
-            raise OutputError(f"cannot make the output folder {self.folder}: it exists and is "
-                              f"not a folder")
-        try:
-            self.created = not self.folder.exists()
-            self.folder.mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            raise output_error(exc, self.folder, "cannot make the output folder") from None
+        fd, self.created = open_folder(self.folder)     # never through a link
+        os.close(fd)
         try:
             return self._lock()
         except BaseException:
@@ -234,6 +232,84 @@ _NOFOLLOW = getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
 _DIR_FLAGS = os.O_RDONLY | getattr(os, "O_DIRECTORY", 0) | _NOFOLLOW
 
 
+def open_folder(path, make: bool = True, below: tuple = ()) -> tuple[int, bool]:
+    """Open the folder ``path`` one name at a time from where it starts (the
+    working folder, or ``/``), each name opened without following a link
+    and made first when missing (``make``): a symbolic link anywhere in
+    ``path`` as written -- at its place or above it -- is refused, never
+    followed.  The one way cosim reaches a folder it writes into.
+    ``below`` are names the caller will make inside it (said in messages).
+
+    Returns
+    -------
+    fd : int
+        The folder, open (``O_DIRECTORY``, not inherited); the caller closes it.
+    made : bool
+        Whether the folder itself was made here.
+
+    Raises
+    ------
+    OutputError
+        Naming the link and where it leads (the path to give instead), a
+        file in the path, or the system's reason a name could not be made.
+    """
+    path = Path(path)
+    parts = path.parts
+    start = parts[0] if path.is_absolute() else "."
+    if path.is_absolute():
+        parts = parts[1:]
+    try:
+        fd = os.open(start, _DIR_FLAGS)
+    except OSError as exc:
+        raise output_error(exc, path, "cannot open the folder") from None
+    here, made = Path(start), False
+    try:
+        for i, part in enumerate(parts):
+            here = here / part
+            made = False
+            if make and part != "..":
+                try:
+                    os.mkdir(part, 0o777, dir_fd=fd)
+                    made = True
+                except FileExistsError:
+                    pass
+                except OSError as exc:
+                    raise output_error(exc, path, "cannot make the output folder") from None
+            try:
+                sub = os.open(part, _DIR_FLAGS, dir_fd=fd)
+            except OSError as exc:
+                raise _component_error(exc, fd, part, here, path.joinpath(*below),
+                                       parts[i + 1:] + tuple(below)) from None
+            os.close(fd)
+            fd = sub
+    except BaseException:
+        os.close(fd)
+        raise
+    return fd, made
+
+
+def _component_error(exc: OSError, fd: int, part: str, here: Path, path: Path,
+                     rest) -> OutputError:
+    """Why the name ``part`` (at ``here``) of ``path`` could not be opened as
+    a folder, in words; ``rest`` are the names after it."""
+    try:
+        st = os.stat(part, dir_fd=fd, follow_symlinks=False)
+    except OSError:
+        st = None
+    if st is not None and stat.S_ISLNK(st.st_mode):
+        real = Path(os.path.realpath(here))
+        if not rest:
+            return OutputError(f"cannot write into {path}: it is a symbolic link (cosim never "
+                               f"writes through one); name the folder itself ({real})")
+        return OutputError(f"cannot write into {path}: {here} is a symbolic link (cosim never "
+                           f"writes through one); give the folder it leads to, "
+                           f"{real.joinpath(*rest)}, or remove the link")
+    if st is not None and not stat.S_ISDIR(st.st_mode) and not rest:
+        return OutputError(f"cannot make the output folder {path}: it exists and is not a "
+                           f"folder")
+    return output_error(exc, path, "cannot make the output folder")
+
+
 def _is_root(path: Path) -> bool:
     real = os.path.realpath(path)
     return os.path.dirname(real) == real
@@ -245,8 +321,9 @@ class OutputFolder:
     Parameters
     ----------
     path : path-like
-        The folder; made with its parents when missing.  A symbolic link,
-        a file or a filesystem root at its place is refused.
+        The folder; made with its parents when missing.  A symbolic link
+        at its place or above it (:func:`open_folder`), a file or a
+        filesystem root at its place is refused.
     lock : bool
         Hold the folder's run lock (:class:`RunLock`) while open, so that no
         other cosim process writes there meanwhile.
@@ -285,24 +362,10 @@ class OutputFolder:
             If another process holds its lock.
         """
         path = self.path
-        if os.path.islink(path):
-            raise OutputError(f"cannot write into {path}: it is a symbolic link (cosim never "
-                              f"writes through one); name the folder itself")
-        if os.path.lexists(path) and not path.is_dir():
-            raise OutputError(f"cannot make the output folder {path}: it exists and is not a "
-                              f"folder")
-        if _is_root(path):
+        if _is_root(path) and not os.path.islink(path):
             raise OutputError(f"refusing to write into {path}: it is a filesystem root; "
                               f"name a folder of its own")
-        try:
-            self.created = not os.path.lexists(path)
-            path.mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            raise output_error(exc, path, "cannot make the output folder") from None
-        try:
-            fd = os.open(path, _DIR_FLAGS)
-        except OSError as exc:
-            raise self._open_error(exc, path) from None
+        fd, self.created = open_folder(path)
         return self._adopt(fd)
 
     def _adopt(self, fd: int) -> "OutputFolder":
@@ -595,19 +658,19 @@ def fresh_folder(parent, name: str) -> Path:
     """
     parent = Path(parent)
     check_name(name, parent)
+    fd, _ = open_folder(parent, below=(name,))  # never through a link
     try:
-        parent.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise output_error(exc, parent, "cannot make the output folder") from None
-    for k in range(1, MAX_RERUNS + 1):
-        path = parent / (name if k == 1 else f"{name}-{k}")
-        try:
-            path.mkdir()
-        except FileExistsError:
-            continue
-        except OSError as exc:
-            raise output_error(exc, path, "cannot make the output folder") from None
-        return path
+        for k in range(1, MAX_RERUNS + 1):
+            here = name if k == 1 else f"{name}-{k}"
+            try:
+                os.mkdir(here, 0o777, dir_fd=fd)
+            except FileExistsError:
+                continue
+            except OSError as exc:
+                raise output_error(exc, parent / here, "cannot make the output folder") from None
+            return parent / here
+    finally:
+        os.close(fd)
     raise OutputError(f"cannot make a new folder {parent / name}-N: the first {MAX_RERUNS} "
                       f"names are taken; give --out")
 

@@ -26,6 +26,7 @@ State layout (``y``, length ``2 n + 4 n_c + 2 + 6 n_p``)::
 from libc.math cimport sin, cos, pow, ceil, fabs, sqrt, isfinite
 from libc.string cimport memcpy
 
+from cpython.exc cimport PyErr_CheckSignals
 from cpython.pycapsule cimport PyCapsule_New
 
 from cosim.core._side_face cimport COSIM_SIDE_FACE, SideFace
@@ -52,6 +53,10 @@ cdef enum:
     MAX_COEF = 8
     # most contacts one subsystem hosts in the kernel
     MAX_CONTACTS = 64
+    # RK4 steps between two looks at the signals (a power of two, less one): a
+    # step under a tiny `max_step` may take millions of them, and Ctrl-C or
+    # SIGTERM must stop it within a fraction of a second, not at its end
+    SIGNAL_POLL = 4095
 
 LAW_KINDS = {"linear": LINEAR, "kelvin_voigt": KELVIN_VOIGT, "power": POWER, "rigid": RIGID}
 DRIVE_KINDS = {"constant": DRIVE_CONSTANT, "table": DRIVE_TABLE, "pd": DRIVE_PD}
@@ -917,6 +922,7 @@ cdef class MultibodyStep:
         cdef double* s1 = &self.sws[1, 0]
         cdef double* snew = &self.sws[3, 0]
         cdef char flipped[MAX_CONTACTS]
+        cdef unsigned long polls = 0
         if self._rhs(t, y, k1, s0):
             self._fail(t)
         if pk != NULL:
@@ -935,6 +941,11 @@ cdef class MultibodyStep:
         dt = (t1 - t0) / n
         i = 0
         while i < n:
+            polls += 1
+            if polls & SIGNAL_POLL == 0:
+                # a signal's Python handler runs here; the exception it raises
+                # (KeyboardInterrupt) ends the step, leaving `y` at a whole RK4 step
+                PyErr_CheckSignals()
             te = t1 if i == n - 1 else t0 + (i + 1) * dt
             h = te - t
             if self._single(t, y, h, k1, y1):

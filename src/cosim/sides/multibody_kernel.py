@@ -85,7 +85,9 @@ class SampledSteps:
         :class:`~cosim.core.subsystem.Samples`; ``switch_row`` (or None) is
         the sample before which :attr:`switch_log` and :attr:`impact_log`
         hold switches to report.  Every sample before a step that raises
-        is emitted before the exception goes on.
+        is emitted before the exception goes on, and so is every sample
+        before a step that a signal stopped (the kernel looks at the
+        signals within its steps: Ctrl-C raises there).
 
         Returns
         -------
@@ -110,8 +112,12 @@ class SampledSteps:
                     self.x, self.aux, self._embedded, k0, k1, H, t_end, sliver,
                     integ.max_step, integ.free_step or 0.0, self._on_switch, self.peak, T, Y,
                     PK, self.port_moments)
-            except Exception:
-                self.status = "failed"
+            except BaseException as exc:
+                # a step that raised (or that Ctrl-C or SIGTERM stopped: the kernel
+                # looks at the signals within its steps) is dropped; the whole
+                # steps before it are the side's, and emitted
+                if isinstance(exc, Exception):
+                    self.status = "failed"
                 done = kernel.n_sampled
                 if done:
                     self._sampled_clock(T, done)

@@ -44,6 +44,8 @@ def accuracy_text(acc: dict) -> str:
         why = [w for w in acc["why"] if w != BLIND] or [BLIND]
         more = f"; {len(why) - 1} more in summary.json" if len(why) > 1 else ""
         return f"accuracy: not reliable, no companion run ({why[0]}{more})"
+    if acc.get("skipped"):                 # a signal stopped the companions
+        return f"accuracy: {acc['skipped']}"
     if acc["companion"].get("status") == "not run":
         return f"accuracy: {acc['companion']['message']}"
     parts, missing, reasons = [], [], []

@@ -52,6 +52,7 @@ the damped motion, then has none and gives no safe step).
 from __future__ import annotations
 
 import math
+import os
 import tempfile
 import warnings
 from pathlib import Path
@@ -123,7 +124,9 @@ def _probe(table: dict, n: np.ndarray, gravity: float | None) -> dict:
         data["effects"] = {"gravity": gravity}
     with tempfile.TemporaryDirectory() as tmp, warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        with OutputFolder(tmp, lock=False) as folder:
+        # by its real path: a system's temporary folder may lie below a link
+        # (/tmp -> /private/tmp), which the writer refuses
+        with OutputFolder(os.path.realpath(tmp), lock=False) as folder:
             path = folder.write("probe.toml", lambda fh: fh.write(dumps(data)), "w")
         system, _ = load_scene(path).build()
     sub = system.subsystems[0]

@@ -31,6 +31,13 @@ What the path gives, against the loop:
   macro step's: nothing reads them, for no contact is hosted against a
   moving partner.
 
+A signal (Ctrl-C, SIGTERM, SIGHUP) stops the path as it stops the loop:
+the compiled kernel looks at the signals within its steps (every 4096 RK4
+steps), drops the step it was taking and raises the signal's
+KeyboardInterrupt; the side emits the whole macro steps it took before, so
+that the run keeps them (status ``interrupted``) within a fraction of a
+second, however long the block.
+
 :func:`refusal` says why a run does not take the path (logged at debug
 level); :data:`ENABLED` False keeps every run in the loop.
 """
@@ -117,7 +124,8 @@ def run_sampled(scheme, system, t_end: float, recorder) -> dict | None:
             scheme.n_windows = k
             if why == "end":
                 break
-    except Exception:
+    except BaseException:
+        # a signal too (the kernel looks at them within its steps);
         # the loop's count: the steps whose samples were kept, and the step
         # whose sample (or report) was refused; a step that raised is not counted
         scheme.n_windows = recorder._count - (0 if emit.refused else 1)
