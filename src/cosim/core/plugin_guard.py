@@ -215,3 +215,13 @@ def check_law(law) -> None:
                 raise refuse(law, f"evaluate() at d = {x!r} m, dd = {v!r} m/s", out,
                              "a tuple of three finite floats (force, dissipated power, "
                              "switch)")
+
+
+def bad_state(integ, y1, shape) -> None:
+    """Refuse the state ``y1`` that integrator ``integ`` returned, not of ``shape``."""
+    import numpy as np
+
+    if origin_of(integ) is not None:
+        raise refuse(integ, "integrate()", y1, f"the state, an array of shape {shape}")
+    raise ValueError(f"integrator `{integ.name}` returned a state of shape {np.shape(y1)}, "
+                     f"expected {shape}")

@@ -331,7 +331,8 @@ class MultibodySubsystem(SampledSteps, TreeFaceMixin, CompiledFace, Subsystem):
                                  switch, self._on_switch, coarse=not self._connections,
                                  probe=probe, peak=self.peak)
         if np.shape(y1) != y0.shape:     # one comparison a step: an installed plug-in's?
-            _bad_state(integ, y1, y0.shape)
+            from cosim.core.plugin_guard import bad_state
+            bad_state(integ, y1, y0.shape)
         n2, na = 2 * self.n_dof, self.aux.size
         self.x[:] = y1[:n2]
         self.aux[:] = y1[n2:n2 + na]
@@ -468,21 +469,10 @@ class MultibodySubsystem(SampledSteps, TreeFaceMixin, CompiledFace, Subsystem):
         return float(jn @ np.linalg.solve(M, jn))
 
     def skeleton(self, x) -> tuple[np.ndarray, np.ndarray]:
-        """The tree drawn as lines, for pictures.
-
-        Parameters
-        ----------
-        x : (2 n,) array
-            State ``[q, dq]``.
-
-        Returns
-        -------
-        lines : (m,) complex array
-            World points [m] of a polyline broken by NaN: each body's origin
-            joined to its children's origins and to its ports.
-        joints : (n,) complex array
-            World positions of the joints (the body frames' origins) [m].
-        """
+        """The tree drawn as lines, for pictures, at state ``x = [q, dq]``:
+        ``(lines, joints)``, complex arrays of world points [m]: a polyline
+        broken by NaN (each body's origin joined to its children's origins
+        and to its ports), and the joints (the body frames' origins)."""
         n = self.n_dof
         q, dq = x[:n], x[n:2 * n]
         fr = self.model.frames(q, dq)
@@ -501,11 +491,3 @@ class MultibodySubsystem(SampledSteps, TreeFaceMixin, CompiledFace, Subsystem):
         n = self.n_dof
         return {name: (i, n + i) for i, name in enumerate(self.model.joint_names)}
 
-
-def _bad_state(integ, y1, shape) -> None:
-    """Refuse the state ``y1`` that integrator ``integ`` returned, not of ``shape``."""
-    from cosim.core.plugin_guard import origin_of, refuse
-    if origin_of(integ) is not None:
-        raise refuse(integ, "integrate()", y1, f"the state, an array of shape {shape}")
-    raise ValueError(f"integrator `{integ.name}` returned a state of shape {np.shape(y1)}, "
-                     f"expected {shape}")
