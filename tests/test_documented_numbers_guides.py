@@ -137,8 +137,8 @@ BEAM_CLAIMS = _claims(S, "cosim run cases/beam_impact.toml (and three_mass.toml 
 MODES_CLAIMS = _claims(S, "cosim run cases/beam_impact.toml --set subsystems.beam.modes=...", [
     ("m1_exit", "with 1 mode the beam returns nearly all of it (exit 15.7 rad/s", 15.7, 0.05),
     ("m1_peak", "peak +37 %)", 37, 0.5),
-    ("m4_peak", "(peak +7.6 %, exit −6.85 %)", 7.6, 0.05),
-    ("m4_exit", "(peak +7.6 %, exit −6.85 %)", -6.85, 0.005),
+    ("m4_peak", "(peak +7.6 %, exit −6.86 %)", 7.6, 0.05),
+    ("m4_exit", "(peak +7.6 %, exit −6.86 %)", -6.86, 0.005),
     ("m12_peak", "with 12 modes the peak moves by +0.13 %", 0.13, 0.005),
     ("m12_exit", "and the exit by −0.20 %", -0.20, 0.005),
     ("m57_modes", "57 modes (80 kHz, 64 elements)", 57, 0),
@@ -262,14 +262,16 @@ def test_contact_counts_hold_under_round_off(key):
 # ======================================================================
 #: the scene stopped just past C's last release (0.1217 s), 12 modes: the
 #: reference is a fraction of the full scene's, and the errors round to the
-#: same printed digits as the full scene's (measured: peak -0.0012 % and exit
-#: -0.013 % here, -0.0012 % and -0.014 % on the full scene)
+#: same printed digits as the full scene's (measured: peak -0.0012 % here and
+#: on the full scene)
 SHORT = ("t_end=0.125", "subsystems.beam.modes={count=12}")
 H20 = ("scheme.macro_step=2e-5", "scheme.contact_step=2e-5")
 REF_CLAIMS = _claims(S, "cosim run cases/beam_impact.toml [--scheme monolithic]", [
     ("count", "C's 2 contacts", 2, 0),
     ("peak", "peak −0.001 %", -0.001, 0.0005),
-    ("exit", "the arm's exit velocity −0.01 %", -0.01, 0.005),
+    # (the short copy against the full scene: to 5e-4 %, a tenth of what the
+    # exit velocity moved when onsets began to be landed on)
+    ("exit", "the arm's exit velocity −0.0003 %", -0.0003, 0.0005),
 ])
 REF_BOUNDS = {
     "coupler20": Claim(S, "`implicit` with C a coupler at 20 µs: within 0.02 %",
@@ -800,13 +802,13 @@ FMU_CLAIMS = _claims(F, "python examples/fmu_arm_on_beam.py (tests/test_fmu.py's
     ("peak", "0.89 N of 511 N in the peak force", 511, 0.5),
     ("v3_jacobi_t", "| FMI 3.0 (holds the mean) | jacobi | 0.81 us | 0.60 N |", 0.81, 0.005),
     ("v3_jacobi_f", "| FMI 3.0 (holds the mean) | jacobi | 0.81 us | 0.60 N |", 0.60, 0.005),
-    ("v3_gauss_seidel_t", "| FMI 3.0 | gauss_seidel (fixed or controlled) | 0.89 us | 0.44 N |",
-     0.89, 0.005),
-    ("v3_gauss_seidel_f", "| FMI 3.0 | gauss_seidel (fixed or controlled) | 0.89 us | 0.44 N |",
+    ("v3_gauss_seidel_t", "| FMI 3.0 | gauss_seidel (fixed or controlled) | 0.91 us | 0.44 N |",
+     0.91, 0.005),
+    ("v3_gauss_seidel_f", "| FMI 3.0 | gauss_seidel (fixed or controlled) | 0.91 us | 0.44 N |",
      0.44, 0.005),
-    ("v3_controlled_t", "| FMI 3.0 | gauss_seidel (fixed or controlled) | 0.89 us | 0.44 N |",
-     0.89, 0.005),
-    ("v3_controlled_f", "| FMI 3.0 | gauss_seidel (fixed or controlled) | 0.89 us | 0.44 N |",
+    ("v3_controlled_t", "| FMI 3.0 | gauss_seidel (fixed or controlled) | 0.91 us | 0.44 N |",
+     0.91, 0.005),
+    ("v3_controlled_f", "| FMI 3.0 | gauss_seidel (fixed or controlled) | 0.91 us | 0.44 N |",
      0.44, 0.005),
     ("v3_implicit_t", "| FMI 3.0 | implicit | 0.95 us | 0.37 N |", 0.95, 0.005),
     ("v3_implicit_f", "| FMI 3.0 | implicit | 0.95 us | 0.37 N |", 0.37, 0.005),

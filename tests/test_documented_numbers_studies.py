@@ -134,31 +134,31 @@ TABLE = "| scheme, placement of C (steps) |"
 F100_CLAIMS = [  # (claim, row, quantity)
     *[(c, "shipped", q) for c, q in zip(row(
         SC, "| `gauss_seidel`, hosted by the chain (the scene as shipped: 2 ms, 30 µs)",
-        ["9", "−0.12 %", "+0.20 %", "−0.026", "266", "0"], _cmd("shipped")),
+        ["9", "−0.12 %", "+0.20 %", "−0.026", "268", "0"], _cmd("shipped")),
         ("count", "peak", "exit", "coupling", "steps", "iterations"))],
     *[(c, "gs", q) for c, q in zip(row(
         SC, "| `gauss_seidel`, hosted by the chain",
-        ["9", "−0.03 %", "+0.07 %", "−0.0086", "534", "0"], _cmd("gs")),
+        ["9", "−0.03 %", "+0.07 %", "−0.0085", "515", "0"], _cmd("gs")),
         ("count", "peak", "exit", "coupling", "steps", "iterations"))],
     *[(c, "jacobi", q) for c, q in zip(row(
         SC, "| `jacobi`, hosted by the chain",
-        ["9", "+0.21 %", "−0.11 %", "+0.0096", "541", "0"], _cmd("jacobi")),
+        ["9", "+0.26 %", "−0.10 %", "+0.061", "521", "0"], _cmd("jacobi")),
         ("count", "peak", "exit", "coupling", "steps", "iterations"))],
     *[(c, "implicit", q) for c, q in zip(row(
         SC, "| `implicit`, hosted by the chain",
-        ["9", "+0.00 %", "−0.00 %", "+8.4e-07", "536", "983"], _cmd("implicit")),
+        ["9", "+0.00 %", "−0.01 %", "−6.8e-07", "517", "997"], _cmd("implicit")),
         ("count", "peak", "exit", "coupling", "steps", "iterations"))],
     *[(c, "gs_tol", q) for c, q in zip(row(
         SC, "| `gauss_seidel`, hosted, `contact_step = 1e-4`, `interface_tolerance = 1e-3`",
-        ["9", "−0.10 %", "−0.20 %", "−0.032", "376", "0"], _cmd("gs_tol")),
+        ["9", "−0.10 %", "+0.20 %", "−0.031", "379", "0"], _cmd("gs_tol")),
         ("count", "peak", "exit", "coupling", "steps", "iterations"))],
     *[(c, "implicit_coupler", q) for c, q in zip(row(
         SC, "| `implicit`, coupler",
-        ["9", "+0.04 %", "+1.07 %", "−0.58", "544", "954"], _cmd("implicit_coupler")),
+        ["11", "−19.1 %", "+8.35 %", "−2.26", "562", "1204"], _cmd("implicit_coupler")),
         ("count", "peak", "exit", "coupling", "steps", "iterations"))],
     *[(c, "gs_coupler", q) for c, q in zip(row(
         SC, "| `gauss_seidel`, coupler (refused by the pre-flight check; forced)",
-        ["10", "+1.9 %", "+10.2 %", "+0.295", "567", "0"], _cmd("gs_coupler")),
+        ["9", "−2.9 %", "+0.60 %", "−0.387", "567", "0"], _cmd("gs_coupler")),
         ("count", "peak", "exit", "coupling", "steps", "iterations"))],
     # verification.md: the default against the reference, and with 20 us steps
     (claim(V, "reproduces the reference's 9 contacts", _cmd("shipped")), "shipped", "count"),
@@ -170,25 +170,28 @@ F100_CLAIMS = [  # (claim, row, quantity)
     (claim(SW, "C's peak is within 0.116 %", _cmd("shipped")), "shipped", "|peak|"),
     (claim(SW, "the arm's exit velocity within 0.197 %", _cmd("shipped")), "shipped", "|exit|"),
     # schemes.md: the forced explicit coupler and the same steps hosted
-    (claim(SC, "it closes C 10 times instead of 9", _cmd("gs_coupler"), "10"), "gs_coupler", "count"),
-    (claim(SC, "it closes C 10 times instead of 9", _cmd("shipped"), "9"), "shipped", "count"),
-    (claim(SC, "the arm leaves 10.2 % too fast", _cmd("gs_coupler")), "gs_coupler", "exit"),
-    (claim(SC, "the coupling creates 0.295 J", _cmd("gs_coupler")), "gs_coupler", "coupling"),
+    (claim(SC, "it closes C 9 times, as the reference does", _cmd("gs_coupler"), "9"),
+     "gs_coupler", "count"),
+    (claim(SC, "it closes C 9 times, as the reference does", _cmd("shipped"), "9"),
+     "shipped", "count"),
+    (claim(SC, "C's peak is 2.9 % low", _cmd("gs_coupler")), "gs_coupler", "|peak|"),
+    (claim(SC, "the coupling takes 0.387 J out", _cmd("gs_coupler")), "gs_coupler",
+     "|coupling|"),
     (claim(SC, "the same 20 µs lands within 0.07 %", _cmd("gs")), "gs", "max|error|"),
     # schemes.md: one coupler contact, Aitken and IQN-ILS take the same iterations
-    (claim(SC, "`contact_step = 2e-5`: 954 each", _cmd("implicit_coupler")),
+    (claim(SC, "`contact_step = 2e-5`: 1204 each", _cmd("implicit_coupler")),
      "implicit_coupler", "iterations"),
-    (claim(SC, "`contact_step = 2e-5`: 954 each", _cmd("iqn_coupler")), "iqn_coupler", "iterations"),
+    (claim(SC, "`contact_step = 2e-5`: 1204 each", _cmd("iqn_coupler")), "iqn_coupler", "iterations"),
     # schemes.md: interface error control at the scene's macro step
-    (claim(SC, "takes C's peak error from 0.2 %", _cmd("coarse_1e-4")), "coarse_1e-4", "|peak|"),
-    (claim(SC, "takes C's peak error from 0.2 % to 0.1 %", _cmd("tol_1e-4")), "tol_1e-4", "|peak|"),
-    (claim(SC, "exit-velocity error from 0.7 %", _cmd("coarse_1e-4")), "coarse_1e-4", "|exit|"),
-    (claim(SC, "exit-velocity error from 0.7 % to 0.2 %", _cmd("tol_1e-4")), "tol_1e-4", "|exit|"),
-    (claim(SC, "for 983 iterations over its 536 macro steps", _cmd("implicit"), "983"),
+    (claim(SC, "takes C's peak error from 0.5 %", _cmd("coarse_1e-4")), "coarse_1e-4", "|peak|"),
+    (claim(SC, "takes C's peak error from 0.5 % to 0.1 %", _cmd("tol_1e-4")), "tol_1e-4", "|peak|"),
+    (claim(SC, "exit-velocity error from 0.9 %", _cmd("coarse_1e-4")), "coarse_1e-4", "|exit|"),
+    (claim(SC, "exit-velocity error from 0.9 % to 0.2 %", _cmd("tol_1e-4")), "tol_1e-4", "|exit|"),
+    (claim(SC, "for 997 iterations over its 517 macro steps", _cmd("implicit"), "997"),
      "implicit", "iterations"),
-    (claim(SC, "for 983 iterations over its 536 macro steps", _cmd("implicit")),
+    (claim(SC, "for 997 iterations over its 517 macro steps", _cmd("implicit")),
      "implicit", "steps"),
-    # implicit hosted: "errors below 2e-5, the energy closed to 1e-6 J" are bounds (below)
+    # implicit hosted: "errors below 1e-4, the energy closed to 1e-6 J" are bounds (below)
 ]
 
 
@@ -218,6 +221,7 @@ def f100_rows(f100_reference):
                          "|peak|": abs(peak), "|exit|": abs(exit_),
                          "max|error|": max(abs(peak), abs(exit_)),
                          "coupling": res.summary["contacts"]["C"]["coupling_error"],
+                         "|coupling|": abs(res.summary["contacts"]["C"]["coupling_error"]),
                          "steps": res.n_windows, "iterations": res.n_iterations})
         out[name] = runs
     return out
@@ -232,13 +236,13 @@ def test_three_mass_f100_against_the_reference(f100_rows, claim, name, quantity)
         assert_reproduced(claim, run[quantity])
 
 
-IMPLICIT_BOUNDS = (claim(SC, "errors below 2e-5", _cmd("implicit")),
+IMPLICIT_BOUNDS = (claim(SC, "errors below 1e-4", _cmd("implicit")),
                    claim(SC, "the energy closed to 1e-6 J", _cmd("implicit")))
 
 
 def test_implicit_hosted_closes_the_energy(f100_rows):
-    """schemes.md: `implicit` with C hosted: "errors below 2e-5, the energy
-    closed to 1e-6 J" (bounds; measured 1.3e-5 and 8.4e-7 J)."""
+    """schemes.md: `implicit` with C hosted: "errors below 1e-4, the energy
+    closed to 1e-6 J" (bounds; measured 9.7e-5 and 6.8e-7 J)."""
     errors, energy = IMPLICIT_BOUNDS
     for run in f100_rows["implicit"]:
         assert run["max|error|"] / 100 < errors.value, run
@@ -928,20 +932,20 @@ def test_hard_matrix_survives_round_off():
 
 
 GROWTH = [
-    (claim(V, "Jacobi at\n  100 µs in contact gains 350 J on f1000",
+    (claim(V, "Jacobi at\n  100 µs in contact gains 245 J on f1000",
            "cosim run cases/three_mass.toml --variant f1000 --scheme jacobi --set "
-           "scheme.contact_step=1e-4 --set guard.energy_check=false", "350", abs_=5.0),
+           "scheme.contact_step=1e-4 --set guard.energy_check=false", "245", abs_=0.5),
      "jacobi", "1e-4"),
-    (claim(V, "and at 1 ms 1500 J", "... --scheme jacobi --set scheme.contact_step=1e-3 ...",
-           abs_=50.0),                     # two significant digits, as the others
+    (claim(V, "and at 1 ms more than 1e90 J", "... --scheme jacobi --set scheme.contact_step=1e-3 ...",
+           "1e90"),                        # a lower bound: it diverges
      "jacobi", "1e-3"),
-    (claim(V, "Gauss-Seidel at 100 µs\n  gains 1800 J",
-           "... --scheme gauss_seidel --set scheme.contact_step=1e-4 ...", abs_=50.0),
+    (claim(V, "Gauss-Seidel at 100 µs\n  gains 19 J",
+           "... --scheme gauss_seidel --set scheme.contact_step=1e-4 ...", abs_=0.5),
      "gauss_seidel", "1e-4"),
 ]
 
 
-GROWTH_OF = claim(V, "gains 350 J on f1000 (of 45 J)", GROWTH[0][0].command, "45")
+GROWTH_OF = claim(V, "gains 245 J on f1000 (of 45 J)", GROWTH[0][0].command, "45")
 
 
 @pytest.mark.parametrize("claim,scheme,step", GROWTH, ids=[c.id for c, _, _ in GROWTH])
@@ -956,23 +960,28 @@ def test_growth_without_the_guard(claim, scheme, step):
         assert res.success, res.message
         e = res.summary["energy"]
         assert e["dissipated"] == 0.0
-        assert_reproduced(claim, e["max_abs_drift"])
+        if claim.printed.startswith("and at 1 ms more than"):     # a bound: it diverges
+            assert e["max_abs_drift"] > claim.value, e
+        else:
+            assert_reproduced(claim, e["max_abs_drift"])
         assert_reproduced(claim_of, e["initial"])
 
 
 # ======================================================================
 # troubleshooting.md
 # ======================================================================
-_DRIFT_CMD = "cosim run cases/three_mass.toml --variant f1000 --scheme jacobi"
-DRIFTING = (claim(TR, "creates 4.0 J of 45.1 J and warns twice", _DRIFT_CMD, "4.0"),
-            claim(TR, "creates 4.0 J of 45.1 J and warns twice", _DRIFT_CMD, "45.1"))
+_DRIFT_CMD = ("cosim run cases/three_mass.toml --variant f1000 --scheme jacobi --set "
+              "scheme.contact_step=2.5e-5")
+DRIFTING = (claim(TR, "creates 3.4 J of 45.1 J and warns twice", _DRIFT_CMD, "3.4"),
+            claim(TR, "creates 3.4 J of 45.1 J and warns twice", _DRIFT_CMD, "45.1"))
 
 
 def test_a_drifting_run_warns_twice():
-    """"creates 4.0 J of 45.1 J and warns twice", for the scene and its
+    """"creates 3.4 J of 45.1 J and warns twice", for the scene and its
     moved copies."""
     created, scale = DRIFTING
-    for s in moved(load(THREE_MASS, "f1000", scheme="jacobi"), COPIES):
+    for s in moved(load(THREE_MASS, "f1000", ["scheme.contact_step=2.5e-5"], scheme="jacobi"),
+                   COPIES):
         res = simulate(s)
         assert res.status == "finished"
         assert_reproduced(created, res.summary["energy"]["max_abs_drift"])
@@ -984,11 +993,11 @@ GUARD_CMD = ("cosim run cases/three_mass.toml --variant f1000 --scheme jacobi --
              "scheme.contact_step=1e-3")
 GUARD = [
     claim(TR, "run stopped at t = 0.102 s", GUARD_CMD),
-    claim(TR, "the guard tripped at t = 0.103 s", GUARD_CMD),
-    claim(TR, "the energy grew by 10.72 J", GUARD_CMD),
+    claim(TR, "the guard tripped at t = 0.104 s", GUARD_CMD),
+    claim(TR, "the energy grew by 10.71 J", GUARD_CMD),
     claim(TR, "(bound 4.511 J", GUARD_CMD),
     claim(TR, "of the energy scale 45.11 J", GUARD_CMD),
-    claim(TR, "created 10.72 J of it", GUARD_CMD),
+    claim(TR, "created 10.71 J of it", GUARD_CMD),
 ]
 _GUARD_RE = [r"run stopped at t = ([0-9.e+-]+) s", r"the guard tripped at t = ([0-9.e+-]+) s",
              r"the energy grew by ([0-9.e+-]+) J",
