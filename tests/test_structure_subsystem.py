@@ -76,7 +76,7 @@ def test_rod_impact_tends_to_saint_venant():
     for n in (20, 80, 160):
         res = cosim.simulate(cosim.load_scene(CASES / "rod_impact.toml", overrides=[
             f"subsystems.rod.elements={n}",
-            f"subsystems.rod.integrator.contact_step={2e-7 * 50 / n}"]))
+            f"subsystems.rod.integrator.contact_step={2e-7 * 50 / n}"]), estimate=False)
         assert res.success, res.message
         cc = res.summary["contacts"]["wall"]
         span_err.append(abs((cc["intervals"][-1][1] - cc["intervals"][0][0]) / tc - 1))
@@ -99,8 +99,8 @@ def test_monolithic_and_exact_cosimulation_agree_on_a_structure(tmp_path):
     p.write_text(CHAIN)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        mono = cosim.simulate(cosim.load_scene(p, scheme="monolithic")).summary
-    ex = cosim.simulate(cosim.load_scene(p)).summary
+        mono = cosim.simulate(cosim.load_scene(p, scheme="monolithic"), estimate=False).summary
+    ex = cosim.simulate(cosim.load_scene(p), estimate=False).summary
     for dof in ("m1", "m2", "m3"):
         assert ex["final_state"]["chain"][dof]["q"] == pytest.approx(
             mono["final_state"]["chain"][dof]["q"], rel=1e-7, abs=1e-12)
@@ -285,7 +285,7 @@ def test_following_contact_on_a_moving_beam_conserves_energy(tmp_path):
     drift = {}
     for follow in (True, False):
         scene = cosim.load_scene(path, overrides=[f"contacts.C.follow={str(follow).lower()}"])
-        res = cosim.simulate(scene)
+        res = cosim.simulate(scene, estimate=False)
         assert res.success, res.message
         assert res.summary["contacts"]["C"]["count"] == 1
         drift[follow] = res.summary["energy"]["max_abs_drift"]
@@ -300,10 +300,11 @@ def test_following_contact_differs_from_a_fixed_one_by_the_slope_force(tmp_path)
     fixed point or a vertical force would leave dx/dt at exactly 5 m/s)."""
     path = tmp_path / "slide.toml"
     path.write_text(SLIDE)
-    res = cosim.simulate(cosim.load_scene(path))
+    res = cosim.simulate(cosim.load_scene(path), estimate=False)
     dx = res.summary["final_state"]["slider"]["x"]["dq"]
     assert dx != pytest.approx(5.0, abs=1e-6)
-    fixed = cosim.simulate(cosim.load_scene(path, overrides=["contacts.C.follow=false"]))
+    fixed = cosim.simulate(cosim.load_scene(path, overrides=["contacts.C.follow=false"]),
+                           estimate=False)
     assert fixed.summary["final_state"]["slider"]["x"]["dq"] == pytest.approx(5.0, abs=1e-12)
 
 
