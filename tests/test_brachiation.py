@@ -29,7 +29,7 @@ H = 1e-3                        # the scene's macro step [s]
 
 
 def simulate(variant=None, overrides=(), scheme=None):
-    res = cosim.simulate(cosim.load_scene(SCENE, variant, list(overrides), scheme))
+    res = cosim.simulate(cosim.load_scene(SCENE, variant, list(overrides), scheme), estimate=False)
     assert res.status == "finished", res.message
     return res
 

@@ -61,7 +61,7 @@ def _slide(tmp_path, max_step: float) -> float:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         res = cosim.simulate(load_scene(path, overrides=["scheme.macro_step=1e-3"],
-                                        scheme="gauss_seidel"))
+                                        scheme="gauss_seidel"), estimate=False)
     assert res.status == "finished", res.message
     after = res.t > 1.0 / (0.3 * 9.81) + 0.01          # past the stop at v0 / (mu g)
     return float(np.max(np.abs(res.series["dq/robot/x"][after])))

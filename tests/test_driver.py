@@ -119,7 +119,7 @@ def _both_ways(name, variant, overrides, monkeypatch):
         monkeypatch.setenv(driver.DRIVER_ENV, loop)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            out.append(cosim.simulate(_load(name, variant, overrides)))
+            out.append(cosim.simulate(_load(name, variant, overrides), estimate=False))
     return out
 
 

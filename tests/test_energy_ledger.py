@@ -18,7 +18,8 @@ COUPLER = ['contacts.wall.placement="coupler"', "scheme.accept_unsafe_step=true"
 def run(scene, variant=None, overrides=(), scheme=None):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        res = cosim.simulate(cosim.load_scene(CASES / scene, variant, list(overrides), scheme))
+        res = cosim.simulate(cosim.load_scene(CASES / scene, variant, list(overrides), scheme),
+                             estimate=False)
     assert res.success, res.message
     return res
 

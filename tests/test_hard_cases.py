@@ -149,7 +149,7 @@ def test_a_nan_in_a_run_stops_it_with_time_and_contact(monkeypatch):
         warnings.simplefilter("ignore")
         scene = cosim.load_scene(CASES / "spring_drop.toml", overrides=[
             "scheme.macro_step=1e-4"], scheme="jacobi")
-    res = cosim.simulate(scene)
+    res = cosim.simulate(scene, estimate=False)
     assert res.status == "failed"
     # the stop time is the last sample kept; the step the guard refused is named too
     assert res.message.startswith("run stopped at t = 0.005 s (the last sample kept; the guard "
@@ -168,8 +168,8 @@ def test_forced_unsafe_step_is_stopped_not_left_to_grow():
             'contacts.wall.placement="coupler"', "scheme.macro_step=1e-4", *extra],
             scheme="jacobi")
     with pytest.raises(cosim.UnsafeStepError, match=r"contact `wall`: macro step 0\.0001 s"):
-        cosim.simulate(load())
-    res = cosim.simulate(load("scheme.accept_unsafe_step=true"))
+        cosim.simulate(load(), estimate=False)
+    res = cosim.simulate(load("scheme.accept_unsafe_step=true"), estimate=False)
     assert res.status == "failed"
     assert "contact `wall` created" in res.message
     t_stop = float(res.message.split("t = ")[1].split(" s")[0])

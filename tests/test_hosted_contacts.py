@@ -49,7 +49,8 @@ def pair(tmp_path, placement="embedded", host="", scheme=None, overrides=()):
     path.write_text(PAIR.format(placement=placement, host=host))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        res = cosim.simulate(cosim.load_scene(path, overrides=list(overrides), scheme=scheme))
+        res = cosim.simulate(cosim.load_scene(path, overrides=list(overrides), scheme=scheme),
+                             estimate=False)
     assert res.success, res.message
     return res
 
@@ -119,7 +120,7 @@ def test_interface_error_control_refines_the_contact_steps():
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             scene = cosim.load_scene(CASES / "three_mass.toml", "f100", list(ov), scheme)
-        res = cosim.simulate(scene)
+        res = cosim.simulate(scene, estimate=False)
         assert res.success, res.message
         return res, impact_metrics(res, "C", "robot/arm")
 

@@ -43,7 +43,7 @@ def _run(monkeypatch, kernel, path, variant, structure_kernels=None):
     over = [f"t_end={T_END[path.stem]}"] if path.stem in T_END else []
     scene = cosim.load_scene(path, variant, overrides=over)
     if structure_kernels is None:
-        return cosim.simulate(scene)
+        return cosim.simulate(scene, estimate=False)
     original = StructureSubsystem._build_kernel
 
     def spy(self):
@@ -53,7 +53,7 @@ def _run(monkeypatch, kernel, path, variant, structure_kernels=None):
 
     monkeypatch.setattr(StructureSubsystem, "_build_kernel", spy)
     try:
-        return cosim.simulate(scene)
+        return cosim.simulate(scene, estimate=False)
     finally:
         monkeypatch.setattr(StructureSubsystem, "_build_kernel", original)
 

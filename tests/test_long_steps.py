@@ -100,6 +100,6 @@ def test_a_scheme_that_stops_short_of_t_end_has_not_finished(monkeypatch):
         return self.counters()
 
     monkeypatch.setattr(GaussSeidel, "run", stop_at_once)
-    res = cosim.simulate(load_scene(SPRING_DROP))
+    res = cosim.simulate(load_scene(SPRING_DROP), estimate=False)
     assert res.status == "error" and not res.success
     assert "returned at t = 0 s, short of t_end = 0.02 s" in res.message

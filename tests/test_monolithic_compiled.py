@@ -208,7 +208,7 @@ def test_compiled_rhs_matches_python_along_a_run(monkeypatch, name, variant, ove
         return probes[-1]
 
     monkeypatch.setattr(mono, "_compiled_rhs", probe)
-    res = cosim.simulate(_scene(name, variant, over))
+    res = cosim.simulate(_scene(name, variant, over), estimate=False)
     assert res.success, res.message
     p, = probes
     assert p.checked > 100
@@ -220,7 +220,8 @@ def _runs(name, variant, over, kernel, copies=1):
     scene = _scene(name, variant, over, kernel)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        return [cosim.simulate(s, scheme="monolithic") for s in spread(scene, copies)]
+        return [cosim.simulate(s, scheme="monolithic", estimate=False)
+                for s in spread(scene, copies)]
 
 
 def _counts(res):

@@ -18,7 +18,7 @@ def run(tmp_path, *ov, scheme=None, placement="coupler"):
         warnings.simplefilter("ignore")
         scene = cosim.load_scene(path, overrides=["scheme.accept_unsafe_step=true", *ov],
                                  scheme=scheme)
-    res = cosim.simulate(scene)
+    res = cosim.simulate(scene, estimate=False)
     assert res.success, res.message
     return res
 

@@ -31,7 +31,7 @@ def simulate(path, *overrides, variant=None, scheme=None):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         scene = cosim.load_scene(path, variant, list(overrides), scheme)
-    res = cosim.simulate(scene)
+    res = cosim.simulate(scene, estimate=False)
     assert res.success, res.message
     return res
 

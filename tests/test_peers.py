@@ -183,7 +183,8 @@ def test_exudyn_model_flies_as_cosim_before_c_strikes():
     assert s["gap/C"].min() > 0                     # C has not touched yet
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        ref = cosim.simulate(cosim.load_scene(SCENE, "f100", [f"t_end={t_end}"], "monolithic"))
+        ref = cosim.simulate(cosim.load_scene(SCENE, "f100", [f"t_end={t_end}"], "monolithic"),
+                             estimate=False)
     final = ref.summary["final_state"]["robot"]
     assert abs(s["q/robot/x"][-1] - final["x"]["q"]) < 2e-5
     assert abs(s["q/robot/y"][-1] - final["y"]["q"]) < 2e-5
@@ -419,7 +420,8 @@ def test_mujoco_model_flies_as_cosim_before_c_strikes():
     assert s["gap/C"].min() > 0                     # C has not touched yet
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        ref = cosim.simulate(cosim.load_scene(SCENE, "f100", [f"t_end={t_end}"], "monolithic"))
+        ref = cosim.simulate(cosim.load_scene(SCENE, "f100", [f"t_end={t_end}"], "monolithic"),
+                             estimate=False)
     final = ref.summary["final_state"]["robot"]
     for j in ("x", "y", "body", "arm"):
         assert abs(s[f"q/robot/{j}"][-1] - final[j]["q"]) < 1e-6, j

@@ -59,12 +59,12 @@ def test_refuses_too_large_step_and_names_contact_step_and_limit():
     with pytest.raises(cosim.UnsafeStepError,
                        match=r"contact `wall`: macro step 0\.0001 s is too large.*largest safe "
                              r"macro step is 6\.3\de-06 s"):
-        cosim.simulate(_load(1e-4))
+        cosim.simulate(_load(1e-4), estimate=False)
 
 
 @pytest.mark.parametrize("scheme", ["jacobi", "gauss_seidel"])
 def test_accepts_safe_step(scheme):
-    res = cosim.simulate(_load(5e-6, scheme, ["t_end=0.014"]))
+    res = cosim.simulate(_load(5e-6, scheme, ["t_end=0.014"]), estimate=False)
     assert res.success
     assert res.summary["final_state"]["body"]["x"]["dq"] == pytest.approx(1.0, rel=0.01)
 
@@ -72,16 +72,16 @@ def test_accepts_safe_step(scheme):
 def test_explicit_risk_acceptance_runs_and_gains_energy():
     # the run guard would stop the run (tests/test_hard_cases.py): turned off to see the gain
     res = cosim.simulate(_load(1e-4, extra=["scheme.accept_unsafe_step=true",
-                                            "guard.energy_check=false"]))
+                                            "guard.energy_check=false"]), estimate=False)
     assert res.success
     assert res.summary["energy"]["final"] > 1.15 * res.summary["energy"]["initial"]
 
 
 def test_implicit_and_embedded_need_no_check():
-    assert cosim.simulate(_load(1e-4, "implicit")).success
+    assert cosim.simulate(_load(1e-4, "implicit"), estimate=False).success
     scene = cosim.load_scene(CASES / "spring_drop.toml", overrides=["scheme.macro_step=1e-3"],
                              scheme="jacobi")
-    assert cosim.simulate(scene).success       # the wall's contact is embedded
+    assert cosim.simulate(scene, estimate=False).success       # the wall's contact is embedded
 
 
 # ------------------------------------------------- the refusal's advice works

@@ -51,7 +51,7 @@ def _scene(name, variant=None, overrides=()):
 
 def run(monkeypatch, name, variant=None, on=True, overrides=()):
     monkeypatch.setattr(sampled, "ENABLED", on)
-    return cosim.simulate(_scene(name, variant, overrides))
+    return cosim.simulate(_scene(name, variant, overrides), estimate=False)
 
 
 def series_distance(a, b) -> float:
