@@ -3,6 +3,7 @@ to the published runs of benchmarks/accuracy_validation.py (the shipped
 scenes) and benchmarks/generated_validation.py (scenes no one chose), and
 one cheap case of the first run again here."""
 import json
+import statistics
 import math
 
 import pytest
@@ -162,23 +163,20 @@ def test_what_decides_the_estimates_misses(data, gen, section):
     (r1, n1, b1, m1, o1, x1, q1), (r2, n2, b2, m2, o2, x2, q2) = said
     assert (f"agrees on {r1} of the {n1} such pairs of the shipped scenes and {r2} of the {n2} "
             f"of the generated ones") in text
-    assert f"{b1} of {m1} bounds agree on the shipped scenes and {b2} of {m2} on the" in text
+    assert (f"the bound at order 1 agrees on {b1} of {m1} on the shipped scenes and {b2} of "
+            f"{m2} on the generated ones") in text
     assert (f"Of the misses, {o1} of {x1} on the shipped scenes and {o2} of {x2} on the "
-            f"generated ones are bounds above the actual error") in text
-    assert (f"{_range(q1, '.1f')} above it on the shipped scenes and {min(q2):.1f}x to "
-            f"{max(q2):.0f}x on the generated ones") in text
-    rich_over = [p["estimated"] / p["actual"] for p in _pairs(generated)
-                 if p["kind"] == "richardson" and not p["agrees"]]
-    assert all(r > 3 for r in rich_over)
-    assert (f"Richardson over-estimates {len(rich_over)} generated pairs "
-            f"({_range(rich_over, '.1f')})") in text
-    under = [(c["scene"], run, q, p) for c in generated for run in ("default", "request")
-             for q, p in c[run]["pairs"].items() if p["actual"] is not None
-             and p["estimated"] is not None and p["estimated"] < p["actual"] / 3]
-    (scene, run, q, p), = under
-    assert (scene.endswith("gen0-013.toml"), run, q, p["kind"]) == (True, "request", "peak",
-                                                                    "bound")
-    assert f"a bound at {p['estimated'] / p['actual']:.2f}x the actual peak error" in text
+            f"generated ones are bounds above the actual error ({_range(q1, '.1f')}, and "
+            f"{min(q2):.1f}x to {max(q2):.0f}x where") in text
+    under = sorted((c["scene"], run, q, p["kind"], p["estimated"] / p["actual"])
+                   for c in gen["cases"] for run in ("default", "request")
+                   for q, p in c["validation"][run]["pairs"].items()
+                   if p["actual"] is not None and p["actual"] >= 1e-4     # judged by ratio
+                   and p["estimated"] is not None and p["estimated"] < p["actual"] / 3)
+    assert [u[:4] for u in under] == [("gen0-022", "request", "exit_velocity", "bound"),
+                                      ("gen0-035", "request", "exit_velocity", "richardson")]
+    assert (f"is {under[0][4]:.2f}x the actual error, and gen0-035's, Richardson at "
+            f"{under[1][4]:.2f}x") in text
     assert not [p for p in _pairs(shipped) if p["estimated"] is not None
                 and p["estimated"] < p["actual"] / 3]
     none = [(c["scene"], c["variant"]) for c in shipped for run in ("default", "request")
@@ -204,26 +202,19 @@ def test_what_decides_the_requests_misses(data, gen, section):
     assert f"{100 * b['pairs']['exit_velocity']['actual']:.2g} %" == "3.4 %"
     assert "brachiation misses 1 % on the exit velocity (3.4 %) and says `unchecked`" in text
     reqs = {c["scene"]: c["validation"]["request"] for c in gen["cases"]}
-    missed = {k: r for k, r in reqs.items() if not r["met"]}
-    said_not = [k for k, r in missed.items() if r["outcome"] != "met"]
-    wrong = sorted(k for k, r in missed.items() if r["outcome"] == "met")
-    assert wrong == ["gen0-017", "gen0-025"]
-    assert (f"Of the {len(missed)} generated scenes that miss, {len(said_not)} say `not met`; "
-            f"two say `met` wrongly") in text
-    p = reqs["gen0-017"]["pairs"]["peak"]
-    assert (f"{100 * p['estimated']:.2g} %", f"{100 * p['actual']:.2g} %") == ("0.89 %", "1.1 %")
-    assert p["agrees"] and p["estimated"] <= 0.01 < p["actual"]
-    assert "gen0-017's estimate of the peak error, 0.89 %, is within 3x of the actual 1.1 %" \
-        in text
+    missed = sorted((k, r["outcome"]) for k, r in reqs.items() if not r["met"])
+    assert missed == [("gen0-007", "not met"), ("gen0-025", "met")]
+    r7 = reqs["gen0-007"]
+    assert (f"gen0-007 says `not met` (its estimate {100 * r7['request_estimate']:.2g} % after "
+            f"the refinement, the actual errors {100 * r7['pairs']['peak']['actual']:.2g} % and "
+            f"{100 * r7['pairs']['exit_velocity']['actual']:.2g} %)") in text
     r = reqs["gen0-025"]
     assert (r["count"], r["count_ref"]) == (4, 3)
     assert all(r["pairs"][q]["actual"] <= 0.01 for q in ("peak", "exit_velocity"))
-    assert "gen0-025's request closes the strike 4 times where the reference closes it 3" in text
-    shy = [r for r in reqs.values() if r["met"] and r["outcome"] == "not met"]
-    kinds = [max(r["pairs"].values(), key=lambda p: p["estimated"])["kind"] for r in shy]
-    assert all(r["request_estimate"] > 0.01 for r in shy)
-    assert (f"{len(shy)} generated requests that meet 1 % say `not met`: an over-estimate above "
-            f"1 % after the refinement ({kinds.count('bound')} of them bounds)") in text
+    assert "its request closes the strike 4 times where the reference closes it 3" in text
+    assert not [k for k, r in reqs.items() if r["met"] and r["outcome"] == "not met"]
+    assert "No request that meets 1 % says `not met`" in text
+    assert f"{sum(r['refined'] for r in reqs.values())} of the 40 requests refined" in text
 
 
 def test_what_decides_the_cpu(data, gen, section):
@@ -235,12 +226,11 @@ def test_what_decides_the_cpu(data, gen, section):
     assert f"costs {min(x):.2g} to {max(x):.2g} times the cheapest row on the shipped" in text
     plan = [c["request"]["stages_s"]["plan"] / c["request"]["stages_s"]["run"]
             for c in data["cases"]]
-    assert f"{min(plan):.2g} to {max(plan):.2g} times the run on the shipped scenes" in text
-    s33, s34 = (_gen(gen, n)["request"] for n in ("gen0-033", "gen0-034"))
-    assert s33["scheme"] == s34["scheme"] == "implicit"
-    assert (f"{s33['stages_s']['plan']:.2g} and {s34['stages_s']['plan']:.2g} s against runs "
-            f"of {s33['stages_s']['run']:.2g} and {s34['stages_s']['run']:.2g} s") in text
     cases = [c["validation"] for c in gen["cases"]]
+    gplan = statistics.median(c["request"]["stages_s"]["plan"] / c["request"]["stages_s"]["run"]
+                              for c in cases)
+    assert (f"{min(plan):.2g} to {max(plan):.2g} times the run on the shipped scenes, "
+            f"{gplan:.2g} times it at the median of the generated ones") in text
     within = [c for c in cases if c["own_ratio"] <= 1.5]
     low = min(c["cheapest"]["cpu_s"] for c in within)
     long = [c for c in cases if c["cheapest"]["cpu_s"] >= low]

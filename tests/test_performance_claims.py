@@ -186,10 +186,10 @@ def test_our_modules_imported_by_a_three_mass_run(tmp_path):
     times = startup.import_times(str(CASES / "three_mass.toml"), "f100", str(tmp_path / "r"))
     loaded = [m for m in times if startup.group(m) in startup.OURS]
     counts = [len(loaded)] + [sum(startup.group(m) == p for m in loaded) for p in startup.OURS]
-    claim = Claim(PAGE, "| 74 (52, 3, 11, 8) |", "python benchmarks/startup.py", 74)
+    claim = Claim(PAGE, "| 76 (54, 3, 11, 8) |", "python benchmarks/startup.py", 76)
     assert_printed(claim)
-    assert counts == [74, 52, 3, 11, 8], counts
-    assert_printed(Claim(PAGE, "and the 74 modules themselves", "python benchmarks/startup.py",
+    assert counts == [76, 54, 3, 11, 8], counts
+    assert_printed(Claim(PAGE, "and the 76 modules themselves", "python benchmarks/startup.py",
                          74))
 
 
@@ -333,12 +333,12 @@ def test_the_full_beam_at_1024_elements_keeps_2048_modes(size_scaling):
 
 
 _PEAKS = ("C's peak penetration at 256 elements is 3.12621 mm with the 20 kHz cutoff (the same "
-          "to six digits from 128 to 1024 elements) and 3.12582 mm with every mode (the same at "
+          "to six digits from 128 to 1024 elements) and 3.12581 mm with every mode (the same at "
           "128 elements), 0.013 % apart.")
 
 
 def _peak_claims(series: str, peaks) -> None:
-    value = 3.12621e-3 if series == "beam_modal" else 3.12582e-3
+    value = 3.12621e-3 if series == "beam_modal" else 3.12581e-3
     for p in peaks:
         claim = Claim(PAGE, _PEAKS, "python benchmarks/size_scaling.py", value, abs=0.000005e-3)
         assert_printed(claim)
