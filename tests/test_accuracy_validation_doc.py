@@ -320,3 +320,13 @@ def test_the_changelog_quotes_the_published_totals(av, data, gen):
     assert "No target is met on both" in text and not any(
         all(av.verdicts(t, n)[k][2] for t, n in runs)
         for k in ("agree", "met", "honest", "own_cpu", "whole_cpu"))
+
+
+def test_the_readme_quotes_the_generated_totals(av, gen):
+    text = _flat((ROOT / "README.md").read_text(encoding="utf-8"))
+    g = gen["totals"]
+    v = av.verdicts(g, g["validated"])
+    assert (f"on {g['validated']} generated scenes its estimates agree within 3x on "
+            f"{v['agree'][0]} of {v['agree'][1]} pairs and it meets 1 % on {v['met'][0]} of "
+            f"{v['met'][1]} scenes, while its CPU targets are not met") in text
+    assert v["agree"][2] and v["met"][2] and not v["own_cpu"][2] and not v["whole_cpu"][2]
