@@ -13,6 +13,7 @@ every copy to it.
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import re
@@ -193,6 +194,12 @@ F100_CLAIMS = [  # (claim, row, quantity)
      "implicit", "steps"),
     # implicit hosted: "errors below 1e-4, the energy closed to 1e-6 J" are bounds (below)
 ]
+
+
+# the implicit row's iterations: the scene and its moved copies take 997 or 998
+# (round-off moves one fixed-point iteration over 517 steps), to one
+F100_CLAIMS = [(dataclasses.replace(c, abs=1.0) if (name, q) == ("implicit", "iterations")
+                else c, name, q) for c, name, q in F100_CLAIMS]
 
 
 @pytest.fixture(scope="module")
@@ -1003,7 +1010,7 @@ def test_a_drifting_run_warns_twice():
 GUARD_CMD = ("cosim run cases/three_mass.toml --variant f1000 --scheme jacobi --set "
              "scheme.contact_step=1e-3")
 GUARD = [
-    claim(TR, "run stopped at t = 0.102 s", GUARD_CMD),
+    claim(TR, "run stopped at t = 0.103 s", GUARD_CMD),
     claim(TR, "the guard tripped at t = 0.104 s", GUARD_CMD),
     claim(TR, "the energy grew by 10.71 J", GUARD_CMD),
     claim(TR, "(bound 4.511 J", GUARD_CMD),

@@ -1,5 +1,10 @@
 """Macro-step control: small steps only around coupler contacts, never a
-contact stepped over blindly (rolled back and landed on its onset)."""
+contact stepped over blindly (rolled back and landed on its onset).
+
+These runs keep 0.13's steps (``land_onsets = false``): they hold what the
+controller does on its own (uniform contact steps, a long step landed on the
+onset it crossed); landing every contact step on its onsets is held in
+tests/test_land_onsets.py."""
 import math
 import warnings
 
@@ -13,14 +18,16 @@ W = 1000.0
 BASE = ['contacts.wall.placement="coupler"']
 
 
-def run(scheme, *ov, order=1, unsafe=True):
+def run(scheme, *ov, order=1, unsafe=True, land=False):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         # the runs study long steps on purpose: the run guard is off
         extra = ["scheme.accept_unsafe_step=true", "guard.energy_check=false"] \
             if unsafe and scheme != "implicit" else []
         scene = cosim.load_scene(CASES / "spring_drop.toml", overrides=BASE + extra + [
-            f"scheme.extrapolation_order={order}", *ov], scheme=scheme)
+            f"scheme.extrapolation_order={order}", *ov,
+            *([] if land or scheme == "monolithic" else ["scheme.land_onsets=false"])],
+            scheme=scheme)
     res = cosim.simulate(scene, estimate=False)
     assert res.success, res.message
     return res

@@ -96,11 +96,15 @@ def test_a_run_the_guard_stops_mid_touch_ends_its_summary_at_the_stop(tmp_path, 
     out = tmp_path / "run"
     s = assert_stopped_cli(run_cli(JACOBI + copy, out), out)
     assert "contact `C` created" in s["message"]
-    assert "the guard tripped at t = 0.1028 s" in s["message"]
-    assert s["t_end"] == pytest.approx(0.1027, abs=1e-12)
-    # C touched only in the step the guard refused: no kept step saw it
+    # the stop falls at the step landed just short of C's onset
+    assert "the guard tripped at t = 0.102839 s" in s["message"]
+    assert s["t_end"] == pytest.approx(0.102739, abs=5e-7)
+    # C touched in the step the guard refused: the kept steps end just past its
+    # onset, which its host located (landed on, LAND_MARGIN of a contact step,
+    # 1e-9 s here), so C's interval is that sliver and its peak a few nm
     c = s["contacts"]["C"]
-    assert c["intervals"] == [] and c["in_touch_time"] == 0.0 and c["peak_penetration"] == 0.0
+    assert all(b - a <= 1e-8 and b == s["t_end"] for a, b in c["intervals"]), c["intervals"]
+    assert c["in_touch_time"] <= 1e-8 and c["peak_penetration"] <= 1e-7
     assert s["contacts"]["A"]["count"] == 2
 
 
