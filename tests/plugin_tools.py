@@ -2,6 +2,7 @@
 folder of its own, bare distributions made of metadata, and a child
 `cosim` that sees them."""
 import os
+from pathlib import Path
 import shutil
 import subprocess
 import sys
@@ -13,9 +14,14 @@ from conftest import ROOT
 
 
 def child_env(*paths):
-    """The environment of a child `cosim`: ``paths``, then this tree's src."""
+    """The environment of a child `cosim`: ``paths``, then this tree's src
+    where this process runs cosim from it (an editable install); a regular
+    install (CI's ``pip install .``) is left to the child as it is, with its
+    compiled kernels, which the src tree does not hold."""
+    import cosim
     env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join([*map(str, paths), str(ROOT / "src")])
+    ours = Path(cosim.__file__).resolve().parents[1] == (ROOT / "src").resolve()
+    env["PYTHONPATH"] = os.pathsep.join([*map(str, paths), *([str(ROOT / "src")] if ours else [])])
     return env
 
 
