@@ -61,6 +61,20 @@ class BuildKernels(build_ext):
         if not self.parallel:
             self.parallel = True           # as many compilers as CPUs
 
+    def run(self):
+        # Cython's translation when the kernels are built, not at every setup.py
+        # command: `egg_info` and `build_py` (a wheel's pure-Python step, and
+        # the shipped files' test) need no C.  include_path: the kernels
+        # cimport cosim.core._side_face from the sources
+        # (the C sources replace the .pyx in the extensions setuptools has
+        # finalised: cythonize returns copies without setuptools' own fields)
+        translated = {ext.name: ext for ext in cythonize(
+            self.extensions, language_level=3, include_path=["src"],
+            compiler_directives={"embedsignature": True})}
+        for ext in self.extensions:
+            ext.sources = translated[ext.name].sources
+        super().run()
+
     def build_extensions(self):
         if self.compiler.compiler_type in ("unix", "mingw32", "cygwin"):
             for ext in self.extensions:
@@ -98,7 +112,5 @@ class BuildWithShipped(build_py):
 
 
 if __name__ == "__main__":
-    # include_path: the kernels cimport cosim.core._side_face from the sources
-    setup(ext_modules=cythonize(KERNELS, language_level=3, include_path=["src"],
-                                compiler_directives={"embedsignature": True}),
+    setup(ext_modules=KERNELS,
           cmdclass={"build_ext": BuildKernels, "build_py": BuildWithShipped})

@@ -37,7 +37,7 @@ def main(argv=None):
         import cosim
         run = args.out / "run"
         cosim.run_scene(SCENE, variant="f100", overrides=[f"t_end={args.t_end}"], out=run,
-                        overwrite=True)
+                        overwrite=True, estimate=False)
 
     # -- from here on: json and numpy only
     summary = json.loads((run / "summary.json").read_text())

@@ -36,7 +36,8 @@ def main(argv=None):
     peak_force, contact_time = np.full(7, np.nan), np.full(7, np.nan)
     for i, k in enumerate(stiffness):
         result = cosim.run_scene(SCENE, overrides=[f"t_end={args.t_end}",
-                                                        f"contacts.wall.law.contact_stiffness={k}"])
+                                                        f"contacts.wall.law.contact_stiffness={k}"],
+                                 estimate=False)
         wall = result.summary["contacts"]["wall"]
         if wall["count"] == 1 and wall["intervals"][0][1] < args.t_end:     # touched and left
             peak_force[i] = k * wall["peak_penetration"]    # linear law: f = k d

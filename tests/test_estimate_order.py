@@ -87,7 +87,7 @@ host = "beam"
 def _simulate(scene):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        return cosim.simulate(scene)
+        return cosim.simulate(scene, estimate=False)     # estimated below, where read
 
 
 def _load(path, variant=None, overrides=()):
