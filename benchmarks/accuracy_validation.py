@@ -31,7 +31,9 @@ c. **its cost**: against the cheapest bench row that meets X on both with the
    process time): the request's own run (the choice, the run and a
    refinement's run: process time) at most :data:`CPU_TARGET` times it, and
    the request whole (with its estimates) at most :data:`ESTIMATE_TARGET`
-   times it, each the median of ``--repeat``.
+   times it, each the median of ``--repeat``; each command timed as a new
+   process would run it (:func:`fresh`: the assemblies and modes another
+   kept are forgotten first).
 
 Run from the project root::
 
