@@ -302,7 +302,12 @@ class Choice:
         One sentence.
     candidates : list of dict
         Every scheme considered: its step, predicted errors and CPU, or why
-        it was left out.
+        it was left out (``refused``), or that it was not built
+        (``unchecked``: costlier than the one chosen).
+    scene : Scene or None
+        The scene loaded with the chosen scheme and overrides, whose build
+        the pre-flight check passed (what :func:`cosim.studies.accurate.plan`
+        runs); None where it is not kept (a refinement's choice).
     """
 
     scheme: str
@@ -315,6 +320,7 @@ class Choice:
     knob: Knob
     why: str
     candidates: list = field(default_factory=list)
+    scene: object = field(default=None, repr=False, compare=False)
 
     @property
     def caveat(self) -> str | None:
@@ -404,13 +410,13 @@ def _checked(cand: dict) -> dict:
     """``cand`` built and its step judged by the scheme's pre-flight check
     (the scene's build included): as it was, or ``refused`` with why."""
     from cosim.scene.checks import SceneError
-    s = cand.pop("scene")
     try:
-        system, sch = s.build()
+        system, sch = cand["scene"].build()
         sch.preflight(system)
     except (UnsafeStepError, SceneError) as exc:
         return {k: v for k, v in cand.items() if k not in ("overrides", "predicted_error",
-                                                           "work_steps", "predicted_cpu_s")
+                                                           "work_steps", "predicted_cpu_s",
+                                                           "scene")
                 } | {"refused": _refused(cand["step"], exc)}
     return cand
 
@@ -506,9 +512,10 @@ def choose(scene, accuracy: float, contact: str | None = None,
     if best is None:
         raise refusal(scene, source, f"{accuracy:.3g}: no scheme meets it by the model: "
                       + "; ".join(f"{c['scheme']}: {c['refused']}" for c in cands))
+    chosen = best.pop("scene")
     return Choice(best["scheme"], tuple(best["overrides"]), accuracy,
                   best["predicted_error"], best["work_steps"], best["predicted_cpu_s"],
-                  best["step"], k, _why(best, ok, k), cands)
+                  best["step"], k, _why(best, ok, k), cands, chosen)
 
 
 def _at(c: dict, k: Knob) -> str:
