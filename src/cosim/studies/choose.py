@@ -31,14 +31,17 @@ time is ``c0 + c1 * steps`` (:data:`COST`, measured per scheme), the steps
 counted before the run (:meth:`cosim.Scene.work`): it ranks the schemes of
 a scene rather than timing them.  The monolithic scheme is a candidate at
 the ``rtol`` its own fit asks (:data:`MONOLITHIC_MODEL`).  Only a step that
-the scheme's pre-flight check (and the scene's build) accepts is chosen.
+the scheme's pre-flight check (and the scene's build) accepts is chosen:
+the candidates are counted unbuilt, then built and checked cheapest first
+until one passes (a costlier one is left unbuilt, ``unchecked``).
 
 A scene's contact the model does not cover (one a structure steps against
 a rigid partner, a law without a linearisation) is refused with a
 :class:`~cosim.scene.checks.SceneError`; a grasp is chosen for with a
 caveat (:attr:`Choice.caveat`).  Building the scene and finding where its
 contact first closes runs it briefly (as ``cosim info`` does), an FMU's
-code included.
+code included; that run is of the system :func:`knob` built, whose
+initial-pose frequencies are read before it.
 """
 from __future__ import annotations
 
