@@ -31,7 +31,9 @@ c. **its cost**: against the cheapest bench row that meets X on both with the
    process time): the request's own run (the choice, the run and a
    refinement's run: process time) at most :data:`CPU_TARGET` times it, and
    the request whole (with its estimates) at most :data:`ESTIMATE_TARGET`
-   times it, each the median of ``--repeat``.
+   times it, each the median of ``--repeat``; each command timed as a new
+   process would run it (:func:`fresh`: the assemblies and modes another
+   kept are forgotten first).
 
 Run from the project root::
 
@@ -149,6 +151,18 @@ def _pairs(est: dict, act: dict) -> dict:
                 "agrees": agrees(est[q]["error"], act[q])} for q in QUANTITIES}
 
 
+def fresh() -> None:
+    """Forget what a process keeps between builds (the assembled structures,
+    :func:`cosim.scene.build.clear_assembled`, and their modes), so that each
+    timed command (the default run, the request, each bench row) pays its
+    builds as a new `cosim run` would: none is timed with another's
+    assemblies kept."""
+    from cosim.scene.build import clear_assembled
+    from fem import modal
+    clear_assembled()
+    modal._SOLVED.clear()
+
+
 def default_run(name, variant, contact, joint, ref) -> dict:
     """The scene's own run, estimated, against the reference."""
     from cosim.scene.load import load_scene
@@ -156,6 +170,7 @@ def default_run(name, variant, contact, joint, ref) -> dict:
     from cosim.studies.estimate import estimate_errors
     ctx = _quiet()
     try:
+        fresh()
         scene = load_scene(name, variant)
         t0 = time.process_time()
         res = simulate(scene)
@@ -190,6 +205,7 @@ def request_run(name, variant, contact, joint, ref, accuracy=ACCURACY):
     where = tempfile.TemporaryDirectory()
     try:
         out = Path(where.name) / "run"
+        fresh()
         t = [time.process_time()]
         req = Request.make(args, load_scene(name, variant))
         refined_s = []
@@ -247,6 +263,7 @@ def bench_rows(name, variant, contact, joint, ref, choice, accuracy=ACCURACY) ->
             row = {"scheme": scheme, "step": h, "factor": f}
             ctx = _quiet()
             try:
+                fresh()
                 t0 = time.process_time()
                 res = simulate(load_scene(name, variant, k.overrides(h), scheme))
                 row["cpu_s"] = time.process_time() - t0

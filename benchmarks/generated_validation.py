@@ -285,8 +285,9 @@ LEGEND = (f"Each pair is the estimated / actual relative error (against the mono
           f"errors within 1 % and the reference's contact count; the outcome it printed). CPU: "
           f"the request's own run (choice, run, refinement) and the request whole (with its "
           f"estimates) over the cheapest bench row that meets 1 % (process time, one run each, "
-          f"on a shared 2-core machine: noisy). The last column runs each stable step `cosim "
-          f"info` prints at {STEP_FRACTION}x: finished, failed (stopped by the run guard) or "
+          f"each command timed as a new process would run it, the assemblies and modes kept "
+          f"by another forgotten, on a shared 2-core machine: noisy). The last column runs "
+          f"each stable step `cosim info` prints at {STEP_FRACTION}x: finished, failed (stopped by the run guard) or "
           f"refused (by the pre-flight check or the build); (bound): printed as a necessary "
           f"bound only; ✗: a step printed as one that runs that did not finish.")
 

@@ -330,3 +330,43 @@ def test_the_readme_quotes_the_generated_totals(av, gen):
             f"{v['agree'][0]} of {v['agree'][1]} pairs and it meets 1 % on {v['met'][0]} of "
             f"{v['met'][1]} scenes, while its CPU targets are not met") in text
     assert v["agree"][2] and v["met"][2] and not v["own_cpu"][2] and not v["whole_cpu"][2]
+
+
+def test_the_changelog_quotes_what_the_choice_costs_now(gen):
+    """The generated run's medians the changelog quotes for the cheaper
+    choice: the choice over the run, the request's own run and with its
+    estimates over the cheapest row, the companions over the run, the
+    chosen step as a bench row, the choice over the cheapest row, and how
+    many requests refined."""
+    text = _flat((ROOT / "CHANGELOG.md").read_text(encoding="utf-8").split("## 0.13.0")[0])
+    cases = [c["validation"] for c in gen["cases"]]
+    st = [c["request"]["stages_s"] for c in cases]
+    plan_run = statistics.median(s["plan"] / s["run"] for s in st)
+    est_run = statistics.median(s["estimate"] / s["run"] for s in st)
+    plan_cheap = statistics.median(c["request"]["stages_s"]["plan"] / c["cheapest"]["cpu_s"]
+                                   for c in cases)
+    choice = statistics.median(c["choice_over_cheapest"] for c in cases)
+    g = gen["totals"]
+    assert (f"the choice costs {plan_run:.2g} times the run (median; 1.05 before), the "
+            f"request's own run {g['own_median']:.2g}x the cheapest bench row that meets 1 % "
+            f"(3.9x before) and with its estimates {g['whole_median']:.2g}x (7.9x)") in text
+    assert f"the companions cost {est_run:.2g} times the run" in text
+    assert f"the chosen step runs at {choice:.3g} times the cheapest row's CPU" in text
+    assert f"the first-touch run: {plan_cheap:.2g} times the cheapest row at the median" in text
+    refined = sum(c["request"]["refined"] for c in cases)
+    assert f"a refined request ({refined} of {len(cases)})" in text
+
+
+def test_what_stands_between_the_generated_requests_and_the_cpu_targets(gen, section):
+    """The chosen step's cost and the companions' at the median of the
+    generated run, and the run with its estimate they make together."""
+    text = _flat(section)
+    cases = [c["validation"] for c in gen["cases"]]
+    choice = statistics.median(c["choice_over_cheapest"] for c in cases)
+    comp = statistics.median(c["request"]["stages_s"]["estimate"] / c["request"]["stages_s"]["run"]
+                             for c in cases)
+    assert f"shipped scenes, {choice:.3g} times it at the median of the generated ones" in text
+    assert f"last column), {comp:.2g} times it at the median of the generated requests" in text
+    assert (f"With the chosen step's {choice:.3g}x and the companions' {comp:.2g}x, the run with "
+            f"its estimate alone costs about {choice * (1 + comp):.2g} times the cheapest row") \
+        in text

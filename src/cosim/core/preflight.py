@@ -119,9 +119,33 @@ def step_map(m, k, c, H, order, gs_partner_first=False) -> np.ndarray:
 
 
 def _exact_map(m, k, c, H):
+    """``expm(A H)``, ``A = [[0, 1], [-k/m, -c/m]]``, in closed form: with
+    ``mu = -c / (2 m)`` and ``d**2 = mu**2 - k/m``, ``expm(A H) = C I + S
+    (A - mu I)``, ``C = e^(mu H) cosh(d H)`` and ``S = e^(mu H) sinh(d H) /
+    d`` (``cos``, ``sin`` with ``|d|`` when ``d**2 < 0``; ``S = e^(mu H) H``
+    when ``d = 0``).  Where ``d`` is real, over ``e^((mu -+ d) H)`` (``mu +
+    d`` as ``(k/m) / (mu - d)``) and ``expm1(2 d H)``, so that nothing
+    overflows or cancels.  A 2x2
+    Pade ``expm`` called many times by a bisection (a refused step's
+    advice) costs more than the whole choice of steps."""
     w2, z2 = k / m, c / m
-    from scipy.linalg import expm
-    return expm(np.array([[0.0, 1.0], [-w2, -z2]]) * H)
+    mu = -0.5 * z2
+    d2 = mu * mu - w2
+    if d2 > 0.0:                        # overdamped: two real rates
+        d = math.sqrt(d2)
+        slow = w2 / (mu - d)            # mu + d, without its cancellation
+        low, high = math.exp((mu - d) * H), math.exp(slow * H)
+        C = 0.5 * (high + low)
+        S = (low * math.expm1(2.0 * d * H) if 2.0 * d * H < 1.0 else high - low) / (2.0 * d)
+    elif d2 < 0.0:                      # underdamped
+        wd = math.sqrt(-d2)
+        e = math.exp(mu * H)
+        C = e * math.cos(wd * H)
+        S = e * math.sin(wd * H) / wd
+    else:
+        C = math.exp(mu * H)
+        S = C * H
+    return np.array([[C - S * mu, S], [-S * w2, C - S * (z2 + mu)]])
 
 
 def contact_energy_gain(m, k, c, H, order, gs_partner_first=False) -> float:

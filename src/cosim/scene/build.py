@@ -7,7 +7,9 @@ calls it, and resolves the scheme through :func:`~cosim.scene.specs.resolve_sche
 """
 from __future__ import annotations
 
+import copy
 import math
+from collections import OrderedDict
 
 import numpy as np
 
@@ -24,7 +26,7 @@ from cosim.core.schemes import get_scheme
 from cosim.core.subsystem import RigidReference
 from cosim.core.system import ContactLink, CoupledSystem
 
-__all__ = ["build_system", "build_side", "embedded_step_limit"]
+__all__ = ["build_system", "build_side", "embedded_step_limit", "clear_assembled", "ASSEMBLED_KEPT"]
 
 #: RK4's stability limit on an undamped oscillator is omega*dt = 2*sqrt(2).
 _RK4_LIMIT = 2.0 * math.sqrt(2.0)
@@ -88,21 +90,65 @@ def _assembled(model):
     return structure
 
 
+#: how many assembled structures (and their modes) a process keeps: a run on
+#: request builds its scene for the choice, the run, its companions and a
+#: refinement, and a sweep once per point, each time the same structure, and
+#: the assembly is most of a build once the modes are remembered
+#: (:data:`fem.modal._SOLVED`); each build gets copies of its own
+ASSEMBLED_KEPT = 4
+
+#: (model, modes) -> (structure, basis) of the latest assemblies
+_ASSEMBLED: "OrderedDict" = OrderedDict()
+
+
+def _assembly_key(spec):
+    """The key an assembled structure is kept under: its model (a frozen
+    value of :mod:`fem`: equal models assemble equal structures) and the
+    modes asked; None where it is not kept (a plug-in's model, which may
+    assemble anything; a plane body, whose assembly the build changes, or
+    whose modes are cached on disk)."""
+    model = spec.model
+    if (type(model).__module__.split(".")[0] != "fem" or spec.type == "plane"
+            or getattr(spec, "modal_cache", None)):
+        return None
+    try:
+        key = (type(model), model, tuple(sorted(spec.modes.items())))
+        hash(key)
+    except TypeError:                   # a model with a list or an array in it
+        return None
+    return key
+
+
+def clear_assembled() -> None:
+    """Forget the assembled structures kept (:data:`ASSEMBLED_KEPT`): the
+    next build assembles again, as a new process would."""
+    _ASSEMBLED.clear()
+
+
 def _structure(spec, scene, macro_step):
     """Assemble a structure, keep its modes, set its initial state."""
     import fem
 
     from cosim.sides.fem import StructureSubsystem
     try:
-        structure = _assembled(spec.model)
-        if spec.type == "plane":       # its ports move along their segments' normal
-            from cosim.scene.plane_build import port_direction
-            port_direction(structure, spec.ports, scene.path, spec.key)
-        if getattr(spec, "modal_cache", None):     # a plane body's, kept on disk
-            from cosim.scene.plane_build import cached_basis
-            basis = cached_basis(structure, spec, scene.path)
+        key = _assembly_key(spec)
+        if key is not None and key in _ASSEMBLED:
+            structure, basis = copy.deepcopy(_ASSEMBLED[key])   # each build its own arrays
+            _ASSEMBLED.move_to_end(key)
         else:
-            basis = fem.modes(structure, **{k: v for k, v in spec.modes.items() if v})
+            structure = _assembled(spec.model)
+            if spec.type == "plane":       # its ports move along their segments' normal
+                from cosim.scene.plane_build import port_direction
+                port_direction(structure, spec.ports, scene.path, spec.key)
+            if getattr(spec, "modal_cache", None):     # a plane body's, kept on disk
+                from cosim.scene.plane_build import cached_basis
+                basis = cached_basis(structure, spec, scene.path)
+            else:
+                basis = fem.modes(structure, **{k: v for k, v in spec.modes.items() if v})
+            if key is not None:
+                _ASSEMBLED[key] = copy.deepcopy((structure, basis))
+                while len(_ASSEMBLED) > ASSEMBLED_KEPT:
+                    _ASSEMBLED.popitem(last=False)
     except PluginError:                 # a plug-in's assemble() returned what is no structure
         raise
     except ValueError as exc:

@@ -88,7 +88,7 @@ class _Touched(Exception):
 
 
 def first_touch(scene, budget_s: float = FIRST_TOUCH_BUDGET_S,
-                contacts=None) -> tuple[dict, str | None]:
+                contacts=None, built=None) -> tuple[dict, str | None]:
     """Where each contact (of ``contacts``, names, if given) first closes in
     a run of ``scene`` with its scheme.
 
@@ -96,6 +96,9 @@ def first_touch(scene, budget_s: float = FIRST_TOUCH_BUDGET_S,
     ``budget_s`` of CPU time; it writes nothing.  A contact closed at the
     start closes at t = 0.  It runs every side, an FMU's code included
     (:func:`scene_info` calls it for a scene with an FMU only when asked).
+    ``built``: the scene's ``(system, scheme)``, built and not yet run, to
+    run instead of a build of its own (it is run: read what the caller
+    needs of its initial state before).
 
     Returns
     -------
@@ -111,7 +114,7 @@ def first_touch(scene, budget_s: float = FIRST_TOUCH_BUDGET_S,
     from cosim.core.recorder import Recorder
     from cosim.errors import SimulationError, UnsafeStepError
 
-    system, sch = scene.build()
+    system, sch = scene.build() if built is None else built
     sought = {c for c, ln in enumerate(system.links) if not ln.contact.law.rigid
               and (contacts is None or ln.contact.name in contacts)}
     touches: dict = {}

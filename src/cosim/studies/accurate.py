@@ -105,7 +105,10 @@ def plan(path, variant, overrides, accuracy: float, scheme=None, first=None,
             warnings.simplefilter("ignore")      # shown again when the chosen scene loads
             first = load_scene(path, variant, list(overrides), scheme)
     choice = choose(first, accuracy, schemes=[scheme] if scheme else None, source=source)
-    return _load(path, variant, overrides, choice), choice
+    # the scene the choice loaded and checked: ``first``'s table (the file, its variant and
+    # ``overrides``) with the choice's overrides, as a load of the file with them all
+    return (choice.scene if choice.scene is not None else
+            _load(path, variant, overrides, choice)), choice
 
 
 def _load(path, variant, overrides, choice):
@@ -229,7 +232,7 @@ def refined(path, variant, overrides, choice, scene, estimated: float, factor: f
     step = _floor2(choice.step / f)
     pred = predicted_error(choice.knob.regime, choice.scheme, choice.knob.omega * step)
     again = dataclasses.replace(
-        choice, overrides=tuple(choice.overrides) + tuple(ov), step=step,
+        choice, scene=None, overrides=tuple(choice.overrides) + tuple(ov), step=step,
         predicted_error=pred or dict(choice.predicted_error),
         why=f"{choice.why}; refined: its steps {f:.3g} times shorter, as the first run's "
             f"estimate asks")

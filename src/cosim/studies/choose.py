@@ -31,14 +31,17 @@ time is ``c0 + c1 * steps`` (:data:`COST`, measured per scheme), the steps
 counted before the run (:meth:`cosim.Scene.work`): it ranks the schemes of
 a scene rather than timing them.  The monolithic scheme is a candidate at
 the ``rtol`` its own fit asks (:data:`MONOLITHIC_MODEL`).  Only a step that
-the scheme's pre-flight check (and the scene's build) accepts is chosen.
+the scheme's pre-flight check (and the scene's build) accepts is chosen:
+the candidates are counted unbuilt, then built and checked cheapest first
+until one passes (a costlier one is left unbuilt, ``unchecked``).
 
 A scene's contact the model does not cover (one a structure steps against
 a rigid partner, a law without a linearisation) is refused with a
 :class:`~cosim.scene.checks.SceneError`; a grasp is chosen for with a
 caveat (:attr:`Choice.caveat`).  Building the scene and finding where its
 contact first closes runs it briefly (as ``cosim info`` does), an FMU's
-code included.
+code included; that run is of the system :func:`knob` built, whose
+initial-pose frequencies are read before it.
 """
 from __future__ import annotations
 
@@ -164,25 +167,37 @@ def knob(scene, contact: str | None = None) -> Knob:
     SceneError
         If no contact of the scene has a penalty law with a frequency.
     """
+    return _knob(scene, contact)[0]
+
+
+def _knob(scene, contact: str | None = None):
+    """:func:`knob` and the system it built (run to the first touch: its
+    structure alone is to be read)."""
     from cosim.core.preflight import stiffest_normal
     from cosim.scene.checks import SceneError
     from cosim.scene.info import first_touch
+    from cosim.studies.companion import contact_omega
     from cosim.studies.strike import find_strike
 
-    system, _ = scene.build()
+    built = scene.build()
+    system = built[0]
     if contact is None:
         strike = find_strike(scene, required=False)
         contact = strike[0] if strike else None
+    # what is read at the initial pose, read before the system runs to the first touch
+    soft = [c for c, ln in enumerate(system.links) if not ln.contact.law.rigid]
+    start_mob = {c: system.contact_mobility(c) for c in soft}
+    start_omega = {c: contact_omega(system, c) for c in soft}
     # the run to the first touch of the contact asked (of every one, to find the
     # stiffest, when none is): on brachiation gripper 1 is closed at the start,
-    # gripper 2 closes after 0.84 s
-    touches, _ = first_touch(scene, contacts=None if contact is None else {contact})
+    # gripper 2 closes after 0.84 s.  It runs the system built here, whose
+    # structure is all the rest of this function reads
+    touches, _ = first_touch(scene, contacts=None if contact is None else {contact},
+                             built=built)
     omegas = {}
-    for c, ln in enumerate(system.links):
-        if ln.contact.law.rigid:
-            continue
-        k, _ = stiffest_normal(ln)
-        mob = touches[c][1] if c in touches else system.contact_mobility(c)   # at the start
+    for c in soft:
+        k, _ = stiffest_normal(system.links[c])
+        mob = touches[c][1] if c in touches else start_mob[c]   # at the start
         if math.isfinite(k) and math.isfinite(mob) and mob > 0:
             omegas[c] = math.sqrt(k * mob)
     if not omegas:
@@ -200,7 +215,7 @@ def knob(scene, contact: str | None = None) -> Knob:
                              "frequency: the accuracy model needs a linearisable penalty law")
     ln = system.links[c]
     opts = scene.scheme_options
-    check = check_omega(system, c)
+    check = check_omega(system, c, start_omega)
     H = opts.get("macro_step") or math.nan
     rigid = [system.subsystems[s].rigid for s in (ln.sub_a, ln.sub_b)]
     grasp = ln.connection is not None and ln.connection.grasp is not None
@@ -214,10 +229,10 @@ def knob(scene, contact: str | None = None) -> Knob:
                              f"(it was measured where the sides exchange a contact and where "
                              f"a multibody's rk4 hosts one)")
         return Knob(ln.contact.name, "host_rk4", f"{spec.key}.integrator.max_step",
-                    spec.max_step, omegas[c], H, grasp, check)
+                    spec.max_step, omegas[c], H, grasp, check), system
     key = "scheme.contact_step" if opts.get("contact_step") else "scheme.macro_step"
     return Knob(ln.contact.name, "exchanged", key, opts.get(key.split(".")[1]), omegas[c], H,
-                grasp, check)
+                grasp, check), system
 
 
 def _params(regime: str, scheme: str, model=None) -> dict | None:
@@ -290,7 +305,12 @@ class Choice:
         One sentence.
     candidates : list of dict
         Every scheme considered: its step, predicted errors and CPU, or why
-        it was left out.
+        it was left out (``refused``), or that it was not built
+        (``unchecked``: costlier than the one chosen).
+    scene : Scene or None
+        The scene loaded with the chosen scheme and overrides, whose build
+        the pre-flight check passed (what :func:`cosim.studies.accurate.plan`
+        runs); None where it is not kept (a refinement's choice).
     """
 
     scheme: str
@@ -303,6 +323,7 @@ class Choice:
     knob: Knob
     why: str
     candidates: list = field(default_factory=list)
+    scene: object = field(default=None, repr=False, compare=False)
 
     @property
     def caveat(self) -> str | None:
@@ -338,9 +359,11 @@ def _load(scene, overrides, scheme):
 
 
 def _candidate(scene, k: Knob, scheme: str, accuracy: float, checkable: bool = True,
-               at_most: float = math.inf) -> dict:
+               at_most: float = math.inf, system=None) -> dict:
     """One scheme at the step the model asks: its overrides, errors, work
-    and CPU, or ``refused`` with the reason."""
+    and CPU, or ``refused`` with the reason; not built (:func:`_checked`
+    builds it).  ``system``: the scene built (:func:`knob`'s), whose
+    structures' stiffest mode counts the monolithic scheme's work."""
     from cosim.scene.checks import SceneError
     out = {"scheme": scheme}
     if scheme == "monolithic":
@@ -349,13 +372,12 @@ def _candidate(scene, k: Knob, scheme: str, accuracy: float, checkable: bool = T
             return {**out, "refused": "no monolithic model"}
         ov = [f"scheme.monolithic.rtol={rtol!r}", f"scheme.monolithic.atol={rtol * 1e-3:.3g}"]
         s = _load(scene, ov, "monolithic")
-        system, _ = s.build()
         steps = s.work(system=system).steps
         c0, c1 = COST["monolithic"]
         cpu = (c0 + c1 * steps) * (rtol / 1e-6) ** -MONOLITHIC_COST_EXPONENT
         err = {q: _bound(v, rtol) for q, v in MONOLITHIC_MODEL.items()}
         return {**out, "step": rtol, "overrides": ov, "predicted_error": err,
-                "work_steps": steps, "predicted_cpu_s": cpu}
+                "work_steps": steps, "predicted_cpu_s": cpu, "scene": s}
     h = step_for(k.regime, scheme, k.omega, accuracy)
     if h is None:
         why = ("not measured in this regime" if _params(k.regime, scheme) is None else
@@ -374,15 +396,32 @@ def _candidate(scene, k: Knob, scheme: str, accuracy: float, checkable: bool = T
     ov = k.overrides(h)
     try:
         s = _load(scene, ov, scheme)
-        system, sch = s.build()
-        sch.preflight(system)
-    except (UnsafeStepError, SceneError) as exc:
-        return {**out, "step": h, "refused": f"the pre-flight check refuses the step it needs, "
-                                               f"{h:.3g} s: {exc}"}
+    except SceneError as exc:
+        return {**out, "step": h, "refused": _refused(h, exc)}
     steps = s.work().steps
     return {**out, "step": h, "overrides": ov,
             "predicted_error": predicted_error(k.regime, scheme, k.omega * h),
-            "work_steps": steps, "predicted_cpu_s": COST[scheme][0] + COST[scheme][1] * steps}
+            "work_steps": steps, "predicted_cpu_s": COST[scheme][0] + COST[scheme][1] * steps,
+            "scene": s}
+
+
+def _refused(h: float, exc) -> str:
+    return f"the pre-flight check refuses the step it needs, {h:.3g} s: {exc}"
+
+
+def _checked(cand: dict) -> dict:
+    """``cand`` built and its step judged by the scheme's pre-flight check
+    (the scene's build included): as it was, or ``refused`` with why."""
+    from cosim.scene.checks import SceneError
+    try:
+        system, sch = cand["scene"].build()
+        sch.preflight(system)
+    except (UnsafeStepError, SceneError) as exc:
+        return {k: v for k, v in cand.items() if k not in ("overrides", "predicted_error",
+                                                           "work_steps", "predicted_cpu_s",
+                                                           "scene")
+                } | {"refused": _refused(cand["step"], exc)}
+    return cand
 
 
 #: regime -> the largest omega h chosen, so that the run's error estimate can
@@ -445,7 +484,7 @@ def choose(scene, accuracy: float, contact: str | None = None,
         or if the scene has no contact the model knows.
     """
     accuracy = parse_accuracy(accuracy, source)
-    k = knob(scene, contact)
+    k, system = _knob(scene, contact)
     if schemes is None:         # host_rk4: the scheme does not matter, the scene's runs
         schemes = ([] if k.regime == "host_rk4" else
                    sorted({s for (r, s) in MODEL if r == k.regime} - {scene.scheme}))
@@ -457,16 +496,29 @@ def choose(scene, accuracy: float, contact: str | None = None,
                       f"relative accuracy this scene can be asked of `{k.contact}` (with "
                       f"{', '.join(schemes)}: the schemes' error floors and the precision of "
                       f"doubles, see `cosim.studies.choose.reachable`); ask {low:.2g} or more")
-    cands = [_candidate(scene, k, s, accuracy, checkable, at_most) for s in schemes]
+    cands = [_candidate(scene, k, s, accuracy, checkable, at_most, system)
+             for s in schemes]
+    # built and checked cheapest first, until one passes: a costlier one is not
+    # chosen whatever its check says, and is left unbuilt
+    order = sorted((c for c in cands if "refused" not in c),
+                   key=lambda c: (checkable and c["scheme"] == "monolithic",
+                                  c["predicted_cpu_s"], c["scheme"] != scene.scheme))
+    best = None
+    for c in order:
+        if best is None:
+            cands[cands.index(c)] = c = _checked(c)
+            best = None if "refused" in c else c
+        else:
+            del c["scene"]
+            c["unchecked"] = "costlier by the model than the one chosen: not built"
     ok = [c for c in cands if "refused" not in c]
-    if not ok:
+    if best is None:
         raise refusal(scene, source, f"{accuracy:.3g}: no scheme meets it by the model: "
                       + "; ".join(f"{c['scheme']}: {c['refused']}" for c in cands))
-    best = min(ok, key=lambda c: (checkable and c["scheme"] == "monolithic",
-                                  c["predicted_cpu_s"], c["scheme"] != scene.scheme))
+    chosen = best.pop("scene")
     return Choice(best["scheme"], tuple(best["overrides"]), accuracy,
                   best["predicted_error"], best["work_steps"], best["predicted_cpu_s"],
-                  best["step"], k, _why(best, ok, k), cands)
+                  best["step"], k, _why(best, ok, k), cands, chosen)
 
 
 def _at(c: dict, k: Knob) -> str:

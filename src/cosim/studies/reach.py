@@ -81,18 +81,21 @@ def _hosted(system, c: int) -> bool:
         system.subsystems[s].rigid for s in (ln.sub_a, ln.sub_b))
 
 
-def check_omega(system, c: int) -> float:
+def check_omega(system, c: int, omegas: dict | None = None) -> float:
     """The frequency [rad/s] the companion judges contact ``c``'s step with
     (:func:`~cosim.studies.companion.contact_omega`, the system at its
     initial pose): the largest over the contacts the sides exchange where
     ``c`` is one (their largest omega h sets the companion's factor), else
     over the contacts ``c``'s host steps (the largest sets whether the host's
-    step is coarsened); nan where none has a linear stiffness."""
+    step is coarsened); nan where none has a linear stiffness.  ``omegas``:
+    contact index -> that frequency, read before (at the initial pose) by
+    a caller that runs the system meanwhile."""
     if _hosted(system, c):
         own = system.embedded[c][0]
         group = [d for d, (host, _) in system.embedded.items() if host == own]
     else:
         group = [d for d in range(len(system.links)) if not _hosted(system, d)]
     ws = [w for d in group if not system.links[d].contact.law.rigid
-          for w in [contact_omega(system, d)] if math.isfinite(w)]
+          for w in [contact_omega(system, d) if omegas is None else omegas[d]]
+          if math.isfinite(w)]
     return max(ws) if ws else math.nan
