@@ -158,9 +158,9 @@ def fresh() -> None:
     builds as a new `cosim run` would: none is timed with another's
     assemblies kept."""
     from cosim.scene.build import clear_assembled
-    from fem import modal
+    from fem.modal import clear_solved
     clear_assembled()
-    modal._SOLVED.clear()
+    clear_solved()
 
 
 def default_run(name, variant, contact, joint, ref) -> dict:

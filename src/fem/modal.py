@@ -25,7 +25,7 @@ import numpy as np
 from .checks import count, positive
 from .linear_structure import LinearStructure
 
-__all__ = ["ModalBasis", "modes", "natural_frequencies", "residual_compliance",
+__all__ = ["ModalBasis", "clear_solved", "modes", "natural_frequencies", "residual_compliance",
            "DENSE_LIMIT"]
 
 #: Largest number of free DOFs solved with a dense eigensolver.
@@ -121,6 +121,12 @@ def _elastic_solver(structure: LinearStructure):
 #: 0.3 s each)
 _SOLVED: dict = {}
 _SOLVED_MAX = 8
+
+
+def clear_solved() -> None:
+    """Forget the modal decompositions kept for the next build: a timed
+    command then pays its eigen-solves as a new process would."""
+    _SOLVED.clear()
 
 
 def _digest(*arrays) -> bytes:
