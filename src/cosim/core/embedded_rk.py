@@ -24,13 +24,11 @@ the pairs and the error control, II.6 for dense output):
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-
 import numpy as np
 
 from cosim.core import rk_tableaux
 
-__all__ = ["Pair", "PAIRS", "Events", "Result", "solve", "locate_root"]
+__all__ = ["Pair", "PAIRS", "Events", "Result", "solve", "single_step", "locate_root"]
 
 _EPS = np.finfo(float).eps
 SAFETY = 0.9
@@ -45,7 +43,6 @@ def _rows(spec: dict, n: int) -> np.ndarray:
     return out
 
 
-@dataclass(frozen=True, eq=False)
 class Pair:
     """An embedded pair: its tableau as dense arrays.
 
@@ -74,18 +71,11 @@ class Pair:
         Bounds of the step-size ratio.
     """
 
-    name: str
-    order: int
-    error_order: int
-    stages: int
-    c: np.ndarray
-    a: np.ndarray
-    b: np.ndarray
-    e: np.ndarray
-    e3: np.ndarray | None
-    dense: np.ndarray
-    fac_min: float
-    fac_max: float
+    def __init__(self, name, order, error_order, stages, c, a, b, e, e3, dense, fac_min,
+                 fac_max):
+        self.name, self.order, self.error_order, self.stages = name, order, error_order, stages
+        self.c, self.a, self.b, self.e, self.e3, self.dense = c, a, b, e, e3, dense
+        self.fac_min, self.fac_max = fac_min, fac_max
 
     @classmethod
     def build(cls, name, spec, order, error_order, stages, fac_min, fac_max):
@@ -114,7 +104,6 @@ PAIRS = {
 }
 
 
-@dataclass
 class Events:
     """Event functions for :func:`solve`.
 
@@ -129,9 +118,12 @@ class Events:
         Whether an event of that component ends the integration.
     """
 
-    fun: object
-    direction: np.ndarray
-    terminal: np.ndarray
+    __slots__ = ("fun", "direction", "terminal")
+
+    def __init__(self, fun, direction, terminal):
+        self.fun = fun
+        self.direction = np.asarray(direction, float)
+        self.terminal = np.asarray(terminal, bool)
 
 
 class Result:
@@ -195,6 +187,30 @@ def locate_root(g, ta: float, ga: float, tb: float, gb: float, tol: float):
         if tb - ta <= 0.5 * width:
             since_halved, width = 0, tb - ta
     return tb
+
+
+def _stages(pair: Pair, f, t, y, h, K):
+    """Stages ``1 .. stages - 1`` of the step ``h`` from ``(t, y)`` into ``K``
+    (``K[0] = f(t, y)`` given); the solution at ``t + h``."""
+    a, c = pair.a, pair.c
+    for i in range(1, pair.stages):
+        K[i] = f(t + c[i] * h, y + h * (a[i, :i] @ K[:i]))
+    return y + h * (pair.b @ K[:pair.stages])
+
+
+def single_step(pair: Pair | str, f, t: float, y, h: float):
+    """One step of length ``h`` from ``(t, y)``, without error control (for
+    tests of the orders): the solution at ``t + h`` and its dense output,
+    a function of the fraction ``s`` of the step."""
+    pair = PAIRS[pair] if isinstance(pair, str) else pair
+    y = np.array(y, dtype=float)
+    K = np.empty((len(pair.c), y.size))
+    R = np.empty((4 + len(pair.dense), y.size))
+    K[0] = f(t, y)
+    y_new = _stages(pair, f, t, y, h, K)
+    K[pair.stages] = f(t + h, y_new)
+    _dense_coefficients(pair, f, t, y, y_new, h, K, R)
+    return y_new, lambda s: _dense_eval(R, s)
 
 
 def _dense_coefficients(pair: Pair, f, t, y, y_new, h, K, R):
@@ -266,7 +282,7 @@ def solve(pair: Pair | str, f, t0: float, y0, t1: float, *, rtol: float, atol: f
     t1 = float(t1)
     y = np.array(y0, dtype=float)
     n, s = y.size, pair.stages
-    a, b, c, e, e3 = pair.a, pair.b, pair.c, pair.e, pair.e3
+    c, e, e3 = pair.c, pair.e, pair.e3
     K = np.empty((len(c), n))
     R = np.empty((4 + len(pair.dense), n))
     K[0] = f(t, y)
@@ -300,9 +316,7 @@ def solve(pair: Pair | str, f, t0: float, y0, t1: float, *, rtol: float, atol: f
             if t_new >= t1 or t1 - t_new < min_step:
                 t_new = t1
             h = h_abs = t_new - t
-            for i in range(1, s):
-                K[i] = f(t + c[i] * h, y + h * (a[i, :i] @ K[:i]))
-            y_new = y + h * (b @ K[:s])
+            y_new = _stages(pair, f, t, y, h, K)
             nfev += s - 1
             scale = atol + rtol * np.maximum(np.abs(y), np.abs(y_new))
             if e3 is None:                            # the slope at the end enters

@@ -14,7 +14,6 @@ from typing import Callable, ClassVar
 
 import numpy as np
 
-from cosim.core.embedded_rk import PAIRS, Events, solve
 from cosim.core.hermite import hermite_value, substep_peaks
 from cosim.core.registry import Registry
 
@@ -202,6 +201,10 @@ class RK4(TimeStepper):
         return y + (h / 6.0) * (k1 + 2.0 * (k2 + k3) + k4)
 
 
+#: the methods :mod:`cosim.core.embedded_rk` integrates (scipy the others)
+_PAIRS = ("RK45", "DOP853")
+
+
 def _switched(sol, sign, t, y, switch, on_switch):
     """The switch signs and state after the earliest event of ``sol``
     (a solver run, :class:`_Run`, that stopped on one) at ``t``: its sign flipped,
@@ -250,6 +253,8 @@ class ScipyStepper(TimeStepper):
             v = getattr(self, k)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise ValueError(f"`{k}` must be > 0, got {v!r}")
+        if self.method in _PAIRS:       # loaded with the scene, not inside its first solve
+            import cosim.core.embedded_rk  # noqa: F401
 
     def _single(self, f, t, y, h, k1):  # pragma: no cover - integrate() is overridden
         return self.integrate(f, t, y, t + h)
@@ -375,7 +380,8 @@ class ScipyStepper(TimeStepper):
         the states at the output times ``t_eval`` before where it stops are
         read from its dense output.  A :class:`_Run`."""
         n_sw = 0 if sign is None else len(sign)
-        if self.method in PAIRS:
+        if self.method in _PAIRS:
+            from cosim.core.embedded_rk import PAIRS, Events, solve   # loaded when built
             events = None
             if n_sw + n_watch:
                 events = Events(_event_vector(switch if n_sw else None, probe, n_watch),
@@ -398,20 +404,18 @@ class ScipyStepper(TimeStepper):
                     sol.y_events, lambda ts: sol.sol(ts).T)
 
 
-@dataclass(frozen=True)
 class _Run:
     """Where one solver run stopped (``t``, ``y``; ``status`` 0 at its end,
     1 on a terminal event, -1 failed, with ``message``), its events' times
     and states per event function, and ``at(ts)``: the states (rows) at the
-    first output times, those before ``t``."""
+    first output times, those before ``t``.  (A plain class: a dataclass
+    costs its generated methods' ``exec`` at import.)"""
 
-    t: float
-    y: np.ndarray
-    status: int
-    message: str
-    t_events: list
-    y_events: list
-    at: Callable
+    __slots__ = ("t", "y", "status", "message", "t_events", "y_events", "at")
+
+    def __init__(self, t, y, status, message, t_events, y_events, at):
+        self.t, self.y, self.status, self.message = t, y, status, message
+        self.t_events, self.y_events, self.at = t_events, y_events, at
 
 
 def _event_vector(switch, probe, n_watch):
