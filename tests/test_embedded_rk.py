@@ -193,3 +193,21 @@ def test_failure_is_reported_not_raised():
     r = solve("DOP853", lambda t, y: y * y, 0.0, [1.0], 2.0, rtol=1e-8, atol=1e-8)
     assert r.status == -1 and "step size" in r.message
     assert r.t == pytest.approx(1.0, abs=1e-3)
+
+
+@pytest.mark.parametrize("name", list(PAIRS))
+def test_a_right_hand_side_turning_nan_fails_where_it_turns(name):
+    """NaN from t = 0.5 on: every step over it is rejected (a NaN error is
+    not below 1) until the step falls below the spacing of the numbers; at
+    t = 0 already, the starting step is NaN: both end with status -1."""
+    r = solve(name, lambda t, y: y if t < 0.5 else y * np.nan, 0.0, [1.0], 1.0,
+              rtol=1e-8, atol=1e-8)
+    assert r.status == -1 and r.t == pytest.approx(0.5, abs=1e-12)
+    assert np.isfinite(r.y).all()
+    r = solve(name, lambda t, y: y * np.nan, 0.0, [1.0], 1.0, rtol=1e-8, atol=1e-8)
+    assert r.status == -1 and r.t == 0.0
+
+
+def test_an_empty_interval_returns_the_start():
+    r = solve("DOP853", lambda t, y: -y, 1.0, [2.0], 1.0, rtol=1e-8, atol=1e-8)
+    assert r.status == 0 and r.t == 1.0 and r.y.tolist() == [2.0] and r.nfev == 1

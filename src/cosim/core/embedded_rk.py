@@ -299,6 +299,10 @@ def solve(pair: Pair | str, f, t0: float, y0, t1: float, *, rtol: float, atol: f
         res.t_events, res.y_events = [], []
     t_eval = np.empty(0) if t_eval is None else np.asarray(t_eval, float)
     n_eval, outs = 0, []
+    if not t < t1:                                    # nothing to integrate
+        res.t, res.y, res.status, res.message, res.nfev = t, y, 0, "reached the end", nfev
+        res.y_eval = np.empty((0, n))
+        return res
     h_abs = _initial_step(f, t, y, K[0], t1, rtol, atol, max_step, pair.order)
     nfev += 1
     expo = -1.0 / (pair.error_order + 1)
@@ -307,10 +311,10 @@ def solve(pair: Pair | str, f, t0: float, y0, t1: float, *, rtol: float, atol: f
         min_step = 10.0 * (np.nextafter(t, math.inf) - t)
         h_abs = min(h_abs, max_step)
         while True:                                   # until a step is accepted
-            if h_abs < min_step:
+            if not h_abs >= min_step:                 # NaN too: a non-finite f
                 status = -1
                 message = (f"the step size {h_abs:.3g} s fell below the spacing of "
-                           f"numbers at t = {t:.17g} s")
+                           f"numbers at t = {t:.17g} s (or f is not finite there)")
                 break
             t_new = t + h_abs
             if t_new >= t1 or t1 - t_new < min_step:
@@ -328,7 +332,7 @@ def solve(pair: Pair | str, f, t0: float, y0, t1: float, *, rtol: float, atol: f
                 err3 = (e3[:s] @ K[:s]) / scale
                 q5, q3 = float(err5 @ err5), float(err3 @ err3)
                 den = q5 + 0.01 * q3
-                err = abs(h) * q5 / math.sqrt(n * (den if den > 0.0 else 1.0))
+                err = abs(h) * q5 / math.sqrt(n * den) if q5 != 0.0 else 0.0  # NaN stays
             if err < 1.0:
                 fac = pair.fac_max if err == 0.0 else min(pair.fac_max, SAFETY * err ** expo)
                 if rejected:
