@@ -340,17 +340,17 @@ class ScipyStepper(TimeStepper):
                     Y[inner] = sol.at(ts[inner])
                 P = np.zeros((j - i, n_peaks))
                 lo = t
-                for r in range(j - i):
+                for r in range(j - i if watch else 0):
                     hi = t_out[i + r]
-                    if watch:
-                        p = pk if r == 0 else np.zeros(n_peaks)
-                        for (te, ye) in (ev[k] for k in np.flatnonzero((ev_t > lo) & (ev_t <= hi))):
-                            d_ev = probe(te, ye)[0]
+                    p = pk if r == 0 else np.zeros(n_peaks)
+                    if ev:          # the maxima located since the sample before
+                        for k in np.flatnonzero((ev_t > lo) & (ev_t <= hi)):
+                            d_ev = probe(*ev[k])[0]
                             for q in range(n_peaks):
                                 p[q] = max(p[q], float(d_ev[q]))
-                        d_s = probe(float(hi), Y[r])[0]
-                        for q in range(n_peaks):
-                            P[r, q] = max(p[q], float(d_s[q]))
+                    d_s = probe(float(hi), Y[r])[0]
+                    for q in range(n_peaks):
+                        P[r, q] = max(p[q], float(d_s[q]))
                     lo = hi
                 pk = np.zeros(n_peaks)
                 emit(i, j, Y, P)
