@@ -76,6 +76,10 @@ class Pair:
         self.name, self.order, self.error_order, self.stages = name, order, error_order, stages
         self.c, self.a, self.b, self.e, self.e3, self.dense = c, a, b, e, e3, dense
         self.fac_min, self.fac_max = fac_min, fac_max
+        # per stage: its node and its row of ``a`` (views made once, not per step)
+        self.rows = [(float(c[i]), a[i, :i]) for i in range(len(c))]
+        # the error estimate(s) as one matrix over the first ``stages + 1`` stages
+        self.err = e[None, :] if e3 is None else np.vstack((e[:stages + 1], e3))
 
     @classmethod
     def build(cls, name, spec, order, error_order, stages, fac_min, fac_max):
@@ -192,9 +196,10 @@ def locate_root(g, ta: float, ga: float, tb: float, gb: float, tol: float):
 def _stages(pair: Pair, f, t, y, h, K):
     """Stages ``1 .. stages - 1`` of the step ``h`` from ``(t, y)`` into ``K``
     (``K[0] = f(t, y)`` given); the solution at ``t + h``."""
-    a, c = pair.a, pair.c
+    rows = pair.rows
     for i in range(1, pair.stages):
-        K[i] = f(t + c[i] * h, y + h * (a[i, :i] @ K[:i]))
+        ci, ai = rows[i]
+        K[i] = f(t + ci * h, y + h * (ai @ K[:i]))
     return y + h * (pair.b @ K[:pair.stages])
 
 
@@ -218,9 +223,9 @@ def _dense_coefficients(pair: Pair, f, t, y, y_new, h, K, R):
     ``(t, y) -> (t + h, y_new)`` (``K`` holds its stages and the slope at
     its end); DOP853 evaluates its three extra stages here."""
     s = pair.stages
-    a, c = pair.a, pair.c
-    for i in range(s + 1, len(c)):
-        K[i] = f(t + c[i] * h, y + h * (a[i, :i] @ K[:i]))
+    for i in range(s + 1, len(pair.c)):
+        ci, ai = pair.rows[i]
+        K[i] = f(t + ci * h, y + h * (ai @ K[:i]))
     R[0] = y
     np.subtract(y_new, y, out=R[1])
     np.subtract(h * K[0], R[1], out=R[2])
@@ -303,12 +308,13 @@ def solve(pair: Pair | str, f, t0: float, y0, t1: float, *, rtol: float, atol: f
         res.t, res.y, res.status, res.message, res.nfev = t, y, 0, "reached the end", nfev
         res.y_eval = np.empty((0, n))
         return res
+    abs_y = np.abs(y)
     h_abs = _initial_step(f, t, y, K[0], t1, rtol, atol, max_step, pair.order)
     nfev += 1
     expo = -1.0 / (pair.error_order + 1)
     status, message, rejected = 0, "reached the end", False
     while t < t1:
-        min_step = 10.0 * (np.nextafter(t, math.inf) - t)
+        min_step = 10.0 * (math.nextafter(t, math.inf) - t)
         h_abs = min(h_abs, max_step)
         while True:                                   # until a step is accepted
             if not h_abs >= min_step:                 # NaN too: a non-finite f
@@ -322,15 +328,18 @@ def solve(pair: Pair | str, f, t0: float, y0, t1: float, *, rtol: float, atol: f
             h = h_abs = t_new - t
             y_new = _stages(pair, f, t, y, h, K)
             nfev += s - 1
-            scale = atol + rtol * np.maximum(np.abs(y), np.abs(y_new))
+            scale = np.abs(y_new)
+            np.maximum(scale, abs_y, out=scale)
+            scale *= rtol
+            scale += atol
             if e3 is None:                            # the slope at the end enters
                 K[s] = f(t_new, y_new)
                 nfev += 1
                 err = abs(h) * rms((e @ K[:s + 1]) / scale)
             else:
-                err5 = (e[:s] @ K[:s]) / scale
-                err3 = (e3[:s] @ K[:s]) / scale
-                q5, q3 = float(err5 @ err5), float(err3 @ err3)
+                ev = pair.err[:, :s] @ K[:s]          # the 5th- and 3rd-order estimates
+                ev /= scale
+                q5, q3 = np.einsum("ij,ij->i", ev, ev).tolist()
                 den = q5 + 0.01 * q3
                 err = abs(h) * q5 / math.sqrt(n * den) if q5 != 0.0 else 0.0  # NaN stays
             if err < 1.0:
@@ -380,11 +389,15 @@ def solve(pair: Pair | str, f, t0: float, y0, t1: float, *, rtol: float, atol: f
             if not dense:
                 _dense_coefficients(pair, f, t, y, y_new, h, K, R)
                 nfev += len(c) - s - 1
-            outs.append(_dense_eval(R, ((t_eval[n_eval:k] - t) / h)[:, None]))
+            if k == n_eval + 1:                      # one output: scalar arithmetic
+                outs.append(_dense_eval(R, (float(t_eval[n_eval]) - t) / h)[None, :])
+            else:
+                outs.append(_dense_eval(R, ((t_eval[n_eval:k] - t) / h)[:, None]))
             n_eval = k
         t, y = t_stop, y_stop
         if status == 1:
             break
+        abs_y = np.abs(y)
         K[0] = K[s]
         h_abs = h_next
     res.t, res.y, res.status, res.message, res.nfev = t, y, status, message, nfev
