@@ -4,7 +4,7 @@ reference, from one run (the README's scenes table).
 Run from the project root::
 
     python benchmarks/scenes.py [--repeat N] [--kernels compiled,numpy] [--only NAME,...]
-                                [--out DIR]
+                                [--first-run] [--out DIR]
 
 It prints the machine, then one row per run: the process CPU of the solve
 (the ``cpu_time_s`` of its summary), the best of ``--repeat`` runs, with each
@@ -15,12 +15,24 @@ after the other, so the ratio holds whatever the machine's speed.  With
 checked writer); ``--table DIR`` prints the Markdown table of such a run as
 docs/performance.md shows it (the published run is in
 ``benchmarks/results/scenes``).
+
+``--first-run`` adds, beside each warm best (the runs above, in this one
+process), the solve CPU of a run that is the first of its process: ``python
+-m cosim.cli run`` in a fresh interpreter (``--no-estimate``), its
+``cpu_time_s`` read from the ``summary.json`` it writes, the best of
+``--repeat`` such processes (at least 2: bytecode is cached as users have
+it, ``PYTHONDONTWRITEBYTECODE`` dropped, so the first process may pay for
+compiling what a later one reads).  A one-time cost inside the solve (an
+import, a first call) shows as their ratio, ``first/warm``.
 """
 import argparse
 import datetime
 import json
 import os
 import platform
+import subprocess
+import sys
+import tempfile
 import warnings
 
 import cosim
@@ -55,6 +67,31 @@ def solve_cpu(name, variant, scheme, overrides, kernel, repeat):
     return best, summary
 
 
+def first_cpu(name, variant, scheme, overrides, kernel, repeat):
+    """Best ``cpu_time_s`` of ``repeat`` (at least 2) runs, each the first of
+    a fresh ``python -m cosim.cli run`` process."""
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+    env["COSIM_KERNEL"] = kernel
+    argv = [sys.executable, "-m", "cosim.cli", "run", f"cases/{name}.toml", "--quiet",
+            "--no-estimate"]
+    if variant:
+        argv += ["--variant", variant]
+    if scheme:
+        argv += ["--scheme", scheme]
+    for o in overrides:
+        argv += ["--set", o]
+    best = None
+    for _ in range(max(2, repeat)):
+        with tempfile.TemporaryDirectory() as tmp:
+            out = os.path.join(tmp, "run")
+            subprocess.run(argv + ["--out", out], env=env, check=True,
+                           stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+            with open(os.path.join(out, "summary.json"), encoding="utf-8") as fh:
+                cpu = json.load(fh)["cpu_time_s"]
+        best = cpu if best is None else min(best, cpu)
+    return best
+
+
 def _label(r) -> str:
     text = r["scene"] + (f" {r['variant']}" if r["variant"] else "")
     text += f", `{r['scheme']}`"
@@ -84,6 +121,8 @@ def main():
     p.add_argument("--only", default="", help="comma-separated scene names")
     p.add_argument("--out", default=None, help="write DIR/scenes.json")
     p.add_argument("--table", metavar="DIR", help="print the table of a finished run")
+    p.add_argument("--first-run", action="store_true",
+                   help="also each run as the first of a fresh process (first kernel only)")
     args = p.parse_args()
     if args.table:
         with open(os.path.join(args.table, "scenes.json"), encoding="utf-8") as fh:
@@ -95,9 +134,11 @@ def main():
                f"{platform.python_version()}, {platform.system()} {platform.release()}")
     data = {"machine": machine, "date": datetime.date.today().isoformat(),
             "load_average": os.getloadavg()[0], "repeat": args.repeat, "kernels": kernels,
-            "rows": []}
+            "first_run": args.first_run, "rows": []}
     print(f"machine: {machine}; load average {data['load_average']:.2f}")
     head = "".join(f"{k + ' CPU [s]':>18}" for k in kernels)
+    if args.first_run:
+        head += f"{'first CPU [s]':>15}{'first/warm':>12}"
     print(f"{'scene':<22}{'variant':<9}{'scheme':<14}{'simulated [s]':>14}{head}"
           f"{'ratio':>8}{'target [s]':>12}")
     for name, variant, scheme, over, target in RUNS:
@@ -108,13 +149,18 @@ def main():
             cpu, summary = solve_cpu(name, variant, scheme, over, k, args.repeat)
             cpus.append(cpu)
         ratio = f"{cpus[0] / cpus[1]:8.3f}" if len(cpus) == 2 else f"{'':8}"
-        cells = "".join(f"{c:>18.3f}" for c in cpus)
+        cells = "".join(f"{c:>18.{4 if args.first_run else 3}f}" for c in cpus)
+        first = None
+        if args.first_run:
+            first = first_cpu(name, variant, scheme, over, kernels[0], args.repeat)
+            cells += f"{first:>15.4f}{first / cpus[0]:>12.2f}"
         tgt = f"{target:>12.2f}" if target is not None else f"{'-':>12}"
         print(f"{name:<22}{variant or '-':<9}{summary['scheme']:<14}"
               f"{summary['t_end']:>14.3g}{cells}{ratio}{tgt}", flush=True)
         data["rows"].append({"scene": name, "variant": variant, "scheme": summary["scheme"],
                              "overrides": list(over), "t_end": summary["t_end"],
-                             "cpu_s": dict(zip(kernels, cpus)), "target_s": target})
+                             "cpu_s": dict(zip(kernels, cpus)), "target_s": target,
+                             **({"first_cpu_s": {kernels[0]: first}} if args.first_run else {})})
     if args.out:
         from cosim.io.rundir import OutputFolder
         with OutputFolder(args.out) as folder:

@@ -319,3 +319,14 @@ def test_a_run_imports_no_cryptographic_modules(tmp_path):
                   str(tmp_path / "run"), "--quiet", "--set", "t_end=0.01")
     assert "cosim.io.rundir" in mods
     assert not {"secrets", "hmac"} & mods
+
+
+def test_an_explicit_adaptive_side_needs_no_scipy(tmp_path):
+    """manipulator_wall's robot integrates with DOP853 and locates its
+    impact as an event: cosim's own Runge-Kutta pairs (issue 39), so the
+    whole run, its accuracy estimate included, loads nothing of scipy (whose
+    integrate package cost half a second inside the first solve)."""
+    mods = loaded(tmp_path, "run", str(CASES / "manipulator_wall.toml"), "--variant", "mu0.03",
+                  "--out", str(tmp_path / "run"), "--quiet")
+    assert "cosim.core.embedded_rk" in mods and "multibody.impact" in mods
+    assert not packages(mods, ("scipy",)), packages(mods, ("scipy",))

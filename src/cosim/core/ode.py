@@ -201,9 +201,13 @@ class RK4(TimeStepper):
         return y + (h / 6.0) * (k1 + 2.0 * (k2 + k3) + k4)
 
 
+#: the methods :mod:`cosim.core.embedded_rk` integrates (scipy the others)
+_PAIRS = ("RK45", "DOP853")
+
+
 def _switched(sol, sign, t, y, switch, on_switch):
     """The switch signs and state after the earliest event of ``sol``
-    (a ``solve_ivp`` result that stopped on one) at ``t``: its sign flipped,
+    (a solver run, :class:`_Run`, that stopped on one) at ``t``: its sign flipped,
     and ``on_switch(t, j, on, y)`` told, whose returned state (a jump)
     replaces ``y`` and sets every sign anew from ``switch(t, y)``."""
     j = min((i for i in range(len(sign)) if len(sol.t_events[i])),
@@ -220,8 +224,10 @@ def _switched(sol, sign, t, y, switch, on_switch):
 
 @dataclass(frozen=True)
 class ScipyStepper(TimeStepper):
-    """Adaptive integration with :func:`scipy.integrate.solve_ivp` over each
-    step, ending exactly at its end.
+    """Adaptive integration over each step, ending exactly at its end: the
+    explicit pairs (``RK45``, ``DOP853``) by :func:`cosim.core.embedded_rk.solve`,
+    the implicit methods (``Radau``, ``BDF``) by
+    :func:`scipy.integrate.solve_ivp` (imported only for them).
 
     A switch (a sign change of one of the ``switch`` functions) is a terminal
     event: located on the dense output, the integration restarts there, so no
@@ -247,6 +253,8 @@ class ScipyStepper(TimeStepper):
             v = getattr(self, k)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise ValueError(f"`{k}` must be > 0, got {v!r}")
+        if self.method in _PAIRS:       # loaded with the scene, not inside its first solve
+            import cosim.core.embedded_rk  # noqa: F401
 
     def _single(self, f, t, y, h, k1):  # pragma: no cover - integrate() is overridden
         return self.integrate(f, t, y, t + h)
@@ -257,32 +265,22 @@ class ScipyStepper(TimeStepper):
         error control chooses the steps).  A watched quantity's maxima are
         non-terminal events (its rate falling through zero), located on the
         dense output; the values there are probed at the located states."""
-        from scipy.integrate import solve_ivp
-
         t, y = t0, y0
         sign = None if switch is None else switch(t, y) > 0
-        n_sw = 0 if sign is None else len(sign)
-        watch = []
-        if probe is not None and peak is not None:
-            watch = [self._rate_event(probe, j) for j in range(len(peak))]
+        n_watch = len(peak) if probe is not None and peak is not None else 0
         while t < t1:
-            events = None
-            if switch is not None:
-                events = [self._event(switch, j, bool(sign[j])) for j in range(len(sign))]
-            if watch:
-                events = (events or []) + watch
-            sol = solve_ivp(f, (t, t1), y, method=self.method, rtol=self.rtol, atol=self.atol,
-                            max_step=self.max_step, events=events)
+            sol = self._run(f, t, y, t1, switch, sign, probe, n_watch)
             if sol.status == -1:
-                raise RuntimeError(f"integrator {self.name} failed at t = {sol.t[-1]:.6g} s: "
+                raise RuntimeError(f"integrator {self.name} failed at t = {sol.t:.6g} s: "
                                    f"{sol.message}")
-            t, y = float(sol.t[-1]), sol.y[:, -1]
-            for j in range(len(watch)):
+            t, y = sol.t, sol.y
+            n_sw = 0 if sign is None else len(sign)
+            for j in range(n_watch):
                 for te, ye in zip(sol.t_events[n_sw + j], sol.y_events[n_sw + j]):
                     peak[j] = max(peak[j], float(probe(float(te), ye)[0][j]))
-            if watch:
+            if n_watch:
                 d_end = probe(t, y)[0]
-                for j in range(len(watch)):
+                for j in range(n_watch):
                     peak[j] = max(peak[j], float(d_end[j]))
             if sol.status != 1:
                 break
@@ -306,13 +304,11 @@ class ScipyStepper(TimeStepper):
         solver's runs and the sample itself).  Every sample before a switch
         is emitted before ``on_switch`` is told of it.  Returns the end state.
         """
-        from scipy.integrate import solve_ivp
-
         t_out = np.asarray(t_out, float)
         t, y = t0, y0
         sign = None if switch is None else switch(t, y) > 0
         n_sw = 0 if sign is None else len(sign)
-        watch = [self._rate_event(probe, j) for j in range(n_peaks)] if probe else []
+        watch = range(n_peaks) if probe else ()
         t1 = float(t_out[-1])
         i = 0                                  # the next sample to emit
         pk = np.zeros(n_peaks)                 # peaks since the last sample emitted
@@ -325,14 +321,9 @@ class ScipyStepper(TimeStepper):
                         P[0, q] = max(pk[q], float(d_s[q]))
                 emit(i, i + 1, y[None, :].copy(), P)
                 return y
-            events = None
-            if switch is not None:
-                events = [self._event(switch, j, bool(sign[j])) for j in range(len(sign))]
-            if watch:
-                events = (events or []) + watch
-            sol = solve_ivp(f, (t, t1), y, method=self.method, rtol=self.rtol, atol=self.atol,
-                            max_step=self.max_step, events=events, dense_output=True)
-            t_seg = float(sol.t[-1])
+            sol = self._run(f, t, y, t1, switch, sign, probe if watch else None, len(watch),
+                            t_out[i:])
+            t_seg = sol.t
             last = sol.status == 0
             # samples inside this run: before its end, or up to it when it
             # reached t1 (a sample at a switch takes the state after it)
@@ -344,22 +335,22 @@ class ScipyStepper(TimeStepper):
                 ts = t_out[i:j]
                 inner = ts < t_seg
                 Y = np.empty((j - i, len(y)))
-                Y[~inner] = sol.y[:, -1]          # the end itself, not its interpolant
+                Y[~inner] = sol.y                 # the end itself, not its interpolant
                 if inner.any():
-                    Y[inner] = sol.sol(ts[inner]).T
+                    Y[inner] = sol.at(ts[inner])
                 P = np.zeros((j - i, n_peaks))
                 lo = t
-                for r in range(j - i):
+                for r in range(j - i if watch else 0):
                     hi = t_out[i + r]
-                    if watch:
-                        p = pk if r == 0 else np.zeros(n_peaks)
-                        for (te, ye) in (ev[k] for k in np.flatnonzero((ev_t > lo) & (ev_t <= hi))):
-                            d_ev = probe(te, ye)[0]
+                    p = pk if r == 0 else np.zeros(n_peaks)
+                    if ev:          # the maxima located since the sample before
+                        for k in np.flatnonzero((ev_t > lo) & (ev_t <= hi)):
+                            d_ev = probe(*ev[k])[0]
                             for q in range(n_peaks):
                                 p[q] = max(p[q], float(d_ev[q]))
-                        d_s = probe(float(hi), Y[r])[0]
-                        for q in range(n_peaks):
-                            P[r, q] = max(p[q], float(d_s[q]))
+                    d_s = probe(float(hi), Y[r])[0]
+                    for q in range(n_peaks):
+                        P[r, q] = max(p[q], float(d_s[q]))
                     lo = hi
                 pk = np.zeros(n_peaks)
                 emit(i, j, Y, P)
@@ -373,7 +364,7 @@ class ScipyStepper(TimeStepper):
             if sol.status == -1:
                 raise RuntimeError(f"integrator {self.name} failed at t = {t_seg:.6g} s: "
                                    f"{sol.message}")
-            t, y = t_seg, sol.y[:, -1]
+            t, y = t_seg, sol.y
             if last:
                 return y
             if watch:
@@ -382,21 +373,71 @@ class ScipyStepper(TimeStepper):
                     pk[q] = max(pk[q], float(d_end[q]))
             sign, y = _switched(sol, sign, t, y, switch, on_switch)
 
-    @staticmethod
-    def _rate_event(probe, j):
-        def ev(t, y):
-            return float(probe(t, y)[1][j])
-        ev.terminal = False
-        ev.direction = -1.0
-        return ev
+    def _run(self, f, t, y, t1, switch, sign, probe, n_watch, t_eval=None):
+        """One run of the solver from ``(t, y)`` towards ``t1``: each switch a
+        terminal event in the direction away from its side ``sign``, the
+        first ``n_watch`` rates of ``probe`` non-terminal events (falling);
+        the states at the output times ``t_eval`` before where it stops are
+        read from its dense output.  A :class:`_Run`."""
+        n_sw = 0 if sign is None else len(sign)
+        if self.method in _PAIRS:
+            from cosim.core.embedded_rk import PAIRS, Events, solve   # loaded when built
+            events = None
+            if n_sw + n_watch:
+                events = Events(_event_vector(switch if n_sw else None, probe, n_watch),
+                                np.r_[np.where(sign, -1.0, 1.0) if n_sw else [], -np.ones(n_watch)],
+                                np.r_[np.ones(n_sw, bool), np.zeros(n_watch, bool)])
+            res = solve(PAIRS[self.method], f, t, y, t1, rtol=self.rtol, atol=self.atol,
+                        max_step=self.max_step, events=events, t_eval=t_eval)
+            return _Run(res.t, res.y, res.status, res.message, res.t_events, res.y_events,
+                        lambda ts: res.y_eval[:len(ts)])
+        from scipy.integrate import solve_ivp    # the implicit methods only: 0.5 s to import
 
-    @staticmethod
-    def _event(switch, j, positive):
-        def ev(t, y):
-            return float(switch(t, y)[j])
-        ev.terminal = True
-        ev.direction = -1.0 if positive else 1.0
-        return ev
+        events = [_scalar_event(lambda tt, yy: switch(tt, yy), j, bool(sign[j]))
+                  for j in range(n_sw)]
+        events += [_scalar_event(lambda tt, yy: probe(tt, yy)[1], j, None)
+                   for j in range(n_watch)]
+        sol = solve_ivp(f, (t, t1), y, method=self.method, rtol=self.rtol, atol=self.atol,
+                        max_step=self.max_step, events=events or None,
+                        dense_output=t_eval is not None)
+        return _Run(float(sol.t[-1]), sol.y[:, -1], sol.status, sol.message, sol.t_events,
+                    sol.y_events, lambda ts: sol.sol(ts).T)
+
+
+class _Run:
+    """Where one solver run stopped (``t``, ``y``; ``status`` 0 at its end,
+    1 on a terminal event, -1 failed, with ``message``), its events' times
+    and states per event function, and ``at(ts)``: the states (rows) at the
+    first output times, those before ``t``.  (A plain class: a dataclass
+    costs its generated methods' ``exec`` at import.)"""
+
+    __slots__ = ("t", "y", "status", "message", "t_events", "y_events", "at")
+
+    def __init__(self, t, y, status, message, t_events, y_events, at):
+        self.t, self.y, self.status, self.message = t, y, status, message
+        self.t_events, self.y_events, self.at = t_events, y_events, at
+
+
+def _event_vector(switch, probe, n_watch):
+    """``g(t, y)``: the switch functions, then the first ``n_watch`` rates of
+    ``probe``, in one array."""
+    if probe is None or not n_watch:
+        return lambda t, y: np.asarray(switch(t, y), float)
+    if switch is None:
+        return lambda t, y: np.asarray(probe(t, y)[1][:n_watch], float)
+    return lambda t, y: np.concatenate((np.asarray(switch(t, y), float),
+                                        np.asarray(probe(t, y)[1][:n_watch], float)))
+
+
+def _scalar_event(fun, j, positive):
+    """Component ``j`` of ``fun`` as a :func:`scipy.integrate.solve_ivp`
+    event: a switch (terminal, away from its side ``positive``) or, with
+    ``positive`` None, a watched rate (falling, non-terminal)."""
+    def ev(t, y):
+        return float(fun(t, y)[j])
+    ev.terminal = positive is not None
+    ev.direction = -1.0 if positive is None or positive else 1.0
+    return ev
 
 
 def _scipy(method_name: str, scipy_method: str, doc: str):
@@ -407,8 +448,10 @@ def _scipy(method_name: str, scipy_method: str, doc: str):
         "__annotations__": {}})
 
 
-RK45 = _scipy("rk45", "RK45", "Adaptive explicit Dormand-Prince 5(4) (scipy).")
-DOP853 = _scipy("dop853", "DOP853", "Adaptive explicit Dormand-Prince 8(5,3) (scipy).")
+RK45 = _scipy("rk45", "RK45", "Adaptive explicit Dormand-Prince 5(4) "
+              "(:mod:`cosim.core.embedded_rk`).")
+DOP853 = _scipy("dop853", "DOP853", "Adaptive explicit Dormand-Prince 8(5,3) "
+                "(:mod:`cosim.core.embedded_rk`).")
 Radau = _scipy("radau", "Radau", "Implicit Radau IIA of order 5 (scipy), for stiff contacts.")
 BDF = _scipy("bdf", "BDF", "Implicit backward differentiation, orders 1-5 (scipy).")
 

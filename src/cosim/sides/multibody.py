@@ -111,6 +111,8 @@ class MultibodySubsystem(SampledSteps, TreeFaceMixin, CompiledFace, Subsystem):
         integrated in ``aux``.
         """
         e = EmbeddedContact(contact, port, own_side, partner_position, partner_velocity)
+        if e.law.rigid:     # its impacts' module, loaded with the scene, not in the first solve
+            import multibody.impact  # noqa: F401
         self._embedded.append(e)
         self.aux = np.zeros(4 * len(self._embedded) + 2)
         self.peak = np.zeros(len(self._embedded))
