@@ -4,7 +4,9 @@ the command line, the plots or the model packages grows past about 500 lines
 is the command line's ``main``."""
 from __future__ import annotations
 
+import ast
 import importlib
+import re
 import tomllib
 from pathlib import Path
 
@@ -37,3 +39,149 @@ def test_the_console_script_is_the_command_lines_main():
     cli = importlib.import_module("cosim.cli")
     assert getattr(importlib.import_module(module), name) is cli.console
     assert importlib.import_module("cosim.cli.__main__").console is cli.console
+
+
+# ------------------------------------------------------------ import circles
+#: the packages whose modules may not import one another in a circle
+PACKAGES = ("cosim", "multibody", "fem", "couplers")
+
+
+def _module_files(src: Path, packages=PACKAGES) -> dict:
+    """Module name -> file, for every ``.py`` and ``.pyx`` of ``packages``."""
+    out = {}
+    for pkg in packages:
+        for path in sorted((src / pkg).rglob("*.py")) + sorted((src / pkg).rglob("*.pyx")):
+            parts = list(path.relative_to(src).with_suffix("").parts)
+            if parts[-1] == "__init__":
+                parts.pop()
+            out[".".join(parts)] = path
+    return out
+
+
+def _statements(path: Path):
+    """``(module, names, level)`` of each import statement of ``path``, at
+    module level or inside a function or class alike, but not under ``if
+    TYPE_CHECKING:`` (never run).  A ``.pyx`` file's Python imports and
+    ``cimport`` lines are read with a pattern (it is not Python's syntax)."""
+    text = path.read_text()
+    if path.suffix == ".pyx":
+        pattern = r"^\s*from\s+([\w.]+)\s+c?import\s+([\w, ]+)|^\s*c?import\s+([\w.]+)"
+        for m in re.finditer(pattern, text, re.M):
+            if m.group(1):
+                yield m.group(1), [n.strip() for n in m.group(2).split(",")], 0
+            else:
+                yield m.group(3), [], 0
+        return
+    tree = ast.parse(text)
+    unrun = {id(n) for node in ast.walk(tree)
+             if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test)
+             for sub in node.body for n in ast.walk(sub)}
+    for node in ast.walk(tree):
+        if id(node) in unrun:
+            continue
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                yield alias.name, [], 0
+        elif isinstance(node, ast.ImportFrom):
+            yield node.module or "", [a.name for a in node.names], node.level
+
+
+def _import_graph(mods: dict) -> dict:
+    """Module -> the modules of ``mods`` its statements import.
+
+    ``from P import N`` imports ``P.N`` when that is a module, else ``P``;
+    ``import P.Q`` imports ``P.Q``; a name that is no module of ours counts
+    as its nearest enclosing module.  A package's ``__init__`` is not counted
+    as imported by a statement that names one of its submodules (Python runs
+    it first, but it is the package's door, not a dependency of the
+    importer)."""
+    def known(name):
+        while name and name not in mods:
+            name = name.rpartition(".")[0]
+        return name
+
+    graph = {}
+    for name, path in mods.items():
+        package = name if path.stem == "__init__" else name.rpartition(".")[0]
+        deps = set()
+        for target, names, level in _statements(path):
+            if level:
+                base = package.split(".")[:len(package.split(".")) - (level - 1)]
+                target = ".".join(base + ([target] if target else []))
+            for n in names or [None]:
+                sub = f"{target}.{n}" if n else target
+                deps.add(sub if sub in mods else known(target))
+        graph[name] = deps - {name, ""}
+    return graph
+
+
+def _circles(graph: dict) -> list:
+    """The strongly connected components of ``graph`` with more than one
+    module (Tarjan's algorithm), each sorted."""
+    index, low, stack, on, out = {}, {}, [], set(), []
+
+    def visit(v):
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on.add(v)
+        for w in sorted(graph[v]):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while not comp or comp[-1] != v:
+                comp.append(stack.pop())
+                on.discard(comp[-1])
+            if len(comp) > 1:
+                out.append(sorted(comp))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return out
+
+
+def test_no_import_circle_in_our_packages():
+    """No module of cosim, multibody, fem or couplers imports itself again
+    through others.
+
+    What counts: every import statement a module holds, ``import x`` and
+    ``from x import y`` (relative ones too), at module level and inside a
+    function or method alike: an import deferred into a function that closes
+    a circle is still a circle (the two modules still need each other; the
+    deferral only hides the order in which they load).  The ``.pyx`` kernels'
+    ``import`` and ``cimport`` lines count as well.  What does not count:
+    imports under ``if TYPE_CHECKING:`` (never run), and imports by a name
+    held as data and resolved at run time (a registry's ``"module:Class"``
+    entries, a package's lazy ``__getattr__``, the plug-in groups' registries
+    in :mod:`cosim.core.plugins`): they are how a low module names a higher
+    one without depending on it."""
+    circles = _circles(_import_graph(_module_files(SRC)))
+    assert not circles, "import circles: " + "; ".join(" <-> ".join(c) for c in circles)
+
+
+def test_the_circle_finder_finds_a_deferred_circle(tmp_path):
+    """The check above could fail: a circle closed by an import inside a
+    function, one through a relative import and a ``.pyx`` kernel, are each
+    found; a ``TYPE_CHECKING`` import and a lower module both import are not
+    circles."""
+    pkg = tmp_path / "cosim"
+    (pkg / "core").mkdir(parents=True)
+    files = {
+        "__init__.py": "",
+        "low.py": "X = 1\n",
+        "a.py": "from cosim.low import X\nfrom cosim import b\n",
+        "b.py": "def f():\n    from cosim.a import g\n",
+        "c.py": "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from cosim import d\n",
+        "d.py": "import cosim.c\nfrom cosim.low import X\n",
+        "core/__init__.py": "",
+        "core/e.py": "from . import _k\n",
+        "core/_k.pyx": "from cosim.core.e import thing\n",
+    }
+    for name, text in files.items():
+        (pkg / name).write_text(text)
+    assert _circles(_import_graph(_module_files(tmp_path, ("cosim",)))) == [
+        ["cosim.a", "cosim.b"], ["cosim.core._k", "cosim.core.e"]]

@@ -93,12 +93,11 @@ def advance_replaced(scheme) -> bool:
 
 def refusal(scheme, system) -> str | None:
     """Why this run takes the Python loop, or None when it takes the compiled one."""
-    from cosim.core.schemes.explicit import GaussSeidel, Jacobi
     if driver_choice() == "python":
         return f"the Python loop was asked for (`{DRIVER_ENV}=python`)"
     if os.environ.get("COSIM_KERNEL", "compiled").strip().lower() == "numpy":
         return "the numpy reference was asked for (`COSIM_KERNEL=numpy`)"
-    if type(scheme) not in (Jacobi, GaussSeidel):
+    if not vars(type(scheme)).get("compiled_loop", False):      # Jacobi, Gauss-Seidel
         return f"scheme `{scheme.name}` is not an explicit scheme the compiled loop knows"
     if advance_replaced(scheme):
         return f"the `advance` of scheme `{scheme.name}` is replaced"
