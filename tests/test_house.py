@@ -190,3 +190,38 @@ def test_the_circle_finder_finds_a_deferred_circle(tmp_path):
         (pkg / name).write_text(text)
     assert _circles(_import_graph(_module_files(tmp_path, ("cosim",)))) == [
         ["cosim.a", "cosim.b"], ["cosim.core._k", "cosim.core.e"]]
+
+
+# ------------------------------------------------------- no private probes
+def _private_probes(path: Path) -> list:
+    """``hasattr``/``getattr``/``setattr`` calls of ``path`` that name a
+    private attribute (one underscore) of an object other than ``self`` or
+    ``cls``."""
+    out = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        if (isinstance(node, ast.Call) and isinstance(node.func, ast.Name)
+                and node.func.id in ("hasattr", "getattr", "setattr") and len(node.args) >= 2
+                and isinstance(node.args[1], ast.Constant) and isinstance(node.args[1].value, str)
+                and node.args[1].value.startswith("_") and not node.args[1].value.startswith("__")
+                and ast.unparse(node.args[0]) not in ("self", "cls")):
+            out.append(f"{path.relative_to(SRC)}:{node.lineno} {ast.unparse(node)}")
+    return out
+
+
+def test_the_driver_asks_the_sides_and_schemes_public_questions():
+    """Whether a run takes the compiled loop is decided by what the scheme
+    class and the sides declare (``compiled_loop``), never by probing or
+    reading their private attributes."""
+    path = SRC / "cosim" / "core" / "schemes" / "driver.py"
+    assert not _private_probes(path)
+    reads = [f"{ast.unparse(n)} (line {n.lineno})" for n in ast.walk(ast.parse(path.read_text()))
+             if isinstance(n, ast.Attribute) and n.attr.startswith("_")
+             and not n.attr.startswith("__") and ast.unparse(n.value) not in ("self", "cls")]
+    assert not reads, reads
+
+
+def test_no_module_probes_a_private_attribute_of_another_module():
+    """The one probe left is of the core's own registry by the core's
+    plug-in finder (a plain dict may stand where a registry does)."""
+    found = [p for path in sorted(SRC.rglob("*.py")) for p in _private_probes(path)]
+    assert [f.split(":")[0] for f in found] == ["cosim/core/plugins.py"], found
