@@ -139,6 +139,11 @@ class Recorder:
         self._wall0 = time.monotonic()
         self._next_progress = -math.inf
 
+    @property
+    def reached(self) -> float:
+        """Simulated time of the last sample recorded [s] (0 before the first)."""
+        return self._prev[0] if self._prev is not None else 0.0
+
     def edge(self, c: int, t: float, on: bool) -> None:
         """Report an exactly located contact onset (``on``) or release.
 
