@@ -218,6 +218,12 @@ class CoSimulationScheme(InputExtrapolation, CouplingScheme):
     def _partner_first(self, system, c) -> bool:
         return False
 
+    def partner_first(self, system, c) -> bool:
+        """Whether contact ``c``'s partner side takes its step first under this
+        scheme (:func:`cosim.core.preflight.partner_first`): what the
+        pre-flight check passes on as ``partner_first``."""
+        return self._partner_first(system, c)
+
     @abstractmethod
     def advance(self, system, t: float, h: float, ratio: float) -> np.ndarray:
         """Step every subsystem over [t, t + h]; return the impulse [N s] the
