@@ -147,6 +147,12 @@ class EmbeddedContact:
         self._x0 = complex(c[0])
         self._dmotion = (c[1:] * np.arange(1, c.size)) / h if c.size > 1 else np.zeros(1, complex)
 
+    @property
+    def velocity_coeffs(self) -> np.ndarray:
+        """Partner velocity over the step: the derivative of :attr:`motion` in
+        ``t`` [m/s], complex polynomial coefficients in ``s`` (lowest first)."""
+        return self._dmotion
+
     def partner(self, t: float) -> tuple[complex, complex]:
         """Partner port position and velocity at ``t`` (complex)."""
         if self._still:

@@ -372,7 +372,7 @@ class StructureSubsystem(StructurePorts, ClosedFormContacts, Subsystem):
         kernel = self._compiled_step(inputs)
         if kernel is not None and kernel.set_step(
                 t, h, None if inputs is None else inputs.coeffs,
-                [(e.t0, e.h, e.motion, e._dmotion) for e in self._embedded]):
+                [(e.t0, e.h, e.motion, e.velocity_coeffs) for e in self._embedded]):
             self.port_moments = pm = np.zeros((3, self.n_ports), complex)
             if not self._embedded:
                 kernel.step_free(self.x, pm.view(float))
