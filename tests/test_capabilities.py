@@ -34,6 +34,7 @@ def test_a_side_without_declarations_has_none_and_neutral_faces():
     assert side.host_cpu_time == 0.0
     assert side.closed_form_contacts is False
     assert side.unknown_port_mass(0) is None
+    assert side.closed_contact_step() is None
 
 
 def test_an_unknown_capability_is_refused_when_the_class_is_made():
@@ -53,9 +54,9 @@ def _sides():
     from cosim.sides.fmu_description import DescribedFMU
     from cosim.sides.multibody import MultibodySubsystem
     return {MultibodySubsystem: {"rigid_impacts", "impact_watch", "connections",
-                                                  "skeleton", "sampled_steps"},
-            StructureSubsystem: {"rigid_impacts", "moving_ports", "modes"},
-            FMUSubsystem: {"fmi"}, DescribedFMU: {"fmi"}, RigidReference: set()}
+                                                  "skeleton", "sampled_steps", "compiled_loop"},
+            StructureSubsystem: {"rigid_impacts", "moving_ports", "modes", "compiled_loop"},
+            FMUSubsystem: {"fmi"}, DescribedFMU: {"fmi"}, RigidReference: {"compiled_loop"}}
 
 
 def test_each_shipped_side_declares_its_faces():

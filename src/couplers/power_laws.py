@@ -64,6 +64,11 @@ class _PowerLaw(ContactLaw):
     def _chi(self) -> float:
         """Hysteresis damping ``chi`` [s/m]."""
 
+    def hysteresis_chi(self) -> float:
+        """Hysteresis damping ``chi`` [s/m] of ``k d^n (1 + chi dd)``, as the
+        compiled kernels take it (:func:`cosim.core.links.kernel_law`)."""
+        return self._chi()
+
     def force_active(self, d, dd):
         """``k d^n (1 + chi dd)`` [N]; ``d^n`` is read as 0 for ``d < 0``."""
         dp = np.maximum(d, 0.0)

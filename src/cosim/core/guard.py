@@ -72,7 +72,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cosim.errors import SimulationError
+from cosim.core.guard_error import GuardError
 
 __all__ = ["GuardOptions", "Guard", "GuardError", "nonfinite_cause", "energy_scale",
            "peak_stored_energy", "DEFAULT_ENERGY_GROWTH", "DEFAULT_ENERGY_FLOOR",
@@ -91,33 +91,6 @@ DEFAULT_COUPLING_WARNING = 0.01
 DEFAULT_CHATTER_SWITCHES = 100
 #: [s] default chatter window
 DEFAULT_CHATTER_WINDOW = 1e-6
-
-
-class GuardError(SimulationError):
-    """The run guard stopped a run.
-
-    Attributes
-    ----------
-    t : float
-        Time of the step that tripped the guard [s].
-    contact : str or None
-        The contact named responsible (None when none is).
-    cause : str
-        ``"non-finite"``, ``"energy growth"`` or ``"chatter"``.
-    reason : str
-        What tripped the guard; the message is ``run stopped at t = T s:
-        REASON``.  In a run ``t`` lies after the last sample kept (the guard refuses
-        the sample it trips on, or trips at a switch inside the step before
-        it); the run's message then opens with the time of that last sample
-        (:func:`cosim.simulate`), which is the summary's ``t_end``.
-    """
-
-    #: the index of the refused sample in a block (:meth:`Guard.check_block`), else None
-    sample: int | None = None
-
-    def __init__(self, reason: str, t: float, contact: str | None, cause: str):
-        super().__init__(f"run stopped at t = {t:.6g} s: {reason}")
-        self.t, self.contact, self.cause, self.reason = t, contact, cause, reason
 
 
 @dataclass(frozen=True)

@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from cosim.core.guard import GuardError
+from cosim.core.guard_error import GuardError
 
 __all__ = ["check_block", "HUGE"]
 

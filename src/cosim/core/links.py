@@ -69,7 +69,7 @@ def kernel_law(law):
     if kind is KelvinVoigtLaw:
         return (1, law.contact_stiffness, law.contact_damping, 1.0)
     if kind in (HertzLaw, HuntCrossleyLaw, LankaraniNikraveshLaw, FloresLaw):
-        return (2, law.contact_stiffness, law._chi(), law.exponent)
+        return (2, law.contact_stiffness, law.hysteresis_chi(), law.exponent)
     if kind is RigidLaw:
         return (3, 0.0, 0.0, 1.0)
     return None

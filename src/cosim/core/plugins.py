@@ -53,23 +53,34 @@ GROUPS = {"cosim.laws": "contact law", "cosim.schemes": "coupling scheme",
 _OURS = ("cosim", "couplers", "fem", "multibody")
 
 
+#: entry-point group -> the (base class, registry) pairs a class of it may go
+#: to, each named ``"module:attribute"`` as a registry names a class it has not
+#: imported: the registries are looked up here, not imported, so that the
+#: modules that hold them (and import :class:`~cosim.core.registry.Registry`,
+#: which asks this module for a name it lacks) are not imported by it
+_TARGETS = {
+    "cosim.laws": [("couplers:ContactLaw", "couplers:CONTACT_LAWS")],
+    "cosim.schemes": [("cosim.core.schemes:CouplingScheme",
+                       "cosim.core.schemes:COUPLING_SCHEMES")],
+    "cosim.integrators": [("cosim.core.ode:TimeStepper", "cosim.core.ode:INTEGRATORS"),
+                          ("fem.integrator_base:StructuralIntegrator",
+                           "fem.integrators:STRUCTURAL_INTEGRATORS")],
+    "cosim.structures": [("fem:StructureModel", "fem:STRUCTURE_MODELS")],
+}
+
+
+def _named(ref: str):
+    """The attribute ``"module:attribute"`` names (its module imported)."""
+    module, _, attr = ref.partition(":")
+    # the import statement's machinery, which `python -X importtime` reports
+    return getattr(__import__(module, fromlist=[attr]), attr)
+
+
 def _targets(group: str):
     """(base class, registry) pairs a class of ``group`` may go to."""
-    if group == "cosim.laws":
-        from couplers import CONTACT_LAWS, ContactLaw
-        return [(ContactLaw, CONTACT_LAWS)]
-    if group == "cosim.schemes":
-        from cosim.core.schemes import COUPLING_SCHEMES, CouplingScheme
-        return [(CouplingScheme, COUPLING_SCHEMES)]
-    if group == "cosim.integrators":
-        from cosim.core.ode import INTEGRATORS, TimeStepper
-        from fem.integrator_base import StructuralIntegrator
-        from fem.integrators import STRUCTURAL_INTEGRATORS
-        return [(TimeStepper, INTEGRATORS), (StructuralIntegrator, STRUCTURAL_INTEGRATORS)]
-    if group == "cosim.structures":
-        from fem import STRUCTURE_MODELS, StructureModel
-        return [(StructureModel, STRUCTURE_MODELS)]
-    raise ValueError(f"unknown plug-in group {group!r}; the groups are {sorted(GROUPS)}")
+    if group not in _TARGETS:
+        raise ValueError(f"unknown plug-in group {group!r}; the groups are {sorted(GROUPS)}")
+    return [(_named(base), _named(registry)) for base, registry in _TARGETS[group]]
 
 
 def _built_in(registry) -> set:

@@ -15,11 +15,12 @@ from __future__ import annotations
 import math
 import time
 from pathlib import Path
-from typing import Callable, NamedTuple
+from typing import Callable
 
 import numpy as np
 
 from cosim.core.hermite import hermite_cubic_max, hermite_point
+from cosim.core.progress import Progress
 from cosim.core.result import SimulationResult
 from cosim.core.series import SeriesFile, SeriesStore, chunk_rows
 
@@ -51,27 +52,6 @@ def intervals_until(intervals, opened: float | None, t_stop: float) -> list:
     if opened is not None and opened <= t_stop:
         out.append([opened, t_stop])
     return out
-
-
-class Progress(NamedTuple):
-    """How far a run is, as handed to a progress callback.
-
-    Attributes
-    ----------
-    t : float
-        Simulated time reached [s].
-    t_end : float
-        Simulated time the run ends at [s].
-    contacts : int
-        Contact intervals begun so far, all contacts together.
-    elapsed_s : float
-        Wall-clock time since recording began [s].
-    """
-
-    t: float
-    t_end: float
-    contacts: int
-    elapsed_s: float
 
 
 class Recorder:
@@ -158,6 +138,11 @@ class Recorder:
         self._progress_interval = float(progress_interval)
         self._wall0 = time.monotonic()
         self._next_progress = -math.inf
+
+    @property
+    def reached(self) -> float:
+        """Simulated time of the last sample recorded [s] (0 before the first)."""
+        return self._prev[0] if self._prev is not None else 0.0
 
     def edge(self, c: int, t: float, on: bool) -> None:
         """Report an exactly located contact onset (``on``) or release.

@@ -17,8 +17,9 @@ import time
 
 import numpy as np
 
-from cosim.core.guard import GuardError
+from cosim.core.guard_error import GuardError
 from cosim.core.hermite import hermite_cubic_max
+from cosim.core.progress import Progress
 
 __all__ = ["record_block"]
 
@@ -211,7 +212,6 @@ def _commit(rec, t, d, dd, f, impulse, dissipated, work, x, energy, diss_total, 
         if now >= rec._next_progress:
             rec._next_progress = now + rec._progress_interval
             begun = sum(map(len, rec.intervals)) + sum(o is not None for o in rec._open)
-            from cosim.core.recorder import Progress      # the recorder imports this module
             if rec._progress_interval <= 0:               # every sample was asked for
                 for j in range(k - 1):
                     rec._progress(Progress(float(t[j]), float(rec.t_end),

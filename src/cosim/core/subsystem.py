@@ -147,6 +147,12 @@ class EmbeddedContact:
         self._x0 = complex(c[0])
         self._dmotion = (c[1:] * np.arange(1, c.size)) / h if c.size > 1 else np.zeros(1, complex)
 
+    @property
+    def velocity_coeffs(self) -> np.ndarray:
+        """Partner velocity over the step: the derivative of :attr:`motion` in
+        ``t`` [m/s], complex polynomial coefficients in ``s`` (lowest first)."""
+        return self._dmotion
+
     def partner(self, t: float) -> tuple[complex, complex]:
         """Partner port position and velocity at ``t`` (complex)."""
         if self._still:
@@ -205,6 +211,8 @@ class SubsystemState:
 #: - ``sampled_steps``: takes many macro steps in one call for the macro loop's
 #:   sampled path (``sampling_refusal``, ``sample_steps``:
 #:   :mod:`cosim.core.schemes.sampled`).
+#: - ``compiled_loop``: may be stepped by the compiled macro loop of the
+#:   explicit schemes (``compiled_loop_refusal``: :mod:`cosim.core.schemes.driver`).
 CAPABILITIES = {
     "rigid_impacts": (),
     "impact_watch": (),
@@ -214,6 +222,7 @@ CAPABILITIES = {
     "skeleton": ("skeleton",),
     "fmi": (),
     "sampled_steps": ("sampling_refusal", "sample_steps"),
+    "compiled_loop": ("compiled_loop_refusal",),
 }
 
 
@@ -346,6 +355,13 @@ class Subsystem(ABC):
     def unknown_port_mass(self, port: int) -> str | None:
         """Why the mass behind ``port`` is unknown before the side runs (an
         FMU known from its model description alone), or None."""
+
+    def closed_contact_step(self) -> float | None:
+        """The longest step [s] of the RK4 that integrates this side, every
+        mode of it, while a contact it hosts is closed (a structure's
+        ``contact_step``), or None where no such RK4 steps it."""
+        return None
+
     def compiled_face(self):
         """The compiled model-exchange face that the monolithic reference's
         compiled right-hand side calls (:meth:`derivatives`, :meth:`outputs`
@@ -398,6 +414,7 @@ class RigidReference(Subsystem):
     """
 
     rigid = True
+    capabilities = frozenset({"compiled_loop"})
 
     def __init__(self, name: str, ports: dict):
         super().__init__(name, ports.keys())
@@ -415,6 +432,12 @@ class RigidReference(Subsystem):
 
     def energy(self, x=None):
         return 0.0
+
+    def compiled_loop_refusal(self) -> str | None:
+        """Why the compiled macro loop cannot take this side (words that
+        follow its name), or None: it holds fixed ports, which a subclass
+        may move."""
+        return None if type(self) is RigidReference else f"is a rigid {type(self).__name__}"
 
     def compiled_face(self):
         try:

@@ -26,293 +26,27 @@ link anywhere in the path as written, at its place or above it (a ``runs``
 that is a link, ``--out link/sub``), is refused with the path it leads to.
 Whatever stops the writing, the name holds its old content or the whole new
 one.
+
+The names and their checks live in :mod:`cosim.io.names`, the reaching of a
+folder in :mod:`cosim.io.folders` and the lock in :mod:`cosim.io.runlock`;
+every public name of theirs is importable from here as well.
 """
 from __future__ import annotations
 
 import errno
 import os
-import re
 import stat
 from pathlib import Path
 
-from cosim.errors import OutputBusyError, OutputError
+from cosim.errors import OutputError
+from cosim.io.folders import (_DIR_FLAGS, _NOFOLLOW, MAX_RERUNS, _is_root, _remove_tree,
+                              fresh_folder, open_folder)
+from cosim.io.names import NAME_MAX, NAME_RULE, check_name, inside, name_problem, output_error
+from cosim.io.runlock import LOCK_NAME, RunLock
 
 __all__ = ["NAME_RULE", "NAME_MAX", "LOCK_NAME", "name_problem", "inside", "RunLock",
            "output_error", "check_name", "OutputFolder", "atomic_write", "run_folder_name",
            "fresh_folder", "MAX_RERUNS", "open_folder"]
-
-#: longest name a scene may give [characters]
-NAME_MAX = 64
-_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.+-]*")
-#: the rule, as messages state it
-NAME_RULE = (f"a name is 1 to {NAME_MAX} of the characters A-Z a-z 0-9 _ . + -, does not "
-             f"start with . + or -, and holds no `..`")
-#: the lock file a run holds in its folder
-LOCK_NAME = ".run.lock"
-
-
-def name_problem(name) -> str | None:
-    """What makes ``name`` unfit as a name that becomes a path or a key
-    (``None`` when it fits :data:`NAME_RULE`)."""
-    if not isinstance(name, str):
-        return f"must be a string, got {type(name).__name__} {name!r}"
-    if not name:
-        return "must not be empty"
-    if len(name) > NAME_MAX:
-        return f"must be at most {NAME_MAX} characters, got {len(name)}: {name[:NAME_MAX]!r}..."
-    if not _NAME.fullmatch(name) or ".." in name:
-        return f"must be a plain name ({NAME_RULE}), got {name!r}"
-    return None
-
-
-def inside(folder, name: str) -> Path:
-    """``folder / name``, after checking that ``name`` is one plain file name
-    and that the file's parent resolves to ``folder``: the last check before
-    a run writes a file.
-
-    Raises
-    ------
-    OutputError
-        If ``name`` holds a separator, is empty, ``.`` or ``..``, or holds a
-        control character.
-    """
-    folder = Path(folder)
-    check_name(name, folder)
-    path = folder / name
-    if os.path.realpath(path.parent) != os.path.realpath(folder):
-        raise OutputError(f"refusing to write {name!r}: a run writes only plain file names "
-                          f"inside its folder {folder}")
-    return path
-
-
-def check_name(name, folder="its folder") -> str:
-    """``name``, after checking it is one plain file name: not empty, not
-    ``.`` or ``..``, no separator, no control character.
-
-    Raises
-    ------
-    OutputError
-        Naming ``name`` and ``folder``.
-    """
-    bad = (not isinstance(name, str) or not name or name in (".", "..") or "/" in name
-           or "\0" in name or (os.altsep is not None and os.altsep in name) or os.sep in name
-           or any(ord(ch) < 32 or ord(ch) == 127 for ch in name))
-    if bad:
-        from cosim.errors import shown
-        raise OutputError(f"refusing to write {shown(repr(name))}: cosim writes only plain file "
-                          f"names inside {folder}")
-    return name
-
-
-def output_error(exc: OSError, path, what: str = "cannot write") -> OutputError:
-    """An :class:`OutputError` naming ``path`` and the system's reason."""
-    if isinstance(exc, OutputError):
-        return exc
-    reason = exc.strerror or str(exc) or type(exc).__name__
-    err = OutputError(f"{what} {path}: {reason}")
-    err.errno, err.path = exc.errno, str(path)     # not `filename`: it would reword str(err)
-    return err
-
-
-class RunLock:
-    """An exclusive lock on a run folder, held from :meth:`acquire` to
-    :meth:`release`.
-
-    :meth:`acquire` makes the folder (and its parents) when missing,
-    remembered as :attr:`created`.  The lock file is opened without following
-    links, holds the owner's process id, and is removed on release.
-    """
-
-    def __init__(self, folder):
-        self.folder = Path(folder)
-        self.path = self.folder / LOCK_NAME
-        self.created = False
-        self._fd = None
-
-    def acquire(self) -> "RunLock":
-        """Take the lock (a folder made for it is removed again when it fails).
-
-        Raises
-        ------
-        OutputError
-            If the folder cannot be made or the lock file not created (a
-            read-only place, a file in the path, a link planted at the lock).
-        OutputBusyError
-            If another process holds the lock.
-        """
-        fd, self.created = open_folder(self.folder)     # never through a link
-        os.close(fd)
-        try:
-            return self._lock()
-        except BaseException:
-            if self.created:            # a folder made just now holds nothing but the lock
-                try:
-                    self.path.unlink(missing_ok=True)
-                    self.folder.rmdir()
-                except OSError:
-                    pass
-            raise
-
-    def _lock(self) -> "RunLock":
-        import fcntl                    # POSIX; the rest of this module is not
-        for _ in range(5):              # the file may be removed between open and lock
-            fd = self._open()
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            except OSError as exc:
-                owner = _read_owner(fd)
-                os.close(fd)
-                if exc.errno in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
-                    raise OutputBusyError(
-                        f"{self.folder} is in use by another run"
-                        + (f" (process {owner})" if owner else "")
-                        + "; wait for it to end, or choose another --out") from None
-                raise output_error(exc, self.path, "cannot lock") from None
-            st = os.fstat(fd)
-            try:
-                now = os.stat(self.path, follow_symlinks=False)
-            except FileNotFoundError:
-                now = None
-            if now is not None and (now.st_ino, now.st_dev) == (st.st_ino, st.st_dev):
-                break
-            os.close(fd)                # locked a file its owner had just removed
-        else:
-            raise OutputError(f"cannot lock {self.path}: it keeps being replaced")
-        try:
-            os.ftruncate(fd, 0)
-            os.write(fd, f"{os.getpid()}\n".encode())
-        except OSError:
-            # the lock is the flock, held; the process id only names the owner to a
-            # second run.  A full disk here is said by the first file the run writes
-            # (naming that file), and the lock file goes on release as always
-            pass
-        self._fd = fd
-        return self
-
-    def _open(self) -> int:
-        flags = os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
-        try:
-            fd = os.open(inside(self.folder, LOCK_NAME), flags, 0o644)
-        except OSError as exc:
-            if exc.errno == errno.ELOOP:
-                raise OutputError(f"cannot lock {self.path}: it is a symbolic link (a run "
-                                  f"never follows one); remove it") from None
-            raise output_error(exc, self.path, "cannot create") from None
-        st = os.fstat(fd)
-        if not stat.S_ISREG(st.st_mode) or st.st_nlink != 1:
-            os.close(fd)
-            raise OutputError(f"cannot lock {self.path}: it is not a plain file of its own "
-                              f"(a link or a special file); remove it")
-        return fd
-
-    def release(self) -> None:
-        """Remove the lock file and let the lock go (no-op when not held)."""
-        if self._fd is None:
-            return
-        try:
-            st = os.fstat(self._fd)
-            now = os.stat(self.path, follow_symlinks=False)
-            if (now.st_ino, now.st_dev) == (st.st_ino, st.st_dev):
-                os.unlink(self.path)
-        except OSError:
-            pass
-        os.close(self._fd)
-        self._fd = None
-
-    def __enter__(self):
-        return self.acquire()
-
-    def __exit__(self, *exc):
-        self.release()
-
-
-#: flags of every file descriptor the writer opens: never through a link, not inherited
-_NOFOLLOW = getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
-#: opening a folder (``O_DIRECTORY`` where the system has it)
-_DIR_FLAGS = os.O_RDONLY | getattr(os, "O_DIRECTORY", 0) | _NOFOLLOW
-
-
-def open_folder(path, make: bool = True, below: tuple = ()) -> tuple[int, bool]:
-    """Open the folder ``path`` one name at a time from where it starts (the
-    working folder, or ``/``), each name opened without following a link
-    and made first when missing (``make``): a symbolic link anywhere in
-    ``path`` as written -- at its place or above it -- is refused, never
-    followed.  The one way cosim reaches a folder it writes into.
-    ``below`` are names the caller will make inside it (said in messages).
-
-    Returns
-    -------
-    fd : int
-        The folder, open (``O_DIRECTORY``, not inherited); the caller closes it.
-    made : bool
-        Whether the folder itself was made here.
-
-    Raises
-    ------
-    OutputError
-        Naming the link and where it leads (the path to give instead), a
-        file in the path, or the system's reason a name could not be made.
-    """
-    path = Path(path)
-    parts = path.parts
-    start = parts[0] if path.is_absolute() else "."
-    if path.is_absolute():
-        parts = parts[1:]
-    try:
-        fd = os.open(start, _DIR_FLAGS)
-    except OSError as exc:
-        raise output_error(exc, path, "cannot open the folder") from None
-    here, made = Path(start), False
-    try:
-        for i, part in enumerate(parts):
-            here = here / part
-            made = False
-            if make and part != "..":
-                try:
-                    os.mkdir(part, 0o777, dir_fd=fd)
-                    made = True
-                except FileExistsError:
-                    pass
-                except OSError as exc:
-                    raise output_error(exc, path, "cannot make the output folder") from None
-            try:
-                sub = os.open(part, _DIR_FLAGS, dir_fd=fd)
-            except OSError as exc:
-                raise _component_error(exc, fd, part, here, path.joinpath(*below),
-                                       parts[i + 1:] + tuple(below)) from None
-            os.close(fd)
-            fd = sub
-    except BaseException:
-        os.close(fd)
-        raise
-    return fd, made
-
-
-def _component_error(exc: OSError, fd: int, part: str, here: Path, path: Path,
-                     rest) -> OutputError:
-    """Why the name ``part`` (at ``here``) of ``path`` could not be opened as
-    a folder, in words; ``rest`` are the names after it."""
-    try:
-        st = os.stat(part, dir_fd=fd, follow_symlinks=False)
-    except OSError:
-        st = None
-    if st is not None and stat.S_ISLNK(st.st_mode):
-        real = Path(os.path.realpath(here))
-        if not rest:
-            return OutputError(f"cannot write into {path}: it is a symbolic link (cosim never "
-                               f"writes through one); name the folder itself ({real})")
-        return OutputError(f"cannot write into {path}: {here} is a symbolic link (cosim never "
-                           f"writes through one); give the folder it leads to, "
-                           f"{real.joinpath(*rest)}, or remove the link")
-    if st is not None and not stat.S_ISDIR(st.st_mode) and not rest:
-        return OutputError(f"cannot make the output folder {path}: it exists and is not a "
-                           f"folder")
-    return output_error(exc, path, "cannot make the output folder")
-
-
-def _is_root(path: Path) -> bool:
-    real = os.path.realpath(path)
-    return os.path.dirname(real) == real
 
 
 class OutputFolder:
@@ -591,36 +325,6 @@ class OutputFolder:
         return sub._adopt(fd)
 
 
-def _remove_tree(dir_fd: int, name: str) -> None:
-    """Remove the folder ``name`` of the folder ``dir_fd`` and what it holds
-    (files and folders only; links are removed, never followed)."""
-    try:
-        fd = os.open(name, _DIR_FLAGS, dir_fd=dir_fd)
-    except FileNotFoundError:
-        return
-    except OSError:
-        try:
-            os.unlink(name, dir_fd=dir_fd)
-        except OSError:
-            pass
-        return
-    try:
-        for entry in os.listdir(fd):
-            st = os.stat(entry, dir_fd=fd, follow_symlinks=False)
-            if stat.S_ISDIR(st.st_mode):
-                _remove_tree(fd, entry)
-            else:
-                os.unlink(entry, dir_fd=fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)
-    try:
-        os.rmdir(name, dir_fd=dir_fd)
-    except OSError:
-        pass
-
-
 def atomic_write(path, writer, mode: str) -> Path:
     """Write the file ``path`` whole through :meth:`OutputFolder.write` on its
     folder (opened without following a link, not locked: for a caller that
@@ -637,47 +341,3 @@ def run_folder_name(scene: str, variant: str | None = None, scheme: str | None =
     (None otherwise), so that the runs of one scene under two schemes, or
     two variants, never meet in one folder."""
     return "-".join(part for part in (scene, variant, scheme) if part)
-
-
-#: most folders :func:`fresh_folder` tries (``NAME``, ``NAME-2``, ...) before it gives up
-MAX_RERUNS = 10000
-
-
-def fresh_folder(parent, name: str) -> Path:
-    """Make and return a new, empty folder ``parent/name``, or, when that
-    exists, the first of ``name-2``, ``name-3``, ... that does not: a run
-    asked again gets a folder of its own and never meets the one before.
-    Each folder is made exclusively (``mkdir``), so two runs started at
-    once get two folders.  ``parent`` is made when missing.
-
-    Raises
-    ------
-    OutputError
-        If ``parent`` cannot be made or written, or the first
-        :data:`MAX_RERUNS` names are all taken.
-    """
-    parent = Path(parent)
-    check_name(name, parent)
-    fd, _ = open_folder(parent, below=(name,))  # never through a link
-    try:
-        for k in range(1, MAX_RERUNS + 1):
-            here = name if k == 1 else f"{name}-{k}"
-            try:
-                os.mkdir(here, 0o777, dir_fd=fd)
-            except FileExistsError:
-                continue
-            except OSError as exc:
-                raise output_error(exc, parent / here, "cannot make the output folder") from None
-            return parent / here
-    finally:
-        os.close(fd)
-    raise OutputError(f"cannot make a new folder {parent / name}-N: the first {MAX_RERUNS} "
-                      f"names are taken; give --out")
-
-
-def _read_owner(fd: int) -> str:
-    try:
-        text = os.pread(fd, 32, 0).decode("ascii", "replace").strip()
-    except OSError:
-        return ""
-    return text if text.isdigit() else ""

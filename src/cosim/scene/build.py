@@ -296,11 +296,11 @@ def embedded_step_limit(system, c: int):
             return None
         dt, key = subs[s].integrator.max_step, "max_step"
     else:   # a structure: RK4 while the contact is closed, over every kept mode
-        rk4 = getattr(subs[s], "_rk4", None)
-        if rk4 is None:
+        dt = subs[s].closed_contact_step()
+        if dt is None:
             return None
         omega = max(omega, float(np.max(subs[s].omega)))
-        dt, key = rk4.max_step, "contact_step"
+        key = "contact_step"
     return 0.5 * _RK4_LIMIT / omega, dt, key, omega
 
 

@@ -279,7 +279,7 @@ def _host_cpu(system) -> float:
 
 def _reached(rec: Recorder) -> float:
     """Simulated time of the last sample."""
-    return rec._prev[0] if rec._prev is not None else 0.0
+    return rec.reached
 
 
 def run_scene(path, *, variant=None, scheme=None, overrides=(), out=None,

@@ -72,7 +72,7 @@ class StructureSubsystem(StructurePorts, ClosedFormContacts, Subsystem):
         Options of that integrator (``beta``, ``gamma``, ``alpha``, ``rho_inf``).
     """
 
-    capabilities = frozenset({"rigid_impacts", "moving_ports", "modes"})
+    capabilities = frozenset({"rigid_impacts", "moving_ports", "modes", "compiled_loop"})
 
     def __init__(self, name, structure, basis, ports: dict, u0=None, v0=None, gravity=None,
                  contact_step: float = 1e-6, integrator: str = "exact",
@@ -166,6 +166,11 @@ class StructureSubsystem(StructurePorts, ClosedFormContacts, Subsystem):
     @property
     def natural_frequencies_hz(self) -> np.ndarray:
         return self.omega / (2 * math.pi)
+
+    def closed_contact_step(self) -> float:
+        """``contact_step`` [s]: the RK4 that steps every kept mode while a
+        hosted contact is closed takes steps no longer than this."""
+        return self._rk4.max_step
 
     # ----------------------------------------------------------- dynamics
     def derivatives(self, t, x, u):
@@ -310,6 +315,12 @@ class StructureSubsystem(StructurePorts, ClosedFormContacts, Subsystem):
             self._kernel = self._build_kernel() or False
         return self._kernel or None
 
+    def compiled_loop_refusal(self) -> str | None:
+        """Why the compiled macro loop cannot take this side (words that
+        follow its name), or None: its compiled kernel must step it."""
+        return None if self._compiled_step(None) is not None else \
+            "is not stepped by its compiled kernel"
+
     def _build_kernel(self):
         free = not self._embedded and self._ts is None and not np.any(self.modal_damping)
         if not (self._closed_form or free):
@@ -361,7 +372,7 @@ class StructureSubsystem(StructurePorts, ClosedFormContacts, Subsystem):
         kernel = self._compiled_step(inputs)
         if kernel is not None and kernel.set_step(
                 t, h, None if inputs is None else inputs.coeffs,
-                [(e.t0, e.h, e.motion, e._dmotion) for e in self._embedded]):
+                [(e.t0, e.h, e.motion, e.velocity_coeffs) for e in self._embedded]):
             self.port_moments = pm = np.zeros((3, self.n_ports), complex)
             if not self._embedded:
                 kernel.step_free(self.x, pm.view(float))

@@ -60,7 +60,7 @@ class MultibodySubsystem(SampledSteps, TreeFaceMixin, CompiledFace, Subsystem):
     """
 
     capabilities = frozenset({"rigid_impacts", "impact_watch", "connections", "skeleton",
-                              "sampled_steps"})
+                              "sampled_steps", "compiled_loop"})
 
     def __init__(self, name: str, model: TreeModel, q0, dq0, ports: dict,
                  gravity=None, integrator: TimeStepper | None = None,

@@ -206,7 +206,21 @@ class TreeFaceMixin:
             return None
         return kernel.face()
 class CompiledFace:
-    """:meth:`compiled_side` of :class:`cosim.sides.multibody.MultibodySubsystem`."""
+    """:meth:`compiled_loop_refusal` and :meth:`compiled_side` of
+    :class:`cosim.sides.multibody.MultibodySubsystem`."""
+
+    def compiled_loop_refusal(self) -> str | None:
+        """Why the compiled macro loop cannot take this side (words that
+        follow its name), or None: its kernel must step it, with RK4, and
+        no rigid contact may be embedded here."""
+        if self.kernel != "compiled":
+            return ("is not stepped by its compiled kernel (a user's law, drive or "
+                    "integrator, or a grasp)")
+        if type(self.integrator) is not RK4:
+            return f"is integrated by {type(self.integrator).__name__}, not RK4"
+        if any(e.law.rigid for e in self._embedded):
+            return "has a rigid contact (its impacts are resolved in Python)"
+        return None
 
     def compiled_side(self):
         """The compiled kernel, whose ``side_face()`` is its C face

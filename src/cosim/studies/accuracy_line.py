@@ -1,7 +1,14 @@
-"""The terminal's line of a run's error estimate (:mod:`cosim.studies.estimate`)."""
+"""The terminal's line of a run's error estimate (:mod:`cosim.studies.estimate`),
+and the estimate's word for a run where no companion runs (:data:`BLIND`, which
+the estimate writes and this line reads: ``cosim.studies.estimate.BLIND``)."""
 from __future__ import annotations
 
-__all__ = ["accuracy_text", "number"]
+__all__ = ["accuracy_text", "number", "BLIND"]
+
+#: why no companion runs where nothing it gives could be read
+BLIND = ("no companion: every contact that closed (the strike among them) lies past the "
+         "asymptotic range at the run's own step, or is stepped by a side that keeps its "
+         "step in the companions, so nothing they give could be read")
 
 
 def _pct(x: float) -> str:
@@ -38,8 +45,6 @@ def accuracy_text(acc: dict) -> str:
     measured order, or said to be a bound), no number for one that is not,
     and what was left out and why (the first reason, the rest in
     summary.json)."""
-    from cosim.studies.estimate import BLIND
-
     if acc["companion"].get("message") == BLIND:
         why = [w for w in acc["why"] if w != BLIND] or [BLIND]
         more = f"; {len(why) - 1} more in summary.json" if len(why) > 1 else ""

@@ -79,7 +79,7 @@ import warnings
 
 import numpy as np
 
-from cosim.studies.accuracy_line import accuracy_text
+from cosim.studies.accuracy_line import BLIND, accuracy_text
 from cosim.studies.companion import (ASYMPTOTIC_OMEGA_H, OMEGA_H_MAX, UNSEEN_OMEGA_H, built,
                                      coarsened, exchanged_omega_h, ladder_plan)
 from cosim.studies.ladder import judge
@@ -119,11 +119,6 @@ _CONTACT_QUANTITIES = ("peak_penetration", "impulse", "t_on", "t_off")
 
 #: where the exit rates are read when no contact releases
 END = "end of the run"
-
-#: why no companion runs where nothing it gives could be read
-BLIND = ("no companion: every contact that closed (the strike among them) lies past the "
-         "asymptotic range at the run's own step, or is stepped by a side that keeps its "
-         "step in the companions, so nothing they give could be read")
 
 
 def _first(c: dict, i: int) -> float:

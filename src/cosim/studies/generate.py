@@ -133,8 +133,7 @@ def _probe(table: dict, n: np.ndarray, gravity: float | None) -> dict:
     port = list(sub.port_names).index("hit")
     pos = sub.outputs(sub.t, sub.x)[0][port]
     # the port's row of the mass-normalised modes (what port_mobility sums)
-    c = float(np.asarray(n, float) @ sub._dir)
-    row, omega = c * np.asarray(sub._R[port], float), np.asarray(sub.omega, float)
+    row, omega = sub.port_participation(port, n), np.asarray(sub.omega, float)
     elastic = omega > 1e-6 * omega.max()
     return {"mobility": sub.port_mobility(port, n), "position": np.asarray(pos, float),
             "compliance": float(np.sum((row[elastic] / omega[elastic]) ** 2)),

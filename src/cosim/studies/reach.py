@@ -18,6 +18,7 @@ import math
 
 from cosim.core.schemes.base import MIN_SOLVER_RTOL
 from cosim.studies.companion import contact_omega
+from cosim.studies.error_model import MONOLITHIC_MODEL, SAFETY, _bound, _params
 
 __all__ = ["DOUBLE_PRECISION_FLOOR", "MIN_RTOL", "reachable", "refusal", "check_omega"]
 
@@ -48,7 +49,6 @@ def reachable(k, schemes) -> float:
     :data:`~cosim.studies.choose.SAFETY`, and never below
     :data:`DOUBLE_PRECISION_FLOOR`.  A step's cost (``guard.max_steps``) is
     not counted here: the pre-flight check refuses a step too short for it."""
-    from cosim.studies.choose import MONOLITHIC_MODEL, SAFETY, _bound, _params
     best = math.inf
     for s in schemes:
         if s == "monolithic":

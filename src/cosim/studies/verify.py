@@ -137,7 +137,7 @@ def reference_step(cases: Path, variant: str, scheme: str, placement: str) -> fl
     k, cd = stiffest_normal(ln)
     if placement == "coupler" and sch.explicit:
         return preflight.largest_safe_step(m, k, cd, 1e-3, sch.extrapolation_order,
-                                           sch.max_energy_gain, sch._partner_first(system, c))
+                                           sch.max_energy_gain, sch.partner_first(system, c))
     return 0.1 * math.pi / math.sqrt(k / m)
 
 

@@ -97,6 +97,10 @@ class CouplingScheme(ABC):
     #: option name -> Option; the scene loader validates them.
     options: ClassVar[dict] = {}
     explicit: ClassVar[bool] = False
+    #: whether the compiled macro loop (:mod:`cosim.core.schemes.driver`) knows
+    #: this class's algorithm; read from the class itself, never inherited (a
+    #: subclass may change the algorithm): Jacobi and Gauss-Seidel declare it
+    compiled_loop: ClassVar[bool] = False
     #: counters so far, kept as a run goes (a run that stops early reports them)
     n_windows: int = 0
     n_iterations: int = 0
@@ -213,6 +217,12 @@ class CoSimulationScheme(InputExtrapolation, CouplingScheme):
 
     def _partner_first(self, system, c) -> bool:
         return False
+
+    def partner_first(self, system, c) -> bool:
+        """Whether contact ``c``'s partner side takes its step first under this
+        scheme (:func:`cosim.core.preflight.partner_first`): what the
+        pre-flight check passes on as ``partner_first``."""
+        return self._partner_first(system, c)
 
     @abstractmethod
     def advance(self, system, t: float, h: float, ratio: float) -> np.ndarray:

@@ -59,26 +59,15 @@ def compiled_driver():
 
 
 def _side_refusal(sub) -> str | None:
-    """Why side ``sub`` cannot be stepped by the compiled loop, or None."""
-    from cosim.core.ode import RK4
+    """Why side ``sub`` cannot be stepped by the compiled loop, or None: a side
+    that declares ``compiled_loop`` says why itself
+    (:meth:`compiled_loop_refusal`); no other side is."""
     name = f"side `{sub.name}`"
+    if "compiled_loop" in sub.capabilities:
+        why = sub.compiled_loop_refusal()
+        return None if why is None else f"{name} {why}"
     if sub.rigid:
-        if type(sub).__name__ == "RigidReference":
-            return None
         return f"{name} is a rigid {type(sub).__name__}"
-    if hasattr(sub, "_closed_end") and hasattr(sub, "_compiled_step"):      # a structure
-        if sub._compiled_step(None) is None:
-            return f"{name} is not stepped by its compiled kernel"
-        return None
-    if hasattr(sub, "_kernel_steps") and hasattr(sub, "integrator"):          # a multibody tree
-        if sub.kernel != "compiled":
-            return (f"{name} is not stepped by its compiled kernel (a user's law, drive or "
-                    f"integrator, or a grasp)")
-        if type(sub.integrator) is not RK4:
-            return f"{name} is integrated by {type(sub.integrator).__name__}, not RK4"
-        if any(e.law.rigid for e in sub._embedded):
-            return f"{name} has a rigid contact (its impacts are resolved in Python)"
-        return None
     return f"{name} ({type(sub).__name__}) has no compiled kernel"
 
 
@@ -93,12 +82,11 @@ def advance_replaced(scheme) -> bool:
 
 def refusal(scheme, system) -> str | None:
     """Why this run takes the Python loop, or None when it takes the compiled one."""
-    from cosim.core.schemes.explicit import GaussSeidel, Jacobi
     if driver_choice() == "python":
         return f"the Python loop was asked for (`{DRIVER_ENV}=python`)"
     if os.environ.get("COSIM_KERNEL", "compiled").strip().lower() == "numpy":
         return "the numpy reference was asked for (`COSIM_KERNEL=numpy`)"
-    if type(scheme) not in (Jacobi, GaussSeidel):
+    if not vars(type(scheme)).get("compiled_loop", False):      # Jacobi, Gauss-Seidel
         return f"scheme `{scheme.name}` is not an explicit scheme the compiled loop knows"
     if advance_replaced(scheme):
         return f"the `advance` of scheme `{scheme.name}` is replaced"

@@ -18,6 +18,7 @@ class Jacobi(CoSimulationScheme):
 
     name: ClassVar[str] = "jacobi"
     explicit: ClassVar[bool] = True
+    compiled_loop: ClassVar[bool] = True
 
     def advance(self, system, t, h, ratio):
         coeffs = self._extrapolated(ratio)
@@ -42,6 +43,7 @@ class GaussSeidel(CoSimulationScheme):
 
     name: ClassVar[str] = "gauss_seidel"
     explicit: ClassVar[bool] = True
+    compiled_loop: ClassVar[bool] = True
     options: ClassVar[dict] = {**CoSimulationScheme.options, "sequence": Option(
         list, None, lambda v: all(isinstance(x, str) for x in v), "a list of subsystem names")}
 
