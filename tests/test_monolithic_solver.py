@@ -55,6 +55,26 @@ def test_own_pairs_meet_the_spring_drop_closed_form(method, variant):
     assert abs(v / (e_ref * V0) - 1) < ALLOWED
 
 
+@pytest.mark.parametrize("method", ["DOP853", "RK45", "RK23"])
+def test_a_contact_touching_at_the_start_closes_at_once(method):
+    """spring_drop started at the wall (penetration exactly zero, moving in):
+    the contact closes at t = 0 and lasts pi sqrt(m/k), whichever solver
+    runs (the own pairs take a switch that starts on its boundary as on the
+    side it leaves, as scipy's solve_ivp does)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        sc = cosim.load_scene(CASES / "spring_drop.toml", "undamped",
+                              [f'scheme.method="{method}"',
+                               "subsystems.body.bodies.mass.joint.q0=0.0"], "monolithic")
+        res = cosim.simulate(sc, estimate=False)
+    c = res.summary["contacts"]["wall"]
+    (t_on, t_off), = c["intervals"]
+    assert t_on < 1e-12
+    allowed = ALLOWED if method != "RK23" else 1e3 * ALLOWED   # scipy's RK23: rtol 1e-10
+    assert abs((t_off - t_on) / linear_contact(M, K) - 1) < allowed
+    assert abs(res.summary["final_state"]["body"]["x"]["dq"] / V0 - 1) < allowed
+
+
 def test_own_dop853_agrees_with_scipys(monkeypatch):
     """three_mass (rtol 1e-9 in its file): 15 contact intervals, their
     switches and peaks located on the dense output.  Each solution is
