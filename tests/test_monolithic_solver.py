@@ -103,3 +103,18 @@ def test_a_monolithic_dop853_run_imports_no_scipy_integrate(tmp_path):
     assert "cosim.core.schemes.monolithic" in mods and "cosim.core.embedded_rk" in mods
     assert not packages(mods, ("scipy",)), packages(mods, ("scipy",))
 
+
+
+@pytest.mark.parametrize("method", ["DOP853", "RK23"])
+def test_a_solver_failure_comes_back_as_status_and_message(method):
+    """A right-hand side that turns non-finite: the segment stops with
+    status -1 and a message saying where, on the own pair and on scipy's
+    (``Monolithic.run`` raises it as a CouplingError naming the time)."""
+    def rhs(t, y):
+        return np.array([np.nan if t > 0.5 else 1.0])
+
+    segment = monolithic.Monolithic(method=method)._segment_solver(rhs, 1.0)
+    sol = segment(0.0, np.zeros(1), lambda t, y: np.empty(0), np.empty(0), np.empty(0, bool),
+                  np.empty(0))
+    assert sol.status == -1 and sol.message
+    assert 0.0 < sol.t <= 0.5 + 1e-9
