@@ -10,7 +10,6 @@ tolerance: each step's local error is held below ``rtol`` of the state, and
 a run of a few hundred steps and a few dozen located events accumulates
 some hundreds of them at most.
 """
-import math
 import warnings
 
 import numpy as np
