@@ -211,3 +211,22 @@ def test_a_right_hand_side_turning_nan_fails_where_it_turns(name):
 def test_an_empty_interval_returns_the_start():
     r = solve("DOP853", lambda t, y: -y, 1.0, [2.0], 1.0, rtol=1e-8, atol=1e-8)
     assert r.status == 0 and r.t == 1.0 and r.y.tolist() == [2.0] and r.nfev == 1
+
+
+def test_a_terminal_event_zero_at_the_start_counts_on_the_side_its_direction_leaves():
+    """``g = y`` with ``y(0) = 0`` and ``y' = 1``: a rising terminal event
+    (the start counts as negative) is found at once, a falling one (the
+    start counts as positive) is not; ``y' = -1`` the other way round.  A
+    contact that touches where the run starts and goes on closing is not
+    lost (the monolithic scheme's rod_impact).  Non-terminal: see
+    test_non_terminal_events_of_either_direction."""
+    for slope, direction, found in ((1.0, 1.0, True), (1.0, -1.0, False),
+                                    (-1.0, -1.0, True), (-1.0, 1.0, False)):
+        ev = Events(lambda t, y: np.array([y[0]]), [direction], [True])
+        res = solve("DOP853", lambda t, y: np.array([slope]), 0.0, [0.0], 1.0,
+                    rtol=1e-10, atol=1e-12, events=ev)
+        assert (res.status == 1) is found, (slope, direction)
+        if found:
+            assert 0.0 < res.t < 1e-12 and res.y[0] * slope >= 0.0
+        else:
+            assert res.t == 1.0

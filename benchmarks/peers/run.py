@@ -28,8 +28,9 @@ The peers are small scripts run as subprocesses, each printing a JSON line:
 
 - ``cosim``: ``cosim run cases/three_mass.toml --variant f100`` with the
   scene's default scheme (``cosim_three_mass.py``);
-- ``paper_rk45``: the same command with the monolithic scheme under scipy's
-  RK45, max step 1e-4 s, rtol 1e-4, atol 1e-6 (the bench's ``paper_rk45``
+- ``paper_rk45``: the same command with the monolithic scheme under the
+  Dormand-Prince 5(4) pair (RK45; cosim's own, :mod:`cosim.core.embedded_rk`,
+  since issue 39; scipy's before), max step 1e-4 s, rtol 1e-4, atol 1e-6 (the bench's ``paper_rk45``
   row, :data:`cosim.studies.bench.PAPER_RK45`);
 - ``exudyn``: this directory's own Exudyn model (``exudyn_three_mass.py``),
   which needs ``pip install ".[peers]"``; it is left out, with a note, when
@@ -247,7 +248,7 @@ def method(peer: str, info: dict) -> str:
         h = info.get("step")
         return (f"MuJoCo {info.get('version')} {info.get('integrator')}"
                 + ("" if h is None else f", h = {h:g} s"))
-    return "cosim monolithic, scipy RK45"
+    return "cosim monolithic, RK45"
 
 
 def measure(peer: str, work: Path, repeat: int, t_end: float | None, ref: dict) -> dict:

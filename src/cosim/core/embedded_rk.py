@@ -31,6 +31,7 @@ from cosim.core import rk_tableaux
 __all__ = ["Pair", "PAIRS", "Events", "Result", "solve", "single_step", "locate_root"]
 
 _EPS = np.finfo(float).eps
+_TINY = np.finfo(float).tiny
 SAFETY = 0.9
 
 
@@ -118,6 +119,12 @@ class Events:
     direction : (m,) array
         ``+1``: only rising crossings (negative to non-negative) count;
         ``-1``: only falling ones (positive to non-positive); ``0``: both.
+        A terminal component exactly zero at the start of the integration
+        counts as on the side its direction leaves (negative for ``+1``,
+        positive for ``-1``; scipy's ``solve_ivp`` finds such a crossing
+        too): a switch that starts on its boundary and goes on is found at
+        once.  A non-terminal one starting at zero (a maximum where the
+        run starts) is no crossing.
     terminal : (m,) bool array
         Whether an event of that component ends the integration.
     """
@@ -295,8 +302,13 @@ def solve(pair: Pair | str, f, t0: float, y0, t1: float, *, rtol: float, atol: f
     res = Result()
     g = None
     if events is not None:
-        g = np.asarray(events.fun(t, y), float)
+        g = np.array(events.fun(t, y), float)
         m = g.size
+        # a terminal component exactly zero at the start lies on the side
+        # its direction leaves: a run started where a contact touches sees
+        # it close if it goes on
+        on = (g == 0.0) & (events.direction != 0.0) & events.terminal
+        g[on] = -events.direction[on] * _TINY
         rising = events.direction >= 0
         falling = events.direction <= 0
         res.t_events, res.y_events = [[] for _ in range(m)], [[] for _ in range(m)]
@@ -359,7 +371,7 @@ def solve(pair: Pair | str, f, t0: float, y0, t1: float, *, rtol: float, atol: f
         t_stop, y_stop = t_new, y_new
         dense = False
         if g is not None:
-            g_new = np.asarray(events.fun(t_new, y_new), float)
+            g_new = np.array(events.fun(t_new, y_new), float)
             up = rising & (g < 0.0) & (g_new >= 0.0)
             down = falling & (g > 0.0) & (g_new <= 0.0)
             active = np.flatnonzero(up | down)

@@ -26,9 +26,9 @@ __all__ = ["contact_time", "step_map", "contact_energy_gain", "is_safe", "larges
            "advised_step",
            "partner_first", "stiffest_normal", "EXPLICIT_STABILITY", "stiffest_mode"]
 
-#: the explicit Runge-Kutta methods of :func:`scipy.integrate.solve_ivp` (the
-#: monolithic scheme's) and of :mod:`cosim.core.embedded_rk` (a robot's ``rk45``
-#: and ``dop853``: the same Butcher tables, so the same regions) ->
+#: the explicit Runge-Kutta methods of the monolithic scheme (RK45 and DOP853 by
+#: :mod:`cosim.core.embedded_rk`, as a robot's ``rk45`` and ``dop853``; RK23 by
+#: :func:`scipy.integrate.solve_ivp`: the same Butcher tables, so the same regions) ->
 #: the farthest reach ``h |lambda|`` of their stability region along the real
 #: or the imaginary axis, whichever is longer (from their Butcher tables:
 #: RK23 2.51 real, 1.73 imaginary; RK45 3.31 real, 1.00 imaginary; DOP853

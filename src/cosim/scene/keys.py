@@ -65,7 +65,7 @@ SCHEME_OPTIONS = {
     "acceleration": "how the iteration is accelerated: Aitken or interface quasi-Newton",
     "reuse": "macro steps whose quasi-Newton pairs are reused (iqn_ils)",
     "filter_tolerance": "QR filter of the quasi-Newton pairs (iqn_ils)",
-    "method": "scipy's solve_ivp method of the monolithic reference",
+    "method": "the monolithic reference's method (DOP853, RK45: cosim's own pairs; RK23, Radau, BDF, LSODA: scipy's solve_ivp)",
     "rtol": "relative tolerance of the monolithic reference",
     "atol": "absolute tolerance of the monolithic reference",
     "max_step": "largest step of the monolithic reference",

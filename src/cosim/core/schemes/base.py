@@ -52,7 +52,9 @@ RELATIVE_RULE = (f">= {MIN_RELATIVE_TOLERANCE:.3g} (relative; float64 resolves n
 
 #: the smallest ``rtol`` scipy's ``solve_ivp`` honours: it raises a smaller
 #: one to ``100 eps`` (with a warning) and runs at that, so a scene asking
-#: less would be run at another tolerance than it says
+#: less would be run at another tolerance than it says (the rule holds for
+#: every method, cosim's own pairs included, so a tolerance means the same
+#: whichever solver runs it)
 MIN_SOLVER_RTOL = 100 * MIN_RELATIVE_TOLERANCE
 
 

@@ -98,11 +98,29 @@ def _compiled_rhs(system, active):
 
 
 _METHODS = ("RK45", "RK23", "DOP853", "Radau", "BDF", "LSODA")
+#: the methods :mod:`cosim.core.embedded_rk` integrates (scipy's solve_ivp the others)
+_PAIRS = ("RK45", "DOP853")
+
+
+class _Segment:
+    """One solver run: where it stopped (``t``, ``y``; ``status`` 0 at the
+    end, 1 on a terminal event, -1 failed, with ``message``), its events'
+    times and states per event function, and ``at(ts)``: the states (rows)
+    at the output times ``ts`` asked for, the first of those before ``t``."""
+
+    __slots__ = ("t", "y", "status", "message", "t_events", "y_events", "at")
+
+    def __init__(self, t, y, status, message, t_events, y_events, at):
+        self.t, self.y, self.status, self.message = t, y, status, message
+        self.t_events, self.y_events, self.at = t_events, y_events, at
 
 
 class Monolithic(CouplingScheme):
-    """All subsystems' model-exchange faces in one ODE, solved by
-    :func:`scipy.integrate.solve_ivp`.
+    """All subsystems' model-exchange faces in one ODE, solved by cosim's
+    own embedded Runge-Kutta pairs (:func:`cosim.core.embedded_rk.solve`)
+    for ``DOP853`` (the default) and ``RK45``, and by
+    :func:`scipy.integrate.solve_ivp` for ``RK23``, ``Radau``, ``BDF`` and
+    ``LSODA`` (scipy is imported only then).
 
     Every contact switch (onset, release, including a Kelvin-Voigt force
     reaching zero before the penetration does) is an event located on the
@@ -132,8 +150,6 @@ class Monolithic(CouplingScheme):
     compiled: bool = False
 
     def run(self, system, t_end, recorder):
-        from scipy.integrate import solve_ivp
-
         subs = system.subsystems
         off = system.stacked()
         n_x = int(off[-1])
@@ -150,40 +166,31 @@ class Monolithic(CouplingScheme):
         self.compiled = stacked is not None
         rhs = py_rhs if stacked is None else stacked.rhs
 
-        def make_switch(c):
-            if stacked is not None:
-                def ev(t, y):
-                    return float(stacked.events(y)[c])
-                ev.terminal = True
-                return ev
-
-            def ev(t, y):
-                _, d, dd, _ = contact_state(y)
-                if conns is not None and system.links[c].connection is not None:
-                    return float(conns.switch(c, d[c], dd[c]))   # none while grasped
-                return float(laws[c].switch(d[c], dd[c]))
-            ev.terminal = True
-            return ev
-
         t_next = [math.inf]                 # the next time trigger of a connection
+
+        def contact_events(t, y):
+            """Per contact its switch value, then its penetration rate: a
+            new (2 nc,) array (the compiled object's own is overwritten by
+            its next call, and the solver keeps the last step's values)."""
+            if stacked is not None:
+                return np.array(stacked.events(y))
+            _, d, dd, _ = contact_state(y)
+            g = np.empty(2 * nc)
+            for c in range(nc):
+                if conns is not None and system.links[c].connection is not None:
+                    g[c] = float(conns.switch(c, d[c], dd[c]))   # none while grasped
+                else:
+                    g[c] = float(laws[c].switch(d[c], dd[c]))
+                g[nc + c] = float(dd[c])
+            return g
 
         def timer(t, y):
             return 1.0 if math.isinf(t_next[0]) else t - t_next[0]
-        timer.terminal = True
-        timer.direction = 1.0
 
-        def make_peak(c):
-            def ev(t, y):
-                if stacked is not None:
-                    return float(stacked.events(y)[nc + c])
-                _, d, dd, _ = contact_state(y)
-                return float(dd[c])
-            ev.terminal = False
-            ev.direction = -1.0
-            return ev
+        def all_events(t, y):
+            return np.append(contact_events(t, y), timer(t, y))
 
-        switches = [make_switch(c) for c in range(nc)]
-        peaks = [make_peak(c) for c in range(nc)]
+        segment = self._segment_solver(rhs, t_end)
         y = np.concatenate([s.x for s in subs] + [np.zeros(3 * nc + 2)])
         dt_out = self.output_interval or t_end / 1000.0
 
@@ -206,36 +213,39 @@ class Monolithic(CouplingScheme):
         n_segments = self.n_windows = 0
         next_out = dt_out
         while t < t_end * (1 - 1e-14):
-            for c, ev in enumerate(switches):
-                ev.direction = -1.0 if active[c] else 1.0   # a rigid one is never active
-            extra = []
+            # a switch away from the contact's branch (a rigid one is never
+            # active), each peak a falling rate, a connection's time trigger
+            direction = np.concatenate((np.where(active, -1.0, 1.0), -np.ones(nc)))
+            terminal = np.arange(2 * nc) < nc
+            timed = False
             if conns is not None:
                 if self._switch_modes(system, t, y, contact_state, active, laws, False):
                     record(t, y)
                 t_next[0] = conns.next_time(t)
-                extra = [timer]
-            sol = solve_ivp(rhs, (t, t_end), y, method=self.method, rtol=self.rtol,
-                            atol=self.atol, max_step=self.max_step, dense_output=True,
-                            events=switches + peaks + extra)
+                timed = True
+                direction, terminal = np.append(direction, 1.0), np.append(terminal, True)
+            sol = segment(t, y, all_events if timed else contact_events, direction, terminal,
+                          np.arange(next_out, t_end, dt_out))
             n_segments += 1
             self.n_windows = n_segments
             if sol.status == -1:
-                raise CouplingError(f"monolithic solver failed at t = {sol.t[-1]:.6g} s: "
+                raise CouplingError(f"monolithic solver failed at t = {sol.t:.6g} s: "
                                     f"{sol.message}")
-            t_seg = sol.t[-1]
-            samples = [(tp, None) for tp in np.arange(next_out, t_seg, dt_out)
-                       if tp < t_seg - 1e-15]
+            t_seg = sol.t
+            out_t = np.arange(next_out, t_seg, dt_out)
+            out_t = out_t[out_t < t_seg - 1e-15]
+            samples = [(tp, yp) for tp, yp in zip(out_t, sol.at(out_t))]
             for c in range(nc):
                 for tp, yp in zip(sol.t_events[nc + c], sol.y_events[nc + c]):
                     if active[c]:
                         samples.append((tp, yp))
             samples.sort(key=lambda s: s[0])
             for tp, yp in samples:
-                record(tp, sol.sol(tp) if yp is None else yp)
+                record(tp, yp)
             next_out = (math.floor(t_seg / dt_out + 1e-9) + 1) * dt_out
-            y = sol.y[:, -1].copy()
+            y = np.array(sol.y)
             t = t_seg
-            if sol.status == 1 and extra and len(sol.t_events[2 * nc]) and not any(
+            if sol.status == 1 and timed and len(sol.t_events[2 * nc]) and not any(
                     len(sol.t_events[i]) for i in range(nc)):       # a time trigger
                 self._switch_modes(system, t, y, contact_state, active, laws, False)
                 record(t, y)
@@ -255,6 +265,43 @@ class Monolithic(CouplingScheme):
             elif t >= t_end * (1 - 1e-14):
                 record(t, y)
         return {"n_windows": n_segments, "n_iterations": 0, "n_rejected": 0}
+
+    def _segment_solver(self, rhs, t_end):
+        """``segment(t, y, g, direction, terminal, t_eval)``: one run of the
+        solver from ``(t, y)`` towards ``t_end``, with the event functions
+        ``g(t, y)`` (a vector; per component its ``direction`` and whether it
+        is ``terminal``), a :class:`_Segment`.  The explicit pairs (``RK45``,
+        ``DOP853``) by :func:`cosim.core.embedded_rk.solve`, evaluating every
+        event in one call; the others by :func:`scipy.integrate.solve_ivp`,
+        imported only for them."""
+        opts = {"rtol": self.rtol, "atol": self.atol, "max_step": self.max_step}
+        if self.method in _PAIRS:
+            from cosim.core.embedded_rk import PAIRS, Events, solve
+            pair = PAIRS[self.method]
+
+            def segment(t, y, g, direction, terminal, t_eval):
+                events = Events(g, direction, terminal) if len(direction) else None
+                res = solve(pair, rhs, t, y, t_end, events=events, t_eval=t_eval, **opts)
+                return _Segment(res.t, res.y, res.status, res.message, res.t_events,
+                                res.y_events, lambda ts: res.y_eval[:len(ts)])
+            return segment
+
+        from scipy.integrate import solve_ivp
+
+        def component(g, j, direction, terminal):
+            def ev(t, y):
+                return float(g(t, y)[j])
+            ev.direction, ev.terminal = float(direction), bool(terminal)
+            return ev
+
+        def segment(t, y, g, direction, terminal, t_eval):
+            events = [component(g, j, direction[j], terminal[j]) for j in range(len(direction))]
+            sol = solve_ivp(rhs, (t, t_end), y, method=self.method, dense_output=True,
+                            events=events, **opts)
+            return _Segment(float(sol.t[-1]), sol.y[:, -1], sol.status, sol.message,
+                            sol.t_events, sol.y_events,
+                            lambda ts: sol.sol(ts).T if len(ts) else ())
+        return segment
 
     @staticmethod
     def _switch_modes(system, t, y, contact_state, active, laws, touched) -> bool:
