@@ -269,10 +269,13 @@ H20 = ("scheme.macro_step=2e-5", "scheme.contact_step=2e-5")
 REF_CLAIMS = _claims(S, "cosim run cases/beam_impact.toml [--scheme monolithic]", [
     ("count", "C's 2 contacts", 2, 0),
     ("peak", "peak −0.001 %", -0.001, 0.0005),
-    # (the short copy against the full scene: to 5e-4 %, a tenth of what the
-    # exit velocity moved when onsets began to be landed on)
-    ("exit", "the arm's exit velocity −0.0003 %", -0.0003, 0.0005),
+    # the full scene's (measured -0.0026 %); the short copy (12 modes, stopped
+    # at 0.125 s) measures -0.0003 %: it holds the page's value as a bound only
+    ("exit", "the arm's exit velocity −0.003 %", -0.003, 0.0005),
 ])
+#: the claims the short copy reproduces as a bound only (its error is the
+#: smaller; the digits are the full scene's, held by the slow test below)
+SHORT_BOUNDS = ("exit",)
 REF_BOUNDS = {
     "coupler20": Claim(S, "`implicit` with C a coupler at 20 µs: within 0.02 %",
                        "--scheme implicit --set contacts.C.placement=\"coupler\" "
@@ -322,7 +325,12 @@ def reference_full():
 
 @pytest.mark.parametrize("key", REF_CLAIMS)
 def test_beam_impact_against_its_reference(reference_short, key):
-    assert_reproduced(REF_CLAIMS[key], reference_short[key])
+    claim = REF_CLAIMS[key]
+    if key in SHORT_BOUNDS:
+        assert_printed(claim)
+        assert abs(reference_short[key]) <= abs(claim.value), (claim.id, reference_short[key])
+        return
+    assert_reproduced(claim, reference_short[key])
 
 
 @pytest.mark.parametrize("key", REF_BOUNDS)
