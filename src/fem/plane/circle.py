@@ -91,23 +91,30 @@ class CircleContact:
         The boundary groups the circle may touch (all the boundary when
         not given).
     gauss : int
-        Gauss-Legendre points per boundary segment.
+        Gauss-Legendre points per part of a segment.
+    parts : int
+        Equal parts each segment is cut into for the quadrature: the
+        points must resolve the contact's width, ``2 sqrt(2 R g_max)`` for a
+        small circle on a flat face.
     """
 
     def __init__(self, structure, radius: float, stiffness: float, basis=None, groups=None,
-                 gauss: int = 4):
+                 gauss: int = 4, parts: int = 1):
         radius, stiffness = float(radius), float(stiffness)
         if not (np.isfinite(radius) and radius > 0.0):
             raise ValueError(f"`radius` must be > 0 m and finite, got {radius!r}")
         if not (np.isfinite(stiffness) and stiffness > 0.0):
             raise ValueError(f"`stiffness` must be > 0 Pa/m and finite, got {stiffness!r}")
-        if int(gauss) != gauss or not 1 <= gauss <= 20:
+        if not isinstance(gauss, (int, np.integer)) or not 1 <= gauss <= 20:
             raise ValueError(f"`gauss` must be an integer in [1, 20], got {gauss!r}")
+        if not isinstance(parts, (int, np.integer)) or parts < 1:
+            raise ValueError(f"`parts` must be an integer >= 1, got {parts!r}")
         self.structure, self.radius, self.stiffness = structure, radius, stiffness
         ends, scalar = structure.boundary_segments(groups)
         p = structure.mesh.points
         xi, w = np.polynomial.legendre.leggauss(int(gauss))
-        xi, w = 0.5 * (xi + 1.0), 0.5 * w
+        xi = ((np.arange(int(parts))[:, None] + 0.5 * (xi + 1.0)) / parts).ravel()
+        w = np.tile(0.5 * w / parts, int(parts))
         shape = _trace(xi, scalar.shape[1] == 3)                  # (g, s)
         n_seg, n_g = ends.shape[0], xi.size
         length = np.hypot(*(p[ends[:, 1]] - p[ends[:, 0]]).T)     # reference [m]
