@@ -10,9 +10,11 @@ import pytest
 from scipy.sparse.linalg import spsolve
 
 import fem
+from documented import Claim, assert_printed, assert_reproduced
 from fem.plane import Plane, grid, rectangle
 from fem.plane.circle import CircleContact, hertz_cylinder
 
+S = "docs/structures.md"
 STEEL = dict(thickness=0.01, youngs_modulus=210e9, poisson_ratio=0.3, density=7850.0)
 E_STAR = STEEL["youngs_modulus"] / (1 - STEEL["poisson_ratio"] ** 2)
 
@@ -165,6 +167,16 @@ def test_a_cylinder_pressed_into_a_block_reaches_johnsons_p0():
     assert 11.5 < 2 * a / (2e-3 / 12) < 13.5
     assert abs(p_centre / p0 - 1) < 1e-2
     assert abs(half_width / a - 1) < 1e-2
+    cmd = "pytest tests/test_plane_circle.py"
+    for claim, measured in (
+            (Claim(S, "graded to 12.5 elements across the contact", cmd, 12.5, abs=0.05),
+             2 * a / (2e-3 / 12)),
+            (Claim(S, "Hertz pressure p0 for its load within 0.035 %", cmd, 0.035, abs=0.005),
+             100 * abs(p_centre / p0 - 1)),
+            (Claim(S, "the half-width within 0.13 %", cmd, 0.13, abs=0.005),
+             100 * abs(half_width / a - 1))):
+        assert_printed(claim)
+        assert_reproduced(claim, measured)
 
 
 def test_the_pressure_converges_with_the_mesh():
@@ -178,6 +190,12 @@ def test_the_pressure_converges_with_the_mesh():
                                              STEEL["poisson_ratio"])[1] - 1)
     assert abs(err[0]) > 1e-2, err
     assert abs(err[1]) < 1e-3 and abs(err[2]) < 1e-3, err
+    cmd = "pytest tests/test_plane_circle.py"
+    for claim, measured in (
+            (Claim(S, "falls from 1.9 % at 4 elements across", cmd, 1.9, abs=0.05), err[0]),
+            (Claim(S, "to 0.06 % at 8 and stays there", cmd, 0.06, abs=0.005), err[1])):
+        assert_printed(claim)
+        assert_reproduced(claim, 100 * abs(measured))
 
 
 def test_a_stiffer_penalty_leaves_less_winkler_softening():
@@ -190,3 +208,9 @@ def test_a_stiffer_penalty_leaves_less_winkler_softening():
         err.append(p_centre / hertz_cylinder(load, RADIUS, STEEL["youngs_modulus"],
                                              STEEL["poisson_ratio"])[1] - 1)
     assert err[0] < err[1] < 0 and abs(err[2]) < abs(err[1]) < abs(err[0]), err
+    printed = "lowers p0 by 8.7 %, 0.93 % and 0.05 %"
+    for value, tol, measured in ((8.7, 0.05, err[0]), (0.93, 0.005, err[1]),
+                                 (0.05, 0.005, err[2])):
+        claim = Claim(S, printed, "pytest tests/test_plane_circle.py", value, abs=tol)
+        assert_printed(claim)
+        assert_reproduced(claim, -100 * measured)
