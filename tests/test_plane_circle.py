@@ -45,12 +45,12 @@ def test_the_force_is_minus_the_energys_gradient(element):
     for _ in range(4):
         d = rng.standard_normal(st.n_dof)
         fd = (cc.evaluate(u + h * d, c)[0] - cc.evaluate(u - h * d, c)[0]) / (2 * h)
-        assert abs(-fd - force @ d) < 1e-6 * np.abs(force).sum() * np.abs(d).max()
+        assert abs(-fd - force @ d) < 1e-8 * np.abs(force).sum() * np.abs(d).max()  # 3e-10
     for i in range(2):              # the circle's force is -dV/dc
         e = np.zeros(2)
         e[i] = h
         fd = (cc.evaluate(u, c + e)[0] - cc.evaluate(u, c - e)[0]) / (2 * h)
-        assert abs(-fd - on_circle[i]) < 1e-6 * np.abs(on_circle).sum()
+        assert abs(-fd - on_circle[i]) < 1e-8 * np.abs(on_circle).sum()
     assert on_circle[1] > 0         # the body pushes the circle out
 
 

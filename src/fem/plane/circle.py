@@ -33,10 +33,13 @@ With a basis ``Phi`` (the kept modes, ``u = Phi q``) the same holds in the
 modal coordinates, with ``B_q Phi`` computed once: a step costs two dense
 products over the quadrature points, with no loop over them.
 
-The pressure is the Winkler layer's, so it converges to the elastic
-contact's (Hertz, for a cylinder on a half-space) as ``k a / E*`` grows
-(``a`` the contact's half-width); ``tests/test_plane_circle.py`` measures
-both limits.
+The pressure is the Winkler layer's, so it tends to the elastic contact's
+(Hertz, for a cylinder on a half-space) as ``k a / E*`` grows (``a`` the
+contact's half-width), and, spread over the boundary, it converges with
+the mesh (``tests/test_plane_circle.py``).  The quadrature points must
+resolve the contact's width (``parts``).  A circle much smaller than the
+modes' wavelengths acts as a point contact whose law is the circle's on a
+flat face (``tests/test_plane_circle_strike.py``).
 
 References
 ----------
