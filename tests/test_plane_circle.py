@@ -101,12 +101,21 @@ def test_a_circle_clear_of_the_body_does_nothing():
     (dict(radius=np.inf), "`radius` must be > 0 m"),
     (dict(stiffness=-1.0), "`stiffness` must be > 0 Pa/m"),
     (dict(gauss=0), "`gauss` must be an integer"),
+    (dict(parts=0), "`parts` must be an integer >= 1"),
 ])
 def test_bad_parameters_are_refused(kw, match):
     st = _plate()
     args = {"radius": 0.05, "stiffness": 1e13, **kw}
     with pytest.raises(ValueError, match=match):
         CircleContact(st, **args)
+
+
+def test_a_graded_grid_keeps_its_coordinates_and_groups():
+    mesh = grid([0.0, 0.1, 0.3], [-0.2, -0.05, 0.0], "quad")
+    assert sorted(set(mesh.points[:, 0])) == [0.0, 0.1, 0.3]
+    assert sorted(set(mesh.points[mesh.group("top").ravel(), 1])) == [0.0]
+    with pytest.raises(ValueError, match="must be increasing"):
+        grid([0.0, 0.0, 1.0], [0.0, 1.0])
 
 
 # -------------------------------------------------------- Johnson's cylinder
