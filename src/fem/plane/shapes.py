@@ -7,7 +7,7 @@ import numpy as np
 
 from .mesh import PlaneMesh
 
-__all__ = ["quad_region", "rectangle"]
+__all__ = ["quad_region", "rectangle", "grid"]
 
 
 def quad_region(corners, nx: int, ny: int, kind: str = "triangle",
@@ -48,3 +48,19 @@ def rectangle(length: float, height: float, nx: int, ny: int, kind: str = "trian
     """The rectangle ``[0, length] x [-height/2, height/2]`` (see :func:`quad_region`)."""
     h = 0.5 * height
     return quad_region([(0.0, -h), (length, -h), (length, h), (0.0, h)], nx, ny, kind, name)
+
+
+def grid(x, y, kind: str = "quad", name: str = "<grid>") -> PlaneMesh:
+    """The tensor-product mesh of the increasing coordinates ``x`` and ``y``
+    [m]: a rectangle graded as the coordinates are (finer under a contact),
+    with the groups of :func:`quad_region` (``bottom`` at ``y[0]``, ``top``
+    at ``y[-1]``, ``left`` at ``x[0]``, ``right`` at ``x[-1]``)."""
+    x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+    if x.ndim != 1 or y.ndim != 1 or x.size < 2 or y.size < 2 \
+            or not (np.all(np.diff(x) > 0) and np.all(np.diff(y) > 0)):
+        raise ValueError("`x` and `y` must be increasing arrays of two or more coordinates")
+    m = quad_region([(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)], x.size - 1, y.size - 1,
+                    kind, name)
+    i = np.rint(m.points[:, 0] * (x.size - 1)).astype(int)
+    j = np.rint(m.points[:, 1] * (y.size - 1)).astype(int)
+    return PlaneMesh(np.column_stack([x[i], y[j]]), m.cells, kind, m.groups, source=name)

@@ -192,6 +192,41 @@ class PlaneStructure(LinearStructure):
         """Arc length of the group [m]."""
         return float(self.chain(group)[1][-1])
 
+    def boundary_segments(self, groups=None):
+        """The segments of the body's boundary and the scalar DOFs of their traces.
+
+        Parameters
+        ----------
+        groups : iterable of str, optional
+            Boundary groups to take the segments of; all the boundary's
+            segments when not given.
+
+        Returns
+        -------
+        ends : ndarray of int, shape (k, 2)
+            The segments' end vertices.
+        scalar : ndarray of int, shape (k, 2) or (k, 3)
+            Scalar DOFs of each segment's trace: its two end vertices, then
+            its edge DOF for P2 and Q2 (at the segment's midpoint); DOF
+            ``2 i + c`` of the full numbering is component ``c`` of scalar
+            DOF ``i`` (:attr:`dof_map` gives its free index).
+        """
+        sk = self._skmesh
+        if groups is None:
+            facets = np.asarray(sk.boundary_facets(), dtype=np.int64)
+        else:
+            facets = np.unique(np.concatenate(
+                [self._facets(self.mesh.group(g)) for g in groups]))
+            if (sk.f2t[1, facets] >= 0).any():
+                raise MeshError(f"{self.mesh.source}: a group of {list(groups)!r} runs inside "
+                                f"the body; a contact needs boundary curves")
+        ends = np.ascontiguousarray(sk.facets[:, facets].T, dtype=np.int64)
+        if self.plane.element in ("P2", "Q2"):
+            scalar = np.column_stack([ends, self._sbasis.facet_dofs[0, facets]])
+        else:
+            scalar = ends.copy()
+        return ends, scalar
+
     # -- points ---------------------------------------------------------------
     def boundary_point(self, group: str, s: float | None) -> BoundaryPoint:
         """The point at arc length ``s`` [m] along ``group`` (see :class:`BoundaryPoint`).
