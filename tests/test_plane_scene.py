@@ -241,9 +241,6 @@ def test_groups_and_points_are_checked_against_the_mesh(tmp_path):
     _refused(path, "subsystems.plate.points.hit.boundary", "no boundary group 'side'")
     path = _strike(tmp_path, **{"s = 0.02": "s = 0.3"})
     _refused(path, "subsystems.plate.points.hit.s", "[0, 0.2] m along `face`")
-    path = _strike(tmp_path, **{"points = { hit = {": "points = { side = { boundary = "
-                                "\"tip\", s = 0.01 }, hit = {"})
-    _refused(path, "subsystems.plate.points", "share their normal")
 
 
 @pytest.mark.filterwarnings("ignore:.*is a point contact on the plane body")

@@ -4,9 +4,9 @@ static correction of its contacts with the pre-flight rules that go with
 it.  It imports nothing of the scene package but its error.
 
 A port of a plane body moves along the outward normal of the boundary
-segment that holds it (its row is the normal displacement): the ports of
-one body must share that normal, which is then the structure's
-``direction`` (the compiled kernels take it as they take a beam's).
+segment that holds it (its row is the normal displacement); the ports of
+one body may lie on segments of different normals, for the structure side
+and its compiled kernel take a direction per port.
 """
 from __future__ import annotations
 
@@ -34,14 +34,15 @@ def _warn(message: str) -> None:
 
 
 def port_direction(structure, ports: dict, file, key: str) -> None:
-    """Give the plane ``structure`` the direction its ports move along: the
-    outward normal their boundary segments share.
+    """Check that each port of the plane ``structure`` lies on a boundary
+    chain, and give the structure the first one's outward normal as its
+    ``direction`` (what reads one direction for the whole body: a port
+    itself moves along its own segment's normal, ``port_direction``).
 
     Raises
     ------
     SceneError
-        If two ports lie on segments of different normals, or a group is
-        not one chain of boundary curves.
+        If a group is not one chain of boundary curves.
     """
     from fem.plane import MeshError
 
@@ -51,16 +52,7 @@ def port_direction(structure, ports: dict, file, key: str) -> None:
             normals[name] = structure.boundary_point(group, s).normal
         except MeshError as exc:
             raise SceneError(file, f"{key}.points.{name}.boundary", str(exc)) from None
-    first = next(iter(normals))
-    for name, n in normals.items():
-        if float(n @ normals[first]) < 1.0 - 1e-9:
-            raise SceneError(file, f"{key}.points.{name}",
-                             f"lies on a boundary segment of outward normal "
-                             f"[{n[0]:.6g}, {n[1]:.6g}], and `{first}` on one of "
-                             f"[{normals[first][0]:.6g}, {normals[first][1]:.6g}]: the points "
-                             f"of one plane body must share their normal (each moves along "
-                             f"it); put them on parallel faces, or in bodies of their own")
-    structure.direction = np.array(normals[first], dtype=float)
+    structure.direction = np.array(next(iter(normals.values())), dtype=float)
     structure.direction.setflags(write=False)
 
 

@@ -279,6 +279,12 @@ class PlaneStructure(LinearStructure):
         pt = self.boundary_point(group, arc)
         return pt.dofs, pt.normal @ pt.rows
 
+    def port_direction(self, s) -> np.ndarray:
+        """The direction the point ``s = (group, arc)`` moves along: its
+        segment's outward normal (world), (2,)."""
+        group, arc = s
+        return self.boundary_point(group, arc).normal
+
     def reference_position(self, s) -> np.ndarray:
         group, arc = s
         return self.boundary_point(group, arc).position
