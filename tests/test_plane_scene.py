@@ -274,12 +274,6 @@ def test_exporting_a_plane_bodys_field_is_refused_not_crashed(tmp_path):
         cosim.load_scene(path)
 
 
-def test_follow_is_refused_on_a_plane_body(tmp_path):
-    path = _strike(tmp_path, **{'placement = "embedded"': 'placement = "embedded"\nfollow = true'})
-    with pytest.raises(SceneError, match="follow"):
-        cosim.load_scene(path)
-
-
 def test_the_mesh_is_an_input_of_the_scene(tmp_path):
     from cosim.scene.inputs import input_digests
     scene = cosim.load_scene(_strike(tmp_path))

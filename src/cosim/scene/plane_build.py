@@ -113,6 +113,8 @@ def corrected_law(contact, scene, subs: list, sides: tuple):
         if getattr(spec, "type", None) != "plane":
             continue
         model, key = spec.model, f"subsystems.{sub_name}"
+        if contact.follow and point == contact.b[1]:
+            _check_follow(contact, spec, subs[s], scene.path)
         k = getattr(law, "contact_stiffness", None)
         point_contact = spec.ports[point][1] is not None     # not a face's average
         if k is not None and not law.rigid and point_contact:
@@ -145,6 +147,34 @@ def corrected_law(contact, scene, subs: list, sides: tuple):
         c_r = corr.compliance(spec.ports[point])
         law = dataclasses.replace(law, contact_stiffness=k / (1.0 + k * c_r))
     return law
+
+
+def _check_follow(contact, spec, sub, file) -> None:
+    """Refuse what a following contact on the plane body ``spec`` cannot
+    do: a point without ``s`` (a face's average does not slide), the static
+    correction (computed at the first point only, it would not follow), and
+    a ``normal`` that is not the first point's outward normal (the contact
+    reads along it until the first step turns it with the boundary)."""
+    point = contact.b[1]
+    group, s = spec.ports[point]
+    if s is None:
+        raise SceneError(file, f"{contact.key}.follow",
+                         f"slides `{spec.name}.{point}` along the boundary, but that point is "
+                         f"the average of the group `{group}` (it has no `s`): give it an arc "
+                         f"length `s`, or set `follow = false`")
+    if spec.static_correction:
+        raise SceneError(file, f"{contact.key}.follow",
+                         f"slides `{spec.name}.{point}` along the boundary, and "
+                         f"`subsystems.{spec.name}.modes.static_correction` holds the dropped "
+                         f"modes' compliance of its first point only: turn the correction off, "
+                         f"or set `follow = false`")
+    n = np.asarray(sub.structure.port_direction((group, s)), float)
+    if float(np.dot(n, contact.normal)) < 1.0 - 1e-9:
+        raise SceneError(file, f"{contact.key}.normal",
+                         f"must be the outward normal of the boundary at `{spec.name}.{point}`, "
+                         f"[{n[0]:.6g}, {n[1]:.6g}], for a contact that follows a plane body "
+                         f"(it turns with the deformed boundary from there), got "
+                         f"[{contact.normal[0]:.6g}, {contact.normal[1]:.6g}]")
 
 
 def cached_basis(structure, spec, file):

@@ -25,6 +25,48 @@ class PlaneSubsystem(StructureSubsystem):
         m = self.n_modes
         return self._names, X[..., :m], X[..., m:2 * m]
 
+    def slide_port(self, port: int, point, x) -> np.ndarray:
+        """Move ``port`` to the point of the deformed boundary closest to the
+        world ``point`` for the state ``x`` (node-to-segment over the
+        closed boundary chain through the port's first segment,
+        :class:`fem.plane.boundary.BoundaryLoop`, across corners onto the
+        next segment), and return the outward unit normal there.
+
+        The port's row becomes the displacement of that material point
+        projected on that normal, and it moves along the normal: its
+        position's component along the normal is the deformed boundary's,
+        so the gap ``n . (p - x_b)`` a contact reads is the signed distance
+        to the deformed boundary, whose rate is ``n . (v_p - v_b)`` exactly.
+        A contact this side hosts at the port turns its normal with it."""
+        from fem.plane.boundary import BoundaryLoop
+
+        loops = self.__dict__.setdefault("_loops", {})
+        loop = loops.get(port)
+        if loop is None:
+            group, s = self.port_coordinates[port]
+            loop = loops[port] = BoundaryLoop(self.structure, group, s)
+            loop.set_modes(self.Phi)
+        m = self.n_modes
+        k, xi, n, _ = loop.project(point, np.asarray(x, float)[:m])
+        row = n @ loop.modal_rows(k, xi)
+        if np.array_equal(row, self._R[port]) and np.array_equal(n, self._dirs[port]):
+            return n
+        self._R[port] = row
+        self._ref[port] = loop.position(k, xi)
+        self._dirs[port] = n              # in place: the compiled kernel reads it
+        self._dirc[port] = complex(n[0], n[1])
+        self.port_coordinates[port] = (loop.name, loop.coordinate(k, xi))
+        for j, e in enumerate(self._embedded):
+            if e.port == port:
+                e.normal = complex(n[0], n[1])
+                if self._kernel:
+                    self._kernel.set_normal(j, e.normal)
+        if any(e.port == port for e in self._embedded):
+            self._bases = {}            # the springs' modes hang on the port's row
+        if self._kernel:
+            self._kernel.forget_bases()
+        return n
+
     def field(self, q) -> np.ndarray:
         """World displacement of every vertex for modal coordinates ``q``
         (..., m): shape (..., N, 2) [m]."""
