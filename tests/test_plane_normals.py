@@ -98,7 +98,8 @@ def test_each_port_moves_along_its_own_segments_normal(tmp_path):
         assert np.max(np.abs(pos[p] - st.reference_position(s) - (full @ n) * np.asarray(n))) \
             <= 1e-12 * np.max(np.abs(full))
         vfull = st.position(s, v) - st.reference_position(s)
-        assert np.max(np.abs(vel[p] - (vfull @ n) * np.asarray(n))) <= 1e-12 * np.max(np.abs(vfull))
+        assert np.max(np.abs(vel[p] - (vfull @ n) * np.asarray(n))) \
+            <= 1e-12 * np.max(np.abs(vfull))
     # a port force does the work of its normal component on the normal row
     f = np.array([[0.3, -2.0], [5.0, 0.7]])
     g = plate._modal_force(f)

@@ -267,10 +267,9 @@ class CoupledSystem:
         for i, c in enumerate(self._follow_index):
             ln = self.links[c]
             sub = self.subsystems[ln.sub_b]
-            slide = getattr(sub, "slide_port", None)
-            if slide is not None:       # a plane body: the closest point of its boundary
-                n = slide(ln.port_b, outs[ln.sub_a][0][ln.port_a],
-                          sub.x if states is None else states[ln.sub_b])
+            if "sliding_ports" in sub.capabilities:   # a plane body's closest boundary point
+                n = sub.slide_port(ln.port_b, outs[ln.sub_a][0][ln.port_a],
+                                   sub.x if states is None else states[ln.sub_b])
                 self._turn_normal(c, n)
                 continue
             s_raw = sub.material_coordinate(outs[ln.sub_a][0][ln.port_a])

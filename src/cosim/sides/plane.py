@@ -14,7 +14,10 @@ __all__ = ["PlaneSubsystem"]
 
 class PlaneSubsystem(StructureSubsystem):
     """A :class:`fem.plane.PlaneStructure` reduced to the modes of its basis
-    (same parameters as :class:`~cosim.sides.fem.StructureSubsystem`)."""
+    (same parameters as :class:`~cosim.sides.fem.StructureSubsystem`); its
+    ports slide along its boundary (:meth:`slide_port`)."""
+
+    capabilities = StructureSubsystem.capabilities | {"sliding_ports"}
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
