@@ -52,6 +52,9 @@ class BoundaryLoop:
 
     def __init__(self, structure, group: str, s: float):
         self.structure = st = structure
+        if s is None:
+            raise ValueError(f"a point that slides along the boundary needs an arc length "
+                             f"`s` along {group!r}, not the group's average")
         start = st.boundary_point(group, s)
         pairs0, _ = st.chain(group)
         a0, b0 = (int(v) for v in pairs0[start.segment])
