@@ -153,11 +153,13 @@ def test_the_ledger_test_sees_a_force_off_the_deformed_normal(tmp_path, monkeypa
     assert res.summary["energy"]["max_abs_drift"] > 1e3 * 1e-9 * spring
 
 
-def _corner_state(tmp_path):
+def _corner_state(tmp_path, element="P2"):
     """The square's boundary loop from the top face's last segment, with a
     random deformation (displacements up to 1e-2 of a segment)."""
     from fem.plane.boundary import BoundaryLoop
-    system, _ = cosim.load_scene(_scene(tmp_path)).build()
+    path = _scene(tmp_path)
+    path.write_text(path.read_text().replace("thickness =", f'element = "{element}"\nthickness ='))
+    system, _ = cosim.load_scene(path).build()
     plate = system.subsystems[system.names.index("plate")]
     loop = BoundaryLoop(plate.structure, "top", 0.094)
     loop.set_modes(plate.Phi)
@@ -184,13 +186,14 @@ def _gradient_errors(loop, q, points, h=1e-9):
     return np.array(out)
 
 
-def test_the_gap_is_a_potential_whose_gradients_are_the_forces(tmp_path, monkeypatch):
+@pytest.mark.parametrize("element", ["P2", "P1"])
+def test_the_gap_is_a_potential_whose_gradients_are_the_forces(tmp_path, monkeypatch, element):
     """Why the ledger closes, point by point around the corner (0.1, 0.1):
     the gap's gradient in the striking point is the normal the force acts
     along, and in the modal coordinates minus the row the body's force acts
     through (within 1e-6, measured 2e-7: central differences), on the top
-    face, in the
-    corner's fan outside, inside near the bisector and on the right face;
+    face, in the corner's fan outside, inside near the bisector and on the
+    right face, for P2's parabolic segments and P1's straight ones;
     and along a path round the corner the gap never moves faster than the
     point (a distance is 1-Lipschitz: no jump when the closest point
     crosses onto the next segment).  With the force along the reference
@@ -199,7 +202,8 @@ def test_the_gap_is_a_potential_whose_gradients_are_the_forces(tmp_path, monkeyp
     over 0.1 mm (a run with it stalls on the jump: it did not finish in
     150 s)."""
     from fem.plane.boundary import BoundaryLoop
-    loop, q = _corner_state(tmp_path)
+    loop, q = _corner_state(tmp_path, element)
+    assert loop.quadratic == (element == "P2")      # a parabola, or straight segments
     points = np.array([(0.097, 0.1003), (0.1015, 0.1012), (0.1004, 0.1021), (0.0994, 0.0990),
                        (0.0991, 0.0993), (0.1008, 0.097), (0.0962, 0.0999)])
     err = _gradient_errors(loop, q, points)
