@@ -307,6 +307,18 @@ def test_a_bad_follow_on_a_plane_body_is_refused_naming_the_file_and_key(tmp_pat
     _refused(path, "contacts.C.follow", "average of the group `top`", "give it an arc length")
 
 
+def test_a_boundary_that_touches_itself_is_refused_for_a_following_point(tmp_path):
+    """Two squares sharing one corner: that vertex lies on four boundary
+    segments, so the loop a point slides along is not one chain."""
+    from fem.plane import PlaneMesh
+    pts = [(0, 0), (0.1, 0), (0.1, 0.1), (0, 0.1), (0.2, 0.1), (0.2, 0.2), (0.1, 0.2)]
+    mesh = PlaneMesh(np.array(pts, float), np.array([(0, 1, 2), (0, 2, 3), (2, 4, 5), (2, 5, 6)]),
+                     "triangle", {"top": [(3, 2)], "left": [(0, 3)], "bottom": [(0, 1)]})
+    path = _edit(_scene(tmp_path), "s = 0.094", "s = 0.05")
+    write_msh(tmp_path / "square.msh", mesh)
+    _refused(path, "contacts.C.follow", "square.msh", "touches itself at a vertex")
+
+
 def test_a_following_contact_on_a_plane_body_is_hosted_by_it(tmp_path):
     """Embedded between two moving sides, a following contact is hosted by
     the plane body (b), as on a beam; hosted by the striker it is refused."""

@@ -152,9 +152,11 @@ def corrected_law(contact, scene, subs: list, sides: tuple):
 def _check_follow(contact, spec, sub, file) -> None:
     """Refuse what a following contact on the plane body ``spec`` cannot
     do: a point without ``s`` (a face's average does not slide), the static
-    correction (computed at the first point only, it would not follow), and
-    a ``normal`` that is not the first point's outward normal (the contact
-    reads along it until the first step turns it with the boundary)."""
+    correction (computed at the first point only, it would not follow), a
+    boundary that touches itself at a vertex, and a ``normal`` that is not
+    the first point's outward normal (the contact reads along it until the
+    first step turns it with the boundary).  The sliding loop is made here,
+    once."""
     point = contact.b[1]
     group, s = spec.ports[point]
     if s is None:
@@ -168,6 +170,11 @@ def _check_follow(contact, spec, sub, file) -> None:
                          f"`subsystems.{spec.name}.modes.static_correction` holds the dropped "
                          f"modes' compliance of its first point only: turn the correction off, "
                          f"or set `follow = false`")
+    from fem.plane import MeshError
+    try:
+        sub.sliding_loop(sub.port_index(point))
+    except MeshError as exc:
+        raise SceneError(file, f"{contact.key}.follow", str(exc)) from None
     n = np.asarray(sub.structure.port_direction((group, s)), float)
     if float(np.dot(n, contact.normal)) < 1.0 - 1e-9:
         raise SceneError(file, f"{contact.key}.normal",

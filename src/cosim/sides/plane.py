@@ -28,6 +28,27 @@ class PlaneSubsystem(StructureSubsystem):
         m = self.n_modes
         return self._names, X[..., :m], X[..., m:2 * m]
 
+    def sliding_loop(self, port: int):
+        """The closed boundary chain ``port`` slides along
+        (:class:`fem.plane.boundary.BoundaryLoop`), made on the first call
+        from the port's first point.
+
+        Raises
+        ------
+        fem.plane.MeshError
+            If the boundary touches itself at a vertex.
+        """
+        from fem.plane.boundary import BoundaryLoop
+
+        loops = self.__dict__.setdefault("_loops", {})
+        loop = loops.get(port)
+        if loop is None:
+            group, s = self.port_coordinates[port]
+            loop = BoundaryLoop(self.structure, group, s)
+            loop.set_modes(self.Phi)
+            loops[port] = loop
+        return loop
+
     def slide_port(self, port: int, point, x) -> np.ndarray:
         """Move ``port`` to the point of the deformed boundary closest to the
         world ``point`` for the state ``x`` (node-to-segment over the
@@ -41,14 +62,7 @@ class PlaneSubsystem(StructureSubsystem):
         so the gap ``n . (p - x_b)`` a contact reads is the signed distance
         to the deformed boundary, whose rate is ``n . (v_p - v_b)`` exactly.
         A contact this side hosts at the port turns its normal with it."""
-        from fem.plane.boundary import BoundaryLoop
-
-        loops = self.__dict__.setdefault("_loops", {})
-        loop = loops.get(port)
-        if loop is None:
-            group, s = self.port_coordinates[port]
-            loop = loops[port] = BoundaryLoop(self.structure, group, s)
-            loop.set_modes(self.Phi)
+        loop = self.sliding_loop(port)
         m = self.n_modes
         k, xi, n, _ = loop.project(point, np.asarray(x, float)[:m])
         row = n @ loop.modal_rows(k, xi)
