@@ -218,6 +218,7 @@ CAPABILITIES = {
     "impact_watch": (),
     "connections": ("attach_connection",),
     "moving_ports": ("move_port", "material_coordinate", "surface_tangent"),
+    "sliding_ports": ("slide_port",),
     "modes": ("natural_frequencies_hz", "named_values"),
     "skeleton": ("skeleton",),
     "fmi": (),

@@ -267,6 +267,11 @@ class CoupledSystem:
         for i, c in enumerate(self._follow_index):
             ln = self.links[c]
             sub = self.subsystems[ln.sub_b]
+            if "sliding_ports" in sub.capabilities:   # a plane body's closest boundary point
+                n = sub.slide_port(ln.port_b, outs[ln.sub_a][0][ln.port_a],
+                                   sub.x if states is None else states[ln.sub_b])
+                self._turn_normal(c, n)
+                continue
             s_raw = sub.material_coordinate(outs[ln.sub_a][0][ln.port_a])
             s = sub.move_port(ln.port_b, s_raw)
             x = sub.x if states is None else states[ln.sub_b]
@@ -287,6 +292,20 @@ class CoupledSystem:
                     G = G.copy()
                     G[rows, c] = col
                     maps[ln.sub_a] = G
+
+    def _turn_normal(self, c: int, n) -> None:
+        """Contact ``c`` now reads and pushes along ``n`` (``-n`` on ``b``): a
+        plane body's boundary turned under a following point (no slope
+        term: ``b``'s is the closest point, :meth:`PlaneSubsystem.slide_port`)."""
+        self._normals[c] = self._row_dir[c] = n = np.asarray(n, float)
+        ln = self.links[c]
+        for sub, port, col in ((ln.sub_a, ln.port_a, n), (ln.sub_b, ln.port_b, -n)):
+            rows = slice(2 * port, 2 * port + 2)
+            for maps in (self._G, self._Gc):
+                G = maps[sub]
+                if G[rows, c].any() and not np.array_equal(G[rows, c], col):
+                    maps[sub] = G = G.copy()    # new arrays, as update_followers makes
+                    G[rows, c] = col
 
     # ------------------------------------------------------------- states
     def outputs(self, states=None):

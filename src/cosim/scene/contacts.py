@@ -75,10 +75,11 @@ def contact_spec(name: str, t: Table, subs: list) -> ContactSpec:
             t.error("host", "names the side that integrates an `embedded` contact between two "
                             "moving sides; here there is nothing to choose")
     follow = t.boolean("follow")
-    if follow and kinds[b[0]] not in ("beam", "cable", "string", "rod"):
-        what = (f"a {kinds[b[0]]}" if b[0] not in structures else
+    if follow and kinds[b[0]] not in ("beam", "cable", "string", "rod", "plane"):
+        what = (f"a {kinds[b[0]]} (a point follows a beam, cable, string, rod or a plane "
+                f"body's boundary)" if b[0] not in structures else
                 f"a `{kinds[b[0]]}`, which an installed package declares; a contact follows "
-                f"the built-in beam, cable, string or rod")
+                f"the built-in beam, cable, string, rod or plane body")
         t.error("follow", f"moves side b's point along a line structure; `{b[0]}` is {what}")
     if follow and host == a[0]:
         # the surface point slides along b as a moves: only b's integrator

@@ -417,9 +417,9 @@ _CONTACT = (
     K("host", "", Varies("the lighter side; with `follow`, the subsystem of `b`"),
       "the subsystem of `a` or of `b`; of `b` with `follow`",
       "the side that integrates an embedded contact between two moving sides"),
-    K("follow", "", False, "true or false; b on a line structure",
-      "move b's point along the structure with a's point (an embedded contact is then "
-      "hosted by b's structure)"),
+    K("follow", "", False, "true or false; b on a line structure or a plane body",
+      "move b's point along the structure with a's point, or along a plane body's boundary "
+      "to the point closest to a's (an embedded contact is then hosted by b's structure)"),
     K("normal", "", REQUIRED, _UNIT_VEC, "contact normal, from b towards a"),
     K("offset", "m", 0.0, "a finite number", "gap added to the distance along the normal"),
     K("grasp", "", None, _TABLE, "a bilateral grasp that holds the two points"),

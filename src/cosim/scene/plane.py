@@ -5,9 +5,8 @@ The mesh is read (and checked, :func:`fem.plane.read_mesh`) when the scene
 loads, so a trap of the mesh is refused at the ``mesh`` key before anything
 is assembled; a point's group and arc length are checked against it there
 too.  A port of a plane body moves along the outward normal of the boundary
-segment that holds it (its row is the normal displacement): the ports of
-one body must share that normal, which is then the structure's
-``direction`` (the compiled kernels take it as they take a beam's).
+segment that holds it (its row is the normal displacement), each port its
+own.
 """
 from __future__ import annotations
 

@@ -4,9 +4,9 @@ static correction of its contacts with the pre-flight rules that go with
 it.  It imports nothing of the scene package but its error.
 
 A port of a plane body moves along the outward normal of the boundary
-segment that holds it (its row is the normal displacement): the ports of
-one body must share that normal, which is then the structure's
-``direction`` (the compiled kernels take it as they take a beam's).
+segment that holds it (its row is the normal displacement); the ports of
+one body may lie on segments of different normals, for the structure side
+and its compiled kernel take a direction per port.
 """
 from __future__ import annotations
 
@@ -34,14 +34,15 @@ def _warn(message: str) -> None:
 
 
 def port_direction(structure, ports: dict, file, key: str) -> None:
-    """Give the plane ``structure`` the direction its ports move along: the
-    outward normal their boundary segments share.
+    """Check that each port of the plane ``structure`` lies on a boundary
+    chain, and give the structure the first one's outward normal as its
+    ``direction`` (what reads one direction for the whole body: a port
+    itself moves along its own segment's normal, ``port_direction``).
 
     Raises
     ------
     SceneError
-        If two ports lie on segments of different normals, or a group is
-        not one chain of boundary curves.
+        If a group is not one chain of boundary curves.
     """
     from fem.plane import MeshError
 
@@ -51,16 +52,7 @@ def port_direction(structure, ports: dict, file, key: str) -> None:
             normals[name] = structure.boundary_point(group, s).normal
         except MeshError as exc:
             raise SceneError(file, f"{key}.points.{name}.boundary", str(exc)) from None
-    first = next(iter(normals))
-    for name, n in normals.items():
-        if float(n @ normals[first]) < 1.0 - 1e-9:
-            raise SceneError(file, f"{key}.points.{name}",
-                             f"lies on a boundary segment of outward normal "
-                             f"[{n[0]:.6g}, {n[1]:.6g}], and `{first}` on one of "
-                             f"[{normals[first][0]:.6g}, {normals[first][1]:.6g}]: the points "
-                             f"of one plane body must share their normal (each moves along "
-                             f"it); put them on parallel faces, or in bodies of their own")
-    structure.direction = np.array(normals[first], dtype=float)
+    structure.direction = np.array(next(iter(normals.values())), dtype=float)
     structure.direction.setflags(write=False)
 
 
@@ -121,6 +113,8 @@ def corrected_law(contact, scene, subs: list, sides: tuple):
         if getattr(spec, "type", None) != "plane":
             continue
         model, key = spec.model, f"subsystems.{sub_name}"
+        if contact.follow and point == contact.b[1]:
+            _check_follow(contact, spec, subs[s], scene.path)
         k = getattr(law, "contact_stiffness", None)
         point_contact = spec.ports[point][1] is not None     # not a face's average
         if k is not None and not law.rigid and point_contact:
@@ -153,6 +147,41 @@ def corrected_law(contact, scene, subs: list, sides: tuple):
         c_r = corr.compliance(spec.ports[point])
         law = dataclasses.replace(law, contact_stiffness=k / (1.0 + k * c_r))
     return law
+
+
+def _check_follow(contact, spec, sub, file) -> None:
+    """Refuse what a following contact on the plane body ``spec`` cannot
+    do: a point without ``s`` (a face's average does not slide), the static
+    correction (computed at the first point only, it would not follow), a
+    boundary that touches itself at a vertex, and a ``normal`` that is not
+    the first point's outward normal (the contact reads along it until the
+    first step turns it with the boundary).  The sliding loop is made here,
+    once."""
+    point = contact.b[1]
+    group, s = spec.ports[point]
+    if s is None:
+        raise SceneError(file, f"{contact.key}.follow",
+                         f"slides `{spec.name}.{point}` along the boundary, but that point is "
+                         f"the average of the group `{group}` (it has no `s`): give it an arc "
+                         f"length `s`, or set `follow = false`")
+    if spec.static_correction:
+        raise SceneError(file, f"{contact.key}.follow",
+                         f"slides `{spec.name}.{point}` along the boundary, and "
+                         f"`subsystems.{spec.name}.modes.static_correction` holds the dropped "
+                         f"modes' compliance of its first point only: turn the correction off, "
+                         f"or set `follow = false`")
+    from fem.plane import MeshError
+    try:
+        sub.sliding_loop(sub.port_index(point))
+    except MeshError as exc:
+        raise SceneError(file, f"{contact.key}.follow", str(exc)) from None
+    n = np.asarray(sub.structure.port_direction((group, s)), float)
+    if float(np.dot(n, contact.normal)) < 1.0 - 1e-9:
+        raise SceneError(file, f"{contact.key}.normal",
+                         f"must be the outward normal of the boundary at `{spec.name}.{point}`, "
+                         f"[{n[0]:.6g}, {n[1]:.6g}], for a contact that follows a plane body "
+                         f"(it turns with the deformed boundary from there), got "
+                         f"[{contact.normal[0]:.6g}, {contact.normal[1]:.6g}]")
 
 
 def cached_basis(structure, spec, file):

@@ -274,7 +274,8 @@ class ContactSpec(_ByKey):
         The side that integrates an embedded contact between two moving
         sides, when the scene names it.
     follow : bool
-        Side b's point follows side a's along a line structure.
+        Side b's point follows side a's along a line structure or a plane
+        body's boundary.
     connection : couplers.Connection or None
         Its grasp and friction, if any.
     """

@@ -27,8 +27,10 @@ event and to hand back the located switches.
 
 Arrays shared with the host (read at each step, so the host may change them
 in place between steps, as a contact that follows a moving point does): the
-ports' shape rows ``R`` (n_p, m) and reference positions ``ref`` (n_p, 2).
-After changing ``R`` the host calls :meth:`StructureStep.forget_bases`.
+ports' shape rows ``R`` (n_p, m), reference positions ``ref`` (n_p, 2) and,
+given per port, directions ``dirs`` (n_p, 2).  After changing ``R`` or
+``dirs`` the host calls :meth:`StructureStep.forget_bases`; a hosted
+contact's normal it changes with :meth:`StructureStep.set_normal`.
 """
 from libc.math cimport sin, cos, pow, ceil, fabs, sqrt, hypot, copysign, isfinite, INFINITY
 from libc.float cimport DBL_EPSILON
@@ -40,8 +42,9 @@ from cosim.core._side_face cimport COSIM_SIDE_FACE, SideFace
 import numpy as np
 
 #: the interface the host (:mod:`cosim.sides.fem`, its ``STEP_API``) calls:
-#: bumped when a call changes (2: ``StructureStep.step`` takes ``peak``)
-STEP_API = 2
+#: bumped when a call changes (2: ``StructureStep.step`` takes ``peak``; 3:
+#: ``direction`` may be given per port, and ``set_normal``)
+STEP_API = 3
 
 
 #: segments (contact switches) one step may take before it is said to stall
@@ -335,8 +338,9 @@ cdef class StructureStep:
         The ports' shape rows, shared (see the module).
     ref : (n_p, 2) array
         The ports' reference positions [m], shared.
-    direction : (2,) array
-        The field's direction.
+    direction : (2,) or (n_p, 2) array
+        The field's direction, or each port's, shared (a plane body's ports
+        move along their segments' normals).
     g_modal : (m,) array
         The weight's modal load.
     contacts : list of tuples
@@ -350,7 +354,7 @@ cdef class StructureStep:
 
     cdef int m, np_, nc
     cdef double[:, ::1] R, ref
-    cdef double dre, dim
+    cdef double[:, ::1] dirs                # each port's direction, shared
     cdef double[::1] lam0, g_modal
     cdef double wmax0
     cdef long[::1] c_port
@@ -410,7 +414,13 @@ cdef class StructureStep:
         if self.nc > MAX_CONTACTS:
             raise ValueError(f"the kernel hosts at most {MAX_CONTACTS} contacts per "
                              f"structure, got {self.nc}")
-        self.dre, self.dim = float(direction[0]), float(direction[1])
+        dirs = np.asarray(direction, dtype=float)
+        if dirs.shape == (2,):
+            dirs = np.tile(dirs, (self.np_, 1))
+        if dirs.shape != (self.np_, 2):
+            raise ValueError(f"`direction` must have shape (2,) or (n_ports, 2), got "
+                             f"{np.shape(direction)}")
+        self.dirs = dirs if self.np_ else np.zeros((1, 2))
         self.lam0 = np.ascontiguousarray(np.asarray(omega, float) ** 2)
         self.wmax0 = float(np.max(omega, initial=0.0))
         self.g_modal = np.ascontiguousarray(g_modal, dtype=float)
@@ -472,6 +482,14 @@ cdef class StructureStep:
         """Drop the kept modes (the ports' shape rows changed)."""
         self.n_bases, self.next_base = 0, 0
 
+    def set_normal(self, int k, normal):
+        """Hosted contact ``k``'s normal (complex) is now ``normal`` (a
+        contact that follows a plane body's boundary turns with it); the
+        host calls :meth:`forget_bases` too."""
+        if not 0 <= k < self.nc:
+            raise IndexError(f"contact {k} of {self.nc}")
+        self.c_nre[k], self.c_nim[k] = complex(normal).real, complex(normal).imag
+
     def set_step(self, double t, double h, coeffs, motions):
         """Load the step: its start ``t`` and length ``h`` [s], the port
         forces' polynomial coefficients in ``s = (time - t) / h``
@@ -520,7 +538,8 @@ cdef class StructureStep:
                 for p in range(npt):
                     if cv[(j * npt + p) * 2] != 0.0 or cv[(j * npt + p) * 2 + 1] != 0.0:
                         self.loaded = True
-                    u = cv[(j * npt + p) * 2] * self.dre + cv[(j * npt + p) * 2 + 1] * self.dim
+                    u = (cv[(j * npt + p) * 2] * self.dirs[p, 0]
+                         + cv[(j * npt + p) * 2 + 1] * self.dirs[p, 1])
                     for i in range(m):
                         self.Gin[j, i] += u * self.R[p, i]
         for i in range(m):
@@ -560,10 +579,10 @@ cdef class StructureStep:
             for i in range(m):
                 w += self.R[p, i] * x[i]
                 dw += self.R[p, i] * x[m + i]
-            pos[2 * p] = self.ref[p, 0] + w * self.dre
-            pos[2 * p + 1] = self.ref[p, 1] + w * self.dim
-            vel[2 * p] = dw * self.dre
-            vel[2 * p + 1] = dw * self.dim
+            pos[2 * p] = self.ref[p, 0] + w * self.dirs[p, 0]
+            pos[2 * p + 1] = self.ref[p, 1] + w * self.dirs[p, 1]
+            vel[2 * p] = dw * self.dirs[p, 0]
+            vel[2 * p + 1] = dw * self.dirs[p, 1]
 
     # ------------------------------------------------- closed-form response
     cdef void _split(self, const double* lam) noexcept nogil:
@@ -736,10 +755,10 @@ cdef class StructureStep:
         cdef int p = self.c_port[k]
         cdef double xr, xi, vr, vi
         self._partner(k, time, &xr, &xi, &vr, &vi)
-        xr = (self.ref[p, 0] + w * self.dre) - xr
-        xi = (self.ref[p, 1] + w * self.dim) - xi
-        vr = dw * self.dre - vr
-        vi = dw * self.dim - vi
+        xr = (self.ref[p, 0] + w * self.dirs[p, 0]) - xr
+        xi = (self.ref[p, 1] + w * self.dirs[p, 1]) - xi
+        vr = dw * self.dirs[p, 0] - vr
+        vi = dw * self.dirs[p, 1] - vi
         d[0] = self.c_off[k] - self.c_side[k] * (self.c_nre[k] * xr + self.c_nim[k] * xi)
         dd[0] = -self.c_side[k] * (self.c_nre[k] * vr + self.c_nim[k] * vi)
 
@@ -812,7 +831,7 @@ cdef class StructureStep:
         if count > 1:
             return -1
         p = self.c_port[one]
-        c = self.c_nre[one] * self.dre + self.c_nim[one] * self.dim
+        c = self.c_nre[one] * self.dirs[p, 0] + self.c_nim[one] * self.dirs[p, 1]
         for i in range(m):
             self.r1_z[i] = sqrt(self.c_k[one]) * fabs(c) * self.R[p, i]
         if _rank_one(m, &self.lam0[0], &self.r1_z[0], &self.r1_lam[0], &self.r1_V[0], 50,
@@ -857,7 +876,7 @@ cdef class StructureStep:
                 continue
             p = self.c_port[k]
             nre, nim = self.c_nre[k], self.c_nim[k]
-            c = nre * self.dre + nim * self.dim
+            c = nre * self.dirs[p, 0] + nim * self.dirs[p, 1]
             self._reparam(&self.m_re[k, 0], self.m_len[k], (tc - self.m_t0[k]) / self.m_h[k],
                           1.0 / self.m_h[k], out)
             self._reparam(&self.m_im[k, 0], self.m_len[k], (tc - self.m_t0[k]) / self.m_h[k],
@@ -947,7 +966,7 @@ cdef class StructureStep:
         for k in range(self.nc):
             p = self.c_port[k]
             nre, nim = self.c_nre[k], self.c_nim[k]
-            beta = self.c_side[k] * (nre * self.dre + nim * self.dim)
+            beta = self.c_side[k] * (nre * self.dirs[p, 0] + nim * self.dirs[p, 1])
             n = self.m_len[k]
             for j in range(DEG1):
                 alpha[j] = 0.0
@@ -1008,7 +1027,7 @@ cdef class StructureStep:
                 continue
             p = self.c_port[k]
             nre, nim = self.c_nre[k], self.c_nim[k]
-            beta = self.c_side[k] * (nre * self.dre + nim * self.dim)
+            beta = self.c_side[k] * (nre * self.dirs[p, 0] + nim * self.dirs[p, 1])
             n = self.m_len[k]
             self._reparam(&self.m_re[k, 0], n, (tc - self.m_t0[k]) / self.m_h[k],
                           1.0 / self.m_h[k], alpha)
@@ -1040,15 +1059,15 @@ cdef class StructureStep:
             s1 = (sig + L) / self.h
             for p in range(npt):
                 x = self.WL[p] - self.W0[p]
-                pm[0, 2 * p] += x * self.dre
-                pm[0, 2 * p + 1] += x * self.dim
+                pm[0, 2 * p] += x * self.dirs[p, 0]
+                pm[0, 2 * p + 1] += x * self.dirs[p, 1]
                 x = s1 * self.WL[p] - s0 * self.W0[p] - self.Wm[0, p] / self.h
-                pm[1, 2 * p] += x * self.dre
-                pm[1, 2 * p + 1] += x * self.dim
+                pm[1, 2 * p] += x * self.dirs[p, 0]
+                pm[1, 2 * p + 1] += x * self.dirs[p, 1]
                 x = (s1 * s1 * self.WL[p] - s0 * s0 * self.W0[p]
                      - 2.0 * (sig * self.Wm[0, p] + self.Wm[1, p]) / (self.h * self.h))
-                pm[2, 2 * p] += x * self.dre
-                pm[2, 2 * p + 1] += x * self.dim
+                pm[2, 2 * p] += x * self.dirs[p, 0]
+                pm[2, 2 * p + 1] += x * self.dirs[p, 1]
 
     cdef double _switch_time(self, int k, bint was_closed, double lo, double hi, double d_lo,
                              double d_hi, double tol, double tc,
@@ -1338,12 +1357,12 @@ cdef class StructureStep:
                     v = 0.0
                     for i in range(m):
                         v += self.R[p, i] * self.dzt[i]
-                    pm[2 * p] += wh * (v * self.dre)
-                    pm[2 * p + 1] += wh * (v * self.dim)
-                    pm[2 * npt + 2 * p] += wh * (sn * (v * self.dre))
-                    pm[2 * npt + 2 * p + 1] += wh * (sn * (v * self.dim))
-                    pm[4 * npt + 2 * p] += wh * (sn * sn * (v * self.dre))
-                    pm[4 * npt + 2 * p + 1] += wh * (sn * sn * (v * self.dim))
+                    pm[2 * p] += wh * (v * self.dirs[p, 0])
+                    pm[2 * p + 1] += wh * (v * self.dirs[p, 1])
+                    pm[2 * npt + 2 * p] += wh * (sn * (v * self.dirs[p, 0]))
+                    pm[2 * npt + 2 * p + 1] += wh * (sn * (v * self.dirs[p, 1]))
+                    pm[4 * npt + 2 * p] += wh * (sn * sn * (v * self.dirs[p, 0]))
+                    pm[4 * npt + 2 * p + 1] += wh * (sn * sn * (v * self.dirs[p, 1]))
         self._modes_at(self.h)
         for i in range(m):
             x[i] = self.zt[i]

@@ -40,10 +40,10 @@ __all__ = ["StructureSubsystem"]
 logger = logging.getLogger(__name__)
 
 #: the interface of ``cosim.sides._structure_step`` this module calls (its
-#: ``STEP_API``): 2 since ``StructureStep.step`` raises the host's peaks.  A
-#: kernel built from older sources is not used (said once), for its step
-#: would not match the reference.
-STEP_API = 2
+#: ``STEP_API``): 2 since ``StructureStep.step`` raises the host's peaks, 3
+#: since each port has its own direction.  A kernel built from older sources
+#: is not used (said once), for its step would not match the reference.
+STEP_API = 3
 _stale_said = False
 
 
@@ -97,6 +97,11 @@ class StructureSubsystem(StructurePorts, ClosedFormContacts, Subsystem):
         self.port_coordinates = [s if isinstance(s, tuple) else float(s) for s in ports.values()]
         self._ref = np.array(refs).reshape(-1, 2)
         self._dir = np.asarray(structure.direction, float)
+        #: each port's direction (n_ports, 2): its row moves it along this
+        #: (the structure's ``direction``, or a plane body's segment normal)
+        self._dirs = np.array([self._port_direction(s) for s in ports.values()],
+                              float).reshape(-1, 2)
+        self._dirc = self._dirs[:, 0] + 1j * self._dirs[:, 1]
         self._g_modal = np.zeros(m)
         if gravity is not None:
             self._g_modal = self.Phi.T @ structure.gravity_load(np.asarray(gravity, float))
@@ -146,21 +151,28 @@ class StructureSubsystem(StructurePorts, ClosedFormContacts, Subsystem):
     def outputs(self, t, x):
         m = self.n_modes
         w, dw = self._R @ x[:m], self._R @ x[m:2 * m]
-        return self._ref + w[:, None] * self._dir, dw[:, None] * self._dir
+        return self._ref + w[:, None] * self._dirs, dw[:, None] * self._dirs
+
+    def _port_direction(self, s) -> np.ndarray:
+        """The direction port ``s`` moves along: the structure's
+        ``port_direction(s)`` where it has one (a plane body: the outward
+        normal of the port's segment), else its ``direction``."""
+        own = getattr(self.structure, "port_direction", None)
+        return self._dir if own is None else np.asarray(own(s), float)
 
     def _modal_force(self, u):
         """Modal load of port forces ``u`` (..., n_ports, 2)."""
-        return (u @ self._dir) @ self._R
+        return np.einsum("...px,px->...p", u, self._dirs) @ self._R
 
     def port_mobility(self, port, direction):
         """``n^T J M^-1 J^T n`` within the kept modes: ``(n . dir)^2 |R_p|^2``."""
-        c = float(np.asarray(direction, float) @ self._dir)
+        c = float(np.asarray(direction, float) @ self._dirs[port])
         return c * c * float(self._R[port] @ self._R[port])
 
     def port_participation(self, port, direction) -> np.ndarray:
         """``(n . dir) R_p``: how each mass-normalised kept mode moves a port
         along ``direction`` (its squares sum to :meth:`port_mobility`)."""
-        c = float(np.asarray(direction, float) @ self._dir)
+        c = float(np.asarray(direction, float) @ self._dirs[port])
         return c * np.array(self._R[port], float)
 
     @property
@@ -200,11 +212,12 @@ class StructureSubsystem(StructurePorts, ClosedFormContacts, Subsystem):
     def compiled_face(self):
         """The compiled model-exchange face (``cosim.sides._modal_face.ModalFace``)
         at the ports' present rows, or None where it is not built or not
-        chosen; on a structure meshed along a line it can move them under a
-        point (:meth:`move_port`)."""
+        chosen, or where the ports move along different directions; on a
+        structure meshed along a line it can move them under a point
+        (:meth:`move_port`)."""
         module = compiled_module("_modal_face")
-        if module is None:
-            return None
+        if module is None or np.any(self._dirs != self._dir):
+            return None         # the face takes one direction for every port
         st = self.structure
         line = None
         if all(hasattr(st, a) for a in ("node_coordinates", "dof_map", "hermite", "length")):
@@ -241,9 +254,8 @@ class StructureSubsystem(StructurePorts, ClosedFormContacts, Subsystem):
     def _contacts(self, t, q, dq):
         """Each embedded contact with its penetration and rate at ``t``."""
         w, dw = self._R @ q, self._R @ dq
-        dirc = complex(self._dir[0], self._dir[1])
         for e in self._embedded:
-            p = self._ref[e.port]
+            p, dirc = self._ref[e.port], self._dirc[e.port]
             d, dd = e.penetration(t, complex(p[0], p[1]) + w[e.port] * dirc, dw[e.port] * dirc)
             yield e, d, dd
 
@@ -258,7 +270,7 @@ class StructureSubsystem(StructurePorts, ClosedFormContacts, Subsystem):
         u = np.zeros((self.n_ports, 2)) if inputs is None else inputs(t)
         rates, pd, pv = [], [], []
         tau = t - self._t0
-        dirc = complex(self._dir[0], self._dir[1])
+        dirc = self._dirc
         dw = self._R @ dq
         for e, d, dd in self._contacts(t, q, dq):
             pd.append(d)
@@ -267,7 +279,7 @@ class StructureSubsystem(StructurePorts, ClosedFormContacts, Subsystem):
             fn = e.side * f * e.normal
             u[e.port] += (fn.real, fn.imag)
             rates += [f, float(e.law.dissipation_rate(f, d, dd)), f * tau,
-                      (fn.conjugate() * dirc).real * dw[e.port]]
+                      (fn.conjugate() * dirc[e.port]).real * dw[e.port]]
         self._last_eval = (y, pd, pv)
         g = self._modal_force(u) + self._g_modal
         ddq = g - self.modal_damping * dq - self.omega ** 2 * q
@@ -340,7 +352,7 @@ class StructureSubsystem(StructurePorts, ClosedFormContacts, Subsystem):
         contacts = []
         for e in self._embedded:
             contacts.append((e.port, e.side, e.normal, e.offset, e.law.contact_stiffness))
-        kernel = module.StructureStep(self.omega, self._R, self._ref, self._dir, self._g_modal,
+        kernel = module.StructureStep(self.omega, self._R, self._ref, self._dirs, self._g_modal,
                                       contacts, self._active_basis)
         kernel.bound_open = self.bound_open
         return kernel
@@ -448,7 +460,7 @@ class StructureSubsystem(StructurePorts, ClosedFormContacts, Subsystem):
             return
         m = self.n_modes
         nodes, weights = self._GAUSS
-        dirc = complex(self._dir[0], self._dir[1])
+        dirc = self._dirc
         mom = np.zeros((3, self.n_ports), complex)
         powers = np.arange(G.shape[0])[:, None]
         for sn, w in zip(nodes, weights):

@@ -64,7 +64,7 @@ class ClosedFormContacts:
             springs = []
             for on, e in zip(active, self._embedded):
                 if on:
-                    c = (e.normal.conjugate() * complex(*self._dir)).real
+                    c = (e.normal.conjugate() * self._dirc[e.port]).real
                     springs.append(math.sqrt(e.law.contact_stiffness) * abs(c) * self._R[e.port])
             # one spring: diag(omega^2) + z z^T by its secular equation, O(m^2)
             # (follow = true asks for one basis per step in contact, and a
@@ -117,10 +117,9 @@ class ClosedFormContacts:
         Q, E, size = env
         margin = 1e-9 + 16.0 * np.finfo(float).eps * (
             lam.size + 4 + math.sqrt(float(lam.max(initial=0.0))) * L)
-        dirc = complex(*self._dir)
         for e in self._embedded:
             p, nc = e.port, e.normal.conjugate()
-            beta = e.side * (nc * dirc).real
+            beta = e.side * (nc * self._dirc[p]).real
             motion = reparametrised(e.motion, (tc - e.t0) / e.h, 1.0 / e.h)
             alpha = np.zeros(max(4, motion.size))
             alpha[:motion.size] = e.side * (nc * motion).real
@@ -143,12 +142,11 @@ class ClosedFormContacts:
         m = self.n_modes
         a = np.zeros((4, m))
         a[:Gin.shape[0]] = reparametrised(Gin, (tc - t) / h, 1.0 / h)
-        dirc = complex(*self._dir)
         for on, e in zip(active, self._embedded):
             if not on:
                 continue
             k, r, nc = e.law.contact_stiffness, self._R[e.port], e.normal.conjugate()
-            c = (nc * dirc).real
+            c = (nc * self._dirc[e.port]).real
             ref = complex(*self._ref[e.port])
             xp = (nc * reparametrised(e.motion, (tc - e.t0) / e.h, 1.0 / e.h)).real
             a[0] += e.side * c * k * (e.offset - e.side * (nc * ref).real) * r
@@ -185,13 +183,14 @@ class ClosedFormContacts:
         """Penetration and rate of each embedded contact at ``tc + taus``
         for port displacements ``W`` and velocities ``DW`` along the field
         (k, n_ports): (k, n_embedded) each."""
-        dirc = complex(*self._dir)
+        dirc = self._dirc
         T = tc + np.asarray(taus, float)
         d = np.empty((len(T), len(self._embedded)))
         dd = np.empty_like(d)
         for j, e in enumerate(self._embedded):
+            dp = dirc[e.port]
             d[:, j], dd[:, j] = e.penetrations(
-                T, complex(*self._ref[e.port]) + W[:, e.port] * dirc, DW[:, e.port] * dirc)
+                T, complex(*self._ref[e.port]) + W[:, e.port] * dp, DW[:, e.port] * dp)
         return d, dd
 
     def _segment_quadratures(self, t, h, tc, L, seg, active, inputs):
@@ -212,7 +211,7 @@ class ClosedFormContacts:
         degree = max([3] + [e.motion.size - 2 for on, e in zip(active, self._embedded) if on])
         Wm = undamped_moments(lam, z0, dz0, a, L, P, degree)      # (degree + 1, n_ports)
         (W0, WL), _ = self._port_states(seg, [0.0, L])
-        dirc = complex(*self._dir)
+        dirc = self._dirc
         ne = len(self._embedded)
         quad = self.aux[:4 * ne].reshape(ne, 4)
         sig = tc - t
@@ -220,7 +219,7 @@ class ClosedFormContacts:
             if not on:
                 continue
             k, p, nc = e.law.contact_stiffness, e.port, e.normal.conjugate()
-            beta = e.side * (nc * dirc).real
+            beta = e.side * (nc * dirc[p]).real
             # penetration d(tau) = alpha(tau) - beta w_p(tau)
             alpha = e.side * (nc * reparametrised(e.motion, (tc - e.t0) / e.h, 1.0 / e.h)).real
             alpha[0] += e.offset - e.side * (nc * complex(*self._ref[p])).real

@@ -49,7 +49,7 @@ class StructurePorts:
         if slope is None:
             return axis
         dofs, w = slope(self.port_coordinates[port])
-        return axis + float((w @ self.Phi[dofs]) @ x[:self.n_modes]) * self._dir
+        return axis + float((w @ self.Phi[dofs]) @ x[:self.n_modes]) * self._dirs[port]
 
     def material_coordinate(self, point) -> float:
         """Material coordinate ``s`` of the structure below a world point."""

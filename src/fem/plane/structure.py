@@ -188,6 +188,23 @@ class PlaneStructure(LinearStructure):
         self._chains[group] = (out, s)
         return out, s
 
+    def boundary_facets(self) -> np.ndarray:
+        """Vertex pairs of the mesh's boundary facets (a facet of one cell),
+        shape (k, 2), in no order."""
+        sk = self._skmesh
+        return sk.facets[:, sk.f2t[1] < 0].T
+
+    def add_chain(self, name: str, pairs: np.ndarray, arc: np.ndarray) -> None:
+        """Name a chain of boundary segments (directed vertex pairs ``pairs``
+        and the arc length ``arc`` at their starts and end, as :meth:`chain`
+        gives them), so that ``(name, s)`` is a point on it."""
+        self._chains[name] = (np.asarray(pairs, np.int64), np.asarray(arc, float))
+
+    def segment_point(self, pairs, k: int, xi: float) -> BoundaryPoint:
+        """The point at local coordinate ``xi`` in [0, 1] of segment ``k``
+        of the chain ``pairs`` (see :class:`BoundaryPoint`)."""
+        return self._segment_point(pairs, k, xi)
+
     def group_length(self, group: str) -> float:
         """Arc length of the group [m]."""
         return float(self.chain(group)[1][-1])
@@ -313,6 +330,12 @@ class PlaneStructure(LinearStructure):
         group, arc = s
         pt = self.boundary_point(group, arc)
         return pt.dofs, pt.normal @ pt.rows
+
+    def port_direction(self, s) -> np.ndarray:
+        """The direction the point ``s = (group, arc)`` moves along: its
+        segment's outward normal (world), (2,)."""
+        group, arc = s
+        return self.boundary_point(group, arc).normal
 
     def reference_position(self, s) -> np.ndarray:
         group, arc = s
