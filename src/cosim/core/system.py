@@ -141,6 +141,9 @@ class CoupledSystem:
                                   dtype=int)
         if self.connections is not None:
             self._close_at_start()
+        #: hosted circle contacts (cosim.core.circles): contact index -> HostedContact
+        self.circles = {c: hc for c, hc in self.hosted.items() if hasattr(hc.embedded, "circle")}
+        self.circle_now: dict = {}
 
     # ------------------------------------------------------------------ rows
     def _init_rows(self) -> None:
@@ -311,6 +314,9 @@ class CoupledSystem:
             e = np.einsum("cx,cx->c", dx[ct], t) - self.connections.anchor[ct]
             de = np.einsum("cx,cx->c", dv[ct], t)
             d, dd = np.concatenate([d, e]), np.concatenate([dd, de])
+        if self.circles:
+            from cosim.core.circles import circle_rows
+            circle_rows(self, outs, d, dd)
         return d, dd
 
     def forces(self, d, dd, which=None):
@@ -318,7 +324,11 @@ class CoupledSystem:
         if self.connections is None:
             idx = range(self.n_contacts) if which is None else which
             laws = self._laws
-            return np.array([laws[c].evaluate(d[c], dd[c])[0] for c in idx], dtype=float)
+            f = np.array([laws[c].evaluate(d[c], dd[c])[0] for c in idx], dtype=float)
+            if self.circles and which is None:
+                from cosim.core.circles import circle_forces
+                circle_forces(self, f)
+            return f
         f = np.zeros(self.n_rows)
         cs = self.connections
         for c, ln in enumerate(self.links):
@@ -330,6 +340,9 @@ class CoupledSystem:
             f[c] = fn
             if r >= 0:
                 f[r] = ft
+        if self.circles:
+            from cosim.core.circles import circle_forces
+            circle_forces(self, f)
         return f if which is None else f[np.asarray(which, dtype=int)]
 
     def dissipation_rates(self, f, d, dd) -> np.ndarray:
@@ -355,10 +368,13 @@ class CoupledSystem:
             else:
                 r = self.tangent_row[c]
                 out[c] = self.connections.potential(c, d[c], d[r] if r >= 0 else 0.0)
+        if self.circles:
+            from cosim.core.circles import circle_potentials
+            circle_potentials(self, out)
         return out
 
     def contact_potential(self, d) -> float:
-        if self.connections is None:
+        if self.connections is None and not self.circles:
             laws = self._laws
             return float(sum([laws[c].potential(d[c]) for c in range(self.n_contacts)]))
         return float(np.sum(self.contact_potentials(d)))
@@ -448,6 +464,9 @@ class CoupledSystem:
         lowest first) with the same impulse and first moment: the L2
         projection of the force history on linear functions.  The partner
         side receives it, so momentum passes over exactly."""
+        if c in self.circles:
+            from cosim.core.circles import circle_hosted_force
+            return circle_hosted_force(self, c, h)
         host, slot = self.embedded[c]
         imp, _, mom, _ = self.subsystems[host].embedded_quadratures()[slot]
         m0 = (imp - impulse_before) / h          # int_0^1 f ds

@@ -96,10 +96,12 @@ def contact_spec(name: str, t: Table, subs: list) -> ContactSpec:
     if connection is not None and placement == "embedded" and not rigid_side:
         t.error("placement", "a grasp or friction between two moving sides is exchanged by the "
                              "scheme, not hosted by one side; set placement `coupler`")
+    from cosim.scene.circle_rules import circle_radius
+    radius = circle_radius(t, a, b, kinds, law, placement, host, follow, connection)
     spec = ContactSpec(name=name, key=t.key(), a=a, b=b,
                        normal=t.vec2("normal", unit="1", nonzero=True), follow=follow,
                        offset=t.number("offset", unit="m"), law=law, placement=placement,
-                       host=host, connection=connection)
+                       host=host, connection=connection, radius=radius)
     t.finish()
     return spec
 

@@ -277,6 +277,9 @@ class ContactSpec(_ByKey):
         Side b's point follows side a's along a line structure.
     connection : couplers.Connection or None
         Its grasp and friction, if any.
+    radius : float or None
+        A circle's radius [m] (side a's point its centre, side b a plane
+        body), or None for a point contact.
     """
 
     name: str
@@ -290,6 +293,7 @@ class ContactSpec(_ByKey):
     host: str | None = None
     follow: bool = False
     connection: object = None
+    radius: float | None = None
 
 
 @dataclass(frozen=True)

@@ -8,13 +8,15 @@ from __future__ import annotations
 import numpy as np
 
 from cosim.sides.fem import StructureSubsystem
+from cosim.sides.plane_circle import CircleHosting
 
 __all__ = ["PlaneSubsystem"]
 
 
-class PlaneSubsystem(StructureSubsystem):
+class PlaneSubsystem(CircleHosting, StructureSubsystem):
     """A :class:`fem.plane.PlaneStructure` reduced to the modes of its basis
-    (same parameters as :class:`~cosim.sides.fem.StructureSubsystem`)."""
+    (same parameters as :class:`~cosim.sides.fem.StructureSubsystem`); it
+    hosts circle contacts (:mod:`cosim.sides.plane_circle`)."""
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
