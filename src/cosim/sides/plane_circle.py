@@ -36,7 +36,7 @@ def quadrature_parts(structure, radius: float) -> int:
     ends, _ = structure.boundary_segments(None)
     p = structure.mesh.points
     longest = float(np.max(np.hypot(*(p[ends[:, 1]] - p[ends[:, 0]]).T)))
-    return max(1, math.ceil(20.0 * longest / radius))
+    return max(1, math.ceil(20.0 * longest / radius - 1e-9))
 
 
 class HostedCircle(EmbeddedContact):
@@ -45,12 +45,24 @@ class HostedCircle(EmbeddedContact):
     ``quad`` the step's ``[int F dt, int F s dt]`` on the circle (x, y
     each) [N s]."""
 
-    __slots__ = ("circle", "quad")
+    __slots__ = ("circle", "quad", "_seg", "_reach", "_amp", "_n_g")
 
     def __init__(self, contact, port, side, partner_position, partner_velocity, circle):
         super().__init__(contact, port, side, partner_position, partner_velocity)
         self.circle = circle
         self.quad = np.zeros(4)
+        # culling (exact): a point x = X + u lies inside the circle only if
+        # |X - c| < R + |u|, and |u| <= amp . |q| (amp: each mode's largest
+        # displacement at a point); the points of a segment lie within its
+        # reach of their centroid
+        n_seg = int(circle.segment[-1]) + 1
+        self._n_g = circle.weights.size // n_seg
+        pts = circle.points.reshape(n_seg, self._n_g, 2)
+        self._seg = pts.mean(axis=1)
+        self._reach = np.max(np.hypot(*(pts - self._seg[:, None, :]).transpose(2, 0, 1)),
+                             axis=1)
+        b = np.asarray(circle._b).reshape(-1, 2, circle.n_coordinates)
+        self._amp = np.max(np.hypot(b[:, 0, :], b[:, 1, :]), axis=0)
 
     def centre(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         """The centre's position and velocity at ``t`` [m, m/s]."""
@@ -59,21 +71,44 @@ class HostedCircle(EmbeddedContact):
 
     def row(self, t: float, q, dq) -> tuple[float, float]:
         """The largest penetration ``max_q (R - |x_q - c|)`` [m] and its rate
-        at that point [m/s]."""
+        at that point [m/s]; where no point can reach the circle, a negative
+        bound of it and 0."""
         c, vc = self.centre(t)
-        return self.row_at(q, dq, c, vc)
+        return self._row(q, dq, c, vc, self._near(q, c))[:2]
+
+    def _near(self, q, c):
+        """The quadrature points that may lie within ``2 R`` of the centre
+        (every point inside the circle among them), or, when there are none,
+        a bound of the penetration (at most ``-R``: a touch is always
+        located on exact values)."""
+        dist = np.hypot(*(self._seg - c).T) - self._reach
+        slack = self.circle.radius + float(self._amp @ np.abs(q))
+        seg = np.flatnonzero(dist < slack + self.circle.radius)
+        if seg.size == 0:
+            return float(slack - dist.min())
+        return (seg[:, None] * self._n_g + np.arange(self._n_g)).ravel()
 
     def row_at(self, q, dq, c, vc) -> tuple[float, float]:
-        return self._row(q, dq, c, vc)[:2]
+        """:meth:`row` for the centre ``c`` moving at ``vc``, over every point."""
+        return self._row(q, dq, c, vc, None)[:2]
 
-    def _row(self, q, dq, c, vc):
+    def _row(self, q, dq, c, vc, idx):
+        """Row, rate, ``x_q - c`` and ``|x_q - c|`` at the points ``idx`` (all
+        when None; a float: no point near, that bound is the row)."""
+        if isinstance(idx, float):
+            return idx, 0.0, None, None
         cc = self.circle
-        d = cc.positions(q) - c
+        if idx is None:
+            x, b = cc.positions(q), cc._b
+        else:
+            b = cc._b.reshape(-1, 2, cc.n_coordinates)[idx].reshape(-1, cc.n_coordinates)
+            x = cc.points[idx] + (b @ q).reshape(-1, 2)
+        d = x - c
         r = np.hypot(d[:, 0], d[:, 1])
         j = int(np.argmin(r))
-        v = cc._b[2 * j:2 * j + 2] @ dq - vc
+        v = b[2 * j:2 * j + 2] @ dq - vc
         rate = float(-(d[j] @ v) / r[j]) if r[j] > 0 else 0.0
-        return float(cc.radius - r[j]), rate, d, r
+        return float(cc.radius - r[j]), rate, d, r, b, idx
 
     def load(self, t: float, q, dq):
         """The row (largest penetration, its rate), the load ``-dV/dq`` on the
@@ -81,15 +116,16 @@ class HostedCircle(EmbeddedContact):
         :meth:`CircleContact.evaluate`, the positions found once."""
         cc = self.circle
         c, vc = self.centre(t)
-        g_max, rate, d, r = self._row(q, dq, c, vc)
-        if g_max <= 0.0:
-            return g_max, rate, np.zeros(q.size), np.zeros(2)
+        out = self._row(q, dq, c, vc, self._near(q, c))
+        if out[0] <= 0.0:
+            return out[0], out[1], np.zeros(q.size), np.zeros(2)
+        _, _, d, r, b, idx = out
         g = cc.radius - r
         on = np.flatnonzero(g > 0.0)
-        kg = (cc.stiffness * g[on] * cc.weights[on] / r[on])[:, None] * d[on]   # [N] along n
-        rows = np.concatenate([2 * on, 2 * on + 1])
-        f_q = cc._b[rows].T @ np.concatenate([kg[:, 0], kg[:, 1]])
-        return g_max, rate, f_q, -kg.sum(axis=0)
+        w = cc.weights[idx[on]]
+        kg = (cc.stiffness * g[on] * w / r[on])[:, None] * d[on]   # [N] along n
+        f_q = b.reshape(-1, 2, cc.n_coordinates)[on].reshape(-1, cc.n_coordinates).T @ kg.ravel()
+        return out[0], out[1], f_q, -kg.sum(axis=0)
 
 
 class CircleHosting:
