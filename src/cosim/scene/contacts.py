@@ -89,6 +89,8 @@ def contact_spec(name: str, t: Table, subs: list) -> ContactSpec:
                         f"out (a following contact is hosted by its structure), or set "
                         f"`follow = false`")
     connection = _connection(t, law)
+    from cosim.scene.circle_rules import circle_radius     # a circle's rules come first
+    radius = circle_radius(t, a, b, kinds, law, placement, host, follow, connection)
     if connection is not None and placement == "embedded" and (
             a[0] in structures or b[0] in structures):
         t.error("placement", "a grasp or friction against a rigid side is not evaluated inside "
@@ -96,8 +98,6 @@ def contact_spec(name: str, t: Table, subs: list) -> ContactSpec:
     if connection is not None and placement == "embedded" and not rigid_side:
         t.error("placement", "a grasp or friction between two moving sides is exchanged by the "
                              "scheme, not hosted by one side; set placement `coupler`")
-    from cosim.scene.circle_rules import circle_radius
-    radius = circle_radius(t, a, b, kinds, law, placement, host, follow, connection)
     spec = ContactSpec(name=name, key=t.key(), a=a, b=b,
                        normal=t.vec2("normal", unit="1", nonzero=True), follow=follow,
                        offset=t.number("offset", unit="m"), law=law, placement=placement,
