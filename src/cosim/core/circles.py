@@ -49,13 +49,13 @@ def circle_rows(system, outs, d, dd) -> None:
 
 def circle_forces(system, f) -> None:
     """Each circle's force size [N] into ``f`` (indexed by contact) in place."""
-    for c, (_, size) in system.circle_now.items():
+    for c, (_, size) in getattr(system, "circle_now", {}).items():
         f[c] = size
 
 
 def circle_potentials(system, out) -> None:
     """Each circle's stored energy ``V(q, c)`` [J] into ``out`` in place."""
-    for c, (energy, _) in system.circle_now.items():
+    for c, (energy, _) in getattr(system, "circle_now", {}).items():
         out[c] = energy
 
 
@@ -70,12 +70,6 @@ def circle_hosted_force(system, c: int, h: float) -> np.ndarray:
     if size == 0.0:
         return np.zeros(2)
     u = m0 / size
-    rows = slice(2 * port, 2 * port + 2)
-    for maps in (system._G, system._Gc):
-        G = maps[partner]
-        if not np.array_equal(G[rows, c], u):
-            G = G.copy()            # new arrays: a step's work is taken with its maps
-            G[rows, c] = u
-            maps[partner] = G
+    system.set_port_column(partner, port, c, u)
     a0, a1 = 4.0 * m0 - 6.0 * m1, 12.0 * m1 - 6.0 * m0
     return np.array([a0 @ u, a1 @ u])

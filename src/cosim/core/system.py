@@ -139,11 +139,10 @@ class CoupledSystem:
         #: the rows whose force a scheme hands over (coupler rows, hosted contacts)
         self.exchanged = np.array(sorted(set(self.coupler_rows.tolist()) | set(self.hosted)),
                                   dtype=int)
-        if self.connections is not None:
-            self._close_at_start()
         #: hosted circle contacts (cosim.core.circles): contact index -> HostedContact
         self.circles = {c: hc for c, hc in self.hosted.items() if hasattr(hc.embedded, "circle")}
-        self.circle_now: dict = {}
+        if self.connections is not None:
+            self._close_at_start()
 
     # ------------------------------------------------------------------ rows
     def _init_rows(self) -> None:
@@ -291,6 +290,14 @@ class CoupledSystem:
                     G[rows, c] = col
                     maps[ln.sub_a] = G
 
+    def set_port_column(self, s: int, port: int, c: int, column) -> None:
+        """Row ``c``'s force acts on port ``port`` of subsystem ``s`` along ``column``
+        (new maps: a step's work is taken with the maps it was applied through)."""
+        for maps in (self._G, self._Gc):
+            G = maps[s].copy()
+            G[2 * port:2 * port + 2, c] = column
+            maps[s] = G
+
     # ------------------------------------------------------------- states
     def outputs(self, states=None):
         """Port positions and velocities of every subsystem at its own state."""
@@ -321,14 +328,10 @@ class CoupledSystem:
 
     def forces(self, d, dd, which=None):
         """Forces of the rows ``which`` (all by default), in the current modes."""
-        if self.connections is None:
+        if self.connections is None and not self.circles:
             idx = range(self.n_contacts) if which is None else which
             laws = self._laws
-            f = np.array([laws[c].evaluate(d[c], dd[c])[0] for c in idx], dtype=float)
-            if self.circles and which is None:
-                from cosim.core.circles import circle_forces
-                circle_forces(self, f)
-            return f
+            return np.array([laws[c].evaluate(d[c], dd[c])[0] for c in idx], dtype=float)
         f = np.zeros(self.n_rows)
         cs = self.connections
         for c, ln in enumerate(self.links):

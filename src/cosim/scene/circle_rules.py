@@ -80,7 +80,7 @@ def circle_build_rules(scene, scheme: str, system, contact, order: list) -> None
                          f"corrects a point contact; contact `{contact.name}` is a circle "
                          f"(`radius`) spread over the boundary: turn the correction off")
     sub = system.subsystems[system.names.index(body)]
-    if getattr(sub, "_ts", None) is not None:
+    if getattr(sub, "integrator", "exact") != "exact":
         raise SceneError(scene.path, f"{spec.key}.integrator.method",
                          f"steps the modes by `{sub.integrator}`; a body hosting circle "
                          f"`{contact.name}` takes the exact modal step between contacts: "

@@ -61,7 +61,7 @@ class HostedCircle(EmbeddedContact):
         self._seg = pts.mean(axis=1)
         self._reach = np.max(np.hypot(*(pts - self._seg[:, None, :]).transpose(2, 0, 1)),
                              axis=1)
-        b = np.asarray(circle._b).reshape(-1, 2, circle.n_coordinates)
+        b = np.asarray(circle.trace).reshape(-1, 2, circle.n_coordinates)
         self._amp = np.max(np.hypot(b[:, 0, :], b[:, 1, :]), axis=0)
 
     def centre(self, t: float) -> tuple[np.ndarray, np.ndarray]:
@@ -99,9 +99,9 @@ class HostedCircle(EmbeddedContact):
             return idx, 0.0, None, None
         cc = self.circle
         if idx is None:
-            x, b = cc.positions(q), cc._b
+            x, b = cc.positions(q), cc.trace
         else:
-            b = cc._b.reshape(-1, 2, cc.n_coordinates)[idx].reshape(-1, cc.n_coordinates)
+            b = cc.trace.reshape(-1, 2, cc.n_coordinates)[idx].reshape(-1, cc.n_coordinates)
             x = cc.points[idx] + (b @ q).reshape(-1, 2)
         d = x - c
         r = np.hypot(d[:, 0], d[:, 1])
