@@ -7,6 +7,7 @@ circle rolled over a corner closes it too while the force turns, the run
 agrees with the stand-alone strike of tests/test_plane_circle_strike.py,
 the compiled loop refuses it with its reason, and what a circle cannot run
 with is refused at its key."""
+import json
 import math
 
 import numpy as np
@@ -257,3 +258,15 @@ def test_a_circle_on_a_plane_side_a_is_refused(tmp_path):
     path.write_text(text)
     _refused(path, "contacts.hit.radius", "must move with another body than a plane one")
     assert math.isfinite(R)
+
+
+def test_info_says_a_circle_has_no_one_spring(tmp_path):
+    """`cosim info` judges no point contact's spring for a circle (its k is in
+    Pa/m): it names the circle and says why its frequency is not evaluated,
+    and gives the plane body no mode rule against it."""
+    from cosim.scene.info import scene_info
+    info = scene_info(cosim.load_scene(_scene(tmp_path, modes=4)))
+    hit = info["contacts"]["hit"]
+    assert hit["radius"] == R and hit["stiffness_pa_per_m"] == 1e12 and hit["host"] == "strip"
+    assert "frequency" not in hit and "no one spring" in hit["not_evaluated"]
+    assert "mode_rule" not in json.dumps(info["subsystems"]["strip"])
