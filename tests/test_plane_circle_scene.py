@@ -270,3 +270,13 @@ def test_info_says_a_circle_has_no_one_spring(tmp_path):
     assert hit["radius"] == R and hit["stiffness_pa_per_m"] == 1e12 and hit["host"] == "strip"
     assert "frequency" not in hit and "no one spring" in hit["not_evaluated"]
     assert "mode_rule" not in json.dumps(info["subsystems"]["strip"])
+
+
+def test_the_accuracy_estimate_judges_no_omega_h_for_a_circle(tmp_path):
+    """The companions' ladder judges each exchanged contact by omega h of
+    its one spring; a circle has none (its k is in Pa/m): it is left out,
+    not judged as a 1e12 N/m spring."""
+    from cosim.studies.companion import exchanged_omega_h
+    scene = cosim.load_scene(_scene(tmp_path, modes=4))
+    system, _ = scene.build()
+    assert 0 in system.circles and exchanged_omega_h(scene, system) == {}
