@@ -172,6 +172,12 @@ class CircleHosting:
     def compiled_side(self):
         return None if self.circles else super().compiled_side()
 
+    @property
+    def _closed_form(self) -> bool:
+        """No closed-form stepping with a circle: its force is not a spring's
+        on one port."""
+        return False if self.circles else super()._closed_form
+
     def circle_energy(self, e: HostedCircle, centre) -> tuple[float, np.ndarray]:
         """``V(q, c)`` [J] and the force on the circle [N] at the body's state."""
         energy, _, on_circle = e.circle.evaluate(self.x[:self.n_modes], centre)
