@@ -54,7 +54,6 @@ b = "strip.top"
 normal = [0.0, 1.0]
 radius = {radius}
 law = {{ type = "linear", contact_stiffness = 1e12 }}
-placement = "embedded"
 """
 
 #: the mass falling on mid-span at 1 m/s, free along y only
@@ -222,13 +221,13 @@ def test_a_bad_radius_is_refused_at_its_key(tmp_path, radius, words):
      "contacts.hit.radius", ("side b must be a plane body",)),
     ({'type = "linear", contact_stiffness = 1e12': 'type = "kelvin_voigt", contact_stiffness = 1e9, contact_damping = 1.0'},
      "contacts.hit.law", ("must be `linear`", "Pa/m")),
-    ({'placement = "embedded"': 'placement = "coupler"'}, "contacts.hit.placement",
+    ({"radius = 0.01": 'radius = 0.01\nplacement = "coupler"'}, "contacts.hit.placement",
      ("must be `embedded`",)),
-    ({'placement = "embedded"': 'placement = "embedded"\nhost = "ball"'}, "contacts.hit.host",
+    ({"radius = 0.01": 'radius = 0.01\nhost = "ball"'}, "contacts.hit.host",
      ("must be the plane body",)),
-    ({'placement = "embedded"': 'placement = "embedded"\nfriction = { coefficient = 0.3, '
-                                'slip_velocity = 0.01 }'}, "contacts.hit.friction",
-     ("not supported on a circle",)),
+    ({"radius = 0.01": 'radius = 0.01\nfriction = { coefficient = 0.3, slip_velocity = 0.01 }'},
+     "contacts.hit.friction", ("not supported on a circle",)),
+    ({"radius = 0.01": 'radius = 0.01\nfollow = true'}, "contacts.hit.follow", ("line structure",)),
 ])
 def test_what_a_circle_cannot_be_is_refused_at_its_key(tmp_path, replace, key, words):
     _refused(_scene(tmp_path, **replace), key, *words)

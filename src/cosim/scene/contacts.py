@@ -63,7 +63,7 @@ def contact_spec(name: str, t: Table, subs: list) -> ContactSpec:
     rigid_side = kinds[a[0]] == "rigid" or kinds[b[0]] == "rigid"
     if kinds[a[0]] == "rigid" and kinds[b[0]] == "rigid":
         t.error("b", "a contact between two rigid subsystems has nothing to simulate")
-    placement = t.string("placement", "embedded" if rigid_side else "coupler",
+    placement = t.string("placement", "embedded" if rigid_side or t.has("radius") else "coupler",
                          choices=("embedded", "coupler"))
     if law.rigid and (placement != "embedded" or not rigid_side):
         t.error("placement", "a `rigid` law is resolved inside its moving side's integrator: "

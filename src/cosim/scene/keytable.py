@@ -411,7 +411,7 @@ _CONTACT = (
     K("a", "", REQUIRED, "SUBSYSTEM.POINT of a declared subsystem", "side a's point"),
     K("b", "", REQUIRED, "SUBSYSTEM.POINT on another subsystem", "side b's point"),
     K("law", "", REQUIRED, _TABLE, "the contact law"),
-    K("placement", "", Varies('"embedded" with a rigid side, else "coupler"'),
+    K("placement", "", Varies('"embedded" with a rigid side or a `radius`, else "coupler"'),
       '"embedded" or "coupler"',
       "who evaluates the contact: one side's integrator or the scheme"),
     K("host", "", Varies("the lighter side; with `follow`, the subsystem of `b`"),
