@@ -168,13 +168,19 @@ def test_a_loaded_circle_rolling_over_a_corner_of_a_free_body_closes_the_ledger(
     the ball, pressed into its top face by 1 kN and carried at 3 m/s, rolls
     over the corner and leaves; the force on it turns from the top's normal
     to over 40 degrees towards the end face's, and the energy drifts by a
-    small share of the stored energy."""
-    path = _scene(tmp_path, step=4e-6, t_end=4e-3, contact_step=4e-6, modes=6, bodies=ROLL,
-                  **{'supports = { fixed = ["left", "right"] }': "supports = {}"})
-    scene = cosim.load_scene(path)
-    res = cosim.simulate(scene, estimate=False)
-    assert res.status == "finished", res.message
-    system = scene.build()[0]
+    small share of the stored energy, falling as the step squared (the
+    force's turn within a step, not handed over, is of higher order)."""
+    drifts = []
+    for step in (8e-6, 4e-6):
+        path = _scene(tmp_path, step=step, t_end=4e-3, contact_step=step, modes=6, bodies=ROLL,
+                      **{'supports = { fixed = ["left", "right"] }': "supports = {}"})
+        scene = cosim.load_scene(path)
+        res = cosim.simulate(scene, estimate=False)
+        assert res.status == "finished", res.message
+        system = scene.build()[0]
+        stored, _ = _replay(res, system, (0.395, H / 2 + R - 5e-5))
+        drifts.append(res.summary["energy"]["max_abs_drift"] / stored.max())
+    assert drifts[0] / drifts[1] > 3.5, drifts
     assert np.count_nonzero(_circle(system)[0].natural_frequencies_hz < 1.0) == 3   # free
     stored, force = _replay(res, system, (0.395, H / 2 + R - 5e-5))
     loaded = np.hypot(*force.T) > 0.05 * np.hypot(*force.T).max()
@@ -185,8 +191,9 @@ def test_a_loaded_circle_rolling_over_a_corner_of_a_free_body_closes_the_ledger(
     drift = res.summary["energy"]["max_abs_drift"] / stored.max()
     assert drift < 1e-3, drift
     for printed, value, measured in (("rolled over the corner, 1.2e-4", 1.2e-4, drift),
+                                     ("6.1e-4 at 8 µs", 6.1e-4, drifts[0]),
                                      ("turns by 43 degrees", 43.0, angle.max())):
-        claim = Claim(S, printed, CMD, value, abs=0.05e-4 if value < 1 else 0.5)
+        claim = Claim(S, printed, CMD, value, abs=0.5 * 10 ** math.floor(math.log10(value) - 1))
         assert_printed(claim)
         assert_reproduced(claim, measured)
 
@@ -261,7 +268,6 @@ def test_a_circle_on_a_plane_side_a_is_refused(tmp_path):
                                     "s = 0.1 } }\nmodes = { count = 2 }\n\n[subsystems.ball]")
     path.write_text(text)
     _refused(path, "contacts.hit.radius", "must move with another body than a plane one")
-    assert math.isfinite(R)
 
 
 def test_info_says_a_circle_has_no_one_spring(tmp_path):
