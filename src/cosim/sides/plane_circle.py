@@ -93,8 +93,9 @@ class HostedCircle(EmbeddedContact):
         return self._row(q, dq, c, vc, None)[:2]
 
     def _row(self, q, dq, c, vc, idx):
-        """Row, rate, ``x_q - c`` and ``|x_q - c|`` at the points ``idx`` (all
-        when None; a float: no point near, that bound is the row)."""
+        """Row, rate, ``x_q - c``, ``|x_q - c|``, the trace's rows and ``idx``
+        at the points ``idx`` (all when None); ``idx`` a float (no point
+        near): that bound as the row, its rate 0 and nothing else."""
         if isinstance(idx, float):
             return idx, 0.0, None, None
         cc = self.circle
