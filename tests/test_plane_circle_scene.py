@@ -290,3 +290,48 @@ def test_the_accuracy_estimate_judges_no_omega_h_for_a_circle(tmp_path):
     scene = cosim.load_scene(_scene(tmp_path, modes=4))
     system, _ = scene.build()
     assert 0 in system.circles and exchanged_omega_h(scene, system) == {}
+
+
+PIN = """
+[subsystems.pin]
+type = "multibody"
+integrator = { method = "rk4", max_step = 1e-6 }
+
+[subsystems.pin.bodies.pin]
+mass = 0.1
+inertia = 1e-5
+points = { tip = [0.0, 0.0] }
+joint = { name = "y", type = "prismatic", parent = "ground", axis = [0.0, 1.0], offset = [0.1, 0.020001], dq0 = -1.0 }
+
+[contacts.poke]
+a = "pin.tip"
+b = "strip.poke"
+normal = [0.0, 1.0]
+law = { type = "linear", contact_stiffness = 1e8 }
+placement = "embedded"
+host = "strip"
+"""
+
+
+def test_a_body_hosts_a_circle_and_a_point_contact_together(tmp_path):
+    """A pin (0.1 kg, 1e8 N/m) strikes the strip at 0.1 m while the circle
+    strikes at mid-span, both hosted by the strip: both close, and the
+    ledger of the whole closes to the coupling errors (the point contact's
+    the larger, as a point contact's lag is)."""
+    import warnings
+    path = _scene(tmp_path, **{
+        'points = { top = { boundary = "top", s = 0.2 } }':
+            'points = { top = { boundary = "top", s = 0.2 }, poke = { boundary = "top", s = 0.1 } }',
+        'sequence = ["strip", "ball"]': 'sequence = ["strip", "ball", "pin"]'})
+    path.write_text(path.read_text() + PIN)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")         # the pin is a point contact on a continuum
+        scene = cosim.load_scene(path)
+        res = cosim.simulate(scene, estimate=False)
+    assert res.status == "finished", res.message
+    contacts = res.summary["contacts"]
+    assert contacts["hit"]["count"] == contacts["poke"]["count"] == 1
+    e0 = res.summary["energy"]["initial"]
+    assert res.summary["energy"]["max_abs_drift"] < 1e-4 * e0
+    assert abs(contacts["hit"]["coupling_error"]) < 1e-6 * e0
+    assert abs(contacts["poke"]["coupling_error"]) < 1e-5 * e0
