@@ -68,7 +68,10 @@ CONSTRUCTED = [
         'fixed_y="tip"}, origin=[0.0, 0.0], angle=0.0, rayleigh=[0.0, 0.0], '
         'points={p={boundary="face", s=0.1}}, modes={count=2, cutoff_hz=1e4, '
         'static_correction=false, cache=".plane-modes"}, integrator={method="exact"}, static_equilibrium=true, '
-        'static_loads={p=1.0}, initial_velocity=[0.0, 0.0]}']),
+        'static_loads={p=1.0}, initial_velocity=[0.0, 0.0]}',
+        # a circle against the plane body (built and run in tests/test_plane_circle_scene.py)
+        'contacts.circle={a="body.tip", b="pl.p", normal=[0.0, 1.0], radius=0.01, '
+        'placement="embedded", law={type="linear", contact_stiffness=1e12}}']),
     (SPRING_DROP, None, [
         f'{M}.joint.drive={{type="table", times=[0.0, 1.0], torques=[0.0, 0.0]}}']),
     (SPRING_DROP, None, [

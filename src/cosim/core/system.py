@@ -7,12 +7,13 @@ import numpy as np
 from couplers.contact import penetrations
 from couplers.modes import GRASPED
 
+from cosim.core.following import MovingPorts
 from cosim.core.links import PLACEMENTS, ContactLink, HostedContact
 from cosim.core.subsystem import StepInput, Subsystem
 
 __all__ = ["ContactLink", "CoupledSystem", "HostedContact", "PLACEMENTS"]
 
-class CoupledSystem:
+class CoupledSystem(MovingPorts):
     """Subsystems and contacts, with the bookkeeping every scheme shares.
 
     Contacts placed ``"embedded"`` are handed to their moving side at
@@ -139,6 +140,8 @@ class CoupledSystem:
         #: the rows whose force a scheme hands over (coupler rows, hosted contacts)
         self.exchanged = np.array(sorted(set(self.coupler_rows.tolist()) | set(self.hosted)),
                                   dtype=int)
+        #: hosted circle contacts (cosim.core.circles): contact index -> HostedContact
+        self.circles = {c: hc for c, hc in self.hosted.items() if hasattr(hc.embedded, "circle")}
         if self.connections is not None:
             self._close_at_start()
 
@@ -225,88 +228,6 @@ class CoupledSystem:
             on = on | (self.connections.mode == GRASPED)
         return on
 
-    # ---------------------------------------------------- moving surface points
-    def update_followers(self, outs, states=None) -> None:
-        """Move each following contact's surface port under its point, and
-        turn the force on the point to the deformed surface's normal.
-
-        Side ``b``'s port moves to the material coordinate ``s`` below side
-        ``a``'s point ``x_a``: ``s = (x_a - o) . e`` with the structure's
-        origin ``o`` and axis ``e``.  The surface point is then
-        ``x_b(s, t) = o + s e + w(s, t) r`` (``r`` the deflection direction),
-        and the penetration ``d = offset - n . (x_a - x_b(s, t))`` depends on
-        ``x_a`` through ``s`` as well.  Its rate is
-
-            dd = -n . (v_a - w_t r) + sigma (e . v_a),   sigma = n . (e + w' r),
-
-        where ``w_t r`` is the port's material velocity (what
-        :meth:`penetrations` takes for ``v_b``) and ``w' = dw/ds``.  A spring of
-        potential ``V(d)`` and force ``f = V'(d)`` therefore acts with
-        ``-dV/dx_a = f (n - sigma e)`` on the point and with ``-f n`` on the
-        material point ``s`` (its consistent nodal load), and the power balance
-        is exact:
-
-            f (n - sigma e) . v_a - f n . (w_t r) = -f dd = -dV/dt.
-
-        A force along ``n`` alone, as before, leaves ``-f sigma (e . v_a)``
-        (the slope term ``w' ds/dt`` of the spring's stretch) unpaid: the
-        spring's energy changed without work on either side.  So the column
-        of side ``a``'s port-force maps for the contact's row becomes
-        ``n - sigma e`` (``sigma = 0`` where ``s`` is clipped to the
-        structure's ends, for there ``s`` no longer moves with ``x_a``), and
-        :meth:`penetrations` adds the slope term to ``dd``.
-
-        Parameters
-        ----------
-        outs : list
-            Every subsystem's port positions and velocities.
-        states : list of arrays, optional
-            The subsystems' states that gave ``outs`` (default: their own
-            ``x``); side ``b``'s gives ``w'``.
-        """
-        for i, c in enumerate(self._follow_index):
-            ln = self.links[c]
-            sub = self.subsystems[ln.sub_b]
-            if "sliding_ports" in sub.capabilities:   # a plane body's closest boundary point
-                n = sub.slide_port(ln.port_b, outs[ln.sub_a][0][ln.port_a],
-                                   sub.x if states is None else states[ln.sub_b])
-                self._turn_normal(c, n)
-                continue
-            s_raw = sub.material_coordinate(outs[ln.sub_a][0][ln.port_a])
-            s = sub.move_port(ln.port_b, s_raw)
-            x = sub.x if states is None else states[ln.sub_b]
-            axis = np.asarray(sub.structure.axis, float)
-            n = ln.contact.normal
-            sigma = float(n @ sub.surface_tangent(ln.port_b, x)) if s == s_raw else 0.0
-            if s != s_raw:
-                axis = np.zeros(2)
-            self._follow_slope[i] = sigma
-            self._follow_axis[i] = axis
-            col = np.asarray(n, float) - sigma * axis
-            rows = slice(2 * ln.port_a, 2 * ln.port_a + 2)
-            # new arrays, not in place: a step's work is taken with the maps
-            # its forces were applied through
-            for maps in (self._G, self._Gc):
-                G = maps[ln.sub_a]
-                if G[rows, c].any() and not np.array_equal(G[rows, c], col):
-                    G = G.copy()
-                    G[rows, c] = col
-                    maps[ln.sub_a] = G
-
-    def _turn_normal(self, c: int, n) -> None:
-        """Contact ``c`` now reads and pushes along ``n`` (``-n`` on ``b``): a
-        plane body's boundary turned under a following point (no slope
-        term: ``b``'s is the closest point, :meth:`PlaneSubsystem.slide_port`)."""
-        self._normals[c] = self._row_dir[c] = n = np.asarray(n, float)
-        ln = self.links[c]
-        for sub, port, col in ((ln.sub_a, ln.port_a, n), (ln.sub_b, ln.port_b, -n)):
-            rows = slice(2 * port, 2 * port + 2)
-            for maps in (self._G, self._Gc):
-                G = maps[sub]
-                if G[rows, c].any() and not np.array_equal(G[rows, c], col):
-                    maps[sub] = G = G.copy()    # new arrays, as update_followers makes
-                    G[rows, c] = col
-
     # ------------------------------------------------------------- states
     def outputs(self, states=None):
         """Port positions and velocities of every subsystem at its own state."""
@@ -330,11 +251,14 @@ class CoupledSystem:
             e = np.einsum("cx,cx->c", dx[ct], t) - self.connections.anchor[ct]
             de = np.einsum("cx,cx->c", dv[ct], t)
             d, dd = np.concatenate([d, e]), np.concatenate([dd, de])
+        if self.circles:
+            from cosim.core.circles import circle_rows
+            circle_rows(self, outs, d, dd)
         return d, dd
 
     def forces(self, d, dd, which=None):
         """Forces of the rows ``which`` (all by default), in the current modes."""
-        if self.connections is None:
+        if self.connections is None and not self.circles:
             idx = range(self.n_contacts) if which is None else which
             laws = self._laws
             return np.array([laws[c].evaluate(d[c], dd[c])[0] for c in idx], dtype=float)
@@ -349,6 +273,9 @@ class CoupledSystem:
             f[c] = fn
             if r >= 0:
                 f[r] = ft
+        if self.circles:
+            from cosim.core.circles import circle_forces
+            circle_forces(self, f)
         return f if which is None else f[np.asarray(which, dtype=int)]
 
     def dissipation_rates(self, f, d, dd) -> np.ndarray:
@@ -374,10 +301,13 @@ class CoupledSystem:
             else:
                 r = self.tangent_row[c]
                 out[c] = self.connections.potential(c, d[c], d[r] if r >= 0 else 0.0)
+        if self.circles:
+            from cosim.core.circles import circle_potentials
+            circle_potentials(self, out)
         return out
 
     def contact_potential(self, d) -> float:
-        if self.connections is None:
+        if self.connections is None and not self.circles:
             laws = self._laws
             return float(sum([laws[c].potential(d[c]) for c in range(self.n_contacts)]))
         return float(np.sum(self.contact_potentials(d)))
@@ -467,6 +397,9 @@ class CoupledSystem:
         lowest first) with the same impulse and first moment: the L2
         projection of the force history on linear functions.  The partner
         side receives it, so momentum passes over exactly."""
+        if c in self.circles:
+            from cosim.core.circles import circle_hosted_force
+            return circle_hosted_force(self, c, h)
         host, slot = self.embedded[c]
         imp, _, mom, _ = self.subsystems[host].embedded_quadratures()[slot]
         m0 = (imp - impulse_before) / h          # int_0^1 f ds

@@ -281,10 +281,10 @@ def embedded_step_limit(system, c: int):
     side's port mobility and, for a structure, its highest kept mode, which
     the same RK4 steps while the contact is closed): ``(limit, the side's
     step, its key, omega)``, or None where no RK4 step integrates ``c`` (a
-    coupler contact, a rigid law, another integrator).  ``cosim info``
+    coupler contact, a rigid law, a circle, another integrator).  ``cosim info``
     prints this limit, so the step it prints is one the build accepts."""
     ln = system.links[c]
-    if ln.placement != "embedded" or ln.contact.law.rigid:
+    if ln.placement != "embedded" or ln.contact.law.rigid or c in system.circles:
         return None
     subs = system.subsystems
     s = system.embedded[c][0]
@@ -349,7 +349,8 @@ def build_system(scene, scheme: str | None = None, *, run_fmu: bool = True):
         sa, sb = names.index(c.a[0]), names.index(c.b[0])
         pa, pb = subs[sa].port_index(c.a[1]), subs[sb].port_index(c.b[1])
         law = c.law
-        if "plane" in (types[c.a[0]], types[c.b[0]]):   # static correction, pre-flight rules
+        if "plane" in (types[c.a[0]], types[c.b[0]]) and c.radius is None:   # static
+            # correction, pre-flight rules (of a point contact)
             from cosim.scene.plane_build import corrected_law
             law = corrected_law(c, scene, subs, ((sa, pa), (sb, pb)))
         contact = PointContact(c.name, law, c.normal, c.offset)
@@ -367,12 +368,21 @@ def build_system(scene, scheme: str | None = None, *, run_fmu: bool = True):
                 mob_a = subs[sa].port_mobility(pa, contact.normal)
                 mob_b = subs[sb].port_mobility(pb, contact.normal)
                 host = sa if mob_a >= mob_b else sb
+        if c.radius is not None:        # a circle: the plane body b hosts it
+            host = sb
+            subs[sb].add_circle(c.name, c.radius, law.contact_stiffness)
         links.append(ContactLink(contact, sa, pa, sb, pb, placement, c.follow, host,
                                  c.connection))
     if any(side.type == "fmu" for side in scene.subsystems):
         from cosim.scene.fmu_build import settle_fmu_contacts
         links = settle_fmu_contacts(scene, subs, links)
     system = CoupledSystem(subs, links)
+    for c in scene.contacts:
+        if c.radius is not None:
+            from cosim.scene.circle_rules import circle_build_rules
+            seq = [n for n in (opts.get("sequence") or names) if n in names]
+            circle_build_rules(scene, name, system, c,
+                               [n for n in seq if not subs[names.index(n)].rigid])
     for c, ln in enumerate(links):
         found = embedded_step_limit(system, c)
         if found is None:

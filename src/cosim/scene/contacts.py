@@ -63,7 +63,7 @@ def contact_spec(name: str, t: Table, subs: list) -> ContactSpec:
     rigid_side = kinds[a[0]] == "rigid" or kinds[b[0]] == "rigid"
     if kinds[a[0]] == "rigid" and kinds[b[0]] == "rigid":
         t.error("b", "a contact between two rigid subsystems has nothing to simulate")
-    placement = t.string("placement", "embedded" if rigid_side else "coupler",
+    placement = t.string("placement", "embedded" if rigid_side or t.has("radius") else "coupler",
                          choices=("embedded", "coupler"))
     if law.rigid and (placement != "embedded" or not rigid_side):
         t.error("placement", "a `rigid` law is resolved inside its moving side's integrator: "
@@ -90,6 +90,8 @@ def contact_spec(name: str, t: Table, subs: list) -> ContactSpec:
                         f"out (a following contact is hosted by its structure), or set "
                         f"`follow = false`")
     connection = _connection(t, law)
+    from cosim.scene.circle_rules import circle_radius     # a circle's rules come first
+    radius = circle_radius(t, a, b, kinds, law, placement, host, follow, connection)
     if connection is not None and placement == "embedded" and (
             a[0] in structures or b[0] in structures):
         t.error("placement", "a grasp or friction against a rigid side is not evaluated inside "
@@ -100,7 +102,7 @@ def contact_spec(name: str, t: Table, subs: list) -> ContactSpec:
     spec = ContactSpec(name=name, key=t.key(), a=a, b=b,
                        normal=t.vec2("normal", unit="1", nonzero=True), follow=follow,
                        offset=t.number("offset", unit="m"), law=law, placement=placement,
-                       host=host, connection=connection)
+                       host=host, connection=connection, radius=radius)
     t.finish()
     return spec
 

@@ -171,6 +171,15 @@ def _contact_info(system, c, scene, touch=None, why_not=None) -> dict:
     if law.rigid:
         out.update(restitution=law.restitution, friction=law.friction)
         return out
+    if c in system.circles:          # a penalty spread over the boundary inside a circle
+        circle = system.circles[c].embedded.circle
+        out.update(host=system.names[system.embedded[c][0]], radius=circle.radius,
+                   stiffness_pa_per_m=circle.stiffness,
+                   not_evaluated="reduced mass, frequency, contact time and stable steps: a "
+                                 "circle (`radius`) stiffens as its contact widens, so it has "
+                                 "no one spring; its host's RK4 resolves it at the host's "
+                                 "`integrator.contact_step`")
+        return out
     n = ln.contact.normal
     mob = system.contact_mobility(c)
     k, cd = stiffest_normal(ln)      # a grasp stiffer than the law sets the frequency

@@ -34,7 +34,7 @@ K = Key
 #: meaning and unit of each contact-law parameter (the laws' dataclass fields)
 LAW_PARAMETERS = {
     "contact_stiffness": ("N/m^e", "penalty stiffness (N/m for the linear laws; N/m^e with "
-                                   "an `exponent` e)"),
+                                   "an `exponent` e; Pa/m for a circle, `radius`)"),
     "contact_damping": ("N s/m", "viscous damping of the Kelvin-Voigt law"),
     "exponent": ("", "exponent e of the penetration (3/2 for Hertz's spheres)"),
     "reference_penetration": ("m", "penetration at which the stiffness is given "

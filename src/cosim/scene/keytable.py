@@ -15,7 +15,7 @@ from cosim.core.guard import (DEFAULT_CHATTER_SWITCHES, DEFAULT_CHATTER_WINDOW,
                               DEFAULT_COUPLING_WARNING, DEFAULT_ENERGY_FLOOR,
                               DEFAULT_ENERGY_GROWTH, DEFAULT_ENERGY_WARNING)
 from cosim.io.rundir import NAME_MAX
-from cosim.scene.keytable_plane import plane_sections
+from cosim.scene.keytable_plane import circle_keys, plane_sections
 
 __all__ = ["Key", "Section", "SECTIONS", "REQUIRED", "Varies", "DEFAULT_MULTIBODY_STEP",
            "DEFAULT_CONTACT_STEP", "STRUCTURE_TYPES", "SUBSYSTEM_TYPES", "NAME_TEXT",
@@ -411,7 +411,7 @@ _CONTACT = (
     K("a", "", REQUIRED, "SUBSYSTEM.POINT of a declared subsystem", "side a's point"),
     K("b", "", REQUIRED, "SUBSYSTEM.POINT on another subsystem", "side b's point"),
     K("law", "", REQUIRED, _TABLE, "the contact law"),
-    K("placement", "", Varies('"embedded" with a rigid side, else "coupler"'),
+    K("placement", "", Varies('"embedded" with a rigid side or a `radius`, else "coupler"'),
       '"embedded" or "coupler"',
       "who evaluates the contact: one side's integrator or the scheme"),
     K("host", "", Varies("the lighter side; with `follow`, the subsystem of `b`"),
@@ -491,7 +491,7 @@ SECTIONS: dict[str, Section] = {
                                     _STRUCTURE_INTEGRATOR),
     "static_loads": Section("subsystems.NAME.static_loads", "a structure", _STATIC_LOADS),
     "contacts": Section("contacts", "", (K("NAME", "", REQUIRED, _WORD, "a contact"),)),
-    "contact": Section("contacts.NAME", "", _CONTACT),
+    "contact": Section("contacts.NAME", "", _CONTACT + circle_keys(K)),
     "grasp": Section("contacts.NAME.grasp", "", _GRASP),
     "trigger": Section("contacts.NAME.grasp.close", "or `release`, as a table", _TRIGGER),
     "friction": Section("contacts.NAME.friction", "", _FRICTION),

@@ -4,10 +4,19 @@ with its own key and section classes and adds what it returns to its
 ``SECTIONS`` (this module imports nothing of cosim's)."""
 from __future__ import annotations
 
-__all__ = ["plane_sections"]
+__all__ = ["plane_sections", "circle_keys"]
 
 _TABLE = "a table"
 _VEC = "two finite numbers"
+
+
+def circle_keys(K) -> tuple:
+    """The key of ``[contacts.NAME]`` that makes a contact a circle against
+    a plane body (:mod:`cosim.scene.circle_rules` reads it)."""
+    return (K("radius", "m", None, "> 0; a at the circle's centre, b on a plane body",
+              "a circle of this radius centred on a's point presses b's boundary where it lies "
+              "inside it (law `linear`, its `contact_stiffness` in Pa/m: pressure per metre "
+              "of penetration; hosted by the plane body, scheme `gauss_seidel`)"),)
 
 
 def plane_sections(K, Section, REQUIRED, subsystem_type, common: tuple) -> dict:

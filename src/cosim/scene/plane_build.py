@@ -76,7 +76,9 @@ def mode_rules(system, scene) -> dict:
     specs = {s.name: s for s in scene.subsystems}
     laws = {c.name: c.law for c in scene.contacts}
     subs, out = system.subsystems, {}
-    for ln in system.links:
+    for c, ln in enumerate(system.links):
+        if c in system.circles:         # a spread penalty, in Pa/m: no one spring to judge
+            continue
         k = getattr(laws.get(ln.contact.name), "contact_stiffness", None)
         ends = ((ln.sub_a, ln.port_a), (ln.sub_b, ln.port_b))
         for (s, port), other in zip(ends, ends[::-1]):

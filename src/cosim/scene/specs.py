@@ -278,6 +278,9 @@ class ContactSpec(_ByKey):
         body's boundary.
     connection : couplers.Connection or None
         Its grasp and friction, if any.
+    radius : float or None
+        A circle's radius [m] (side a's point its centre, side b a plane
+        body), or None for a point contact.
     """
 
     name: str
@@ -291,6 +294,7 @@ class ContactSpec(_ByKey):
     host: str | None = None
     follow: bool = False
     connection: object = None
+    radius: float | None = None
 
 
 @dataclass(frozen=True)

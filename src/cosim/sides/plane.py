@@ -8,14 +8,16 @@ from __future__ import annotations
 import numpy as np
 
 from cosim.sides.fem import StructureSubsystem
+from cosim.sides.plane_circle import CircleHosting
 
 __all__ = ["PlaneSubsystem"]
 
 
-class PlaneSubsystem(StructureSubsystem):
+class PlaneSubsystem(CircleHosting, StructureSubsystem):
     """A :class:`fem.plane.PlaneStructure` reduced to the modes of its basis
     (same parameters as :class:`~cosim.sides.fem.StructureSubsystem`); its
-    ports slide along its boundary (:meth:`slide_port`)."""
+    ports slide along its boundary (:meth:`slide_port`), and it hosts circle
+    contacts (:mod:`cosim.sides.plane_circle`)."""
 
     capabilities = StructureSubsystem.capabilities | {"sliding_ports"}
 

@@ -78,6 +78,8 @@ def exchanged_omega_h(scene, system) -> dict:
         sides = (system.subsystems[ln.sub_a], system.subsystems[ln.sub_b])
         if ln.placement == "embedded" and any(s.rigid for s in sides):
             continue                      # a side's integrator steps it: its own step
+        if c in system.circles:           # a spread penalty: no one spring's omega
+            continue
         w = contact_omega(system, c)
         if math.isfinite(w):
             out[ln.contact.name] = w * h

@@ -147,6 +147,12 @@ class CircleContact:
         self._b = b if basis is None else np.ascontiguousarray(b @ np.asarray(basis))
         self.n_coordinates = self._b.shape[1]
 
+    @property
+    def trace(self):
+        """``B``: the world displacement of the quadrature points from the
+        coordinates, rows ``2 q + i`` (sparse without a basis, dense with one)."""
+        return self._b
+
     def positions(self, u) -> np.ndarray:
         """Deformed world positions of the quadrature points, (n_q, 2) [m]."""
         return self.points + (self._b @ np.asarray(u, dtype=float)).reshape(-1, 2)
