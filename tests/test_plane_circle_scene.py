@@ -234,7 +234,7 @@ def test_a_bad_radius_is_refused_at_its_key(tmp_path, radius, words):
      ("must be the plane body",)),
     ({"radius = 0.01": 'radius = 0.01\nfriction = { coefficient = 0.3, slip_velocity = 0.01 }'},
      "contacts.hit.friction", ("not supported on a circle",)),
-    ({"radius = 0.01": 'radius = 0.01\nfollow = true'}, "contacts.hit.follow", ("line structure",)),
+    ({"radius = 0.01": 'radius = 0.01\nfollow = true'}, "contacts.hit.follow", ("does not apply to a circle",)),
 ])
 def test_what_a_circle_cannot_be_is_refused_at_its_key(tmp_path, replace, key, words):
     _refused(_scene(tmp_path, **replace), key, *words)
