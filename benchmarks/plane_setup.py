@@ -11,8 +11,11 @@ written as a Gmsh 2.2 file.  Per size, wall and CPU (process time) of
 - *factor*: the sparse LU of ``K`` the eigen-solve inverts with (timed on
   its own, then again inside *modes*);
 - *modes*: :func:`fem.modes` for the lowest 20 and 50 modes (scipy's
-  ``eigsh`` in shift-invert about 0; the decompositions kept in the process
-  are forgotten first), with the number of solves ARPACK asked for;
+  ``eigsh`` in shift-invert about 0, on one OpenBLAS thread as cosim runs it:
+  :mod:`fem.blas_threads`; the decompositions kept in the process are
+  forgotten first), with the number of solves ARPACK asked for; then the 50
+  modes again with OpenBLAS's threads as the machine gives them
+  (``COSIM_BLAS_THREADS=keep``), and on one thread once more, side by side;
 - *cached re-run*: a second run's whole set-up with the modal cache filled
   by the first (:func:`fem.plane.cache.cached_modes`): read, assemble and
   the cache entry read back.
@@ -141,6 +144,18 @@ def setup_point(label: str, nx: int, ny: int, folder: Path) -> dict:
         out[f"modes{m}_solves"] = count.n
         out[f"modes{m}_factor_wall"] = count.factor
         out[f"modes{m}_top_hz"] = float(basis.frequencies_hz[-1])
+    # the same 50 modes with OpenBLAS's threads as the machine gives them
+    # (COSIM_BLAS_THREADS=keep), then on one thread again: the two side by
+    # side under the same load
+    for key, keep in (("modes50_keep", True), ("modes50_again", False)):
+        clear_solved()
+        os.environ["COSIM_BLAS_THREADS"] = "keep" if keep else ""
+        try:
+            t0 = _clock()
+            modes(s, n_modes=MODES[-1])
+            out[key] = _since(t0)
+        finally:
+            os.environ.pop("COSIM_BLAS_THREADS", None)
     out["f1_hz"] = float(basis.frequencies_hz[0])
     # the cache: filled by a first run (50 modes), then a second run's set-up
     m = MODES[-1]
@@ -233,11 +248,13 @@ def table(data: dict) -> str:
     """The Markdown tables of a run's ``plane_setup.json``: set-up (wall [ms])
     and step cost."""
     lines = ["| DOFs | read | assemble | factor | 20 modes (solves) | 50 modes (solves) "
-             "| cached re-run |", "|---|---|---|---|---|---|---|"]
+             "| 50 modes, BLAS threads kept / one again | cached re-run |",
+             "|---|---|---|---|---|---|---|---|"]
     for p in data["setup"]:
         lines.append(f"| {p['dofs']} | {_ms(p['read'])} | {_ms(p['assemble'])} "
                      f"| {_ms(p['factor'])} | {_ms(p['modes20'])} ({p['modes20_solves']}) "
                      f"| {_ms(p['modes50'])} ({p['modes50_solves']}) "
+                     f"| {_ms(p['modes50_keep'])} / {_ms(p['modes50_again'])} "
                      f"| {_ms(p['cached_rerun'])} |")
     lines += ["", "| modes | beam: solve / structure [us per step] | plane: solve / structure "
               "[us per step] | ratio solve / structure |", "|---|---|---|---|"]
@@ -284,7 +301,9 @@ def main(argv=None):
                   f"{p['assemble'][0]:.2f} s, factor {p['factor'][0]:.2f} s, 20 modes "
                   f"{p['modes20'][0]:.2f} s ({p['modes20_solves']} solves), 50 modes "
                   f"{p['modes50'][0]:.2f} s ({p['modes50_solves']} solves, CPU "
-                  f"{p['modes50'][1]:.2f} s), cached re-run {p['cached_rerun'][0]:.2f} s; "
+                  f"{p['modes50'][1]:.2f} s; threads kept {p['modes50_keep'][0]:.2f} s, one "
+                  f"again {p['modes50_again'][0]:.2f} s), cached re-run "
+                  f"{p['cached_rerun'][0]:.2f} s; "
                   f"load {load[-1]:.1f}", flush=True)
         if not args.skip_step:
             for m in STEP_MODES:
