@@ -138,3 +138,22 @@ def test_the_outline_of_a_body_with_a_hole_is_two_loops():
     assert lengths == pytest.approx([4.0, 12.0], rel=1e-12)
     for lp in loops:
         assert lp[0] == lp[-1] and np.unique(lp[:-1]).size == lp.size - 1
+
+
+def test_without_the_system_the_export_builds_the_body_again(plate_run, tmp_path):
+    """Called without the system that ran, the export builds the body from
+    the scene: the same modes (a fixed start vector), the same field."""
+    meshio = pytest.importorskip("meshio")
+    from cosim.io.export import export_structures
+
+    out, res, sub = plate_run
+    scene = cosim.load_scene(out / "scene.toml")
+    (path,) = export_structures(scene, res, tmp_path)
+    with meshio.xdmf.TimeSeriesReader(path) as a, \
+            meshio.xdmf.TimeSeriesReader(out / "plate.xdmf") as b:
+        a.read_points_cells()
+        b.read_points_cells()
+        assert a.num_steps == b.num_steps
+        last = [r.read_data(r.num_steps - 1)[1]["displacement"] for r in (a, b)]
+    scale = np.abs(last[1]).max()
+    assert np.max(np.abs(last[0] - last[1])) <= 1e-9 * scale
