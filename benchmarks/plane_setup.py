@@ -115,8 +115,9 @@ class _CountingSolves:
         self.modal._elastic_solver = self.orig
 
 
-def setup_point(label: str, nx: int, ny: int, folder: Path) -> dict:
-    """The set-up figures of one strip size."""
+def setup_point(label: str, nx: int, ny: int, folder: Path, threads: bool = True) -> dict:
+    """The set-up figures of one strip size (``threads``: the 50 modes again
+    with OpenBLAS's threads kept, and on one thread once more)."""
     from cosim.io.rundir import OutputFolder
     from fem.modal import _elastic_solver, clear_solved, modes
     from fem.plane import Plane
@@ -147,7 +148,7 @@ def setup_point(label: str, nx: int, ny: int, folder: Path) -> dict:
     # the same 50 modes with OpenBLAS's threads as the machine gives them
     # (COSIM_BLAS_THREADS=keep), then on one thread again: the two side by
     # side under the same load
-    for key, keep in (("modes50_keep", True), ("modes50_again", False)):
+    for key, keep in (("modes50_keep", True), ("modes50_again", False)) if threads else ():
         clear_solved()
         os.environ["COSIM_BLAS_THREADS"] = "keep" if keep else ""
         try:
