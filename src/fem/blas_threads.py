@@ -4,10 +4,10 @@ ARPACK's Lanczos iteration (scipy's ``eigsh``) and SuperLU's triangular
 solves call BLAS hundreds of times on thin operands (level-2 operations on
 ``n x ncv`` blocks).  A threaded OpenBLAS hands each call to its threads and
 waits for them; on a machine whose cores are busy with other work the waiting
-costs more than the arithmetic.  ``benchmarks/plane_setup.py`` measured it:
-the 50 lowest modes of a 33k-DOF plane body took 10.6 s with OpenBLAS's
-default threads on a loaded 2-core machine and 2.6 s on one thread, 6.1 s of
-the former inside ARPACK's own calls.
+costs more than the arithmetic: profiled on a loaded 2-core machine, most of
+the eigen-solve's time went to ARPACK's own calls, waiting.
+``benchmarks/plane_setup.py`` times the modes both ways side by side
+(docs/performance.md).
 
 :func:`one_blas_thread` sets the OpenBLAS libraries loaded in the process
 (numpy's and scipy's bundled copies, found by their exported
