@@ -114,6 +114,20 @@ def test_the_animation_draws_the_deformed_outline(plate_run):
     assert "deflection x1 (true scale" in fig1.axes[0].get_title()
 
 
+def test_cosim_plot_animates_a_plane_body(plate_run, tmp_path):
+    pytest.importorskip("matplotlib")
+    pytest.importorskip("PIL")
+    from PIL import Image
+
+    from cosim.plot import animate_run
+
+    out, _, _ = plate_run
+    path = animate_run(out, tmp_path, max_frames=4, magnify=500.0, video="gif")
+    assert path == tmp_path / "animation.gif"
+    with Image.open(path) as im:
+        assert im.n_frames == 4
+
+
 def test_the_outline_of_a_body_with_a_hole_is_two_loops():
     from fem.plane import outline, quad_region
 
