@@ -7,7 +7,7 @@ kink in the force (its slope jumps from 0 to k v), which rings each dropped
 mode by about ``(phi_i . b)^2 k v / omega_i^3``.  Against the penetration
 ``v / omega_c`` that is a share bounded by ``c_r k`` times the ratio of the
 contact frequency to the dropped ones (``c_r k``: the share of the dropped
-modes' compliance ``c_r`` in the contact's); measured, it lies an order of
+modes' compliance ``c_r`` in the contact's); measured, it lies well below
 magnitude below that bound.  A static correction cannot remove it (a second-order term,
 ``omega_c^2 b^T (K^-1 M K^-1 - sum phi phi^T / omega^4) b`` added to ``c_r``,
 was tried outside the suite: at 10 times it left 2.3e-4 of the peak's
