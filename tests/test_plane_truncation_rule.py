@@ -8,12 +8,11 @@ mode by about ``(phi_i . b)^2 k v / omega_i^3``.  Against the penetration
 ``v / omega_c`` that is a share bounded by ``c_r k`` times the ratio of the
 contact frequency to the dropped ones (``c_r k``: the share of the dropped
 modes' compliance ``c_r`` in the contact's); measured, it lies well below
-magnitude below that bound.  A static correction cannot remove it (a second-order term,
-``omega_c^2 b^T (K^-1 M K^-1 - sum phi phi^T / omega^4) b`` added to ``c_r``,
-was tried outside the suite: at 10 times it left 2.3e-4 of the peak's
-3.0e-4), and the error's sign and size swing with where the cutoff falls
-among the modes.  So on the strip struck
-through 1e8 N/m (``c_r k`` 0.043 at 10 times) the peak's error at cutoffs
+that bound.  A static correction cannot remove it (a second-order term,
+``omega_c^2 b^T (K^-1 M K^-1 - sum phi phi^T / omega^4) b`` added to
+``c_r``, was tried outside the suite: at 10 times it left 2.3e-4 of the
+peak's 3.0e-4), and the error's sign and size swing with where the cutoff
+falls among the modes.  So on the strip struck through 1e8 N/m (``c_r k`` 0.043 at 10 times) the peak's error at cutoffs
 of 8 to 12 times runs from below 1e-6 to 3e-4 (at 10 times: 3.0e-4), while
 through 1e7 N/m (``c_r k`` 0.0071) it stays below 1e-4 at every one of them,
 as it does through 1e8 N/m at 25 and 28 times, where ``c_r k`` has fallen
