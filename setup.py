@@ -89,14 +89,15 @@ class BuildKernels(build_ext):
 #: `cosim verify` and `cosim sweep --study NAME` work from any folder.  The
 #: repository keeps the one copy at its root (the paths the docs use);
 #: ``cosim.scene.shipped`` finds them in either place.
-SHIPPED = {"cases": "*.toml", "studies": "*.toml"}
+#: A plane body's scene ships its mesh (``.msh``) and the Gmsh script that made it (``.geo``).
+SHIPPED = {"cases": ("*.toml", "*.msh", "*.geo"), "studies": ("*.toml",)}
 
 
 def shipped_files(root="."):
     """``(source, path inside the package)`` of each shipped file."""
     root = Path(root)
-    for folder, pattern in SHIPPED.items():
-        for src in sorted((root / folder).glob(pattern)):
+    for folder, patterns in SHIPPED.items():
+        for src in sorted(p for pattern in patterns for p in (root / folder).glob(pattern)):
             yield src, Path("cosim", "_shipped", folder, src.name)
 
 

@@ -11,12 +11,17 @@ name, or the other way round, fails too, and so does a variant that has no
 row.  Derived initial states are computed here from CASES.md's formulas, e.g.
 the body's height 0.1 - (m3 + m4) g / (kA + kB), and must agree to a few ulps.
 
+The two scenes of plane bodies (beam_impact_2d, beam_with_holes) are
+examples beyond CASES.md: their rows hold section 6's robot, contact and
+steel, and the scene files' meshes and sections.
+
 Where CASES.md leaves a value to the project (marked "assumed" there or in
 the scene file's comments), the row holds the scene file's value with a
 comment saying so; changing it is then a decision, made here too.
 """
 import math
 import tomllib
+from pathlib import Path
 
 import pytest
 
@@ -162,6 +167,28 @@ BEAM_IMPACT = robot(1e6, 2.0) | {
 }
 
 
+# ------------------------------------------- beyond CASES.md: plane bodies
+def plane_beam(mesh, thickness):
+    """Section 6's robot and contact C striking a beam meshed in the plane:
+    steel as section 6's beam (E, rho), plane stress with nu = 0.3, P2, its
+    top face at y = 0, pinned as the 1-D beam (u_y = 0 on the end faces,
+    u_x = 0 at the left one's mid-height), struck 0.45 m along the top;
+    the mesh and its section are the scene file's (assumed)."""
+    return robot(1e6, 2.0) | {
+        "beam.type": "plane", "beam.mesh": mesh, "beam.scale": 1.0,
+        "beam.model": "plane_stress", "beam.thickness": thickness,
+        "beam.youngs_modulus": 210e9, "beam.poisson_ratio": 0.3, "beam.density": 7850.0,
+        "beam.element": "P2", "beam.fixed": (), "beam.fixed_x": ("pin",),
+        "beam.fixed_y": ("left", "right"), "beam.origin": (0.0233, 0.0), "beam.angle": 0.0,
+        "beam.rayleigh": None, "beam.static_equilibrium": True, "beam.static_loads": {},
+        "beam.initial_velocity": (0.0, 0.0), "beam.ports": {"under_C": ("top", 0.45)},
+        "beam.modes": {"n_modes": None, "cutoff_hz": 20000.0}, "beam.static_correction": True,
+        "contact.C.ports": (("robot", "C"), ("beam", "under_C")),
+        "contact.C.normal": (0.0, 1.0), "contact.C.offset": 0.0,
+        "contact.C.law": linear(1.6e6), "contact.C.connection": None,
+    }
+
+
 # ---------------------------------------------------------------- section 7
 def grasp(close, release):
     # stiff bilateral springs (assumed in the scene file: 1e5 N/m, 100 N s/m)
@@ -251,6 +278,10 @@ ROWS = {
     **{("three_mass", f"ms{m}"): three_mass(10.0, m)
        for m in (0.05, 0.1, 0.2, 0.4, 0.8, 1.6, 3.2, 6.4)},
     ("beam_impact", None): BEAM_IMPACT,
+    # section 6's beam (40 mm thick, 10 mm high) meshed in the plane
+    ("beam_impact_2d", None): plane_beam("beam_2d.msh", 0.04),
+    # a deeper beam with seven holes, 10 mm thick (an example: its mesh, beam_with_holes.geo)
+    ("beam_with_holes", None): plane_beam("beam_with_holes.msh", 0.01),
     ("brachiation", None): brachiation(rigid_cable=False),
     ("brachiation", "rigid_cable"): brachiation(rigid_cable=True),
 }
@@ -281,6 +312,13 @@ def _structure(sub) -> dict:
            f"{n}.static_loads": dict(sub["static_loads"]),
            f"{n}.initial_velocity": sub["initial_velocity"], f"{n}.ports": dict(sub["ports"]),
            f"{n}.rayleigh": model.rayleigh}
+    if sub["type"] == "plane":
+        out |= {f"{n}.mesh": Path(model.mesh).name, f"{n}.origin": tuple(model.origin),
+                f"{n}.modes": sub["modes"], f"{n}.static_correction": sub["static_correction"]}
+        out |= {f"{n}.{k}": getattr(model, k) for k in (
+            "scale", "model", "thickness", "youngs_modulus", "poisson_ratio", "density",
+            "element", "fixed", "fixed_x", "fixed_y", "angle")}
+        return out
     if sub["type"] == "chain":
         out |= {f"{n}.masses": tuple(model.masses), f"{n}.stiffnesses": tuple(model.stiffnesses),
                 f"{n}.ground_below": model.ground_below, f"{n}.direction": tuple(model.direction),

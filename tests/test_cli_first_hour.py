@@ -142,6 +142,7 @@ def test_verify_runs_the_shipped_cases_from_another_folder(tmp_path):
 
 def test_a_built_package_carries_its_cases_and_studies(tmp_path):
     """setup.py's build_py (the step that fills a wheel) copies cases/*.toml
+    (with the meshes, .msh, of its plane bodies and their Gmsh scripts, .geo)
     and studies/*.toml into cosim/_shipped, byte for byte; the sdist's
     MANIFEST.in takes them along; and cosim imported from that build finds
     them from another folder (the numpy kernels: build_py compiles nothing)."""
@@ -155,10 +156,13 @@ def test_a_built_package_carries_its_cases_and_studies(tmp_path):
     p = subprocess.run([sys.executable, "setup.py", "-q", "build_py", "--build-lib", str(lib)],
                        cwd=tree, capture_output=True, text=True, timeout=600)
     assert p.returncode == 0, p.stderr
-    for kind in ("cases", "studies"):
+    # a plane body's scene ships its mesh and the Gmsh script that made it
+    for kind, patterns in (("cases", ("*.toml", "*.msh", "*.geo")), ("studies", ("*.toml",))):
         shipped = {f.name: f.read_bytes() for f in (lib / "cosim" / "_shipped" / kind).iterdir()}
-        assert shipped == {f.name: f.read_bytes() for f in (ROOT / kind).glob("*.toml")}
-        assert f"recursive-include {kind} *.toml" in (ROOT / "MANIFEST.in").read_text()
+        assert shipped == {f.name: f.read_bytes() for p in patterns
+                           for f in (ROOT / kind).glob(p)}
+        assert (f"recursive-include {kind} {' '.join(patterns)}"
+                in (ROOT / "MANIFEST.in").read_text())
     work = tmp_path / "work"
     work.mkdir()
     p = cosim("info", "--list", "--json", cwd=work, path=lib, env={"COSIM_KERNEL": "numpy"})
@@ -170,6 +174,11 @@ def test_a_built_package_carries_its_cases_and_studies(tmp_path):
               env={"COSIM_KERNEL": "numpy"})
     assert p.returncode == 0, p.stderr
     assert "contact wall: 1 interval(s)" in p.stdout
+    # a plane body's scene finds its mesh beside it in the package (gmsh not needed)
+    p = cosim("run", "beam_with_holes", "--set", "t_end=0.002", "--no-estimate", cwd=work,
+              path=lib, env={"COSIM_KERNEL": "numpy"})
+    assert p.returncode == 0, p.stderr
+    assert "beam: 24 DOFs" in p.stdout
 
 
 # ------------------------------------------------------------- cosim info

@@ -77,8 +77,9 @@ def test_the_static_correction_and_the_mode_rule_on_the_strip(tmp_path):
     """Measured (duration, peak force) errors against all 400 modes: at 10
     times the contact frequency 2.1 % and 2.0 % without the correction,
     1.9e-4 and 3.0e-4 with it; at 20 times 0.9 % and 0.8 % without,
-    7e-5 and 4e-5 with.  (The issue measured 1e-4 at 10 times on its strip;
-    here, struck at mid-span on a coarse mesh, it takes 20 times.)  Below
+    7e-5 and 4e-5 with.  (1e-4 at 10 times needs the dropped modes'
+    compliance to be a smaller share of the spring's than here:
+    tests/test_plane_truncation_rule.py.)  Below
     the contact frequency the correction is refused."""
     claim = Claim("docs/structures.md", "1e8 N/m: 3559 Hz", "sqrt(k / m) / (2 pi)", 3559,
                   abs=0.5)

@@ -170,7 +170,16 @@ def _dense_modes(s: LinearStructure):
 
 @_remembered
 def _sparse_modes(s: LinearStructure, k: int):
-    """Lowest ``k`` modes (rigid ones included) by shift-invert Lanczos."""
+    """Lowest ``k`` modes (rigid ones included) by shift-invert Lanczos, on
+    one BLAS thread (:mod:`fem.blas_threads`: ARPACK's many thin BLAS calls
+    wait on a threaded OpenBLAS where the cores are busy)."""
+    from .blas_threads import one_blas_thread
+
+    with one_blas_thread():
+        return _lanczos(s, k)
+
+
+def _lanczos(s: LinearStructure, k: int):
     from scipy.linalg import eigh
     from scipy.sparse.linalg import LinearOperator, eigsh
 

@@ -7,7 +7,7 @@ groups a Gmsh script would give: curves ``bottom``, ``right``, ``top`` (left
 to right, so that the arc length along it is x) and ``left``, the point
 ``pin`` at mid-height of the left end, and the surface ``beam``.
 
-Run ``python tests/data/make_beam_2d_msh.py`` to write it again.
+Run ``python tests/data/make_beam_2d_msh.py`` to write ``cases/beam_2d.msh`` again.
 """
 from pathlib import Path
 
@@ -43,4 +43,4 @@ def build() -> str:
 
 
 if __name__ == "__main__":
-    Path(__file__).with_name("beam_2d.msh").write_text(build())
+    (Path(__file__).resolve().parents[2] / "cases" / "beam_2d.msh").write_text(build())

@@ -15,6 +15,7 @@ from matplotlib.figure import Figure
 from cosim.errors import shown
 from cosim.plot.figures import wrapped
 from cosim.plot.run_data import PlotError, RunData, load_run
+from cosim.sides.plane import PlaneSubsystem
 
 __all__ = ["animate_run"]
 
@@ -53,6 +54,8 @@ def _geometry(run: RunData, geo, idx: np.ndarray, magnify: float):
             states[s] = X
             frames = [sub.skeleton(x) for x in X]
             robots.append((sub.name, [f[0] for f in frames], [f[1] for f in frames]))
+        elif isinstance(sub, PlaneSubsystem):                # a body from a mesh
+            structures.append(_plane_outline(run, sub, idx, magnify))
         elif "modes" in sub.capabilities:
             st = sub.structure
             U = np.column_stack([_column(run, f"q/{sub.name}/{d}")[idx]
@@ -90,15 +93,36 @@ def _geometry(run: RunData, geo, idx: np.ndarray, magnify: float):
     return robots, structures, fixed, contacts
 
 
+def _plane_outline(run: RunData, sub, idx: np.ndarray, magnify: float):
+    """A plane body as the animation draws it: its boundary loops (outer
+    and holes, split by NaN) through the mesh's vertices, at rest and
+    displaced by ``magnify`` times the field ``Phi q`` of the recorded modal
+    coordinates of the frames ``idx``."""
+    from fem.plane import outline
+
+    st = sub.structure
+    Q = np.column_stack([_column(run, f"q/{sub.name}/mode{i + 1}")[idx]
+                         for i in range(sub.n_modes)])
+    order = np.concatenate([np.append(loop, -1) for loop in outline(st.mesh.cells)])
+    gap = order < 0
+    nodes = st.nodes() @ np.array([1.0, 1j])
+    field = sub.field(Q) @ np.array([1.0, 1j])               # (frames, vertices)
+    ref = np.where(gap, np.nan, nodes[order])
+    line = np.where(gap, np.nan, nodes[order] + magnify * field[:, order])
+    return sub.name, ref, line, False
+
+
 def animate_run(run_dir, out_dir=None, *, max_frames: int = 200, fps: int = 20,
                 magnify: float = 1.0, video: str | None = None, progress=None) -> Path:
     """Animate the robot and the deformed structure of a run directory.
 
     The geometry is rebuilt from the run's ``scene.toml`` (the scene as run)
     read as data, and posed at the recorded joint coordinates
-    (``q/SUB/JOINT``) and structure DOFs (``q/SUB/DOF``).  Drawn: each tree's
+    (``q/SUB/JOINT``) and structure DOFs (``q/SUB/DOF``), a plane body's
+    modal coordinates (``q/SUB/modeK``).  Drawn: each tree's
     links (joint to child joint, joint to port), the structures' deflected
-    lines (the field between nodes through the shape functions), fixed
+    lines (the field between nodes through the shape functions), a plane
+    body's boundary (outer and holes) through its displaced vertices, fixed
     points, rigid surfaces across their contact normals, and contact points,
     red while their force is non-zero.
 
@@ -125,7 +149,8 @@ def animate_run(run_dir, out_dir=None, *, max_frames: int = 200, fps: int = 20,
         Frames per second of the animation (at least 1).
     magnify : float
         Scale of the structures' deflection in the picture (1: true scale);
-        finite and > 0.
+        finite and > 0.  The title states it when it is not 1, and always
+        when a plane body is drawn.
     video : {"mp4", "gif"}, optional
         The file written: ``"mp4"`` (H.264 through ffmpeg), ``"gif"``
         (Pillow); by default MP4 where matplotlib finds ffmpeg, else GIF.
@@ -397,7 +422,10 @@ def _figure(run: RunData, geo, idx: np.ndarray, magnify: float):
     # under it: they are copied back over each frame instead of drawn again
     legend = (ax.legend(fontsize=8, loc="upper right", framealpha=1.0)
               if robots or structures else None)
-    scale = f"\nstructure deflection x{magnify:g}" if magnify != 1 else ""
+    planes = any(isinstance(sub, PlaneSubsystem) for sub in geo.subsystems)
+    scale = (f"\nstructure deflection x{magnify:g}" if magnify != 1 else
+             "\nstructure deflection x1 (true scale; --magnify to exaggerate)" if planes
+             else "")
     if geo.not_drawn:
         scale += (f"\nnot drawn: {shown(', '.join(geo.not_drawn), 80)} (an FMU: its "
                   f"geometry is in its own code, which plotting does not run)")

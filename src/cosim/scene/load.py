@@ -118,13 +118,8 @@ def _validate(data: dict, file, variant, scheme_chosen: bool = False) -> Scene:
     if not subs:
         top.error("subsystems", "must declare at least one subsystem")
     _check_memory(subs, file)
-    structures = [s.name for s in subs if isinstance(s, StructureSpec) and s.type != "plane"]
-    planes = [s.name for s in subs if isinstance(s, StructureSpec) and s.type == "plane"]
+    structures = [s.name for s in subs if isinstance(s, StructureSpec)]
     for name_ in export:
-        if name_ in planes:
-            raise SceneError(file, "output.export", f"names the plane body {echo(name_)}, whose "
-                                                    f"field is not exported yet (its modal "
-                                                    f"coordinates are in the series); drop it")
         if name_ not in structures:
             raise SceneError(file, "output.export", f"names {echo(name_)}, which is not a "
                                                     f"structure of this scene; structures are "

@@ -209,7 +209,7 @@ def _simulate(scene, scheme, progress, progress_interval, out, overwrite):
         if scene.export:
             from cosim.io.export import export_structures
             try:
-                export_structures(scene, res, out)
+                export_structures(scene, res, out, system)
             except OutputError as exc:
                 raise _lost(exc, f"{ended}; its series and summary are written, not all of "
                                  f"its exports", out) from None

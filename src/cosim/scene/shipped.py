@@ -1,6 +1,7 @@
 """The scenes and studies cosim ships, and scenes named instead of a path.
 
-The repository keeps the verification cases in ``cases/`` and the studies
+The repository keeps the verification cases (and a few examples beyond
+them, with the meshes of their plane bodies) in ``cases/`` and the studies
 in ``studies/`` at its root; a built package carries a copy of both as
 ``cosim/_shipped/cases`` and ``cosim/_shipped/studies`` (``setup.py``'s
 ``build_py``).  :func:`shipped_folder` finds them in either place: the

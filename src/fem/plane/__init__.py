@@ -9,10 +9,10 @@ read, scikit-fem when a body is assembled.
 """
 from .body import PLANE_ELEMENTS, PLANE_MODELS, Plane, lame
 from .circle import CircleContact, hertz_cylinder
-from .mesh import MAX_DOF, MeshError, PlaneMesh, dof_count, read_mesh
+from .mesh import MAX_DOF, MeshError, PlaneMesh, dof_count, outline, read_mesh
 from .shapes import grid, quad_region, rectangle
 from .structure import BoundaryPoint, PlaneStructure
 
 __all__ = ["Plane", "PlaneStructure", "PlaneMesh", "BoundaryPoint", "MeshError", "read_mesh",
-           "dof_count", "MAX_DOF", "PLANE_MODELS", "PLANE_ELEMENTS", "lame", "quad_region",
-           "rectangle", "grid", "CircleContact", "hertz_cylinder"]
+           "dof_count", "outline", "MAX_DOF", "PLANE_MODELS", "PLANE_ELEMENTS", "lame",
+           "quad_region", "rectangle", "grid", "CircleContact", "hertz_cylinder"]

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["MeshError", "PlaneMesh", "read_mesh", "dof_count", "MAX_DOF", "CELL_KINDS"]
+__all__ = ["MeshError", "PlaneMesh", "read_mesh", "dof_count", "outline", "MAX_DOF", "CELL_KINDS"]
 
 #: Most degrees of freedom a plane body may have (its memory bound): a
 #: sparse factorisation of 500k DOF of P2 elasticity needs several GB.
@@ -130,6 +130,38 @@ def dof_count(mesh: PlaneMesh, element: str) -> int:
     n_e = _edges(mesh.cells).shape[0]
     n_c = mesh.cells.shape[0] if element == "Q2" else 0
     return 2 * (n_v + n_e + n_c)
+
+
+def outline(cells: np.ndarray) -> list:
+    """The boundary of a mesh of counter-clockwise ``cells``: its closed
+    loops (the outer one and each hole's), each an array of vertex indices
+    in the order the cells run, its first vertex repeated at its end.
+
+    A boundary edge is an edge of one cell only; each such directed edge
+    leads to the next, since every boundary vertex of a plane mesh (a
+    manifold with holes) starts exactly one.
+    """
+    cells = np.asarray(cells, dtype=np.int64)
+    k = cells.shape[1]
+    directed = np.stack([cells, np.roll(cells, -1, axis=1)], axis=2).reshape(-1, 2)
+    key = np.sort(directed, axis=1)
+    _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    edges = directed[counts[inverse.ravel()] == 1]
+    if k not in (3, 4) or edges.size == 0:
+        return []
+    nxt = dict(zip(edges[:, 0].tolist(), edges[:, 1].tolist()))
+    loops, left = [], set(nxt)
+    while left:
+        start = min(left)
+        loop = [start]
+        cur = nxt[start]
+        left.discard(start)
+        while cur != start:
+            loop.append(cur)
+            left.discard(cur)
+            cur = nxt[cur]
+        loops.append(np.array(loop + [start], dtype=np.int64))
+    return loops
 
 
 def _edges(cells: np.ndarray) -> np.ndarray:
