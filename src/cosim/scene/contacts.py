@@ -90,8 +90,10 @@ def contact_spec(name: str, t: Table, subs: list) -> ContactSpec:
                         f"out (a following contact is hosted by its structure), or set "
                         f"`follow = false`")
     connection = _connection(t, law)
-    from cosim.scene.circle_rules import circle_radius     # a circle's rules come first
-    radius = circle_radius(t, a, b, kinds, law, placement, host, follow, connection)
+    radius = None
+    if t.has("radius"):         # a circle's rules come first (loaded only for a circle)
+        from cosim.scene.circle_rules import circle_radius
+        radius = circle_radius(t, a, b, kinds, law, placement, host, follow, connection)
     if connection is not None and placement == "embedded" and (
             a[0] in structures or b[0] in structures):
         t.error("placement", "a grasp or friction against a rigid side is not evaluated inside "
