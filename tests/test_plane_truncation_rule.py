@@ -106,3 +106,34 @@ def test_a_small_c_r_k_meets_1e_4_at_10_times(tmp_path):
     assert_reproduced(claim, err[10][1])
     for e, _ in err.values():
         assert np.all(np.abs(e) < 1e-4), e
+
+
+def _dropped_share_warnings(tmp_path, k: float, ratio: float):
+    """The build's warnings that name the dropped modes' share, and the rule
+    ``cosim info`` gives, for the strip through ``k`` kept to ``ratio`` x its
+    contact frequency."""
+    from cosim.scene.plane_build import mode_rules
+    if not (tmp_path / "strip.msh").exists():
+        write_msh(tmp_path / "strip.msh", rectangle(1.0, 0.1, 20, 2), "strip")
+    modes = f"modes = {{ cutoff_hz = {ratio * _contact_hz(k)!r}, static_correction = true }}"
+    path = tmp_path / f"strip_{k:g}_{ratio:g}.toml"
+    path.write_text(SCENE.format(modes=modes).replace("contact_stiffness = 1e8",
+                                                      f"contact_stiffness = {k!r}"))
+    scene = cosim.load_scene(path)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        system, _ = scene.build()
+    said = [str(w.message) for w in caught if "of the contact's compliance" in str(w.message)]
+    return said, mode_rules(system, scene)["strip"][0]
+
+
+@pytest.mark.parametrize("nudge", [1.0, 1.0 + 4e-16, 1.0 - 4e-16])
+def test_the_rule_warns_where_the_dropped_modes_hold_over_1e_2(tmp_path, nudge):
+    # through 1e8 N/m at 15 x the contact frequency the frequency rule is met
+    # (ok) but the dropped modes hold ~3e-2 of the compliance: the run warns and
+    # `cosim info` says warn; at 28 x (share 6e-3, the error within 1e-4 above) both are quiet
+    said, rule = _dropped_share_warnings(tmp_path, 1e8 * nudge, 15.0)
+    assert rule["ratio"] >= 10.0 and rule["dropped_share"] > 1e-2, rule
+    assert rule["verdict"] == "warn" and len(said) == 1 and "soften the spring" in said[0]
+    said, rule = _dropped_share_warnings(tmp_path, 1e8 * nudge, 28.0)
+    assert rule["dropped_share"] < 1e-2 and rule["verdict"] == "ok" and not said, (rule, said)

@@ -284,7 +284,9 @@ def _cmd_info(args) -> int:
         for r in s.get("mode_rule", ()):      # a plane body's modes against a contact
             print(f"    modes to {r['kept_to_hz']:.4g} Hz: {r['ratio']:.3g} x contact "
                   f"{r['contact']}'s {r['frequency_hz']:.4g} Hz ({r['verdict']}; 10 x or more "
-                  f"wanted), static correction {'on' if r['static_correction'] else 'off'}")
+                  f"wanted), static correction {'on' if r['static_correction'] else 'off'}"
+                  + (f", dropped modes {r['dropped_share']:.2g} of its compliance (1e-2 or "
+                     f"less wanted)" if "dropped_share" in r else ""))
         if "fmu" in s:                  # an FMU side: its variables (cosim.scene.info.fmu_info)
             f = s["fmu"]                # (its texts escaped and capped there)
             print(f"    model {f['model_name']}"

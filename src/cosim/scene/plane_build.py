@@ -69,11 +69,13 @@ def mode_rules(system, scene) -> dict:
     """Plane body -> for each of its contacts with a stiffness, the mode
     rule (:func:`fem.plane.reduce.mode_rule`): ``contact``,
     ``frequency_hz`` (its spring on the other side's port mass),
-    ``kept_to_hz``, ``ratio``, ``verdict`` and ``static_correction``;
-    for ``cosim info``."""
-    from fem.plane.reduce import mode_rule
+    ``kept_to_hz``, ``ratio``, ``verdict`` and ``static_correction``, with
+    the static correction its ``dropped_share`` (``c_r k``, which turns an
+    ``ok`` into a ``warn`` over 1e-2); for ``cosim info``."""
+    from fem.plane.reduce import dropped_share_rule, mode_rule
 
     specs = {s.name: s for s in scene.subsystems}
+    contacts = {c.name: c for c in scene.contacts}
     laws = {c.name: c.law for c in scene.contacts}
     subs, out = system.subsystems, {}
     for c, ln in enumerate(system.links):
@@ -87,10 +89,18 @@ def mode_rules(system, scene) -> dict:
                 continue
             f = _contact_hz(k, subs, s, port, other, ln.contact.normal)
             top = float(np.max(subs[s].natural_frequencies_hz))
-            out.setdefault(subs[s].name, []).append(
-                {"contact": ln.contact.name, "frequency_hz": f, "kept_to_hz": top,
-                 "ratio": top / f, "verdict": mode_rule(top, f)[0],
-                 "static_correction": bool(spec.static_correction)})
+            rule = {"contact": ln.contact.name, "frequency_hz": f, "kept_to_hz": top,
+                    "ratio": top / f, "verdict": mode_rule(top, f)[0],
+                    "static_correction": bool(spec.static_correction)}
+            corr = getattr(subs[s], "static_correction", None)
+            cspec = contacts[ln.contact.name]
+            point = cspec.a[1] if s == ln.sub_a else cspec.b[1]
+            if spec.static_correction and corr is not None:
+                share = k * corr.compliance(spec.ports[point])
+                rule["dropped_share"] = share
+                if rule["verdict"] == "ok":
+                    rule["verdict"] = dropped_share_rule(share)[0]
+            out.setdefault(subs[s].name, []).append(rule)
     return out
 
 
@@ -106,7 +116,8 @@ def corrected_law(contact, scene, subs: list, sides: tuple):
     below 1 times the contact's frequency and with a law that is not the
     linear spring.  ``sides`` are ``(subsystem index, port index)`` of a and b.
     """
-    from fem.plane.reduce import StaticCorrection, flamant_growth, mode_rule
+    from fem.plane.reduce import (StaticCorrection, dropped_share_rule, flamant_growth,
+                                  mode_rule)
 
     law = contact.law
     specs = {s.name: s for s in scene.subsystems}
@@ -147,6 +158,9 @@ def corrected_law(contact, scene, subs: list, sides: tuple):
         if corr is None:
             corr = sub.static_correction = StaticCorrection(sub.structure, sub.basis)
         c_r = corr.compliance(spec.ports[point])
+        share_verdict, why = dropped_share_rule(k * c_r)
+        if verdict == "ok" and share_verdict == "warn":
+            _warn(f"{scene.path}: `{key}` with contact `{contact.name}`: {why}")
         law = dataclasses.replace(law, contact_stiffness=k / (1.0 + k * c_r))
     return law
 
