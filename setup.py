@@ -15,8 +15,10 @@ from setuptools.command.build_py import build_py
 FACE = "src/cosim/core/_stacked.pxd"
 
 KERNELS = [
+    # the multibody step (the integrator) extends the tree's model (its .pxd)
+    Extension("cosim.sides._multibody_tree", ["src/cosim/sides/_multibody_tree.pyx"]),
     Extension("cosim.sides._multibody_step", ["src/cosim/sides/_multibody_step.pyx"],
-              depends=[FACE]),
+              depends=[FACE, "src/cosim/sides/_multibody_tree.pxd"]),
     # the implicit scheme's iterations, which call the sides' kernels through
     # the C face they fill in (cosim/core/_side_face.pxd, declarations only)
     Extension("cosim.core.schemes._implicit_step", ["src/cosim/core/schemes/_implicit_step.pyx"]),
