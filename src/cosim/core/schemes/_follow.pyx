@@ -19,12 +19,25 @@ the reference.  Only where ``s`` changed does the side hear of it
 (``port_moved``, one call: its kernel drops the modes it kept for the old
 shape row).  ``cosim.core`` imports nothing of ``cosim.sides`` here: the
 face is reached through the :c:type:`FaceTable` of ``cosim/core/_stacked.pxd``.
+The compiled loop imports this module only for a run with a following
+contact, and calls it through its :c:type:`FollowTable` (``_follow.pxd``).
 """
 import numpy as np
-from cpython.pycapsule cimport PyCapsule_GetPointer
+from cpython.pycapsule cimport PyCapsule_GetPointer, PyCapsule_New
 from libc.stdlib cimport calloc, free
 
+from cosim.core._stacked cimport FaceTable
+
 cdef const char* FACE_CAPSULE_C = b"cosim.FaceTable"
+cdef const char* FOLLOW_CAPSULE_C = b"cosim.FollowTable"
+
+
+cdef int _update(void* obj, const double* P0) except -1:
+    return (<Followers>obj).update(P0)
+
+
+cdef double _rate(void* obj, int c, double va0, double va1) noexcept nogil:
+    return (<Followers>obj).rate(c, va0, va1)
 
 
 cdef class Followers:
@@ -36,6 +49,23 @@ cdef class Followers:
     Gc : list of (2 n_ports, n_rows) arrays
         The compiled loop's own exchanged-force maps (written in place).
     """
+
+    cdef int n, nc
+    # per follower: contact, point a's side and port row, side b and its port
+    cdef long[::1] c, sub_a, port_a, row_a, sub_b, port_b
+    cdef double[::1] nx, ny, s_now
+    # per contact (n_contacts): whether it follows, ``sigma`` and the axis
+    # (zero where ``s`` is clipped), as CoupledSystem.update_followers keeps them
+    cdef long[::1] follows
+    cdef double[::1] slope
+    cdef double[:, ::1] axis
+    cdef FaceTable** tab
+    cdef double** xb                # side b's state (its own array, never rebound)
+    cdef double** gc                # side a's exchanged-force map (the loop's copy)
+    cdef long[::1] gc_cols
+    cdef list keep, moved
+    cdef double[8] out
+    cdef FollowTable ftab
 
     def __init__(self, system, list Gc):
         cdef int k, c
@@ -82,16 +112,24 @@ cdef class Followers:
             self.gc[k] = &gv[0, 0]
             self.moved.append(sub.port_moved)
             self.s_now[k] = float(sub.port_coordinates[self.port_b[k]])
+        self.ftab.obj = <void*>self
+        self.ftab.update = _update
+        self.ftab.rate = _rate
+
+    def table(self):
+        """The :c:type:`FollowTable` in a capsule named ``cosim.FollowTable``
+        (valid while this object lives)."""
+        return PyCapsule_New(&self.ftab, FOLLOW_CAPSULE_C, NULL)
 
     def __dealloc__(self):
         free(self.tab)
         free(self.xb)
         free(self.gc)
 
-    cdef int update(self, double[:, ::1] P0) except -1:
+    cdef int update(self, const double* P0) except -1:
         """Move every following contact's surface port under its point's
-        position at the step's start (``P0``, the ports' rows) and turn side
-        a's force on it (``update_followers``)."""
+        position at the step's start (``P0``, the ports' rows, (n_ports, 2)
+        row-major) and turn side a's force on it (``update_followers``)."""
         cdef int k, c, a, r, ncol
         cdef bint along
         cdef double sigma, col0, col1
@@ -101,7 +139,7 @@ cdef class Followers:
             c = self.c[k]
             a = self.row_a[k]
             face = self.tab[k]
-            along = face.follow(face.obj, self.port_b[k], P0[a, 0], P0[a, 1], self.xb[k],
+            along = face.follow(face.obj, self.port_b[k], P0[2 * a], P0[2 * a + 1], self.xb[k],
                                 self.out)
             if self.out[4] != self.s_now[k]:
                 self.s_now[k] = self.out[4]
