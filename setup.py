@@ -15,13 +15,20 @@ from setuptools.command.build_py import build_py
 FACE = "src/cosim/core/_stacked.pxd"
 
 KERNELS = [
+    # the multibody step (the integrator) extends the tree's model (its .pxd)
+    Extension("cosim.sides._multibody_tree", ["src/cosim/sides/_multibody_tree.pyx"]),
     Extension("cosim.sides._multibody_step", ["src/cosim/sides/_multibody_step.pyx"],
-              depends=[FACE]),
+              depends=[FACE, "src/cosim/sides/_multibody_tree.pxd"]),
     # the implicit scheme's iterations, which call the sides' kernels through
     # the C face they fill in (cosim/core/_side_face.pxd, declarations only)
     Extension("cosim.core.schemes._implicit_step", ["src/cosim/core/schemes/_implicit_step.pyx"]),
     Extension("cosim.sides._structure_step", ["src/cosim/sides/_structure_step.pyx"]),
-    Extension("cosim.core.schemes._driver", ["src/cosim/core/schemes/_driver.pyx"]),
+    # the compiled loop, and its following contacts (which call the structure's
+    # face through cosim/core/_stacked.pxd, declarations only)
+    Extension("cosim.core.schemes._driver", ["src/cosim/core/schemes/_driver.pyx"],
+              depends=["src/cosim/core/schemes/_follow.pxd"]),
+    Extension("cosim.core.schemes._follow", ["src/cosim/core/schemes/_follow.pyx"],
+              depends=[FACE]),
     # the monolithic reference's right-hand side, and the structure's face it calls
     Extension("cosim.core._stacked", ["src/cosim/core/_stacked.pyx"], depends=[FACE]),
     Extension("cosim.sides._modal_face", ["src/cosim/sides/_modal_face.pyx"], depends=[FACE]),

@@ -55,7 +55,8 @@ def _sides():
     from cosim.sides.multibody import MultibodySubsystem
     return {MultibodySubsystem: {"rigid_impacts", "impact_watch", "connections",
                                                   "skeleton", "sampled_steps", "compiled_loop"},
-            StructureSubsystem: {"rigid_impacts", "moving_ports", "modes", "compiled_loop"},
+            StructureSubsystem: {"rigid_impacts", "moving_ports", "modes", "compiled_loop",
+                                 "compiled_follow"},
             FMUSubsystem: {"fmi"}, DescribedFMU: {"fmi"}, RigidReference: {"compiled_loop"}}
 
 

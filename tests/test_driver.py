@@ -43,7 +43,7 @@ TAKES_DRIVER = {
     "rod_impact": ("all", None),
     "ground_multicontact": ("all", None),
     "ground_multicontact_strike": ("all", None),
-    "beam_impact": (set(), "a contact follows a moving point (`follow`)"),
+    "beam_impact": ("all", None),
     "brachiation": (set(), "scheme `implicit` is not an explicit scheme the compiled loop knows"),
     "manipulator_wall": (set(), "side `robot` is integrated by ScipyDOP853, not RK4"),
 }

@@ -23,6 +23,7 @@ cdef struct FaceTable:
     # power dissipated inside the subsystem and supplied to it [W]
     int (*ledger_rates)(void* obj, double t, const double* x, double* rates) except -1
     # move ``port`` under the world point ``(px, py)``: ``out[0:2]`` the axis,
-    # ``out[2:4]`` the surface tangent; 0 where the point is past an end
+    # ``out[2:4]`` the surface tangent, ``out[4]`` the material coordinate it took
+    # (``out`` holds at least 5); 0 where the point is past an end
     int (*follow)(void* obj, int port, double px, double py, const double* x,
                   double* out) except -1

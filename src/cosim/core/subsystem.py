@@ -204,6 +204,8 @@ class SubsystemState:
 #: - ``connections``: carries embedded grasps or friction (``attach_connection``).
 #: - ``moving_ports``: a surface whose ports move to a material coordinate
 #:   (``move_port``, ``material_coordinate``, ``surface_tangent``).
+#: - ``compiled_follow``: those ports moved in compiled code by the face of
+#:   ``follow_face`` (None where there is none), told by ``port_moved``.
 #: - ``modes``: a modal structure (``natural_frequencies_hz``, ``named_values``;
 #:   ``omega``, ``basis`` and ``structure`` set in ``__init__``).
 #: - ``skeleton``: a multibody tree that can draw itself (``skeleton``; ``model``).
@@ -219,6 +221,7 @@ CAPABILITIES = {
     "connections": ("attach_connection",),
     "moving_ports": ("move_port", "material_coordinate", "surface_tangent"),
     "sliding_ports": ("slide_port",),
+    "compiled_follow": ("follow_face", "port_moved"),
     "modes": ("natural_frequencies_hz", "named_values"),
     "skeleton": ("skeleton",),
     "fmi": (),

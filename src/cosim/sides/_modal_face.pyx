@@ -11,7 +11,10 @@ port under a point with its surface slope
 (:meth:`~cosim.sides.fem.StructureSubsystem.move_port` and
 ``surface_tangent``): the same shape functions, evaluated here.  The face
 keeps its own copy of the port rows, so moving a port here leaves the
-subsystem's (the Python reference's) as they are.
+subsystem's (the Python reference's) as they are; built with ``shared``, it
+moves the subsystem's own rows and reference positions in place (the
+compiled macro loop's following contacts, whose structure kernel reads those
+arrays at each step).
 """
 import numpy as np
 
@@ -54,6 +57,9 @@ cdef class ModalFace:
         ``(node_coordinates (N,), dof_map (N, k), hermite, shapes (n_dof, m),
         origin (2,), axis (2,), port_coordinates (n_ports,))`` of a line
         structure, whose ports may then follow a point; None: they may not.
+    shared : bool
+        Use ``rows`` and ``reference`` themselves (C-contiguous float
+        arrays), not copies: :meth:`follow` then moves the caller's ports.
     """
 
     cdef int m, n_ports
@@ -65,10 +71,15 @@ cdef class ModalFace:
     cdef bint hermite
     cdef double length
 
-    def __init__(self, rows, reference, direction, omega, damping, gravity, line=None):
-        self.R = np.array(rows, dtype=float, order="C", ndmin=2)
+    def __init__(self, rows, reference, direction, omega, damping, gravity, line=None,
+                 shared=False):
+        if shared:                           # the caller's arrays, written in place
+            self.R = rows
+            self.ref = reference
+        else:
+            self.R = np.array(rows, dtype=float, order="C", ndmin=2)
+            self.ref = np.array(reference, dtype=float, order="C").reshape(-1, 2)
         self.m = self.R.shape[1]
-        self.ref = np.array(reference, dtype=float, order="C").reshape(-1, 2)
         self.dirv = np.array(direction, dtype=float)
         om = np.asarray(omega, dtype=float)
         self.w2 = om ** 2                    # as the reference squares it
@@ -190,7 +201,8 @@ cdef class ModalFace:
                     double* out) except -1:
         """Move ``port`` to the material point under ``(px, py)`` (clipped to
         the ends); ``out[0:2]`` = the axis, ``out[2:4]`` = the deformed
-        surface's tangent ``dx/ds`` there.  Returns 0 where ``s`` was clipped
+        surface's tangent ``dx/ds`` there, ``out[4]`` = the coordinate ``s``
+        it took [m].  Returns 0 where ``s`` was clipped
         (it no longer moves with the point), 1 elsewhere."""
         cdef int j, m = self.m
         cdef double s_raw, s, wp
@@ -214,4 +226,5 @@ cdef class ModalFace:
         out[0], out[1] = self.axis[0], self.axis[1]
         out[2] = self.axis[0] + wp * self.dirv[0]
         out[3] = self.axis[1] + wp * self.dirv[1]
+        out[4] = s
         return 1 if s == s_raw else 0

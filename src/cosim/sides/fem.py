@@ -72,7 +72,8 @@ class StructureSubsystem(StructurePorts, ClosedFormContacts, Subsystem):
         Options of that integrator (``beta``, ``gamma``, ``alpha``, ``rho_inf``).
     """
 
-    capabilities = frozenset({"rigid_impacts", "moving_ports", "modes", "compiled_loop"})
+    capabilities = frozenset({"rigid_impacts", "moving_ports", "modes", "compiled_loop",
+                              "compiled_follow"})
 
     def __init__(self, name, structure, basis, ports: dict, u0=None, v0=None, gravity=None,
                  contact_step: float = 1e-6, integrator: str = "exact",
@@ -218,11 +219,7 @@ class StructureSubsystem(StructurePorts, ClosedFormContacts, Subsystem):
         module = compiled_module("_modal_face")
         if module is None or np.any(self._dirs != self._dir):
             return None         # the face takes one direction for every port
-        st = self.structure
-        line = None
-        if all(hasattr(st, a) for a in ("node_coordinates", "dof_map", "hermite", "length")):
-            line = (st.node_coordinates, st.dof_map, st.hermite, self.Phi, st.origin, st.axis,
-                    self.port_coordinates)
+        line = self.line_geometry()
         return module.ModalFace(self._R, self._ref, self._dir, self.omega, self.modal_damping,
                                 self._g_modal, line)
 

@@ -19,7 +19,9 @@ class PlaneSubsystem(CircleHosting, StructureSubsystem):
     ports slide along its boundary (:meth:`slide_port`), and it hosts circle
     contacts (:mod:`cosim.sides.plane_circle`)."""
 
-    capabilities = StructureSubsystem.capabilities | {"sliding_ports"}
+    #: its ports slide in Python (:meth:`slide_port`), never by the compiled face
+    #: of a line structure
+    capabilities = (StructureSubsystem.capabilities - {"compiled_follow"}) | {"sliding_ports"}
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)

@@ -19,11 +19,16 @@ The sides are reached duck-typed through their compiled kernels
 ``cosim.core`` imports nothing of ``cosim.sides``.  Every formula below is
 the Python loop's, written in the same order of operations.
 """
+import importlib
+
 import numpy as np
 from libc.math cimport isfinite, isnan, NAN
 from libc.string cimport memcpy
 
 from cosim.core.subsystem import StepInput
+# declarations only: _follow is imported for a run with a following contact
+from cosim.core.schemes._follow cimport FollowTable
+from cpython.pycapsule cimport PyCapsule_GetPointer
 from cosim.core.schemes.step_control import LAND_MARGIN, ONSET_WINDOW, onset_contacts
 
 #: kinds of side
@@ -61,6 +66,9 @@ cdef class Driver:
     cdef double[::1] offset
     cdef long[::1] h_c, h_host, h_slot, h_partner, h_pport
     cdef list Gc, rows_of, xs, auxs, peaks, closed, free_steps
+    # the following contacts (cosim.core.schemes._follow), None where there are none
+    cdef object fol
+    cdef FollowTable* ft
     cdef double[::1] max_step, free_step
     # state (StepState's fields)
     cdef double[:, ::1] P, V, P0, V0, Pp, Vp
@@ -149,7 +157,13 @@ cdef class Driver:
         self.h_partner = np.array([system.hosted[c].partner for c in hc], dtype=np.int_)
         self.h_pport = np.array([system.hosted[c].partner_port for c in hc], dtype=np.int_)
         self.hosted_embs = [system.hosted[c].embedded for c in hc]
-        self.Gc = [np.ascontiguousarray(G, dtype=float) for G in system._Gc]
+        # copies: a following contact turns side a's column in place (_follow)
+        self.Gc = [np.array(G, dtype=float, order="C") for G in system._Gc]
+        self.fol, self.ft = None, NULL
+        if system.followers:
+            self.fol = importlib.import_module("cosim.core.schemes._follow").Followers(
+                system, self.Gc)
+            self.ft = <FollowTable*>PyCapsule_GetPointer(self.fol.table(), b"cosim.FollowTable")
         self.rows_of = [np.array(scheme._rows_of(system, s), dtype=np.int_)
                         for s in range(self.nsub)]
         self.P = np.zeros((self.nports, 2))
@@ -482,6 +496,8 @@ cdef class Driver:
                                  + (self.P[a, 1] - self.P[b, 1]) * self.normal[c, 1])
         dd[0] = -((self.V[a, 0] - self.V[b, 0]) * self.normal[c, 0]
                   + (self.V[a, 1] - self.V[b, 1]) * self.normal[c, 1])
+        if self.ft != NULL:
+            dd[0] += self.ft.rate(self.ft.obj, c, self.V[a, 0], self.V[a, 1])
 
     cdef double _force(self, int c, double d, double dd):
         """The law's force (``evaluate(d, dd)[0]``), in C for the linear and
@@ -608,6 +624,8 @@ cdef class Driver:
             xb0, xb1, vb0, vb1 = self.P[b, 0], self.P[b, 1], self.V[b, 0], self.V[b, 1]
         d[0] = self.offset[c] - ((xa0 - xb0) * self.normal[c, 0] + (xa1 - xb1) * self.normal[c, 1])
         dd[0] = -((va0 - vb0) * self.normal[c, 0] + (va1 - vb1) * self.normal[c, 1])
+        if self.ft != NULL:
+            dd[0] += self.ft.rate(self.ft.obj, c, va0, va1)
 
     # ------------------------------------------------------------ one step
     def step(self, double t, double remaining, double h_fixed=0.0):
@@ -625,6 +643,8 @@ cdef class Driver:
                 self._save()
             else:
                 h = h_fixed
+            if self.ft != NULL:         # surface points under their points at t
+                self.ft.update(self.ft.obj, &self.P0[0, 0])
             ratio = h / self.h_prev
             for r in range(self.nr):
                 self.wv[r] = 0.0

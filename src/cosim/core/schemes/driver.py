@@ -71,6 +71,19 @@ def _side_refusal(sub) -> str | None:
     return f"{name} ({type(sub).__name__}) has no compiled kernel"
 
 
+def _follow_refusal(system) -> str | None:
+    """Why the compiled loop cannot move a following contact's surface point
+    (:mod:`cosim.core.schemes._follow`), or None: side b must move its ports
+    in compiled code (capability ``compiled_follow``, and a face: a
+    structure meshed along a line, its compiled face built)."""
+    for ln in system.followers:
+        sub = system.subsystems[ln.sub_b]
+        if "compiled_follow" not in sub.capabilities or sub.follow_face() is None:
+            return (f"contact `{ln.contact.name}` follows a point along side `{sub.name}`, "
+                    f"which cannot move its ports in compiled code")
+    return None
+
+
 def advance_replaced(scheme) -> bool:
     """Whether the ``advance`` of ``scheme``'s class is not the explicit
     schemes' own (a test or a user wrapped it): theirs must run, so only the
@@ -96,8 +109,9 @@ def refusal(scheme, system) -> str | None:
         return "`substeps` (multirate) are set"
     if system.connections is not None:
         return "a contact has a grasp or friction connection"
-    if system.followers:
-        return "a contact follows a moving point (`follow`)"
+    why = _follow_refusal(system)
+    if why is not None:
+        return why
     for sub in system.subsystems:
         why = _side_refusal(sub)
         if why is not None:
