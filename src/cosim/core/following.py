@@ -59,6 +59,10 @@ class MovingPorts:
                 n = sub.slide_port(ln.port_b, outs[ln.sub_a][0][ln.port_a],
                                    sub.x if states is None else states[ln.sub_b])
                 self._turn_normal(c, n)
+                x = sub.x if states is None else states[ln.sub_b]
+                xa = np.asarray(outs[ln.sub_a][0][ln.port_a], float)
+                sub.follow_stiffness(ln.port_b, lambda: ln.contact.offset - float(
+                    n @ (xa - sub.outputs(0.0, x)[0][ln.port_b])))
                 continue
             s_raw = sub.material_coordinate(outs[ln.sub_a][0][ln.port_a])
             s = sub.move_port(ln.port_b, s_raw)

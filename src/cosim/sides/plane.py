@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from cosim.core.subsystem import SubsystemState
 from cosim.sides.fem import StructureSubsystem
 from cosim.sides.plane_circle import CircleHosting
 
@@ -87,6 +88,81 @@ class PlaneSubsystem(CircleHosting, StructureSubsystem):
         if self._kernel:
             self._kernel.forget_bases()
         return n
+
+    def correct_following(self, port: int, law, correction) -> None:
+        """Keep the static correction of the contact that follows along
+        ``port`` on its present point: ``law`` (the contact's own copy of a
+        linear law, :func:`cosim.scene.plane_build.corrected_law`) has its
+        ``contact_stiffness`` set to ``k / (1 + k c_r)`` by
+        :meth:`follow_stiffness` each time the port moves, ``k`` the
+        stiffness the scene gave and ``c_r`` the dropped modes' compliance
+        at the port's point (``correction``, a
+        :class:`fem.plane.reduce.StaticCorrection`: per visited segment)."""
+        corr = self.__dict__.setdefault("_follow_corr", {})
+        corr[port] = (law, float(law.contact_stiffness), correction)
+        self.follow_stiffness(port, lambda: 0.0)
+
+    def follow_stiffness(self, port: int, penetration) -> None:
+        """After :meth:`slide_port`: the corrected stiffness of the contact
+        following along ``port`` at the port's present point.
+
+        The law is changed in place (every holder of the contact's law reads
+        it: the coupler, this side's embedded contact; the compiled kernel,
+        which copies its springs' stiffnesses when built, is built again,
+        and the closed-form bases, which hang on the stiffness, are
+        dropped).  A change of stiffness at the penetration ``d =
+        penetration()`` changes the spring's stored energy by
+        ``(k1 - k0) d^2 / 2`` with no work of any force: that is the work of
+        the reduction (the dropped modes' static part of the field, which
+        the correction stands for, differs from point to point), booked as
+        energy supplied to this side (``ledger()[1]``) so the ledger closes."""
+        entry = self.__dict__.get("_follow_corr", {}).get(port)
+        if entry is None:
+            return
+        law, k_own, correction = entry
+        c_r = correction.compliance(self.port_coordinates[port])
+        k = k_own / (1.0 + k_own * c_r)
+        if k == law.contact_stiffness:
+            return
+        d = float(penetration())
+        before = float(law.potential(d))
+        object.__setattr__(law, "contact_stiffness", k)   # the contact's own copy
+        self.aux[-1] += float(law.potential(d)) - before
+        self._bases = {}
+        if self._kernel:
+            self._kernel = None         # built again with the new stiffness
+
+    def _follow_laws(self) -> list:
+        return [law for law, _, _ in self.__dict__.get("_follow_corr", {}).values()]
+
+    def get_state(self):
+        """As the structure's, with the following contacts' corrected
+        stiffnesses: a step taken again starts from the stiffness its
+        booked energy (``aux``) goes with."""
+        st = super().get_state()
+        laws = self._follow_laws()
+        if laws:
+            st.x = np.concatenate([st.x, [law.contact_stiffness for law in laws]])
+        return st
+
+    def set_state(self, state):
+        laws = self._follow_laws()
+        if not laws:
+            return super().set_state(state)
+        ks = state.x[-len(laws):]
+        super().set_state(SubsystemState(state.t, state.x[:-len(laws)], state.aux,
+                                         state.n_steps, state.status, state.peak))
+        if any(float(k) != law.contact_stiffness for k, law in zip(ks, laws)):
+            for k, law in zip(ks, laws):
+                object.__setattr__(law, "contact_stiffness", float(k))
+            self._bases = {}
+            if self._kernel:
+                self._kernel = None
+
+    def ledger(self):
+        """Energy dissipated by damping, and supplied by the static
+        correction of a following contact (:meth:`follow_stiffness`) [J]."""
+        return float(self.aux[-2]), float(self.aux[-1])
 
     def field(self, q) -> np.ndarray:
         """World displacement of every vertex for modal coordinates ``q``
