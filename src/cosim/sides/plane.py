@@ -120,7 +120,7 @@ class PlaneSubsystem(CircleHosting, StructureSubsystem):
         if entry is None:
             return
         law, k_own, correction = entry
-        c_r = correction.compliance(self.port_coordinates[port])
+        c_r = correction.compliance(self.port_coordinates[port], self._dirs[port])
         k = k_own / (1.0 + k_own * c_r)
         if k == law.contact_stiffness:
             return
@@ -128,9 +128,15 @@ class PlaneSubsystem(CircleHosting, StructureSubsystem):
         before = float(law.potential(d))
         object.__setattr__(law, "contact_stiffness", k)   # the contact's own copy
         self.aux[-1] += float(law.potential(d)) - before
+        self._forget_springs()
+
+    def _forget_springs(self) -> None:
+        """A hosted spring's stiffness changed: drop the closed-form bases,
+        and the compiled kernel (built again, with the new stiffness, on the
+        next step that it takes)."""
         self._bases = {}
         if self._kernel:
-            self._kernel = None         # built again with the new stiffness
+            self._kernel = None
 
     def _follow_laws(self) -> list:
         return [law for law, _, _ in self.__dict__.get("_follow_corr", {}).values()]
@@ -155,9 +161,7 @@ class PlaneSubsystem(CircleHosting, StructureSubsystem):
         if any(float(k) != law.contact_stiffness for k, law in zip(ks, laws)):
             for k, law in zip(ks, laws):
                 object.__setattr__(law, "contact_stiffness", float(k))
-            self._bases = {}
-            if self._kernel:
-                self._kernel = None
+            self._forget_springs()
 
     def ledger(self):
         """Energy dissipated by damping, and supplied by the static
