@@ -24,9 +24,11 @@ import pytest
 import cosim
 from cosim.scene.load import SceneError
 from cosim.sides.plane import PlaneSubsystem
+from documented import Claim, assert_printed, assert_reproduced
 from plane_files import write_msh
 from test_plane_follow import BALL, L, MONOLITHIC, POINT, SCENE
 
+S, CMD = "docs/structures.md", "pytest tests/test_plane_follow_correction.py"
 K = 1e8
 FEW = "count = 12 }"
 CORRECTED = "count = 12, static_correction = true }"
@@ -189,6 +191,13 @@ def test_the_following_correction_comes_closest_to_every_mode(tmp_path, monkeypa
     assert first[0] > 1e-2 and abs(first[1]) > 5e-3
     assert follows[0] < 2e-3 and abs(follows[1]) < 2e-4
     assert follows[0] < few[0] / 30 and follows[0] < first[0] / 10
+    for printed, value, measured in (
+            ("off by 6.5e-2 of its peak without the correction", 6.5e-2, few[0]),
+            ("by 2.6e-2 with the correction kept at the first point", 2.6e-2, first[0]),
+            ("by 6.1e-4 with the correction that follows the port", 6.1e-4, follows[0])):
+        claim = Claim(S, printed, CMD, value, abs=0.05 * 10 ** np.floor(np.log10(value)))
+        assert_printed(claim)
+        assert_reproduced(claim, measured)
 
 
 @pytest.mark.slow
@@ -230,6 +239,12 @@ def test_the_ledger_books_the_change_of_stiffness_as_work_of_the_reduction(tmp_p
     assert drift[0] < 1.5 * few["max_abs_drift"]
     assert drift[0] < 1e-2 * abs(supplied)
     assert drift[1] < 0.6 * drift[0]
+    for printed, value, measured in (
+            ("the ledger books -3.7e-3 J supplied by the reduction", -3.7e-3, supplied),
+            ("drifts by 2.0e-5 J at 1 µs", 2.0e-5, drift[0])):
+        claim = Claim(S, printed, CMD, value, abs=0.05 * 10 ** np.floor(np.log10(abs(value))))
+        assert_printed(claim)
+        assert_reproduced(claim, measured)
     monkeypatch.setattr(PlaneSubsystem, "ledger", lambda self: (float(self.aux[-2]), 0.0))
     unbooked = _run(_scene(tmp_path, name="unbooked")).summary["energy"]
     assert unbooked["max_abs_drift"] == pytest.approx(abs(supplied), rel=2e-2)
@@ -286,6 +301,9 @@ def test_the_rules_still_speak_of_the_first_point(tmp_path):
     c_r = plate.static_correction.compliance(("top", BALL["s"]))
     share = K * c_r
     assert 0.02 < share < 0.05
+    claim = Claim(S, "the dropped modes hold 0.03 of its compliance", CMD, 0.03, abs=0.005)
+    assert_printed(claim)
+    assert_reproduced(claim, share)
     assert any("Flamant" in m and str(path) in m for m in said), said
     assert any(f"hold {share:.2g} of the contact's compliance" in m for m in said), said
     (rule,) = mode_rules(system, scene)["plate"]
