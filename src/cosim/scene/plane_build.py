@@ -185,10 +185,9 @@ def _check_follow(contact, spec, sub, file, scheme=None) -> None:
     set per macro step, the monolithic scheme moves the port at every
     evaluation of its right-hand side, where the change of stiffness would
     go unbooked), a boundary that touches itself at a vertex, and a
-    ``normal`` that is not
-    the first point's outward normal (the contact reads along it until the
-    first step turns it with the boundary).  The sliding loop is made here,
-    once."""
+    ``normal`` that is not the first point's outward normal (the contact
+    reads along it until the first step turns it with the boundary).  The
+    sliding loop is made here, once."""
     point = contact.b[1]
     group, s = spec.ports[point]
     if s is None:
