@@ -70,6 +70,7 @@ class PlaneSubsystem(CircleHosting, StructureSubsystem):
         loop = self.sliding_loop(port)
         m = self.n_modes
         k, xi, n, _ = loop.project(point, np.asarray(x, float)[:m])
+        self.__dict__.setdefault("_on_segment", {})[port] = (k, xi)
         row = n @ loop.modal_rows(k, xi)
         if np.array_equal(row, self._R[port]) and np.array_equal(n, self._dirs[port]):
             return n
@@ -120,7 +121,12 @@ class PlaneSubsystem(CircleHosting, StructureSubsystem):
         if entry is None:
             return
         law, k_own, correction = entry
-        c_r = correction.compliance(self.port_coordinates[port], self._dirs[port])
+        seg = self.__dict__.get("_on_segment", {}).get(port)
+        if seg is None:                 # its first point
+            c_r = correction.compliance(self.port_coordinates[port], self._dirs[port])
+        else:                           # where slide_port put it
+            c_r = correction.row_compliance(*self.sliding_loop(port).point_row(
+                *seg, self._dirs[port]))
         k = k_own / (1.0 + k_own * c_r)
         if k == law.contact_stiffness:
             return

@@ -98,6 +98,11 @@ class StaticCorrection:
         else:
             pt = self.structure.boundary_point(*point)
             dofs, w = pt.dofs, np.asarray(direction, float) @ pt.rows
+        return self.row_compliance(dofs, w)
+
+    def row_compliance(self, dofs, w) -> float:
+        """``w^T G_r w`` [m/N] for the row ``w`` on the free DOFs ``dofs``
+        of one boundary segment (its ``G_r`` computed on first use)."""
         if len(dofs) == 0:
             return 0.0
         order = np.argsort(dofs)
