@@ -85,6 +85,19 @@ class MovingPorts:
                     G[rows, c] = col
                     maps[ln.sub_a] = G
 
+    def reduction_work(self) -> np.ndarray:
+        """(n_contacts,) energy [J] a plane body's static correction has
+        supplied to each following contact's spring by changing its
+        stiffness under load (:meth:`PlaneSubsystem.follow_stiffness`): no
+        force's work, so not the coupling's error either."""
+        out = np.zeros(len(self.links))
+        for c in self._follow_index:
+            ln = self.links[c]
+            supplied = getattr(self.subsystems[ln.sub_b], "follow_supplied", None)
+            if supplied is not None:
+                out[c] = supplied(ln.port_b)
+        return out
+
     def _turn_normal(self, c: int, n) -> None:
         """Contact ``c`` now reads and pushes along ``n`` (``-n`` on ``b``): a
         plane body's boundary turned under a following point (no slope

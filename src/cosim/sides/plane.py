@@ -100,7 +100,8 @@ class PlaneSubsystem(CircleHosting, StructureSubsystem):
         at the port's point (``correction``, a
         :class:`fem.plane.reduce.StaticCorrection`: per visited segment)."""
         corr = self.__dict__.setdefault("_follow_corr", {})
-        corr[port] = (law, float(law.contact_stiffness), correction)
+        # the law, the scene's stiffness, the correction, the energy booked
+        corr[port] = [law, float(law.contact_stiffness), correction, 0.0]
         self.follow_stiffness(port, lambda: 0.0)
 
     def follow_stiffness(self, port: int, penetration) -> None:
@@ -120,7 +121,7 @@ class PlaneSubsystem(CircleHosting, StructureSubsystem):
         entry = self.__dict__.get("_follow_corr", {}).get(port)
         if entry is None:
             return
-        law, k_own, correction = entry
+        law, k_own, correction, _ = entry
         seg = self.__dict__.get("_on_segment", {}).get(port)
         if seg is None:                 # its first point
             c_r = correction.compliance(self.port_coordinates[port], self._dirs[port])
@@ -133,8 +134,17 @@ class PlaneSubsystem(CircleHosting, StructureSubsystem):
         d = float(penetration())
         before = float(law.potential(d))
         object.__setattr__(law, "contact_stiffness", k)   # the contact's own copy
-        self.aux[-1] += float(law.potential(d)) - before
+        booked = float(law.potential(d)) - before
+        entry[3] += booked
+        self.aux[-1] += booked
         self._forget_springs()
+
+    def follow_supplied(self, port: int) -> float:
+        """Energy [J] the static correction of the contact following along
+        ``port`` has supplied to its spring so far (:meth:`follow_stiffness`;
+        0 without one): the part of ``ledger()[1]`` that is that contact's."""
+        entry = self.__dict__.get("_follow_corr", {}).get(port)
+        return 0.0 if entry is None else float(entry[3])
 
     def _forget_springs(self) -> None:
         """A hosted spring's stiffness changed: drop the closed-form bases,
@@ -144,29 +154,31 @@ class PlaneSubsystem(CircleHosting, StructureSubsystem):
         if self._kernel:
             self._kernel = None
 
-    def _follow_laws(self) -> list:
-        return [law for law, _, _ in self.__dict__.get("_follow_corr", {}).values()]
-
     def get_state(self):
-        """As the structure's, with the following contacts' corrected
-        stiffnesses: a step taken again starts from the stiffness its
-        booked energy (``aux``) goes with."""
+        """As the structure's, with each following contact's corrected
+        stiffness and the energy booked for it: a step taken again starts
+        from the stiffness its booked energy (``aux``) goes with."""
         st = super().get_state()
-        laws = self._follow_laws()
-        if laws:
-            st.x = np.concatenate([st.x, [law.contact_stiffness for law in laws]])
+        entries = list(self.__dict__.get("_follow_corr", {}).values())
+        if entries:
+            st.x = np.concatenate([st.x, [e[0].contact_stiffness for e in entries],
+                                   [e[3] for e in entries]])
         return st
 
     def set_state(self, state):
-        laws = self._follow_laws()
-        if not laws:
+        entries = list(self.__dict__.get("_follow_corr", {}).values())
+        if not entries:
             return super().set_state(state)
-        ks = state.x[-len(laws):]
-        super().set_state(SubsystemState(state.t, state.x[:-len(laws)], state.aux,
+        n = len(entries)
+        ks, booked = state.x[-2 * n:-n], state.x[-n:]
+        super().set_state(SubsystemState(state.t, state.x[:-2 * n], state.aux,
                                          state.n_steps, state.status, state.peak))
-        if any(float(k) != law.contact_stiffness for k, law in zip(ks, laws)):
-            for k, law in zip(ks, laws):
-                object.__setattr__(law, "contact_stiffness", float(k))
+        changed = False
+        for k, b, e in zip(ks, booked, entries):
+            changed |= float(k) != e[0].contact_stiffness
+            object.__setattr__(e[0], "contact_stiffness", float(k))
+            e[3] = float(b)
+        if changed:
             self._forget_springs()
 
     def ledger(self):
