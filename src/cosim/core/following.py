@@ -59,6 +59,10 @@ class MovingPorts:
                 n = sub.slide_port(ln.port_b, outs[ln.sub_a][0][ln.port_a],
                                    sub.x if states is None else states[ln.sub_b])
                 self._turn_normal(c, n)
+                x = sub.x if states is None else states[ln.sub_b]
+                xa = np.asarray(outs[ln.sub_a][0][ln.port_a], float)
+                sub.follow_stiffness(ln.port_b, lambda: ln.contact.offset - float(
+                    n @ (xa - sub.outputs(0.0, x)[0][ln.port_b])))
                 continue
             s_raw = sub.material_coordinate(outs[ln.sub_a][0][ln.port_a])
             s = sub.move_port(ln.port_b, s_raw)
@@ -80,6 +84,19 @@ class MovingPorts:
                     G = G.copy()
                     G[rows, c] = col
                     maps[ln.sub_a] = G
+
+    def reduction_work(self) -> np.ndarray:
+        """(n_contacts,) energy [J] a plane body's static correction has
+        supplied to each following contact's spring by changing its
+        stiffness under load (:meth:`PlaneSubsystem.follow_stiffness`): no
+        force's work, so not the coupling's error either."""
+        out = np.zeros(len(self.links))
+        for c in self._follow_index:
+            ln = self.links[c]
+            supplied = getattr(self.subsystems[ln.sub_b], "follow_supplied", None)
+            if supplied is not None:
+                out[c] = supplied(ln.port_b)
+        return out
 
     def _turn_normal(self, c: int, n) -> None:
         """Contact ``c`` now reads and pushes along ``n`` (``-n`` on ``b``): a

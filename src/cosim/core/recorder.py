@@ -421,6 +421,9 @@ class Recorder:
         contacts = {}
         events = []
         work = self.last[5] if self.last else None
+        # a following contact's stiffness changed by a plane body's static
+        # correction: the energy that changed in its spring with no work
+        reduction = getattr(sysm, "reduction_work", lambda: None)()
         for c, name in enumerate(sysm.contact_names):
             iv = intervals[c]
             ledger = {}
@@ -429,6 +432,9 @@ class Recorder:
                 stored0 = float(self._stored0[c])
                 ledger = {"work": float(work[c]), "stored": stored,
                           "coupling_error": float(work[c] + stored - stored0 + dissipated[c])}
+                if reduction is not None and reduction[c] != 0.0:
+                    ledger["reduction"] = float(reduction[c])
+                    ledger["coupling_error"] -= float(reduction[c])
             contacts[name] = {
                 "peak_penetration": float(self.peak[c]),
                 "intervals": [[float(a), float(b)] for a, b in iv],

@@ -352,7 +352,7 @@ def build_system(scene, scheme: str | None = None, *, run_fmu: bool = True):
         if "plane" in (types[c.a[0]], types[c.b[0]]) and c.radius is None:   # static
             # correction, pre-flight rules (of a point contact)
             from cosim.scene.plane_build import corrected_law
-            law = corrected_law(c, scene, subs, ((sa, pa), (sb, pb)))
+            law = corrected_law(c, scene, subs, ((sa, pa), (sb, pb)), name)
         contact = PointContact(c.name, law, c.normal, c.offset)
         # the monolithic ODE evaluates every penalty law itself; a rigid law
         # stays with its moving side, which resolves the impact

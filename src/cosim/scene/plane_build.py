@@ -104,7 +104,7 @@ def mode_rules(system, scene) -> dict:
     return out
 
 
-def corrected_law(contact, scene, subs: list, sides: tuple):
+def corrected_law(contact, scene, subs: list, sides: tuple, scheme: str | None = None):
     """The law contact ``contact`` (a :class:`ContactSpec`) runs with: its
     own, or, where a side is a plane body with ``modes.static_correction``,
     a linear spring in series with the static compliance of the modes that
@@ -115,6 +115,15 @@ def corrected_law(contact, scene, subs: list, sides: tuple):
     (Flamant: ``k x 2 ln 2 / (pi E t)`` over 1e-2); refuses the correction
     below 1 times the contact's frequency and with a law that is not the
     linear spring.  ``sides`` are ``(subsystem index, port index)`` of a and b.
+
+    A contact that follows the plane body's boundary (``follow = true``)
+    gets its own copy of the law, whose stiffness the body sets to
+    ``k / (1 + k c_r)`` at the port's present point each time the port
+    moves (:meth:`cosim.sides.plane.PlaneSubsystem.follow_stiffness`, per
+    macro step of the scheme ``scheme``, which therefore must not be the
+    monolithic one: it moves the port at every evaluation).  The rules
+    above (mode rule, dropped share, Flamant) are evaluated at the first
+    point.
     """
     from fem.plane.reduce import (StaticCorrection, dropped_share_rule, flamant_growth,
                                   mode_rule)
@@ -127,7 +136,7 @@ def corrected_law(contact, scene, subs: list, sides: tuple):
             continue
         model, key = spec.model, f"subsystems.{sub_name}"
         if contact.follow and point == contact.b[1]:
-            _check_follow(contact, spec, subs[s], scene.path)
+            _check_follow(contact, spec, subs[s], scene.path, scheme)
         k = getattr(law, "contact_stiffness", None)
         point_contact = spec.ports[point][1] is not None     # not a face's average
         if k is not None and not law.rigid and point_contact:
@@ -162,17 +171,23 @@ def corrected_law(contact, scene, subs: list, sides: tuple):
         if verdict == "ok" and share_verdict == "warn":
             _warn(f"{scene.path}: `{key}` with contact `{contact.name}`: {why}")
         law = dataclasses.replace(law, contact_stiffness=k / (1.0 + k * c_r))
+        if contact.follow and point == contact.b[1]:
+            # its own copy, whose stiffness follows the port (per macro step)
+            law = dataclasses.replace(law, contact_stiffness=k)
+            sub.correct_following(port, law, corr)
     return law
 
 
-def _check_follow(contact, spec, sub, file) -> None:
+def _check_follow(contact, spec, sub, file, scheme=None) -> None:
     """Refuse what a following contact on the plane body ``spec`` cannot
     do: a point without ``s`` (a face's average does not slide), the static
-    correction (computed at the first point only, it would not follow), a
-    boundary that touches itself at a vertex, and a ``normal`` that is not
-    the first point's outward normal (the contact reads along it until the
-    first step turns it with the boundary).  The sliding loop is made here,
-    once."""
+    correction under the monolithic scheme (the correction's stiffness is
+    set per macro step, the monolithic scheme moves the port at every
+    evaluation of its right-hand side, where the change of stiffness would
+    go unbooked), a boundary that touches itself at a vertex, and a
+    ``normal`` that is not the first point's outward normal (the contact
+    reads along it until the first step turns it with the boundary).  The
+    sliding loop is made here, once."""
     point = contact.b[1]
     group, s = spec.ports[point]
     if s is None:
@@ -180,12 +195,13 @@ def _check_follow(contact, spec, sub, file) -> None:
                          f"slides `{spec.name}.{point}` along the boundary, but that point is "
                          f"the average of the group `{group}` (it has no `s`): give it an arc "
                          f"length `s`, or set `follow = false`")
-    if spec.static_correction:
+    if spec.static_correction and scheme == "monolithic":
         raise SceneError(file, f"{contact.key}.follow",
-                         f"slides `{spec.name}.{point}` along the boundary, and "
-                         f"`subsystems.{spec.name}.modes.static_correction` holds the dropped "
-                         f"modes' compliance of its first point only: turn the correction off, "
-                         f"or set `follow = false`")
+                         f"slides `{spec.name}.{point}` along the boundary with "
+                         f"`subsystems.{spec.name}.modes.static_correction`, whose stiffness "
+                         f"follows the port per macro step; the monolithic scheme moves the "
+                         f"port at every evaluation of its right-hand side: use a co-simulation "
+                         f"scheme (gauss_seidel, jacobi), or turn the correction off")
     from fem.plane import MeshError
     try:
         sub.sliding_loop(sub.port_index(point))

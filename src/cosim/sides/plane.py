@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from cosim.core.subsystem import SubsystemState
 from cosim.sides.fem import StructureSubsystem
 from cosim.sides.plane_circle import CircleHosting
 
@@ -69,6 +70,7 @@ class PlaneSubsystem(CircleHosting, StructureSubsystem):
         loop = self.sliding_loop(port)
         m = self.n_modes
         k, xi, n, _ = loop.project(point, np.asarray(x, float)[:m])
+        self.__dict__.setdefault("_on_segment", {})[port] = (k, xi)
         row = n @ loop.modal_rows(k, xi)
         if np.array_equal(row, self._R[port]) and np.array_equal(n, self._dirs[port]):
             return n
@@ -87,6 +89,102 @@ class PlaneSubsystem(CircleHosting, StructureSubsystem):
         if self._kernel:
             self._kernel.forget_bases()
         return n
+
+    def correct_following(self, port: int, law, correction) -> None:
+        """Keep the static correction of the contact that follows along
+        ``port`` on its present point: ``law`` (the contact's own copy of a
+        linear law, :func:`cosim.scene.plane_build.corrected_law`) has its
+        ``contact_stiffness`` set to ``k / (1 + k c_r)`` by
+        :meth:`follow_stiffness` each time the port moves, ``k`` the
+        stiffness the scene gave and ``c_r`` the dropped modes' compliance
+        at the port's point (``correction``, a
+        :class:`fem.plane.reduce.StaticCorrection`: per visited segment)."""
+        corr = self.__dict__.setdefault("_follow_corr", {})
+        # the law, the scene's stiffness, the correction, the energy booked
+        corr[port] = [law, float(law.contact_stiffness), correction, 0.0]
+        self.follow_stiffness(port, lambda: 0.0)
+
+    def follow_stiffness(self, port: int, penetration) -> None:
+        """After :meth:`slide_port`: the corrected stiffness of the contact
+        following along ``port`` at the port's present point.
+
+        The law is changed in place (every holder of the contact's law reads
+        it: the coupler, this side's embedded contact; the compiled kernel,
+        which copies its springs' stiffnesses when built, is built again,
+        and the closed-form bases, which hang on the stiffness, are
+        dropped).  A change of stiffness at the penetration ``d =
+        penetration()`` changes the spring's stored energy by
+        ``(k1 - k0) d^2 / 2`` with no work of any force: that is the work of
+        the reduction (the dropped modes' static part of the field, which
+        the correction stands for, differs from point to point), booked as
+        energy supplied to this side (``ledger()[1]``) so the ledger closes."""
+        entry = self.__dict__.get("_follow_corr", {}).get(port)
+        if entry is None:
+            return
+        law, k_own, correction, _ = entry
+        seg = self.__dict__.get("_on_segment", {}).get(port)
+        if seg is None:                 # its first point
+            c_r = correction.compliance(self.port_coordinates[port], self._dirs[port])
+        else:                           # where slide_port put it
+            c_r = correction.row_compliance(*self.sliding_loop(port).point_row(
+                *seg, self._dirs[port]))
+        k = k_own / (1.0 + k_own * c_r)
+        if k == law.contact_stiffness:
+            return
+        d = float(penetration())
+        before = float(law.potential(d))
+        object.__setattr__(law, "contact_stiffness", k)   # the contact's own copy
+        booked = float(law.potential(d)) - before
+        entry[3] += booked
+        self.aux[-1] += booked
+        self._forget_springs()
+
+    def follow_supplied(self, port: int) -> float:
+        """Energy [J] the static correction of the contact following along
+        ``port`` has supplied to its spring so far (:meth:`follow_stiffness`;
+        0 without one): the part of ``ledger()[1]`` that is that contact's."""
+        entry = self.__dict__.get("_follow_corr", {}).get(port)
+        return 0.0 if entry is None else float(entry[3])
+
+    def _forget_springs(self) -> None:
+        """A hosted spring's stiffness changed: drop the closed-form bases,
+        and the compiled kernel (built again, with the new stiffness, on the
+        next step that it takes)."""
+        self._bases = {}
+        if self._kernel:
+            self._kernel = None
+
+    def get_state(self):
+        """As the structure's, with each following contact's corrected
+        stiffness and the energy booked for it: a step taken again starts
+        from the stiffness its booked energy (``aux``) goes with."""
+        st = super().get_state()
+        entries = list(self.__dict__.get("_follow_corr", {}).values())
+        if entries:
+            st.x = np.concatenate([st.x, [e[0].contact_stiffness for e in entries],
+                                   [e[3] for e in entries]])
+        return st
+
+    def set_state(self, state):
+        entries = list(self.__dict__.get("_follow_corr", {}).values())
+        if not entries:
+            return super().set_state(state)
+        n = len(entries)
+        ks, booked = state.x[-2 * n:-n], state.x[-n:]
+        super().set_state(SubsystemState(state.t, state.x[:-2 * n], state.aux,
+                                         state.n_steps, state.status, state.peak))
+        changed = False
+        for k, b, e in zip(ks, booked, entries):
+            changed |= float(k) != e[0].contact_stiffness
+            object.__setattr__(e[0], "contact_stiffness", float(k))
+            e[3] = float(b)
+        if changed:
+            self._forget_springs()
+
+    def ledger(self):
+        """Energy dissipated by damping, and supplied by the static
+        correction of a following contact (:meth:`follow_stiffness`) [J]."""
+        return float(self.aux[-2]), float(self.aux[-1])
 
     def field(self, q) -> np.ndarray:
         """World displacement of every vertex for modal coordinates ``q``

@@ -179,6 +179,23 @@ class BoundaryLoop:
         rows = self._rows[k]
         return sum(w * rows[j] for j, w in enumerate(shape))
 
+    def point_row(self, k: int, xi: float, direction) -> tuple:
+        """``(dofs, w)``: the free DOFs of segment ``k`` and the row of the
+        displacement of its point ``xi`` along the unit ``direction``
+        (world) on them, as the structure's ``boundary_point`` gives it (the
+        segment's nodal rows kept from the first call)."""
+        nodal = self.__dict__.setdefault("_nodal", {})
+        if k not in nodal:
+            pts = [self.structure.segment_point(self.pairs, k, x)
+                   for x in ((0.0, 1.0, 0.5) if self.quadratic else (0.0, 1.0))]
+            nodal[k] = (pts[0].dofs, np.array([pt.rows for pt in pts]))
+        dofs, rows = nodal[k]
+        if self.quadratic:
+            shape = ((1.0 - xi) * (1.0 - 2.0 * xi), xi * (2.0 * xi - 1.0), 4.0 * xi * (1.0 - xi))
+        else:
+            shape = (1.0 - xi, xi)
+        return dofs, np.asarray(direction, float) @ np.tensordot(shape, rows, axes=1)
+
     def position(self, k: int, xi: float) -> np.ndarray:
         """Reference world position of the point ``xi`` of segment ``k`` [m]."""
         return (1.0 - xi) * self.X[k, 0] + xi * self.X[k, 1]

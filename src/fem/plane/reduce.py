@@ -85,10 +85,24 @@ class StaticCorrection:
             self._segments[key] = 0.5 * (g + g.T)
         return self._segments[key]
 
-    def compliance(self, point) -> float:
+    def compliance(self, point, direction=None) -> float:
         """Residual compliance ``c_r`` [m/N] at ``point`` (what the
-        structure's ``point_operator`` takes: ``(group, s)`` for a plane body)."""
-        dofs, w = self.structure.point_operator(point)
+        structure's ``point_operator`` takes: ``(group, s)`` for a plane
+        body, or a point of a chain it was given, such as a sliding port's
+        loop), along the outward normal there or, on a plane body, along
+        the unit ``direction`` (world; a following contact's deformed
+        normal).  Anywhere on a segment it is ``w^T G_r w`` with the
+        segment's ``G_r``, computed once."""
+        if direction is None:
+            dofs, w = self.structure.point_operator(point)
+        else:
+            pt = self.structure.boundary_point(*point)
+            dofs, w = pt.dofs, np.asarray(direction, float) @ pt.rows
+        return self.row_compliance(dofs, w)
+
+    def row_compliance(self, dofs, w) -> float:
+        """``w^T G_r w`` [m/N] for the row ``w`` on the free DOFs ``dofs``
+        of one boundary segment (its ``G_r`` computed on first use)."""
         if len(dofs) == 0:
             return 0.0
         order = np.argsort(dofs)
