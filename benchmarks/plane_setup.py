@@ -175,33 +175,19 @@ def setup_point(label: str, nx: int, ny: int, folder: Path, threads: bool = True
     return out
 
 
-class _StructureClock:
-    """Process time in :meth:`StructureSubsystem._step_impl`, the run driven by
-    the Python macro loop (which calls the step it times)."""
-
-    def __enter__(self):
-        from cosim.sides.fem import StructureSubsystem
-        self.driver = os.environ.get("COSIM_DRIVER")
-        os.environ["COSIM_DRIVER"] = "python"
-        self.cls, self.orig, self.total = StructureSubsystem, StructureSubsystem._step_impl, 0.0
-        clock = self
-
-        def timed(sub, *args, **kwargs):
-            t0 = time.process_time()
-            try:
-                return clock.orig(sub, *args, **kwargs)
-            finally:
-                clock.total += time.process_time() - t0
-
-        self.cls._step_impl = timed
-        return self
-
-    def __exit__(self, *exc):
-        self.cls._step_impl = self.orig
-        if self.driver is None:
-            os.environ.pop("COSIM_DRIVER", None)
-        else:
-            os.environ["COSIM_DRIVER"] = self.driver
+def _StructureClock():
+    """size_scaling's clock of the structure's own steps (the Python macro
+    loop, with ``StructureSubsystem._step_impl`` timed), loaded from the
+    script beside this one."""
+    import importlib.util
+    path = Path(__file__).with_name("size_scaling.py")
+    spec = importlib.util.spec_from_file_location("size_scaling_bench", path)
+    mod = sys.modules.get(spec.name)
+    if mod is None:
+        mod = importlib.util.module_from_spec(spec)
+        sys.modules[spec.name] = mod        # its dataclasses look their module up
+        spec.loader.exec_module(mod)
+    return mod._StructureClock()
 
 
 def _scene(which: str, n_modes: int, cache: Path):

@@ -153,3 +153,18 @@ def test_the_smallest_size_is_the_published_one_run_again(tmp_path):
         assert p[key] == pytest.approx(published[key], rel=1e-9), key
     # Timoshenko's clamped strip: f1 82.894 Hz; this mesh's P2 is within 0.3 %
     assert p["f1_hz"] == pytest.approx(82.894, rel=3e-3)
+
+
+def test_the_step_clock_is_size_scalings_and_times_the_structures_steps():
+    # the clock of the step-cost table: the structure's own steps, in the
+    # Python macro loop, which it sets for the block and gives back after
+    import os
+    import cosim
+    before = os.environ.get("COSIM_DRIVER")
+    with _script()._StructureClock() as clock:
+        assert os.environ["COSIM_DRIVER"] == "python"
+        scene = cosim.load_scene(ROOT / "cases" / "beam_impact.toml", overrides=["t_end=0.02"])
+        cosim.simulate(scene, estimate=False)
+    assert type(clock).__module__ == "size_scaling_bench"
+    assert clock.total > 0.0
+    assert os.environ.get("COSIM_DRIVER") == before
