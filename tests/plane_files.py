@@ -20,3 +20,19 @@ def write_msh(path, mesh, name="body"):
         field_data={**{g: np.array([t, 1]) for g, t in tags.items()},
                     name: np.array([surface, 2])}), file_format="gmsh22", binary=False)
     return path
+
+
+def spy_kernels(monkeypatch) -> list:
+    """The structure kernels built from now on (``None`` where a side had
+    none), appended as :meth:`StructureSubsystem._build_kernel` makes them."""
+    from cosim.sides.fem import StructureSubsystem
+    built = []
+    original = StructureSubsystem._build_kernel
+
+    def spy(self):
+        k = original(self)
+        built.append(k)
+        return k
+
+    monkeypatch.setattr(StructureSubsystem, "_build_kernel", spy)
+    return built

@@ -15,7 +15,7 @@ import pytest
 
 import cosim
 from cosim.scene.load import SceneError
-from plane_files import write_msh
+from plane_files import spy_kernels, write_msh
 
 L = 0.1
 SCENE = """\
@@ -237,16 +237,7 @@ def test_compiled_and_numpy_kernels_agree_on_the_hosted_slide(tmp_path, monkeypa
     with the numpy reference: contact times to 1e-9 s, every series within
     1e-10 of its largest value (measured 6e-12; not bit-equal, the two sum
     in other orders)."""
-    from cosim.sides.fem import StructureSubsystem
-    built = []
-    original = StructureSubsystem._build_kernel
-
-    def spy(self):
-        k = original(self)
-        built.append(k)
-        return k
-
-    monkeypatch.setattr(StructureSubsystem, "_build_kernel", spy)
+    built = spy_kernels(monkeypatch)
     fast = _cosim(tmp_path, 1e-5, "compiled", monkeypatch)
     assert built and all(k is not None for k in built)
     ref = _cosim(tmp_path, 1e-5, "numpy", monkeypatch)

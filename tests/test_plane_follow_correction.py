@@ -25,7 +25,7 @@ import cosim
 from cosim.scene.load import SceneError
 from cosim.sides.plane import PlaneSubsystem
 from documented import Claim, assert_printed, assert_reproduced
-from plane_files import write_msh
+from plane_files import spy_kernels, write_msh
 from test_plane_follow import BALL, L, MONOLITHIC, POINT, SCENE
 
 S, CMD = "docs/structures.md", "pytest tests/test_plane_follow_correction.py"
@@ -313,16 +313,7 @@ def test_compiled_and_numpy_kernels_agree_with_the_following_correction(tmp_path
     times here), and it agrees with the numpy reference: contact times to
     1e-9 s, every series within 1e-10 of its largest value (not bit-equal:
     the two sum in other orders)."""
-    from cosim.sides.fem import StructureSubsystem
-    built = []
-    original = StructureSubsystem._build_kernel
-
-    def spy(self):
-        k = original(self)
-        built.append(k)
-        return k
-
-    monkeypatch.setattr(StructureSubsystem, "_build_kernel", spy)
+    built = spy_kernels(monkeypatch)
     monkeypatch.setenv("COSIM_KERNEL", "compiled")
     fast = _run(_scene(tmp_path))
     assert len(built) > 10 and all(k is not None for k in built)

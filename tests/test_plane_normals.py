@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import cosim
-from plane_files import write_msh
+from plane_files import spy_kernels, write_msh
 
 L = 0.1
 SCENE = """\
@@ -145,16 +145,7 @@ def test_compiled_and_numpy_kernels_agree_on_two_faces(tmp_path, monkeypatch):
     1e-9 s, every series within 1e-10 of its largest value (as
     tests/test_kernel.py's bounds; not bit-equal, for the two sum in other
     orders)."""
-    from cosim.sides.fem import StructureSubsystem
-    built = []
-    original = StructureSubsystem._build_kernel
-
-    def spy(self):
-        k = original(self)
-        built.append(k)
-        return k
-
-    monkeypatch.setattr(StructureSubsystem, "_build_kernel", spy)
+    built = spy_kernels(monkeypatch)
     path = _square(tmp_path, s_top=0.03, s_right=0.07, v_right=0.8)
     fast = _run(path, monkeypatch, "compiled")
     assert built and all(k is not None for k in built)
