@@ -21,6 +21,4 @@ cdef class ContactPhases(ModalResponse):
                                  double v_hi, const double* P) noexcept nogil
     cdef void _peak_interval(self, int k, double tc, double lo, double hi, double v_lo,
                              double d_hi, double v_hi, const double* P) noexcept nogil
-    cdef list _phases(self, double[::1] x, double[::1] aux, double[:, ::1] pm,
-                      signed char[::1] closed, double[::1] peak)
     cdef void _raise_peaks(self, double[::1] peak) noexcept nogil

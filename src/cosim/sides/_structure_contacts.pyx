@@ -26,7 +26,9 @@ class StalledStep(RuntimeError):
 
 
 cdef class ContactPhases(ModalResponse):
-    """The contact phases of one structure's compiled step."""
+    """The contact phases of one structure's compiled step, and the step
+    (:meth:`step`, which :class:`cosim.sides._structure_step.StructureStep`
+    inherits)."""
 
     # ------------------------------------------------------------- contacts
     cdef inline void _partner(self, int k, double time, double* xr, double* xi, double* vr,
@@ -316,12 +318,19 @@ cdef class ContactPhases(ModalResponse):
             if r > self.seg_peak[k]:
                 self.seg_peak[k] = r
 
-    # ------------------------------------------------------------ the phases
-    cdef list _phases(self, double[::1] x, double[::1] aux, double[:, ::1] pm,
-                      signed char[::1] closed, double[::1] peak):
-        """:meth:`StructureStep.step` on arguments of checked shapes: the
-        step's phases between switches, each in closed form in its modes;
-        returns the located switches."""
+    # -------------------------------------------------------------- the step
+    def step(self, double[::1] x, double[::1] aux, double[:, ::1] pm, signed char[::1] closed,
+             double[::1] peak):
+        """Advance the modal state ``x = [q, dq]`` (2 m) over the loaded step
+        in closed form with the hosted springs switching, adding to ``aux``
+        (4 per contact, as the reference) and to the ports' velocity moments
+        ``pm`` (3, 2 n_p; complex interleaved).  ``closed`` (n_c) holds each
+        contact's state at the end of the last step (1 closed, 0 open, -1
+        unknown), and on return at the end of this one.  ``peak`` (n_c), the
+        host's largest penetrations, is raised in place to each closed
+        contact's largest penetration over each segment (the reference's
+        ``_segment_peaks``).  Returns the located switches
+        ``[(time, contact, closed), ...]``."""
         cdef int m = self.m, npt = self.np_, nc = self.nc, j, k, s, p
         cdef long i, n, row
         cdef double t1 = self.t + self.h, tc = self.t, eps, L, tau, tol, best, hi, lo0, hi0
@@ -331,6 +340,12 @@ cdef class ContactPhases(ModalResponse):
         cdef const double* P
         cdef long[64] who
         cdef int n_who
+        if x.shape[0] != 2 * m or aux.shape[0] != 4 * nc + 2 or pm.shape[0] != 3 \
+                or pm.shape[1] != 2 * npt or closed.shape[0] != nc or peak.shape[0] != nc:
+            raise ValueError(f"`x`, `aux`, `pm`, `closed` and `peak` must have {2 * m}, "
+                             f"{4 * nc + 2}, (3, {2 * npt}), {nc} and {nc} entries, got "
+                             f"{x.shape[0]}, {aux.shape[0]}, ({pm.shape[0]}, {pm.shape[1]}), "
+                             f"{closed.shape[0]} and {peak.shape[0]}")
         log = []
         for k in range(nc):
             aux[4 * k + 2] = 0.0            # first moments are per step

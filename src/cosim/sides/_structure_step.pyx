@@ -38,8 +38,8 @@ closed, by the secular equation), :mod:`cosim.sides._structure_modes`
 (:class:`ModalResponse`: the state, the kept modes and a segment's exact
 response, the step with no contact), :mod:`cosim.sides._structure_contacts`
 (:class:`ContactPhases`: the springs' phases, their switches, peaks and
-quadratures) and this one, :class:`StructureStep`, the face its host calls
-(Python, and the C face of :mod:`cosim.core._side_face`).
+quadratures, and the step with them) and this one, :class:`StructureStep`, the
+face its host calls (Python, and the C face of :mod:`cosim.core._side_face`).
 """
 from cpython.pycapsule cimport PyCapsule_New
 
@@ -271,28 +271,7 @@ cdef class StructureStep(ContactPhases):
             vel[2 * p] = dw * self.dirs[p, 0]
             vel[2 * p + 1] = dw * self.dirs[p, 1]
 
-    # -------------------------------------------------------------- stepping
-    def step(self, double[::1] x, double[::1] aux, double[:, ::1] pm, signed char[::1] closed,
-             double[::1] peak):
-        """Advance the modal state ``x = [q, dq]`` (2 m) over the loaded step
-        in closed form with the hosted springs switching, adding to ``aux``
-        (4 per contact, as the reference) and to the ports' velocity moments
-        ``pm`` (3, 2 n_p; complex interleaved).  ``closed`` (n_c) holds each
-        contact's state at the end of the last step (1 closed, 0 open, -1
-        unknown), and on return at the end of this one.  ``peak`` (n_c), the
-        host's largest penetrations, is raised in place to each closed
-        contact's largest penetration over each segment (the reference's
-        ``_segment_peaks``).  Returns the located switches
-        ``[(time, contact, closed), ...]``."""
-        cdef int m = self.m, npt = self.np_, nc = self.nc
-        if x.shape[0] != 2 * m or aux.shape[0] != 4 * nc + 2 or pm.shape[0] != 3 \
-                or pm.shape[1] != 2 * npt or closed.shape[0] != nc or peak.shape[0] != nc:
-            raise ValueError(f"`x`, `aux`, `pm`, `closed` and `peak` must have {2 * m}, "
-                             f"{4 * nc + 2}, (3, {2 * npt}), {nc} and {nc} entries, got "
-                             f"{x.shape[0]}, {aux.shape[0]}, ({pm.shape[0]}, {pm.shape[1]}), "
-                             f"{closed.shape[0]} and {peak.shape[0]}")
-        return self._phases(x, aux, pm, closed, peak)
-
+    # ------------------------------------------------ stepping with no contact
     def step_free(self, double[::1] x, double[:, ::1] pm):
         """Advance ``x`` exactly over the loaded step with no hosted contact
         (:meth:`fem.ExactModal.step_modal` on undamped modes), and the
