@@ -6,10 +6,10 @@ from cosim.sides._structure_modes cimport ModalResponse
 
 
 cdef class ContactPhases(ModalResponse):
-    cdef void _partner(self, int k, double time, double* xr, double* xi, double* vr,
-                       double* vi) noexcept nogil
-    cdef void _gap(self, int k, double time, double w, double dw, double* d,
-                   double* dd) noexcept nogil
+    cdef inline void _partner(self, int k, double time, double* xr, double* xi, double* vr,
+                              double* vi) noexcept nogil
+    cdef inline void _gap(self, int k, double time, double w, double dw, double* d,
+                          double* dd) noexcept nogil
     cdef void _segment_load(self, double tc) noexcept nogil
     cdef bint _stays_open(self, double tc, double L, const double* P) noexcept nogil
     cdef void _quadratures(self, double[::1] aux, double[:, ::1] pm, double tc, double L,
