@@ -22,7 +22,16 @@ KERNELS = [
     # the implicit scheme's iterations, which call the sides' kernels through
     # the C face they fill in (cosim/core/_side_face.pxd, declarations only)
     Extension("cosim.core.schemes._implicit_step", ["src/cosim/core/schemes/_implicit_step.pyx"]),
-    Extension("cosim.sides._structure_step", ["src/cosim/sides/_structure_step.pyx"]),
+    # the structure's step (its Python face) extends the contact phases, which
+    # extend the modal response, which calls the rank-one update (their .pxd)
+    Extension("cosim.sides._rank_one", ["src/cosim/sides/_rank_one.pyx"]),
+    Extension("cosim.sides._structure_modes", ["src/cosim/sides/_structure_modes.pyx"],
+              depends=["src/cosim/sides/_rank_one.pxd"]),
+    Extension("cosim.sides._structure_contacts", ["src/cosim/sides/_structure_contacts.pyx"],
+              depends=["src/cosim/sides/_structure_modes.pxd"]),
+    Extension("cosim.sides._structure_step", ["src/cosim/sides/_structure_step.pyx"],
+              depends=["src/cosim/sides/_structure_modes.pxd",
+                       "src/cosim/sides/_structure_contacts.pxd"]),
     # the compiled loop, and its following contacts (which call the structure's
     # face through cosim/core/_stacked.pxd, declarations only)
     Extension("cosim.core.schemes._driver", ["src/cosim/core/schemes/_driver.pyx"],

@@ -140,6 +140,34 @@ def test_verify_runs_the_shipped_cases_from_another_folder(tmp_path):
     assert p.stdout.strip().splitlines()[-1] == "all checks passed"
 
 
+def test_the_sdist_carries_every_kernel_source_and_the_package_none(tmp_path):
+    """A source distribution builds the kernels on the user's machine: it
+    carries each ``.pyx`` and each ``.pxd`` they cimport (the declarations the
+    split kernels and the C faces share; MANIFEST.in), while the built package
+    carries none of them nor the generated C (pyproject.toml's
+    exclude-package-data)."""
+    import tarfile
+    tree = tmp_path / "tree"            # a copy, so the build leaves nothing in the repository
+    skip = shutil.ignore_patterns("__pycache__", "*.so", "*.c", "*.egg-info")
+    for name in ("src", "cases", "studies"):
+        shutil.copytree(ROOT / name, tree / name, ignore=skip)
+    for name in ("setup.py", "pyproject.toml", "README.md", "MANIFEST.in"):
+        shutil.copy(ROOT / name, tree / name)
+    lib = tmp_path / "lib"
+    for argv in (["sdist", "-d", str(tmp_path / "dist")], ["build_py", "--build-lib", str(lib)]):
+        p = subprocess.run([sys.executable, "setup.py", "-q", *argv], cwd=tree,
+                           capture_output=True, text=True, timeout=600)
+        assert p.returncode == 0, p.stderr
+    (archive,) = (tmp_path / "dist").glob("*.tar.gz")
+    with tarfile.open(archive) as tf:
+        carried = {n.split("/", 1)[1] for n in tf.getnames() if "/" in n}
+    sources = {q.relative_to(ROOT).as_posix() for q in (ROOT / "src").rglob("*.p[xy][xd]")}
+    assert {q.rpartition(".")[2] for q in sources} == {"pyx", "pxd"}
+    assert sources <= carried, sorted(sources - carried)
+    built = sorted(q.name for q in lib.rglob("*") if q.suffix in (".pyx", ".pxd", ".c"))
+    assert (lib / "cosim" / "sides" / "fem.py").is_file() and built == []
+
+
 def test_a_built_package_carries_its_cases_and_studies(tmp_path):
     """setup.py's build_py (the step that fills a wheel) copies cases/*.toml
     (with the meshes, .msh, of its plane bodies and their Gmsh scripts, .geo)

@@ -1,7 +1,7 @@
 """The house's sizes and doors: no module of cosim or the model packages
-grows past 500 lines (split it by concern instead), none imports itself again
-through others, and the console script named in pyproject.toml is the command
-line's ``main``."""
+grows past 500 lines, no compiled kernel past 800 (split it by concern instead),
+none imports itself again through others, and the console script named in
+pyproject.toml is the command line's ``main``."""
 from __future__ import annotations
 
 import ast
@@ -34,6 +34,29 @@ def test_every_python_module_under_src_is_held():
 def test_no_module_over_about_500_lines(path):
     n = len(path.read_text().splitlines())
     assert n <= MAX_LINES, f"{path.relative_to(SRC)} has {n} lines (> {MAX_LINES}): split it by concern"
+
+
+#: a compiled kernel (``.pyx``) is held to its own limit: past it, split by
+#: concept into modules that call one another in C through a ``.pxd``
+MAX_KERNEL_LINES = 800
+
+
+def _held_kernels():
+    for folder in HELD:
+        yield from sorted((SRC / folder).rglob("*.pyx"))
+
+
+def test_the_kernels_are_held():
+    """The limit below sees the kernels (a moved folder would leave it nothing to hold)."""
+    names = {p.name for p in _held_kernels()}
+    assert {"_structure_step.pyx", "_multibody_step.pyx"} <= names, sorted(names)
+
+
+@pytest.mark.parametrize("path", list(_held_kernels()), ids=lambda p: str(p.relative_to(SRC)))
+def test_no_kernel_over_800_lines(path):
+    n = len(path.read_text().splitlines())
+    assert n <= MAX_KERNEL_LINES, (f"{path.relative_to(SRC)} has {n} lines (> {MAX_KERNEL_LINES}):"
+                                   " split it by concept, the pieces sharing a .pxd")
 
 
 def test_the_console_script_is_the_command_lines_main():

@@ -22,10 +22,25 @@ from couplers import LinearLaw, PointContact
 
 RTOL = 1e-10
 
+#: the modules the compiled structure step is built of (split by concept, each
+#: extending or calling the one before in C through its .pxd)
+STRUCTURE_MODULES = ("_rank_one", "_structure_modes", "_structure_contacts", "_structure_step")
+
+
 def test_the_extension_is_built():
-    """CI must fail, not fall back, when the kernel did not build."""
-    import cosim.sides._structure_step as k
-    assert hasattr(k, "StructureStep")
+    """CI must fail, not fall back, when the kernel did not build: every module
+    it is made of, the step's classes built on one another, and the names a
+    host reads from ``_structure_step`` the pieces' own."""
+    import importlib
+    mods = {name: importlib.import_module(f"cosim.sides.{name}") for name in STRUCTURE_MODULES}
+    k = mods["_structure_step"]
+    assert [c.__name__ for c in k.StructureStep.__mro__[:3]] == [
+        "StructureStep", "ContactPhases", "ModalResponse"]
+    assert k.StructureStep.__mro__[1] is mods["_structure_contacts"].ContactPhases
+    assert k.StructureStep.__mro__[2] is mods["_structure_modes"].ModalResponse
+    assert k.StalledStep is mods["_structure_contacts"].StalledStep
+    assert k.rank_one_eigh is mods["_rank_one"].rank_one_eigh
+    assert k.STEP_API == 3 and k.MAX_SEGMENTS == 10000
 
 
 def test_compiled_rank_one_update_matches_the_reference():
