@@ -246,10 +246,11 @@ class Recorder:
                                         now - self._wall0))
 
     def record_block(self, t, d, dd, f, impulse, dissipated, internal, work=None, *, x,
-                     energy=None, peaks=None) -> None:
+                     energy=None, peaks=None, edges=None) -> None:
         """Add samples as arrays (:func:`cosim.core.recorder_block.record_block`)."""
         from cosim.core.recorder_block import record_block     # where a side samples
-        record_block(self, t, d, dd, f, impulse, dissipated, internal, work, x, energy, peaks)
+        record_block(self, t, d, dd, f, impulse, dissipated, internal, work, x, energy, peaks,
+                     edges)
 
     def _store(self, t, x, d, f, energy, diss_total):
         sysm = self.system

@@ -25,7 +25,7 @@ __all__ = ["record_block"]
 
 
 def record_block(rec, t, d, dd, f, impulse, dissipated, internal, work, x, energy=None,
-                 peaks=None) -> None:
+                 peaks=None, edges=None) -> None:
     """Add ``m`` samples at once: what ``m`` calls of
     :meth:`~cosim.core.recorder.Recorder.record` would
     keep, with the statistics, the guard's verdict and the stored series
@@ -59,6 +59,11 @@ def record_block(rec, t, d, dd, f, impulse, dissipated, internal, work, x, energ
         :meth:`~cosim.core.system.CoupledSystem.take_peaks` would have
         given there (0 for rigid laws and for contacts not embedded).
         None: zeros.
+    edges : dict, optional
+        Row -> the switches ``(contact, time, on)`` a side located in the
+        step that ended at that row's sample, reported (:meth:`Recorder.edge
+        <cosim.core.recorder.Recorder.edge>`) before the row is, as a caller
+        of ``record`` reports them before its call.
 
     Raises
     ------
@@ -143,8 +148,13 @@ def record_block(rec, t, d, dd, f, impulse, dissipated, internal, work, x, energ
     flip = (a_prev != active) & rec.auto_edges[None, :]
     if released:
         flip[0, sorted(released)] = False
-    edge_rows = sorted(set(np.nonzero(flip)[0].tolist()) | ({0} if switched else set()))
+    edges = {j - i0: e for j, e in (edges or {}).items() if i0 <= j < m + i0}
+    edge_rows = sorted(set(np.nonzero(flip)[0].tolist()) | ({0} if switched else set())
+                       | {j - 1 for j in edges if j > 0})
     pos = 0
+    if 0 in edges:
+        _located(rec, t, d, dd, f, impulse, dissipated, work, x, energy, diss_total, drift,
+                 internal, active, contrib, edges[0], 0)
     for je in edge_rows + [m]:
         hi = min(je + 1, m)
         if rec.guard is not None and hi > pos:
@@ -173,9 +183,25 @@ def record_block(rec, t, d, dd, f, impulse, dissipated, internal, work, x, energ
             _commit(rec, t, d, dd, f, impulse, dissipated, work, x, energy, diss_total,
                     drift, internal, active, contrib, je)
             raise
+        if je + 1 in edges:
+            _located(rec, t, d, dd, f, impulse, dissipated, work, x, energy, diss_total, drift,
+                     internal, active, contrib, edges[je + 1], je + 1)
         pos = hi
     _commit(rec, t, d, dd, f, impulse, dissipated, work, x, energy, diss_total, drift,
             internal, active, contrib, m)
+
+
+def _located(rec, t, d, dd, f, impulse, dissipated, work, x, energy, diss_total, drift,
+             internal, active, contrib, located, j) -> None:
+    """Report the located switches before row ``j``; an edge that makes a
+    contact chatter keeps the rows before ``j``."""
+    try:
+        for c, ts, on in located:
+            rec.edge(int(c), ts, bool(on))
+    except GuardError:
+        _commit(rec, t, d, dd, f, impulse, dissipated, work, x, energy, diss_total, drift,
+                internal, active, contrib, j)
+        raise
 
 
 def _commit(rec, t, d, dd, f, impulse, dissipated, work, x, energy, diss_total, drift,
