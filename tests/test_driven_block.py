@@ -222,3 +222,15 @@ def test_counts_hold_under_a_nudge(monkeypatch):
             ref = run(monkeypatch, "three_mass", "f100", False, over)
             assert counts == {c: v["count"] for c, v in ref.summary["contacts"].items()}
     assert sum(base.values()) >= 3
+
+
+def test_progress_is_told_of_every_sample_when_asked(monkeypatch):
+    """``progress_interval = 0`` asks for every sample: in blocks too, each
+    sample's time once, increasing, to the end."""
+    calls = []
+    monkeypatch.setattr(driven_block, "ENABLED", True)
+    res = cosim.simulate(_scene("three_mass", "f100"), estimate=False, progress=calls.append,
+                         progress_interval=0.0)
+    t = np.array([p.t for p in calls])
+    assert len(t) == len(res.t) and np.all(np.diff(t) > 0)
+    np.testing.assert_array_equal(t, res.t)
