@@ -63,7 +63,8 @@ def record_block(rec, t, d, dd, f, impulse, dissipated, internal, work, x, energ
         Row -> the switches ``(contact, time, on)`` a side located in the
         step that ended at that row's sample, reported (:meth:`Recorder.edge
         <cosim.core.recorder.Recorder.edge>`) before the row is, as a caller
-        of ``record`` reports them before its call.
+        of ``record`` reports them before its call; or a function that
+        reports them.
 
     Raises
     ------
@@ -196,6 +197,9 @@ def _located(rec, t, d, dd, f, impulse, dissipated, work, x, energy, diss_total,
     """Report the located switches before row ``j``; an edge that makes a
     contact chatter keeps the rows before ``j``."""
     try:
+        if callable(located):       # the caller reports them
+            located()
+            return
         for c, ts, on in located:
             rec.edge(int(c), ts, bool(on))
     except GuardError:

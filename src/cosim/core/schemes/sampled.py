@@ -206,15 +206,12 @@ class _Emitter:
             x[:, a:b] = xr
         block = (smp.t, d, dd, f, quad[:, :, 0], quad[:, :, 1], smp.ledger, quad[:, :, 3], x,
                  energy, peaks)
-        if switch_row is None:
-            self._push(block, 0, m)
-            return
-        self._push(block, 0, switch_row)
-        self._report()
-        self._push(block, switch_row, m)
+        self._push(block, 0, m, switch_row)
 
-    def _push(self, block, a, b) -> None:
-        """Record rows ``a .. b - 1``; stop at a non-finite one as the loop does."""
+    def _push(self, block, a, b, switch_row=None) -> None:
+        """Record rows ``a .. b - 1``, the switches of the step of row
+        ``switch_row`` reported before it (:meth:`_report`, in the recorder's
+        block); stop at a non-finite row as the loop does."""
         if b <= a:
             return
         t, d, dd, f, impulse, diss, ledger, work, x, energy, peaks = block
@@ -225,7 +222,11 @@ class _Emitter:
             self.recorder.record_block(t[a:stop], d[a:stop], dd[a:stop], f[a:stop],
                                        impulse[a:stop], diss[a:stop], ledger[a:stop],
                                        work[a:stop], x=x[a:stop], energy=energy[a:stop],
-                                       peaks=peaks[a:stop])
+                                       peaks=peaks[a:stop],
+                                       edges=None if switch_row is None else
+                                       {switch_row - a: self._report})
+        if switch_row is not None and stop == switch_row:
+            self._report()              # the loop reports them before it looks at the rows
         if stop < b:
             cause = nonfinite_cause(self.system, d[stop], dd[stop], f[stop])
             raise GuardError(cause[0] if cause else "non-finite state", float(t[stop]),
