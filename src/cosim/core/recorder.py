@@ -96,6 +96,11 @@ class Recorder:
     intervals and impacts aside).
     """
 
+    #: whether this recorder reads the system's live state when it takes a
+    #: sample or an edge (a subclass's hook): the compiled loop then hands it
+    #: each step as it is taken, not in blocks (:mod:`cosim.core.schemes.driven_block`)
+    reads_live_system = False
+
     def __init__(self, system, scene: str, scheme: str, t_end: float, every: int = 1,
                  auto_edges: bool = True, *, progress: Callable[[Progress], None] | None = None,
                  progress_interval: float = 0.2, series_path=None, guard=None):

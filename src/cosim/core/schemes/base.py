@@ -268,9 +268,8 @@ class CoSimulationScheme(InputExtrapolation, CouplingScheme):
         h_prev = min(H, t_end)
         k, t, n_rejected = 0, 0.0, 0
         drv = self._compiled_loop(system, st, d, dd, controlled, h_prev)
-        compiled_cpu = energy_cpu = 0.0
-        blocks = drv is not None and driven_block.ENABLED
-        if blocks:                      # the compiled loop, its samples in blocks
+        compiled_cpu = energy_cpu = 0.0         # the compiled loop, its samples in blocks:
+        if blocks := drv is not None and driven_block.takes(recorder):
             k, n_rejected, compiled_cpu, energy_cpu = driven_block.run_blocks(
                 self, system, recorder, drv, t, t_end, k, n, H, sliver, controlled)
         while drv is not None and not blocks:   # the compiled loop, one step per call

@@ -13,10 +13,15 @@ and time, and the samples before it kept.
 
 The switches the sides locate in a step are reported before that step's
 sample, as step by step.  A block ends when its :data:`BLOCK` rows are
-full, at the run's end, at the first step whose rows are not finite (stopped as step by step: the samples before are kept), or when a
-step raised: a signal's KeyboardInterrupt keeps the whole samples before it
-and is raised again.  The progress callback is told at the end of each
-block, so within :data:`BLOCK` macro steps of its interval.
+full, at the run's end, at the first step whose rows are not finite
+(stopped as step by step: the samples before are kept), or when a step
+raised: a signal's KeyboardInterrupt keeps the whole samples before it and
+is raised again.  The progress callback is told at the end of each block,
+so within :data:`BLOCK` macro steps of its interval.
+
+A recorder that reads the system's live state at each sample or edge (a
+subclass's hook: ``reads_live_system``, as ``cosim info``'s probe of the
+first touch does) is handed each step as it is taken.
 
 A guard that stops the run inside a block leaves the sides past the sample
 it refused (the loop took the block's later steps): the recorder keeps the
@@ -33,12 +38,19 @@ import numpy as np
 
 from cosim.core.guard_error import GuardError
 
-__all__ = ["ENABLED", "BLOCK", "run_blocks"]
+__all__ = ["ENABLED", "BLOCK", "takes", "run_blocks"]
 
 #: False: the compiled loop returns to Python after every step
 ENABLED = True
 #: most samples the compiled loop writes before it returns [-]
 BLOCK = 256
+
+
+def takes(recorder) -> bool:
+    """Whether the compiled loop hands ``recorder`` its samples in blocks:
+    unless :data:`ENABLED` is False or the recorder reads the system's live
+    state at each sample (``reads_live_system``)."""
+    return ENABLED and not getattr(recorder, "reads_live_system", False)
 
 
 class _Rows:
