@@ -4,7 +4,7 @@ steps of a :class:`cosim.core.schemes._driver.Driver` one after the other and
 writes each step's sample (what :meth:`StepBooks.book_driven
 <cosim.core.schemes.step_control.StepBooks.book_driven>` hands the recorder:
 time, rows, forces, impulse, dissipated energy, the subsystems' ledger, work,
-their stacked states, the system's energy and the embedded contacts' peaks)
+their stacked states and the embedded contacts' peaks)
 into preallocated rows, without returning to Python.
 
 The switches its sides located in a step are listed with the step's row
@@ -15,7 +15,6 @@ before are whole samples, and :mod:`cosim.core.schemes.driven_block` records
 them before anything else happens.
 """
 from libc.string cimport memcpy
-from libc.time cimport clock, CLOCKS_PER_SEC
 
 #: why a block ended
 cdef enum:
@@ -34,30 +33,26 @@ cdef void _put(double[:, ::1] out, int i, object src):
         memcpy(&out[i, 0], &v[0], n * sizeof(double))
 
 
-def fill(drv, list subs, list edges, long[::1] e_c, long[::1] e_host, long[::1] e_slot, energy,
+def fill(drv, list subs, list edges, long[::1] e_c, long[::1] e_host, long[::1] e_slot,
          double t, double t_end, long k, long n, double H, double sliver, bint controlled,
          double[::1] T, double[:, ::1] D, double[:, ::1] DD, double[:, ::1] F,
          double[:, ::1] IMP, double[:, ::1] DISS, double[:, ::1] INT, double[:, ::1] W,
-         double[:, ::1] X, double[::1] E, double[:, ::1] PK, long[::1] REJ):
+         double[:, ::1] X, double[:, ::1] PK, long[::1] REJ):
     """Fill rows from 0 with accepted steps of ``drv`` from time ``t`` and
     step count ``k`` (``n`` steps of ``H`` when not ``controlled``).
 
     ``subs`` are the subsystems (their ``x`` stacked in that order), ``e_c``,
     ``e_host``, ``e_slot`` the embedded contacts with their host and slot;
     the switches the sides located in a step are appended to ``edges`` as
-    ``(row, contact, time, on)``, to be reported before that row's sample;
-    ``energy(d)`` the system's energy at rows ``d`` (called per sample, the
-    function the recorder calls step by step).
+    ``(row, contact, time, on)``, to be reported before that row's sample.
 
-    Returns ``(rows, t, k, reason, error, energy_cpu)``: rows written, the
-    time and count after them, why the block ended (:data:`REASONS`), the
-    exception a step raised (reason ``raised``) and the CPU [s] spent in
-    ``energy``.
+    Returns ``(rows, t, k, reason, error)``: rows written, the time and
+    count after them, why the block ended (:data:`REASONS`) and the
+    exception a step raised (reason ``raised``).
     """
     cdef int m = T.shape[0], i = 0, j, s, nsub = len(subs), nc = e_c.shape[0]
     cdef int reason = FULL
-    cdef double h, clk = 0.0
-    cdef long c0
+    cdef double h
     cdef double[::1] v, pk
     cdef Py_ssize_t off
     error = None
@@ -113,9 +108,6 @@ def fill(drv, list subs, list edges, long[::1] e_c, long[::1] e_host, long[::1] 
             for j in range(nc):
                 pk = subs[e_host[j]].peak
                 pk[e_slot[j]] = 0.0
-            c0 = clock()
-            E[i] = energy(drv.d)
-            clk += <double>(clock() - c0)
             for j in range(nc):
                 log = subs[e_host[j]].switch_log
                 if log:
@@ -129,4 +121,4 @@ def fill(drv, list subs, list edges, long[::1] e_c, long[::1] e_host, long[::1] 
             reason = RAISED
             break
         i += 1
-    return i, t, k, REASONS[reason], error, clk / CLOCKS_PER_SEC
+    return i, t, k, REASONS[reason], error

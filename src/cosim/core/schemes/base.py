@@ -268,9 +268,9 @@ class CoSimulationScheme(InputExtrapolation, CouplingScheme):
         h_prev = min(H, t_end)
         k, t, n_rejected = 0, 0.0, 0
         drv = self._compiled_loop(system, st, d, dd, controlled, h_prev)
-        compiled_cpu = energy_cpu = 0.0         # the compiled loop, its samples in blocks:
+        compiled_cpu = 0.0                      # the compiled loop, its samples in blocks:
         if blocks := drv is not None and driven_block.takes(recorder):
-            k, n_rejected, compiled_cpu, energy_cpu = driven_block.run_blocks(
+            k, n_rejected, compiled_cpu = driven_block.run_blocks(
                 self, system, recorder, drv, t, t_end, k, n, H, sliver, controlled)
         while drv is not None and not blocks:   # the compiled loop, one step per call
             if controlled:
@@ -342,7 +342,7 @@ class CoSimulationScheme(InputExtrapolation, CouplingScheme):
                 t = t + h
         self.loop_stats = {"loop": "python" if drv is None else "compiled",
                            "refusal": self.loop_refusal, "macro_steps": k,
-                           "compiled_cpu_s": compiled_cpu, "energy_cpu_s": energy_cpu,
+                           "compiled_cpu_s": compiled_cpu,
                            "run_cpu_s": time.process_time() - cpu0}
         return {"n_windows": k, "n_iterations": self.n_iterations, "n_rejected": n_rejected}
 
@@ -352,8 +352,7 @@ class CoSimulationScheme(InputExtrapolation, CouplingScheme):
     loop_refusal: str | None = None
     #: the last finished run's loop: ``loop`` (``"compiled"`` or ``"python"``),
     #: ``refusal`` (:attr:`loop_refusal`), ``macro_steps``, ``compiled_cpu_s``
-    #: (process CPU inside the compiled loop's calls [s]), ``energy_cpu_s`` (of it,
-    #: the samples' energy evaluated in Python) and ``run_cpu_s``
+    #: (process CPU inside the compiled loop's calls [s]) and ``run_cpu_s``
     #: (the whole of :meth:`run` [s]), for benchmarks
     loop_stats: dict | None = None
 

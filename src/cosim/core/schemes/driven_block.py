@@ -70,7 +70,24 @@ class _Rows:
 
     def args(self):
         return (self.t, self.d, self.dd, self.f, self.imp, self.diss, self.internal, self.work,
-                self.x, self.energy, self.peaks, self.rej)
+                self.x, self.peaks, self.rej)
+
+    def energies(self, system, b) -> None:
+        """The system's energy at rows ``0 .. b - 1``: each side's
+        (:meth:`~cosim.core.subsystem.Subsystem.energies`) and the contacts'
+        stored energy, summed in the order of
+        :meth:`~cosim.core.system.CoupledSystem.energy`."""
+        off = system.stacked()
+        e = 0
+        for s, sub in enumerate(system.subsystems):
+            e = e + sub.energies(self.x[:b, off[s]:off[s + 1]])
+        if system.connections is None and not system.circles:
+            pot = 0
+            for c, ln in enumerate(system.links):
+                pot = pot + ln.contact.law.potential(self.d[:b, c])
+        else:
+            pot = np.array([system.contact_potential(self.d[i]) for i in range(b)])
+        self.energy[:b] = e + pot
 
     def record(self, rec, b, edges) -> None:
         """Record rows ``0 .. b - 1``, with the switches ``edges`` (row,
@@ -93,9 +110,8 @@ def run_blocks(scheme, system, recorder, drv, t, t_end, k, n, H, sliver, control
     """Run the compiled loop ``drv`` from time ``t`` and step count ``k`` to
     ``t_end`` in blocks (``n`` steps of ``H`` when not ``controlled``).
 
-    Returns ``(k, n_rejected, compiled_cpu, energy_cpu)``: the steps taken,
-    the tries rejected, the process CPU [s] inside the compiled loop's calls
-    and, of it, the CPU spent evaluating the system's energy in Python.
+    Returns ``(k, n_rejected, compiled_cpu)``: the steps taken, the tries
+    rejected and the process CPU [s] inside the compiled loop's calls.
     Raises as step by step would (:class:`GuardError`, a signal's
     KeyboardInterrupt), with ``scheme.n_windows`` and ``n_rejected`` those
     of the step that stopped it.
@@ -107,15 +123,15 @@ def run_blocks(scheme, system, recorder, drv, t, t_end, k, n, H, sliver, control
     e_host = np.array([hs[0] for _, hs in emb], dtype=np.int_)
     e_slot = np.array([hs[1] for _, hs in emb], dtype=np.int_)
     rows = _Rows(system, BLOCK)
-    compiled_cpu, energy_cpu = 0.0, 0.0
+    compiled_cpu = 0.0
     while True:
         c0 = time.process_time()
         edges = []
-        m, t, k1, why, error, e_cpu = _driver_block.fill(
-            drv, subs, edges, e_c, e_host, e_slot, system.energy, t, t_end, k, n, H, sliver,
-            controlled, *rows.args())
+        m, t, k1, why, error = _driver_block.fill(
+            drv, subs, edges, e_c, e_host, e_slot, t, t_end, k, n, H, sliver, controlled,
+            *rows.args())
         compiled_cpu += time.process_time() - c0
-        energy_cpu += e_cpu
+        rows.energies(system, m - 1 if why == "nonfinite" else m)
         kept0 = recorder._count
         try:
             rows.record(recorder, m - 1 if why == "nonfinite" else m, edges)
@@ -141,4 +157,4 @@ def run_blocks(scheme, system, recorder, drv, t, t_end, k, n, H, sliver, control
         if why == "raised":         # the step that raised is not counted
             raise error
         if why == "end":
-            return k, drv.n_rejected, compiled_cpu, energy_cpu
+            return k, drv.n_rejected, compiled_cpu

@@ -136,7 +136,7 @@ def run_sampled(scheme, system, t_end: float, recorder) -> dict | None:
         raise
     # the side's compiled steps: its calls less the recorder's blocks they called back
     scheme.loop_stats = {"loop": "sampled", "refusal": None, "macro_steps": k,
-                         "compiled_cpu_s": inside - emit.cpu, "energy_cpu_s": 0.0,
+                         "compiled_cpu_s": inside - emit.cpu,
                          "run_cpu_s": time.process_time() - cpu0}
     return {"n_windows": k, "n_iterations": scheme.n_iterations, "n_rejected": 0}
 
