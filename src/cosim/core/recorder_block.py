@@ -17,6 +17,7 @@ import time
 
 import numpy as np
 
+from couplers.law_base import ContactLaw
 from cosim.core.guard_error import GuardError
 from cosim.core.hermite import hermite_cubic_max
 from cosim.core.progress import Progress
@@ -152,6 +153,7 @@ def record_block(rec, t, d, dd, f, impulse, dissipated, internal, work, x, energ
     edges = {j - i0: e for j, e in (edges or {}).items() if i0 <= j < m + i0}
     edge_rows = sorted(set(np.nonzero(flip)[0].tolist()) | ({0} if switched else set())
                        | {j - 1 for j in edges if j > 0})
+    at = _crossings(rec, flip, t_prev, d_prev, dd_prev, t, d, dd, a_prev)
     pos = 0
     if 0 in edges:
         _located(rec, t, d, dd, f, impulse, dissipated, work, x, energy, diss_total, drift,
@@ -173,9 +175,11 @@ def record_block(rec, t, d, dd, f, impulse, dissipated, internal, work, x, energ
         try:
             for c in np.flatnonzero(flip[je]):
                 c = int(c)
-                rec.edge(c, rec._crossing(c, t_prev[je], d_prev[je, c], dd_prev[je, c],
-                                          t[je], d[je, c], dd[je, c], a_prev[je, c]),
-                         bool(active[je, c]))
+                tc = at.get((je, c))
+                if tc is None:
+                    tc = rec._crossing(c, t_prev[je], d_prev[je, c], dd_prev[je, c], t[je],
+                                       d[je, c], dd[je, c], a_prev[je, c])
+                rec.edge(c, tc, bool(active[je, c]))
             if je == 0:
                 for e in switched:  # a grasp holds from its switch; a release frees
                     c = sysm.contact_names.index(e["contact"])
@@ -190,6 +194,32 @@ def record_block(rec, t, d, dd, f, impulse, dissipated, internal, work, x, energ
         pos = hi
     _commit(rec, t, d, dd, f, impulse, dissipated, work, x, energy, diss_total, drift,
             internal, active, contrib, m)
+
+
+def _crossings(rec, flip, t_prev, d_prev, dd_prev, t, d, dd, a_prev) -> dict:
+    """(row, contact) -> the time :meth:`Recorder._crossing
+    <cosim.core.recorder.Recorder._crossing>` locates, for the flips of
+    contacts whose law switches on the penetration itself (the base
+    ``switch``): its bisection on the cubic Hermite, with its formulas in its
+    order, on all of them at once."""
+    rows, cs = np.nonzero(flip)
+    keep = [i for i, c in enumerate(cs) if type(rec._laws[c]).switch is ContactLaw.switch]
+    if not keep:
+        return {}
+    rows, cs = rows[keep], cs[keep]
+    t0, t1 = t_prev[rows], t[rows]
+    d0, v0, d1, v1 = d_prev[rows, cs], dd_prev[rows, cs], d[rows, cs], dd[rows, cs]
+    was = a_prev[rows, cs]
+    h = t1 - t0
+    dx = d1 - d0
+    c1, c2, c3 = h * v0, 3 * dx - h * (2 * v0 + v1), -2 * dx + h * (v0 + v1)
+    lo, hi = np.zeros(len(rows)), np.ones(len(rows))
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        up = (d0 + mid * (c1 + mid * (c2 + mid * c3)) > 0) == was
+        lo, hi = np.where(up, mid, lo), np.where(up, hi, mid)
+    times = t0 + 0.5 * (lo + hi) * h
+    return {(int(j), int(c)): float(x) for j, c, x in zip(rows, cs, times)}
 
 
 def _located(rec, t, d, dd, f, impulse, dissipated, work, x, energy, diss_total, drift,
