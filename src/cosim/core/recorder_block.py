@@ -196,15 +196,21 @@ def record_block(rec, t, d, dd, f, impulse, dissipated, internal, work, x, energ
             internal, active, contrib, m)
 
 
+#: fewest crossings in a block located on arrays (each array bisection costs
+#: about as much as eight located one by one)
+ARRAY_CROSSINGS = 8
+
+
 def _crossings(rec, flip, t_prev, d_prev, dd_prev, t, d, dd, a_prev) -> dict:
     """(row, contact) -> the time :meth:`Recorder._crossing
     <cosim.core.recorder.Recorder._crossing>` locates, for the flips of
     contacts whose law switches on the penetration itself (the base
     ``switch``): its bisection on the cubic Hermite, with its formulas in its
-    order, on all of them at once."""
+    order, on all of them at once where they are :data:`ARRAY_CROSSINGS` or
+    more (else none: the recorder locates them)."""
     rows, cs = np.nonzero(flip)
     keep = [i for i, c in enumerate(cs) if type(rec._laws[c]).switch is ContactLaw.switch]
-    if not keep:
+    if len(keep) < ARRAY_CROSSINGS:     # a few: one by one costs less
         return {}
     rows, cs = rows[keep], cs[keep]
     t0, t1 = t_prev[rows], t[rows]
