@@ -133,6 +133,8 @@ def test_a_guard_stop_is_the_step_by_step_one(monkeypatch, name, variant, overri
     assert path.summary.get("counters") == ref.summary.get("counters")
     assert len(path.t) == len(ref.t)
     assert series_distance(ref, path) <= TOL
+    # the state reported is the last sample kept's, not the loop's past it
+    assert path.summary["final_state"] == ref.summary["final_state"]
 
 
 def test_the_energy_stop_falls_inside_a_block(monkeypatch):
