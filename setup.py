@@ -36,6 +36,8 @@ KERNELS = [
     # face through cosim/core/_stacked.pxd, declarations only)
     Extension("cosim.core.schemes._driver", ["src/cosim/core/schemes/_driver.pyx"],
               depends=["src/cosim/core/schemes/_follow.pxd"]),
+    # the compiled loop's samples in blocks (calls the loop's steps)
+    Extension("cosim.core.schemes._driver_block", ["src/cosim/core/schemes/_driver_block.pyx"]),
     Extension("cosim.core.schemes._follow", ["src/cosim/core/schemes/_follow.pyx"],
               depends=[FACE]),
     # the monolithic reference's right-hand side, and the structure's face it calls

@@ -10,8 +10,8 @@ Per variant it prints the best of ``--repeat`` solves (the summary's
 ``cpu_time_s``) with each loop (``COSIM_DRIVER``, see
 :mod:`cosim.core.schemes.driver`), their ratio, the macro steps, and from
 the scheme's ``loop_stats`` the CPU inside the compiled loop's calls over
-the CPU of the whole run (the rest is the Python loop's booking and
-recording of each step).
+the CPU of the whole run (the rest is the run's set-up and the recorder
+taking the loop's blocks of samples, :mod:`cosim.core.schemes.driven_block`).
 """
 import argparse
 import os

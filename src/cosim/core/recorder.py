@@ -19,7 +19,7 @@ from typing import Callable
 
 import numpy as np
 
-from cosim.core.hermite import hermite_cubic_max, hermite_point
+from cosim.core.hermite import hermite_cubic_max
 from cosim.core.progress import Progress
 from cosim.core.result import SimulationResult
 from cosim.core.series import SeriesFile, SeriesStore, chunk_rows
@@ -95,6 +95,11 @@ class Recorder:
     memory a run needs therefore does not grow with its length (contact
     intervals and impacts aside).
     """
+
+    #: whether this recorder reads the system's live state when it takes a
+    #: sample or an edge (a subclass's hook): the compiled loop then hands it
+    #: each step as it is taken, not in blocks (:mod:`cosim.core.schemes.driven_block`)
+    reads_live_system = False
 
     def __init__(self, system, scene: str, scheme: str, t_end: float, every: int = 1,
                  auto_edges: bool = True, *, progress: Callable[[Progress], None] | None = None,
@@ -246,10 +251,11 @@ class Recorder:
                                         now - self._wall0))
 
     def record_block(self, t, d, dd, f, impulse, dissipated, internal, work=None, *, x,
-                     energy=None, peaks=None) -> None:
+                     energy=None, peaks=None, edges=None) -> None:
         """Add samples as arrays (:func:`cosim.core.recorder_block.record_block`)."""
         from cosim.core.recorder_block import record_block     # where a side samples
-        record_block(self, t, d, dd, f, impulse, dissipated, internal, work, x, energy, peaks)
+        record_block(self, t, d, dd, f, impulse, dissipated, internal, work, x, energy, peaks,
+                     edges)
 
     def _store(self, t, x, d, f, energy, diss_total):
         sysm = self.system
@@ -347,12 +353,18 @@ class Recorder:
             self._n_buf = 0
 
     def _crossing(self, c, t0, d0, v0, t1, d1, v1, was_active):
-        law, h = self._laws[c], t1 - t0
+        # Python floats: the same IEEE arithmetic as numpy's scalars, faster
+        t0, d0, v0, t1, d1, v1 = map(float, (t0, d0, v0, t1, d1, v1))
+        switch, h = self._laws[c].switch, t1 - t0
+        # cosim.core.hermite.hermite_point's formulas, its coefficients formed once
+        dx = d1 - d0
+        c1, c2, c3 = h * v0, 3 * dx - h * (2 * v0 + v1), -2 * dx + h * (v0 + v1)
         lo, hi = 0.0, 1.0
         for _ in range(60):
             mid = 0.5 * (lo + hi)
-            p, dp = hermite_point(d0, v0, d1, v1, h, mid)
-            if (float(law.switch(p, dp)) > 0) == was_active:
+            p = d0 + mid * (c1 + mid * (c2 + mid * c3))
+            dp = (c1 + mid * (2 * c2 + 3 * mid * c3)) / h
+            if (float(switch(p, dp)) > 0) == was_active:
                 lo = mid
             else:
                 hi = mid

@@ -17,6 +17,7 @@ import time
 
 import numpy as np
 
+from couplers.law_base import ContactLaw
 from cosim.core.guard_error import GuardError
 from cosim.core.hermite import hermite_cubic_max
 from cosim.core.progress import Progress
@@ -25,7 +26,7 @@ __all__ = ["record_block"]
 
 
 def record_block(rec, t, d, dd, f, impulse, dissipated, internal, work, x, energy=None,
-                 peaks=None) -> None:
+                 peaks=None, edges=None) -> None:
     """Add ``m`` samples at once: what ``m`` calls of
     :meth:`~cosim.core.recorder.Recorder.record` would
     keep, with the statistics, the guard's verdict and the stored series
@@ -59,6 +60,12 @@ def record_block(rec, t, d, dd, f, impulse, dissipated, internal, work, x, energ
         :meth:`~cosim.core.system.CoupledSystem.take_peaks` would have
         given there (0 for rigid laws and for contacts not embedded).
         None: zeros.
+    edges : dict, optional
+        Row -> the switches ``(contact, time, on)`` a side located in the
+        step that ended at that row's sample, reported (:meth:`Recorder.edge
+        <cosim.core.recorder.Recorder.edge>`) before the row is, as a caller
+        of ``record`` reports them before its call; or a function that
+        reports them.
 
     Raises
     ------
@@ -143,8 +150,14 @@ def record_block(rec, t, d, dd, f, impulse, dissipated, internal, work, x, energ
     flip = (a_prev != active) & rec.auto_edges[None, :]
     if released:
         flip[0, sorted(released)] = False
-    edge_rows = sorted(set(np.nonzero(flip)[0].tolist()) | ({0} if switched else set()))
+    edges = {j - i0: e for j, e in (edges or {}).items() if i0 <= j < m + i0}
+    edge_rows = sorted(set(np.nonzero(flip)[0].tolist()) | ({0} if switched else set())
+                       | {j - 1 for j in edges if j > 0})
+    at = _crossings(rec, flip, t_prev, d_prev, dd_prev, t, d, dd, a_prev)
     pos = 0
+    if 0 in edges:
+        _located(rec, t, d, dd, f, impulse, dissipated, work, x, energy, diss_total, drift,
+                 internal, active, contrib, edges[0], 0)
     for je in edge_rows + [m]:
         hi = min(je + 1, m)
         if rec.guard is not None and hi > pos:
@@ -162,9 +175,11 @@ def record_block(rec, t, d, dd, f, impulse, dissipated, internal, work, x, energ
         try:
             for c in np.flatnonzero(flip[je]):
                 c = int(c)
-                rec.edge(c, rec._crossing(c, t_prev[je], d_prev[je, c], dd_prev[je, c],
-                                          t[je], d[je, c], dd[je, c], a_prev[je, c]),
-                         bool(active[je, c]))
+                tc = at.get((je, c))
+                if tc is None:
+                    tc = rec._crossing(c, t_prev[je], d_prev[je, c], dd_prev[je, c], t[je],
+                                       d[je, c], dd[je, c], a_prev[je, c])
+                rec.edge(c, tc, bool(active[je, c]))
             if je == 0:
                 for e in switched:  # a grasp holds from its switch; a release frees
                     c = sysm.contact_names.index(e["contact"])
@@ -173,9 +188,60 @@ def record_block(rec, t, d, dd, f, impulse, dissipated, internal, work, x, energ
             _commit(rec, t, d, dd, f, impulse, dissipated, work, x, energy, diss_total,
                     drift, internal, active, contrib, je)
             raise
+        if je + 1 in edges:
+            _located(rec, t, d, dd, f, impulse, dissipated, work, x, energy, diss_total, drift,
+                     internal, active, contrib, edges[je + 1], je + 1)
         pos = hi
     _commit(rec, t, d, dd, f, impulse, dissipated, work, x, energy, diss_total, drift,
             internal, active, contrib, m)
+
+
+#: fewest crossings in a block located on arrays (each array bisection costs
+#: about as much as eight located one by one)
+ARRAY_CROSSINGS = 8
+
+
+def _crossings(rec, flip, t_prev, d_prev, dd_prev, t, d, dd, a_prev) -> dict:
+    """(row, contact) -> the time :meth:`Recorder._crossing
+    <cosim.core.recorder.Recorder._crossing>` locates, for the flips of
+    contacts whose law switches on the penetration itself (the base
+    ``switch``): its bisection on the cubic Hermite, with its formulas in its
+    order, on all of them at once where they are :data:`ARRAY_CROSSINGS` or
+    more (else none: the recorder locates them)."""
+    rows, cs = np.nonzero(flip)
+    keep = [i for i, c in enumerate(cs) if type(rec._laws[c]).switch is ContactLaw.switch]
+    if len(keep) < ARRAY_CROSSINGS:     # a few: one by one costs less
+        return {}
+    rows, cs = rows[keep], cs[keep]
+    t0, t1 = t_prev[rows], t[rows]
+    d0, v0, d1, v1 = d_prev[rows, cs], dd_prev[rows, cs], d[rows, cs], dd[rows, cs]
+    was = a_prev[rows, cs]
+    h = t1 - t0
+    dx = d1 - d0
+    c1, c2, c3 = h * v0, 3 * dx - h * (2 * v0 + v1), -2 * dx + h * (v0 + v1)
+    lo, hi = np.zeros(len(rows)), np.ones(len(rows))
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        up = (d0 + mid * (c1 + mid * (c2 + mid * c3)) > 0) == was
+        lo, hi = np.where(up, mid, lo), np.where(up, hi, mid)
+    times = t0 + 0.5 * (lo + hi) * h
+    return {(int(j), int(c)): float(x) for j, c, x in zip(rows, cs, times)}
+
+
+def _located(rec, t, d, dd, f, impulse, dissipated, work, x, energy, diss_total, drift,
+             internal, active, contrib, located, j) -> None:
+    """Report the located switches before row ``j``; an edge that makes a
+    contact chatter keeps the rows before ``j``."""
+    try:
+        if callable(located):       # the caller reports them
+            located()
+            return
+        for c, ts, on in located:
+            rec.edge(int(c), ts, bool(on))
+    except GuardError:
+        _commit(rec, t, d, dd, f, impulse, dissipated, work, x, energy, diss_total, drift,
+                internal, active, contrib, j)
+        raise
 
 
 def _commit(rec, t, d, dd, f, impulse, dissipated, work, x, energy, diss_total, drift,

@@ -325,6 +325,11 @@ class Subsystem(ABC):
     def energy(self, x: np.ndarray | None = None) -> float:
         """Mechanical energy held by the subsystem [J]."""
 
+    def energies(self, X: np.ndarray) -> np.ndarray:
+        """:meth:`energy` at each row of the states ``X`` (m, n_states) [J]
+        (a side may evaluate them on arrays)."""
+        return np.array([self.energy(x) for x in X], dtype=float).reshape(len(X))
+
     def ledger(self) -> tuple[float, float]:
         """Energy dissipated inside the subsystem and supplied to it by drives
         since the start [J] (co-simulation face)."""

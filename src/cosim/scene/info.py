@@ -125,6 +125,8 @@ def first_touch(scene, budget_s: float = FIRST_TOUCH_BUDGET_S,
     cpu0 = time.process_time()
 
     class Probe(Recorder):
+        reads_live_system = True        # the mobility at the touch, from the system
+
         def edge(self, c, t, on):
             if on and c in sought and c not in touches:
                 touches[c] = (float(t), system.contact_mobility(c))

@@ -31,6 +31,7 @@ import numpy as np
 
 from cosim.core.ode import RK4
 from cosim.sides.fem_closed_form import ClosedFormContacts
+from cosim.sides.fem_energy import StructureEnergy
 from cosim.sides.fem_ports import StructurePorts
 from cosim.sides.kernel import compiled_module
 from cosim.core.subsystem import EmbeddedContact, StepInput, Subsystem
@@ -47,7 +48,7 @@ STEP_API = 3
 _stale_said = False
 
 
-class StructureSubsystem(StructurePorts, ClosedFormContacts, Subsystem):
+class StructureSubsystem(StructurePorts, ClosedFormContacts, StructureEnergy, Subsystem):
     """A :class:`fem.LinearStructure` reduced to the modes of ``basis``.
 
     Parameters
@@ -191,21 +192,6 @@ class StructureSubsystem(StructurePorts, ClosedFormContacts, Subsystem):
         q, dq = x[:m], x[m:2 * m]
         g = self._modal_force(u) + self._g_modal
         return np.concatenate([dq, g - self.modal_damping * dq - self.omega ** 2 * q])
-
-    def energy(self, x=None):
-        x = self.x if x is None else x
-        m = self.n_modes
-        q, dq = x[:m], x[m:2 * m]
-        return 0.5 * float(dq @ dq + (self.omega * q) @ (self.omega * q)) \
-            - float(self._g_modal @ q)
-
-    def ledger(self):
-        return float(self.aux[-2]), 0.0
-
-    def ledger_rates(self, t, x):
-        m = self.n_modes
-        dq = x[m:2 * m]
-        return float(self.modal_damping @ (dq * dq)), 0.0
 
     def coordinates(self):
         return {}

@@ -6,10 +6,12 @@ schemes' ``advance``, over the loop's state held in C arrays (the fields of
 :class:`~cosim.core.schemes.step_control.StepState`).
 
 :class:`Driver` takes one accepted macro step per call (with any rejected
-tries before it) and hands it back to the Python loop, which books and
-records it (:class:`~cosim.core.schemes.step_control.StepBooks`): the
-recorder and the run guard see every sample as the Python loop gives it,
-with the system in the state that loop would leave.  What the driver covers
+tries before it) and keeps the step's books; :mod:`cosim.core.schemes._driver_block`
+calls it step after step and writes the samples into blocks that the
+recorder and the run guard take as arrays
+(:mod:`cosim.core.schemes.driven_block`), and the Python loop may instead
+book and record each step as it comes
+(:meth:`~cosim.core.schemes.step_control.StepBooks.book_driven`).  What the driver covers
 is decided once per run by :func:`cosim.core.schemes.driver.refusal`; the
 Python loop (:meth:`cosim.core.schemes.base.CoSimulationScheme.run`) stays
 the reference it is tested against.

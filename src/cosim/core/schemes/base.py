@@ -15,6 +15,7 @@ import numpy as np
 from cosim.core import preflight
 from cosim.errors import CouplingError, UnsafeStepError
 from cosim.core.preflight import stiffest_normal
+from cosim.core.schemes import driven_block
 from cosim.core.schemes.extrapolation import InputExtrapolation, extrapolation_coeffs
 from cosim.core.schemes.step_control import StepBooks, StepController, StepState
 from cosim.core.subsystem import reparametrised
@@ -267,8 +268,11 @@ class CoSimulationScheme(InputExtrapolation, CouplingScheme):
         h_prev = min(H, t_end)
         k, t, n_rejected = 0, 0.0, 0
         drv = self._compiled_loop(system, st, d, dd, controlled, h_prev)
-        compiled_cpu = 0.0
-        while drv is not None:          # the compiled loop: one accepted step per call
+        compiled_cpu = 0.0                      # the compiled loop, its samples in blocks:
+        if blocks := drv is not None and driven_block.takes(recorder):
+            k, n_rejected, compiled_cpu = driven_block.run_blocks(
+                self, system, recorder, drv, t, t_end, k, n, H, sliver, controlled)
+        while drv is not None and not blocks:   # the compiled loop, one step per call
             if controlled:
                 if t_end - t <= sliver:
                     break

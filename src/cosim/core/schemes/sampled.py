@@ -45,6 +45,7 @@ from __future__ import annotations
 
 import logging
 import math
+import time
 
 import numpy as np
 
@@ -102,6 +103,7 @@ def run_sampled(scheme, system, t_end: float, recorder) -> dict | None:
         log.debug("macro loop, not the sampled path: %s", why)
         return None
     H = scheme.macro_step
+    cpu0 = time.process_time()
     # what the loop does before its first step
     scheme.preflight(system, t_end)
     scheme._system = system
@@ -117,10 +119,12 @@ def run_sampled(scheme, system, t_end: float, recorder) -> dict | None:
     s = next(i for i, sub in enumerate(system.subsystems) if not sub.rigid)
     emit = _Emitter(system, s, recorder)
     sub = system.subsystems[s]
-    k = 0
+    k, inside = 0, 0.0
     try:
         while k < n:
+            c0 = time.process_time()
             k, why = sub.sample_steps(k, min(n, k + BLOCK), H, t_end, sliver, emit)
+            inside += time.process_time() - c0
             scheme.n_windows = k
             if why == "end":
                 break
@@ -130,6 +134,10 @@ def run_sampled(scheme, system, t_end: float, recorder) -> dict | None:
         # whose sample (or report) was refused; a step that raised is not counted
         scheme.n_windows = recorder._count - (0 if emit.refused else 1)
         raise
+    # the side's compiled steps: its calls less the recorder's blocks they called back
+    scheme.loop_stats = {"loop": "sampled", "refusal": None, "macro_steps": k,
+                         "compiled_cpu_s": inside - emit.cpu,
+                         "run_cpu_s": time.process_time() - cpu0}
     return {"n_windows": k, "n_iterations": scheme.n_iterations, "n_rejected": 0}
 
 
@@ -158,13 +166,18 @@ class _Emitter:
 
     #: whether the recorder (or the guard) refused a sample
     refused = False
+    #: process CPU spent here, called back from the side's steps [s]
+    cpu = 0.0
 
     def __call__(self, smp, switch_row) -> None:
+        c0 = time.process_time()
         try:
             self._emit(smp, switch_row)
         except Exception:
             self.refused = True
             raise
+        finally:
+            self.cpu += time.process_time() - c0
 
     def _emit(self, smp, switch_row) -> None:
         sysm, nc = self.system, self.system.n_contacts
@@ -193,15 +206,12 @@ class _Emitter:
             x[:, a:b] = xr
         block = (smp.t, d, dd, f, quad[:, :, 0], quad[:, :, 1], smp.ledger, quad[:, :, 3], x,
                  energy, peaks)
-        if switch_row is None:
-            self._push(block, 0, m)
-            return
-        self._push(block, 0, switch_row)
-        self._report()
-        self._push(block, switch_row, m)
+        self._push(block, 0, m, switch_row)
 
-    def _push(self, block, a, b) -> None:
-        """Record rows ``a .. b - 1``; stop at a non-finite one as the loop does."""
+    def _push(self, block, a, b, switch_row=None) -> None:
+        """Record rows ``a .. b - 1``, the switches of the step of row
+        ``switch_row`` reported before it (:meth:`_report`, in the recorder's
+        block); stop at a non-finite row as the loop does."""
         if b <= a:
             return
         t, d, dd, f, impulse, diss, ledger, work, x, energy, peaks = block
@@ -212,7 +222,11 @@ class _Emitter:
             self.recorder.record_block(t[a:stop], d[a:stop], dd[a:stop], f[a:stop],
                                        impulse[a:stop], diss[a:stop], ledger[a:stop],
                                        work[a:stop], x=x[a:stop], energy=energy[a:stop],
-                                       peaks=peaks[a:stop])
+                                       peaks=peaks[a:stop],
+                                       edges=None if switch_row is None else
+                                       {switch_row - a: self._report})
+        if switch_row is not None and stop == switch_row:
+            self._report()              # the loop reports them before it looks at the rows
         if stop < b:
             cause = nonfinite_cause(self.system, d[stop], dd[stop], f[stop])
             raise GuardError(cause[0] if cause else "non-finite state", float(t[stop]),
