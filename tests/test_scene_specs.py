@@ -80,14 +80,15 @@ def test_load_and_build_do_not_import_each_other():
     # the builder reads the specs it is handed: of the scene package it
     # needs only the scene error and, for a cutoff that keeps no mode, the
     # plausibility judgments (a leaf: they import nothing of cosim)
-    # (and the FMU side's and the plane body's builders, which import neither
-    # the loader nor the builder)
+    # (and the FMU side's and the plane body's builders, and a circle contact's
+    # rules, which import neither the loader nor the builder)
     assert {m for m in _imports(SCENE / "build.py")
-            if not m.startswith(("cosim.scene.fmu_build", "cosim.scene.plane_build"))} \
+            if not m.startswith(("cosim.scene.fmu_build", "cosim.scene.plane_build",
+                                 "cosim.scene.circle_rules"))} \
         <= {"cosim.scene.checks", "cosim.scene.checks.SceneError", "cosim.scene.plausible",
             "cosim.scene.plausible.HIGH_HZ", "cosim.scene.plausible.section_problem"}
     assert not any(m.startswith("cosim") for m in _imports(SCENE / "plausible.py"))
-    for builder in ("fmu_build.py", "plane_build.py"):
+    for builder in ("fmu_build.py", "plane_build.py", "circle_rules.py"):
         assert not any(m.startswith(("cosim.scene.load", "cosim.scene.build"))
                        for m in _imports(SCENE / builder))
 
