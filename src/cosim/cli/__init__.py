@@ -42,9 +42,31 @@ def console(argv=None) -> int:
     the exit handlers run as before.  Not for a process that goes on after
     (the garbage it holds would stay), hence not in :func:`main`.
     """
+    one_blas_thread_by_default()
     code = main(argv)
     gc.freeze()
     return code
+
+
+#: the variables a user sets to choose OpenBLAS's threads (numpy's and scipy's)
+BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "GOTO_NUM_THREADS", "OMP_NUM_THREADS")
+
+
+def one_blas_thread_by_default() -> None:
+    """Run numpy's and scipy's OpenBLAS on one thread in this process and the
+    processes it starts, unless the user chose a count (one of
+    :data:`BLAS_THREAD_VARIABLES` is set) or numpy is loaded already.
+
+    cosim's solves work on small matrices (a side's modes, a robot's joints),
+    which OpenBLAS runs on one thread anyway; but a threaded OpenBLAS starts
+    its threads when numpy loads, and they spin, each on a core, for a while
+    before they sleep: in a fresh `cosim run` that spinning overlaps the solve
+    and doubles the process's CPU there (docs/performance.md, *First runs*).
+    """
+    import os
+    if "numpy" in sys.modules or any(v in os.environ for v in BLAS_THREAD_VARIABLES):
+        return
+    os.environ["OPENBLAS_NUM_THREADS"] = "1"
 
 
 #: exit status when the reader of our output went away (`cosim run ... | head`): 128 + SIGPIPE
