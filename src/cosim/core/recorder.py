@@ -21,37 +21,10 @@ import numpy as np
 
 from cosim.core.hermite import hermite_cubic_max
 from cosim.core.progress import Progress
-from cosim.core.result import SimulationResult
+from cosim.core.result import SimulationResult, intervals_until
 from cosim.core.series import SeriesFile, SeriesStore, chunk_rows
 
 __all__ = ["Recorder", "Progress", "hermite_cubic_max", "intervals_until"]
-
-
-def intervals_until(intervals, opened: float | None, t_stop: float) -> list:
-    """One contact's intervals as a summary gives them, for a run whose last
-    kept sample is at ``t_stop`` [s].
-
-    ``intervals`` are the closed ones ``[t_on, t_off]`` in time order and
-    ``opened`` the onset of one still open (or None).  A scheme reports a
-    step's switches before the sample at its end, and that sample may never
-    be kept (the guard refuses it, or Ctrl-C comes first): what began after
-    ``t_stop`` is dropped, and an interval that runs past it, or is still
-    open, ends at ``t_stop``.  Every interval returned therefore has
-    ``t_on <= t_off <= t_stop``.
-
-    Examples
-    --------
-    >>> intervals_until([[0.0, 0.2]], 0.35, 0.3)
-    [[0.0, 0.2]]
-    >>> intervals_until([[0.0, 0.2], [0.25, 0.32]], None, 0.3)
-    [[0.0, 0.2], [0.25, 0.3]]
-    >>> intervals_until([], 0.1, 0.3)
-    [[0.1, 0.3]]
-    """
-    out = [[a, min(b, t_stop)] for a, b in intervals if a <= t_stop]
-    if opened is not None and opened <= t_stop:
-        out.append([opened, t_stop])
-    return out
 
 
 class Recorder:

@@ -12,7 +12,7 @@ from cosim.errors import OutputExistsError
 from cosim.io.rundir import inside
 from cosim.core.series import atomic_write, write_npz
 
-__all__ = ["SimulationResult", "write_outputs", "check_output_dir", "resolved_scene_text",
+__all__ = ["SimulationResult", "intervals_until", "write_outputs", "check_output_dir", "resolved_scene_text",
            "written_by_a_run"]
 
 
@@ -214,3 +214,30 @@ def resolved_scene_text(scene) -> str:
             + (f", variant {scene.variant!r}" if scene.variant else "")
             + ", overrides and scheme applied (written by `cosim run`).\n")
     return head + dumps(data)
+
+
+def intervals_until(intervals, opened: float | None, t_stop: float) -> list:
+    """One contact's intervals as a summary gives them, for a run whose last
+    kept sample is at ``t_stop`` [s].
+
+    ``intervals`` are the closed ones ``[t_on, t_off]`` in time order and
+    ``opened`` the onset of one still open (or None).  A scheme reports a
+    step's switches before the sample at its end, and that sample may never
+    be kept (the guard refuses it, or Ctrl-C comes first): what began after
+    ``t_stop`` is dropped, and an interval that runs past it, or is still
+    open, ends at ``t_stop``.  Every interval returned therefore has
+    ``t_on <= t_off <= t_stop``.
+
+    Examples
+    --------
+    >>> intervals_until([[0.0, 0.2]], 0.35, 0.3)
+    [[0.0, 0.2]]
+    >>> intervals_until([[0.0, 0.2], [0.25, 0.32]], None, 0.3)
+    [[0.0, 0.2], [0.25, 0.3]]
+    >>> intervals_until([], 0.1, 0.3)
+    [[0.1, 0.3]]
+    """
+    out = [[a, min(b, t_stop)] for a, b in intervals if a <= t_stop]
+    if opened is not None and opened <= t_stop:
+        out.append([opened, t_stop])
+    return out
