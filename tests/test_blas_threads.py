@@ -69,3 +69,20 @@ def test_the_modes_do_not_depend_on_the_threads(monkeypatch):
     assert np.allclose(one.omega, kept.omega, rtol=1e-10, atol=0)
     scale = np.abs(one.shapes).max()
     assert np.max(np.abs(one.shapes - kept.shapes)) <= 1e-8 * scale
+
+
+def test_a_blas_loaded_later_is_found_too():
+    # numpy's OpenBLAS first; scipy's own copy, where its wheel bundles one,
+    # once its linear algebra loads: each library loaded after is controlled too
+    import subprocess
+    import sys
+    code = ("from fem.blas_threads import openblas_controls, _loaded_libraries\n"
+            "a, la = len(openblas_controls()), len(_loaded_libraries())\n"
+            "import scipy.linalg\n"
+            "print(a, la, len(openblas_controls()), len(_loaded_libraries()))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout.split()
+    first, libs_first, then, libs_then = map(int, out)
+    if first == 0:
+        pytest.skip("no OpenBLAS found in this process")
+    assert first == libs_first and then == libs_then, out

@@ -31,7 +31,7 @@ __all__ = ["one_blas_thread", "openblas_controls"]
 _NAMES = tuple((f"{p}openblas_get_num_threads{s}", f"{p}openblas_set_num_threads{s}")
                for p in ("", "scipy_") for s in ("", "64_"))
 
-_FOUND: list | None = None
+_FOUND: tuple | None = None
 
 
 def _loaded_libraries() -> list[str]:
@@ -55,13 +55,15 @@ def _loaded_libraries() -> list[str]:
 
 
 def openblas_controls() -> list:
-    """``(get, set)`` of the thread count of each OpenBLAS loaded now (found
-    once numpy and scipy are imported; looked up again until one is)."""
+    """``(get, set)`` of the thread count of each OpenBLAS loaded now
+    (numpy's, and scipy's once scipy's linear algebra is imported: the
+    libraries are looked up again whenever their set has changed)."""
     global _FOUND
-    if _FOUND:
-        return _FOUND
+    paths = tuple(_loaded_libraries())
+    if _FOUND is not None and _FOUND[0] == paths:
+        return _FOUND[1]
     found = []
-    for path in _loaded_libraries():
+    for path in paths:
         try:
             lib = ctypes.CDLL(path)           # already loaded: its handle
         except OSError:
@@ -73,7 +75,7 @@ def openblas_controls() -> list:
                 put.restype, put.argtypes = None, [ctypes.c_int]
                 found.append((get, put))
                 break
-    _FOUND = found
+    _FOUND = (paths, found)
     return found
 
 
