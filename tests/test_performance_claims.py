@@ -88,7 +88,7 @@ def test_the_default_three_mass_run_takes_268_macro_steps_and_the_chain_279(monk
                                 THREE_MASS_RUN, 279), chain),
                          (Claim(PAGE, "and the chain 279 steps of its own (C's 9 contacts)",
                                 THREE_MASS_RUN, 9), count),
-                         (Claim(PAGE, "| 266 | 9 |", THREE_MASS_RUN, 9), count)):
+                         (Claim(PAGE, "| 268 | 9 |", THREE_MASS_RUN, 9), count)):
         assert_printed(claim)
         assert_reproduced(claim, value)
 
@@ -105,7 +105,7 @@ def test_the_peers_cosim_row_errors(tmp_path):
                  "--out", str(tmp_path / "run")]) == 0
     err = peers.errors(peers.run_dir_metrics(tmp_path / "run"), ref)
     half = 0.005e-2                      # half a unit of the printed 0.01 %
-    row = "| 266 | 9 | 0.42 % / 0.12 % | 0.20 % | yes |"
+    row = "| 268 | 9 | 0.42 % / 0.12 % | 0.20 % | yes |"
     for value, measured in ((0.42e-2, err["err_peak_steps"]), (0.12e-2, err["err_peak_interp"]),
                             (0.20e-2, err["err_exit_velocity"])):
         claim = Claim(PAGE, row, "python benchmarks/peers/run.py --peers cosim", value, abs=half)
@@ -435,16 +435,13 @@ print(before, "scipy.integrate" in sys.modules)
 
 
 def test_the_paper_rows_first_run_imports_no_scipy():
-    """"the monolithic scheme now runs RK45 and DOP853 on cosim's own pairs
-    ..., and its first run in a process imports no scipy": in a fresh
-    process the paper row's scene (RK45), loaded and then run, has not
-    imported ``scipy.integrate``.  (The published peers run predates this:
-    its paper row paid that import, as the page says.)"""
+    """"the paper's RK45 now being cosim's own pair, which imports no
+    scipy": in a fresh process the paper row's scene (RK45), loaded and then
+    run, has not imported ``scipy.integrate``."""
     import subprocess
     import cosim.studies.bench as bench
-    assert_printed(Claim(PAGE, "the\nmonolithic scheme now runs RK45 and DOP853 on cosim's own "
-                               "pairs (`cosim.core.embedded_rk`),\nand its first run in a process "
-                               "imports no scipy", "python benchmarks/peers/run.py", 0))
+    assert_printed(Claim(PAGE, "the paper's RK45 now being cosim's own pair, which imports no "
+                               "scipy", "python benchmarks/peers/run.py", 0))
     proc = subprocess.run([sys.executable, "-c", _SCIPY, str(CASES / "three_mass.toml"),
                            *bench._monolithic(bench.PAPER_RK45)], capture_output=True,
                           text=True, timeout=300)
