@@ -25,6 +25,7 @@ import cosim
 from cosim.core.guard import Guard, GuardError
 from cosim.core.schemes import driven_block, _driver_block
 from cosim.scene.run import RunInterrupted
+from test_sampled import _scene, series_distance
 
 TOL = 1e-12
 #: shipped scenes the compiled loop runs (short t_end where the scene is long)
@@ -33,28 +34,9 @@ DRIVEN = [("three_mass", "f1", ()), ("three_mass", "f100", ()), ("three_mass", "
           ("beam_impact_2d", None, ("t_end=0.01",)), ("beam_with_holes", None, ("t_end=0.01",))]
 
 
-def _scene(name, variant=None, overrides=()):
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        return cosim.load_scene(CASES / f"{name}.toml", variant, overrides=list(overrides))
-
-
 def run(monkeypatch, name, variant=None, on=True, overrides=()):
     monkeypatch.setattr(driven_block, "ENABLED", on)
     return cosim.simulate(_scene(name, variant, overrides), estimate=False)
-
-
-def series_distance(a, b) -> float:
-    """Largest difference of any series, relative to its largest value."""
-    assert set(a.series) == set(b.series)
-    worst = 0.0
-    for k in a.series:
-        x, y = np.asarray(a.series[k], float), np.asarray(b.series[k], float)
-        assert x.shape == y.shape, k
-        scale = np.max(np.abs(x)) if x.size else 0.0
-        if scale > 0:
-            worst = max(worst, float(np.max(np.abs(x - y)) / scale))
-    return worst
 
 
 def same_outcome(a, b):

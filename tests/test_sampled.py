@@ -61,7 +61,7 @@ def series_distance(a, b) -> float:
     for k in a.series:
         x, y = np.asarray(a.series[k], float), np.asarray(b.series[k], float)
         assert x.shape == y.shape, k
-        scale = np.max(np.abs(x))
+        scale = np.max(np.abs(x)) if x.size else 0.0
         if scale > 0:
             worst = max(worst, float(np.max(np.abs(x - y)) / scale))
     return worst
