@@ -252,6 +252,7 @@ def test_what_a_circle_cannot_be_is_refused_at_its_key(tmp_path, replace, key, w
     ({"integrator = { contact_step = 2e-07 }": 'integrator = { method = "newmark" }'},
      "subsystems.strip.integrator.method", ("leave the method out",)),
 ])
+@pytest.mark.filterwarnings("ignore:.*ignores the options")   # the monolithic case's macro_step
 def test_a_scene_a_circle_cannot_run_in_is_refused_at_build(tmp_path, replace, key, words):
     _refused(_scene(tmp_path, modes=4, **replace), key, *words, build=True)
 
