@@ -131,7 +131,7 @@ cdef class Driver:
             self.port0[s + 1] = self.port0[s] + sub.n_ports
             if sub.rigid:
                 self.kind[s], self.rigid[s] = RIGID, 1
-            elif hasattr(sub, "_closed_end"):
+            elif sub.closed_end is not None:
                 self.kind[s] = STRUCTURE
             else:
                 self.kind[s] = MULTIBODY
@@ -351,7 +351,7 @@ cdef class Driver:
             if self.rigid[s]:
                 continue
             sub = self.subs[s]
-            cl = getattr(sub, "_closed_end", None)
+            cl = sub.closed_end
             self.saved[s] = (sub.x.copy(), sub.aux.copy(), sub.peak.copy(),
                              None if cl is None else cl.copy())
             self.saved_t[s] = sub.t
@@ -368,7 +368,7 @@ cdef class Driver:
             sub.aux[...] = aux
             sub.peak[...] = peak
             if cl is not None:
-                sub._closed_end[...] = cl
+                sub.closed_end[...] = cl
             sub.t = self.saved_t[s]
             sub.n_steps = self.saved_n[s]
         self.P[...] = self.P0
@@ -410,16 +410,16 @@ cdef class Driver:
         inp = self.step_input(t, h, u.reshape(width, self.nport[s], 2))
         # asked at each step, as the side's own step asks: a side may change
         # its kernel (its basis renewed) or decline one step
-        kern = sub._compiled_step(inp)
+        kern = sub.compiled_step(inp)
         if kern is None:                # the side's own step: its reference
-            sub._step_impl(t, h, inp)
+            sub.reference_step(t, h, inp)
             pm = sub.port_moments
         elif self.kind[s] == MULTIBODY:
-            sub._t0, sub._h = t, h
+            sub.begin_step(t, h)
             sub.switch_log = []
             sub.impact_log = []
-            pm = kern.step(t, h, sub.x, sub.aux, inp, sub._embedded, self.max_step[s],
-                           self.free_step[s], sub._on_switch, sub.peak)
+            pm = kern.step(t, h, sub.x, sub.aux, inp, sub.embedded_contacts, self.max_step[s],
+                           self.free_step[s], sub.switch_handler, sub.peak)
             sub.port_moments = pm
         else:
             pm = self._step_structure(s, kern, t, h, inp)
@@ -449,25 +449,25 @@ cdef class Driver:
         degree, a stalled step) the structure's own step does (the
         reference, saying so once).  Returns the port moments."""
         sub = self.subs[s]
-        embs = sub._embedded
+        embs = sub.embedded_contacts
         sub.switch_log = []
-        sub._t0, sub._h = t, h
-        if kern.set_step(t, h, inp.coeffs, [(e.t0, e.h, e.motion, e._dmotion) for e in embs]):
+        sub.begin_step(t, h)
+        if kern.set_step(t, h, inp.coeffs, [(e.t0, e.h, e.motion, e.velocity_coeffs) for e in embs]):
             pm = np.zeros((3, self.nport[s]), complex)
             sub.port_moments = pm
             if not embs:
                 kern.step_free(sub.x, pm.view(float))
                 return pm
-            saved = sub.aux.copy(), sub._closed_end.copy(), sub.peak.copy()
+            saved = sub.aux.copy(), sub.closed_end.copy(), sub.peak.copy()
             try:
-                sub.switch_log = kern.step(sub.x, sub.aux, pm.view(float), sub._closed_end,
+                sub.switch_log = kern.step(sub.x, sub.aux, pm.view(float), sub.closed_end,
                                            sub.peak)
                 return pm
             except RuntimeError as exc:
                 if type(exc).__name__ != "StalledStep":
                     raise
-                sub.aux[:], sub._closed_end[:], sub.peak[:] = saved
-        sub._step_impl(t, h, inp)
+                sub.aux[:], sub.closed_end[:], sub.peak[:] = saved
+        sub.reference_step(t, h, inp)
         return sub.port_moments
 
     cdef void _partner_motion(self, int k, double t, double h, bint after):
@@ -518,7 +518,7 @@ cdef class Driver:
 
     # --------------------------------------------------------- the advance
     cdef int _extrapolated(self, double ratio):
-        """InputExtrapolation._extrapolated into ``self.base``; returns its rows."""
+        """``_extrapolated`` of InputExtrapolation into ``self.base``; returns its rows."""
         cdef int p = self.order if self.order < self.nhist - 1 else self.nhist - 1
         cdef int r, j
         cdef double fn, f1, f2
