@@ -64,8 +64,9 @@ cdef class Driver:
     # layout
     cdef long[::1] kind, port0, nport, seq, rigid
     cdef long[::1] row_a, row_b, sub_a, sub_b, coupler, exchanged
-    cdef double[:, ::1] normal
-    cdef double[::1] offset
+    # the system's own arrays, read-only (a following contact may turn its normal)
+    cdef const double[:, ::1] normal
+    cdef const double[::1] offset
     cdef long[::1] h_c, h_host, h_slot, h_partner, h_pport
     cdef list Gc, rows_of, xs, auxs, peaks, closed, free_steps
     # the following contacts (cosim.core.schemes._follow), None where there are none
@@ -141,12 +142,13 @@ cdef class Driver:
         self.seq = np.array(order, dtype=np.int_)
         self.n_order = len(order)
         links = system.links
-        self.row_a = np.array(system._row_a, dtype=np.int_)
-        self.row_b = np.array(system._row_b, dtype=np.int_)
+        row_a, row_b = system.contact_rows
+        self.row_a = np.array(row_a, dtype=np.int_)
+        self.row_b = np.array(row_b, dtype=np.int_)
         self.sub_a = np.array([ln.sub_a for ln in links], dtype=np.int_)
         self.sub_b = np.array([ln.sub_b for ln in links], dtype=np.int_)
-        self.normal = np.ascontiguousarray(system._normals, dtype=float).reshape(self.nc, 2)
-        self.offset = np.ascontiguousarray(system._offsets, dtype=float)
+        self.normal = np.ascontiguousarray(system.contact_normals, dtype=float).reshape(self.nc, 2)
+        self.offset = np.ascontiguousarray(system.contact_offsets, dtype=float)
         self.coupler = np.array(system.coupler_rows, dtype=np.int_)
         self.n_coupler = self.coupler.shape[0]
         self.exchanged = np.array(system.exchanged, dtype=np.int_)
@@ -160,13 +162,13 @@ cdef class Driver:
         self.h_pport = np.array([system.hosted[c].partner_port for c in hc], dtype=np.int_)
         self.hosted_embs = [system.hosted[c].embedded for c in hc]
         # copies: a following contact turns side a's column in place (_follow)
-        self.Gc = [np.array(G, dtype=float, order="C") for G in system._Gc]
+        self.Gc = [np.array(G, dtype=float, order="C") for G in system.exchange_maps]
         self.fol, self.ft = None, NULL
         if system.followers:
             self.fol = importlib.import_module("cosim.core.schemes._follow").Followers(
                 system, self.Gc)
             self.ft = <FollowTable*>PyCapsule_GetPointer(self.fol.table(), b"cosim.FollowTable")
-        self.rows_of = [np.array(scheme._rows_of(system, s), dtype=np.int_)
+        self.rows_of = [np.array(scheme.rows_of(system, s), dtype=np.int_)
                         for s in range(self.nsub)]
         self.P = np.zeros((self.nports, 2))
         self.V = np.zeros((self.nports, 2))
@@ -702,7 +704,7 @@ cdef class Driver:
             onsets = onset_contacts(self.system, self.contact_step, self.d, self.dd, self.f,
                                     f_was, was_aimed)
             if len(onsets):
-                hist = self.scheme._onset_history(self.system, self.d, self.dd, self.f, onsets,
+                hist = self.scheme.onset_history(self.system, self.d, self.dd, self.f, onsets,
                                                   self.contact_step)
                 self.nhist = len(hist)
                 for k in range(self.nhist):
