@@ -454,7 +454,8 @@ cdef class Driver:
         embs = sub.embedded_contacts
         sub.switch_log = []
         sub.begin_step(t, h)
-        if kern.set_step(t, h, inp.coeffs, [(e.t0, e.h, e.motion, e.velocity_coeffs) for e in embs]):
+        if kern.set_step(t, h, inp.coeffs,
+                         [(e.t0, e.h, e.motion, e.velocity_coeffs) for e in embs]):
             pm = np.zeros((3, self.nport[s]), complex)
             sub.port_moments = pm
             if not embs:
