@@ -97,3 +97,33 @@ def test_no_code_probes_a_side_or_scheme_for_a_face(package):
                 probes.append(f"{path.relative_to(SRC)}:{node.lineno} "
                               f"{node.func.id}(..., {node.args[1].value!r})")
     assert not probes, "\n".join(probes)
+
+
+def test_the_compiled_loop_face_of_a_built_scene_sides():
+    """The face the compiled loop steps a side through (``compiled_loop``,
+    cosim.core.loop_face) hands the side's own live state: its embedded
+    contacts, its kernel where the kernel steps it, a structure's record of
+    closed ends (one per hosted contact) and none for a multibody side."""
+    from cosim.sides.fem import StructureSubsystem
+    from cosim.sides.multibody import MultibodySubsystem
+    system, _ = cosim.load_scene("cases/beam_impact.toml").build()
+    kinds = set()
+    for sub in system.subsystems:
+        assert "compiled_loop" in sub.capabilities
+        kinds.add(type(sub))
+        kernel = sub.compiled_step(None)         # built on the first ask
+        assert (kernel is not None) == (getattr(sub, "kernel", None) == "compiled")
+        if isinstance(sub, StructureSubsystem):
+            assert sub.closed_end.dtype == np.int8
+            assert sub.closed_end.shape == (len(sub.embedded_contacts),)
+            assert sub.switch_handler is not None
+        elif isinstance(sub, MultibodySubsystem):
+            assert sub.closed_end is None and sub.switch_handler is not None
+        else:
+            assert sub.rigid and sub.closed_end is None and sub.compiled_step(None) is None
+            assert tuple(sub.embedded_contacts) == ()
+    assert {StructureSubsystem, MultibodySubsystem} <= kinds
+    hosts = [sub for sub in system.subsystems if len(sub.embedded_contacts)]
+    assert len(hosts) == 2                      # the beam's and the arm's
+    for sub in hosts:
+        assert sub.embedded_contacts is sub.embedded_contacts   # the live list, not a copy

@@ -248,3 +248,52 @@ def test_no_module_probes_a_private_attribute_of_another_module():
     plug-in finder (a plain dict may stand where a registry does)."""
     found = [p for path in sorted(SRC.rglob("*.py")) for p in _private_probes(path)]
     assert [f.split(":")[0] for f in found] == ["cosim/core/plugins.py"], found
+
+
+#: the compiled macro loop's modules: they reach the sides, the system, the
+#: scheme and the recorder through public faces (the sides' ``compiled_loop``
+#: capability, cosim.core.loop_face), never through their private attributes
+LOOP = ("cosim/core/schemes/_driver.pyx", "cosim/core/schemes/_driver_block.pyx",
+        "cosim/core/schemes/driven_block.py", "cosim/core/schemes/_follow.pyx")
+
+
+def _private_reads(text: str) -> list[str]:
+    """Each ``._name`` (one underscore) read of an object other than ``self``
+    in ``text``, with its line.  Allowed: ``self._name`` (an object's own
+    state) and a dotted path that starts at ``cosim.`` (a module's name, as
+    in ``cosim.core.schemes._follow``: imports, docstrings, import_module),
+    which reads no object's attribute."""
+    out = []
+    for m in re.finditer(r"\._[A-Za-z0-9]\w*", text):
+        before = text[:m.start()]
+        chain = re.search(r"[\w.]*$", before).group(0)
+        lead = before[:len(before) - len(chain)][-1:]
+        if chain.startswith("cosim."):
+            continue
+        if chain == "self" and lead not in (")", "]"):
+            continue
+        line = text.count("\n", 0, m.start()) + 1
+        out.append(f"{line}: {(chain or lead) + m.group(0)}")
+    # and a probe by name: hasattr(sub, "_name"), getattr(...), setattr(...)
+    probe = r"\b(?:has|get|set)attr\((?!(?:self|cls)\s*,)[^,()]+,\s*[\"']_[A-Za-z0-9]\w*"
+    for m in re.finditer(probe, text):
+        out.append(f"{text.count(chr(10), 0, m.start()) + 1}: {m.group(0)}")
+    return out
+
+
+def test_the_private_read_finder_finds_them():
+    """The finder of the test below tells a side's private attribute (read
+    or probed by name) from the loop's own and from a module's name."""
+    assert _private_reads("self._x = 1\nimport cosim.core.schemes._follow\n") == []
+    assert _private_reads("k = sub._closed_end\n") == ["1: sub._closed_end"]
+    assert _private_reads('c = getattr(sub, "_closed_end", None)\nhasattr(self, "_k")\n') == [
+        '1: getattr(sub, "_closed_end']
+    assert _private_reads("a = self.subs[s]._embedded\n") == ["1: ]._embedded"]
+    assert _private_reads("a = f(x)._h\nb = scheme.self._t0\n") == ["1: )._h", "2: scheme.self._t0"]
+
+
+@pytest.mark.parametrize("name", LOOP)
+def test_the_compiled_loop_reads_no_private_attribute_of_another_object(name):
+    """The loop's modules read no ``._name`` of an object other than ``self``."""
+    found = _private_reads((SRC / name).read_text())
+    assert not found, found

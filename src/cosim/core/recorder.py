@@ -122,6 +122,12 @@ class Recorder:
         """Simulated time of the last sample recorded [s] (0 before the first)."""
         return self._prev[0] if self._prev is not None else 0.0
 
+    @property
+    def n_offered(self) -> int:
+        """Samples offered so far (recorded or not: every ``every``-th is
+        stored)."""
+        return self._count
+
     def edge(self, c: int, t: float, on: bool) -> None:
         """Report an exactly located contact onset (``on``) or release.
 

@@ -19,6 +19,7 @@ import numpy as np
 from couplers.contact import penetration_c
 
 from cosim.core.hermite import hermite_coefficients
+from cosim.core.loop_face import LoopFace
 
 __all__ = ["QUADRATURES", "IMPULSE", "DISSIPATED", "MOMENT", "WORK", "CAPABILITIES", "StepInput", "Subsystem", "RigidReference", "SubsystemState", "EmbeddedContact", "Samples",
            "reparametrised", "hermite_coefficients"]
@@ -226,7 +227,9 @@ CAPABILITIES = {
     "skeleton": ("skeleton",),
     "fmi": (),
     "sampled_steps": ("sampling_refusal", "sample_steps"),
-    "compiled_loop": ("compiled_loop_refusal",),
+    # the compiled macro loop's face of a side (cosim.core.loop_face.LoopFace)
+    "compiled_loop": ("compiled_loop_refusal", "compiled_step", "reference_step", "begin_step",
+                      "embedded_contacts", "switch_handler", "closed_end"),
 }
 
 
@@ -412,7 +415,7 @@ class Subsystem(ABC):
             self.peak[...] = state.peak
 
 
-class RigidReference(Subsystem):
+class RigidReference(LoopFace, Subsystem):
     """A subsystem without degrees of freedom: a wall or the ground.
 
     Parameters

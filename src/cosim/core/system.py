@@ -146,6 +146,37 @@ class CoupledSystem(MovingPorts):
             self._close_at_start()
 
     # ------------------------------------------------------------------ rows
+    # ---------------------------------------- read-only faces of the layout
+    @staticmethod
+    def _read_only(a) -> np.ndarray:
+        v = a.view()
+        v.flags.writeable = False
+        return v
+
+    @property
+    def contact_rows(self) -> tuple[np.ndarray, np.ndarray]:
+        """Each contact's two ports (side a's, side b's) as rows of the
+        subsystems' stacked outputs: two (n_contacts,) int arrays (read-only)."""
+        return self._read_only(self._row_a), self._read_only(self._row_b)
+
+    @property
+    def contact_normals(self) -> np.ndarray:
+        """Each contact's normal, (n_contacts, 2) (read-only; a following
+        contact's turns with its surface)."""
+        return self._read_only(self._normals)
+
+    @property
+    def contact_offsets(self) -> np.ndarray:
+        """Each contact's offset [m], (n_contacts,) (read-only)."""
+        return self._read_only(self._offsets)
+
+    @property
+    def exchange_maps(self) -> tuple:
+        """Per subsystem, the (2 n_ports, n_rows) map of the row forces a
+        scheme hands it (the exchanged rows only) to its flat port forces
+        (read-only; a following contact turns side a's column in place)."""
+        return tuple(self._read_only(G) for G in self._Gc)
+
     def _init_rows(self) -> None:
         nc = self.n_contacts
         conns = [ln.connection for ln in self.links]

@@ -29,6 +29,7 @@ import math
 
 import numpy as np
 
+from cosim.core.loop_face import LoopFace
 from cosim.core.ode import RK4
 from cosim.sides.fem_closed_form import ClosedFormContacts
 from cosim.sides.fem_energy import StructureEnergy
@@ -48,7 +49,8 @@ STEP_API = 3
 _stale_said = False
 
 
-class StructureSubsystem(StructurePorts, ClosedFormContacts, StructureEnergy, Subsystem):
+class StructureSubsystem(StructurePorts, ClosedFormContacts, StructureEnergy, LoopFace,
+                         Subsystem):
     """A :class:`fem.LinearStructure` reduced to the modes of ``basis``.
 
     Parameters

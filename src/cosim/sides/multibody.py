@@ -13,6 +13,7 @@ from couplers import PointContact
 from multibody import TreeModel
 
 from cosim.errors import SimulationError
+from cosim.core.loop_face import LoopFace
 from cosim.core.ode import INTEGRATORS, RK4, TimeStepper
 from cosim.sides.kernel import compiled_module
 from cosim.sides.multibody_kernel import (CompiledFace, SampledSteps, TreeFaceMixin,
@@ -30,7 +31,7 @@ __all__ = ["MultibodySubsystem", "kernel_law"]
 KERNEL_INTEGRATORS = tuple(INTEGRATORS.values())
 
 
-class MultibodySubsystem(SampledSteps, TreeFaceMixin, CompiledFace, Subsystem):
+class MultibodySubsystem(SampledSteps, TreeFaceMixin, CompiledFace, LoopFace, Subsystem):
     """A :class:`multibody.TreeModel` with state ``x = [q, dq]``.
 
     Parameters

@@ -64,8 +64,9 @@ cdef class Driver:
     # layout
     cdef long[::1] kind, port0, nport, seq, rigid
     cdef long[::1] row_a, row_b, sub_a, sub_b, coupler, exchanged
-    cdef double[:, ::1] normal
-    cdef double[::1] offset
+    # the system's own arrays, read-only (a following contact may turn its normal)
+    cdef const double[:, ::1] normal
+    cdef const double[::1] offset
     cdef long[::1] h_c, h_host, h_slot, h_partner, h_pport
     cdef list Gc, rows_of, xs, auxs, peaks, closed, free_steps
     # the following contacts (cosim.core.schemes._follow), None where there are none
@@ -131,7 +132,7 @@ cdef class Driver:
             self.port0[s + 1] = self.port0[s] + sub.n_ports
             if sub.rigid:
                 self.kind[s], self.rigid[s] = RIGID, 1
-            elif hasattr(sub, "_closed_end"):
+            elif sub.closed_end is not None:
                 self.kind[s] = STRUCTURE
             else:
                 self.kind[s] = MULTIBODY
@@ -141,12 +142,13 @@ cdef class Driver:
         self.seq = np.array(order, dtype=np.int_)
         self.n_order = len(order)
         links = system.links
-        self.row_a = np.array(system._row_a, dtype=np.int_)
-        self.row_b = np.array(system._row_b, dtype=np.int_)
+        row_a, row_b = system.contact_rows
+        self.row_a = np.array(row_a, dtype=np.int_)
+        self.row_b = np.array(row_b, dtype=np.int_)
         self.sub_a = np.array([ln.sub_a for ln in links], dtype=np.int_)
         self.sub_b = np.array([ln.sub_b for ln in links], dtype=np.int_)
-        self.normal = np.ascontiguousarray(system._normals, dtype=float).reshape(self.nc, 2)
-        self.offset = np.ascontiguousarray(system._offsets, dtype=float)
+        self.normal = np.ascontiguousarray(system.contact_normals, dtype=float).reshape(self.nc, 2)
+        self.offset = np.ascontiguousarray(system.contact_offsets, dtype=float)
         self.coupler = np.array(system.coupler_rows, dtype=np.int_)
         self.n_coupler = self.coupler.shape[0]
         self.exchanged = np.array(system.exchanged, dtype=np.int_)
@@ -160,13 +162,13 @@ cdef class Driver:
         self.h_pport = np.array([system.hosted[c].partner_port for c in hc], dtype=np.int_)
         self.hosted_embs = [system.hosted[c].embedded for c in hc]
         # copies: a following contact turns side a's column in place (_follow)
-        self.Gc = [np.array(G, dtype=float, order="C") for G in system._Gc]
+        self.Gc = [np.array(G, dtype=float, order="C") for G in system.exchange_maps]
         self.fol, self.ft = None, NULL
         if system.followers:
             self.fol = importlib.import_module("cosim.core.schemes._follow").Followers(
                 system, self.Gc)
             self.ft = <FollowTable*>PyCapsule_GetPointer(self.fol.table(), b"cosim.FollowTable")
-        self.rows_of = [np.array(scheme._rows_of(system, s), dtype=np.int_)
+        self.rows_of = [np.array(scheme.rows_of(system, s), dtype=np.int_)
                         for s in range(self.nsub)]
         self.P = np.zeros((self.nports, 2))
         self.V = np.zeros((self.nports, 2))
@@ -351,7 +353,7 @@ cdef class Driver:
             if self.rigid[s]:
                 continue
             sub = self.subs[s]
-            cl = getattr(sub, "_closed_end", None)
+            cl = sub.closed_end
             self.saved[s] = (sub.x.copy(), sub.aux.copy(), sub.peak.copy(),
                              None if cl is None else cl.copy())
             self.saved_t[s] = sub.t
@@ -368,7 +370,7 @@ cdef class Driver:
             sub.aux[...] = aux
             sub.peak[...] = peak
             if cl is not None:
-                sub._closed_end[...] = cl
+                sub.closed_end[...] = cl
             sub.t = self.saved_t[s]
             sub.n_steps = self.saved_n[s]
         self.P[...] = self.P0
@@ -410,16 +412,16 @@ cdef class Driver:
         inp = self.step_input(t, h, u.reshape(width, self.nport[s], 2))
         # asked at each step, as the side's own step asks: a side may change
         # its kernel (its basis renewed) or decline one step
-        kern = sub._compiled_step(inp)
+        kern = sub.compiled_step(inp)
         if kern is None:                # the side's own step: its reference
-            sub._step_impl(t, h, inp)
+            sub.reference_step(t, h, inp)
             pm = sub.port_moments
         elif self.kind[s] == MULTIBODY:
-            sub._t0, sub._h = t, h
+            sub.begin_step(t, h)
             sub.switch_log = []
             sub.impact_log = []
-            pm = kern.step(t, h, sub.x, sub.aux, inp, sub._embedded, self.max_step[s],
-                           self.free_step[s], sub._on_switch, sub.peak)
+            pm = kern.step(t, h, sub.x, sub.aux, inp, sub.embedded_contacts, self.max_step[s],
+                           self.free_step[s], sub.switch_handler, sub.peak)
             sub.port_moments = pm
         else:
             pm = self._step_structure(s, kern, t, h, inp)
@@ -449,25 +451,26 @@ cdef class Driver:
         degree, a stalled step) the structure's own step does (the
         reference, saying so once).  Returns the port moments."""
         sub = self.subs[s]
-        embs = sub._embedded
+        embs = sub.embedded_contacts
         sub.switch_log = []
-        sub._t0, sub._h = t, h
-        if kern.set_step(t, h, inp.coeffs, [(e.t0, e.h, e.motion, e._dmotion) for e in embs]):
+        sub.begin_step(t, h)
+        if kern.set_step(t, h, inp.coeffs,
+                         [(e.t0, e.h, e.motion, e.velocity_coeffs) for e in embs]):
             pm = np.zeros((3, self.nport[s]), complex)
             sub.port_moments = pm
             if not embs:
                 kern.step_free(sub.x, pm.view(float))
                 return pm
-            saved = sub.aux.copy(), sub._closed_end.copy(), sub.peak.copy()
+            saved = sub.aux.copy(), sub.closed_end.copy(), sub.peak.copy()
             try:
-                sub.switch_log = kern.step(sub.x, sub.aux, pm.view(float), sub._closed_end,
+                sub.switch_log = kern.step(sub.x, sub.aux, pm.view(float), sub.closed_end,
                                            sub.peak)
                 return pm
             except RuntimeError as exc:
                 if type(exc).__name__ != "StalledStep":
                     raise
-                sub.aux[:], sub._closed_end[:], sub.peak[:] = saved
-        sub._step_impl(t, h, inp)
+                sub.aux[:], sub.closed_end[:], sub.peak[:] = saved
+        sub.reference_step(t, h, inp)
         return sub.port_moments
 
     cdef void _partner_motion(self, int k, double t, double h, bint after):
@@ -518,7 +521,7 @@ cdef class Driver:
 
     # --------------------------------------------------------- the advance
     cdef int _extrapolated(self, double ratio):
-        """InputExtrapolation._extrapolated into ``self.base``; returns its rows."""
+        """``_extrapolated`` of InputExtrapolation into ``self.base``; returns its rows."""
         cdef int p = self.order if self.order < self.nhist - 1 else self.nhist - 1
         cdef int r, j
         cdef double fn, f1, f2
@@ -702,7 +705,7 @@ cdef class Driver:
             onsets = onset_contacts(self.system, self.contact_step, self.d, self.dd, self.f,
                                     f_was, was_aimed)
             if len(onsets):
-                hist = self.scheme._onset_history(self.system, self.d, self.dd, self.f, onsets,
+                hist = self.scheme.onset_history(self.system, self.d, self.dd, self.f, onsets,
                                                   self.contact_step)
                 self.nhist = len(hist)
                 for k in range(self.nhist):

@@ -334,7 +334,7 @@ class CoSimulationScheme(InputExtrapolation, CouplingScheme):
                 onsets = ctl.at_onset(d, dd, f, f_was, was_aimed)
                 if len(onsets):             # the history starts again at the onset
                     h_prev = self.contact_step
-                    st.hist = self._onset_history(system, d, dd, f, onsets, h_prev)
+                    st.hist = self.onset_history(system, d, dd, f, onsets, h_prev)
             k += 1
             self.n_windows = k          # kept as they go: a run that fails reports them
             books.book(t + h, h, d, dd, f, stepped)
@@ -409,7 +409,7 @@ class CoSimulationScheme(InputExtrapolation, CouplingScheme):
         return {c: system.subsystems[host].embedded_quadratures()[slot, 0]
                 for c, (host, slot, _, _, _) in system.hosted.items()}
 
-    def _rows_of(self, system, s: int) -> list:
+    def rows_of(self, system, s: int) -> list:
         """The coupler rows (normal, then tangential) with subsystem ``s`` on a side."""
         return self._topology(system).rows[s]
 
@@ -429,7 +429,7 @@ class CoSimulationScheme(InputExtrapolation, CouplingScheme):
             system.collect_work(s)
             return h * (coeffs / _POWERS_PLUS_ONE[:coeffs.shape[0]]).sum(axis=0)
         hk = h / m
-        mine = self._rows_of(system, s)
+        mine = self.rows_of(system, s)
         width = max(2, coeffs.shape[0])
         impulse = np.zeros(system.n_rows)
         j = np.arange(width)[:, None]

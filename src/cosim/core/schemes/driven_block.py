@@ -132,7 +132,7 @@ def run_blocks(scheme, system, recorder, drv, t, t_end, k, n, H, sliver, control
             *rows.args())
         compiled_cpu += time.process_time() - c0
         rows.energies(system, m - 1 if why == "nonfinite" else m)
-        kept0 = recorder._count
+        kept0 = recorder.n_offered
         try:
             rows.record(recorder, m - 1 if why == "nonfinite" else m, edges)
             if why == "nonfinite":
@@ -141,7 +141,7 @@ def run_blocks(scheme, system, recorder, drv, t, t_end, k, n, H, sliver, control
                         recorder.edge(int(c), ts, bool(on))
         except GuardError:
             # the step of the refused sample counts, as step by step
-            j = recorder._count - kept0
+            j = recorder.n_offered - kept0
             scheme.n_windows = k + j + 1
             scheme.n_rejected = int(rows.rej[j])
             raise

@@ -74,7 +74,7 @@ class GaussSeidel(CoSimulationScheme):
                 elif partner == s and host in done:     # the force the host exerted
                     coeffs[:, c] = 0.0
                     coeffs[:2, c] = system.hosted_force(c, h, imp0[c])
-            mine = self._rows_of(system, s)
+            mine = self.rows_of(system, s)
             if mine:
                 pred = list(system.outputs())
                 pos, vel = outs_n[s]

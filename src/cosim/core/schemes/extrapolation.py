@@ -62,7 +62,7 @@ class InputExtrapolation:
             rate[c] = (fp - fm) / (2 * eps) * dd[c]
         return rate
 
-    def _onset_history(self, system, d, dd, f, onsets, H):
+    def onset_history(self, system, d, dd, f, onsets, H):
         """The force history to extrapolate the next step from when the
         coupler contacts ``onsets`` start it at their onset
         (``land_onsets``): as at a run's start (:meth:`_starting_history`,

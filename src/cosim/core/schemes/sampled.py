@@ -132,7 +132,7 @@ def run_sampled(scheme, system, t_end: float, recorder) -> dict | None:
         # a signal too (the kernel looks at them within its steps);
         # the loop's count: the steps whose samples were kept, and the step
         # whose sample (or report) was refused; a step that raised is not counted
-        scheme.n_windows = recorder._count - (0 if emit.refused else 1)
+        scheme.n_windows = recorder.n_offered - (0 if emit.refused else 1)
         raise
     # the side's compiled steps: its calls less the recorder's blocks they called back
     scheme.loop_stats = {"loop": "sampled", "refusal": None, "macro_steps": k,
@@ -186,10 +186,12 @@ class _Emitter:
         vel = np.broadcast_to(self.vel, (m,) + self.vel.shape).copy()
         pos[:, self.ports], vel[:, self.ports] = smp.position, smp.velocity
         # CoupledSystem.penetrations, on every sample at once
-        dx = pos[:, sysm._row_a] - pos[:, sysm._row_b]
-        dv = vel[:, sysm._row_a] - vel[:, sysm._row_b]
-        d = sysm._offsets - np.einsum("mcx,cx->mc", dx, sysm._normals)
-        dd = -np.einsum("mcx,cx->mc", dv, sysm._normals)
+        row_a, row_b = sysm.contact_rows
+        normals = sysm.contact_normals
+        dx = pos[:, row_a] - pos[:, row_b]
+        dv = vel[:, row_a] - vel[:, row_b]
+        d = sysm.contact_offsets - np.einsum("mcx,cx->mc", dx, normals)
+        dd = -np.einsum("mcx,cx->mc", dv, normals)
         f = np.empty((m, nc))
         energy = smp.energy.copy()          # the other sides are rigid: no energy
         for c, law in enumerate(self.laws):
