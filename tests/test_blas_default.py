@@ -52,31 +52,3 @@ def test_the_command_line_sets_it_for_its_run(tmp_path):
     assert out.returncode == 0, out.stderr
     assert "BLAS 1" in out.stdout
 
-
-def test_a_structures_solve_runs_on_one_blas_thread(monkeypatch):
-    # in a caller's process (numpy loaded, its threads started), the solve of a
-    # scene with a structure sets OpenBLAS to one thread and gives its count back
-    import warnings
-    import cosim
-    from cosim.core.schemes.explicit import GaussSeidel
-    from fem.blas_threads import openblas_controls
-    monkeypatch.delenv("COSIM_BLAS_THREADS", raising=False)
-    controls = openblas_controls()
-    if not controls:
-        pytest.skip("no OpenBLAS in this process")
-    seen, run = [], GaussSeidel.run
-
-    def spy(self, *a, **k):
-        seen.append([get() for get, _ in controls])
-        return run(self, *a, **k)
-
-    before = [get() for get, _ in controls]
-    monkeypatch.setattr(GaussSeidel, "run", spy)
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        scene = cosim.load_scene(os.path.join(root, "cases", "beam_impact.toml"),
-                                 overrides=["t_end=0.01"])
-        cosim.simulate(scene, estimate=False)
-    assert seen and all(n == 1 for n in seen[0])
-    assert [get() for get, _ in controls] == before

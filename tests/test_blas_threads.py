@@ -86,3 +86,22 @@ def test_a_blas_loaded_later_is_found_too():
     if first == 0:
         pytest.skip("no OpenBLAS found in this process")
     assert first == libs_first and then == libs_then, out
+
+
+def test_the_count_is_left_alone_while_other_threads_run():
+    # another thread may be inside OpenBLAS: the block then changes nothing
+    import threading
+    controls = openblas_controls()
+    if not controls:
+        pytest.skip("no OpenBLAS found in this process")
+    before = [get() for get, _ in controls]
+    stop = threading.Event()
+    other = threading.Thread(target=stop.wait)
+    other.start()
+    try:
+        with one_blas_thread():
+            inside = [get() for get, _ in controls]
+    finally:
+        stop.set()
+        other.join()
+    assert inside == before

@@ -14,8 +14,9 @@ the eigen-solve's time went to ARPACK's own calls, waiting.
 ``*openblas_set_num_threads*`` functions) to one thread for the duration of a
 ``with`` block and gives each back its count after.  Where none is found (not
 Linux, another BLAS), it does nothing.  Set ``COSIM_BLAS_THREADS=keep`` to
-leave the threads alone.  The count is process-wide: a thread of the same
-process calling BLAS meanwhile runs on one thread too.
+leave the threads alone.  The count is process-wide, and changing it while
+another thread is inside OpenBLAS is not safe: where the process runs other
+Python threads (a threaded sweep, a Dask scheduler), it is left alone.
 """
 from __future__ import annotations
 
@@ -23,6 +24,7 @@ import contextlib
 import ctypes
 import os
 import sys
+import threading
 
 __all__ = ["one_blas_thread", "openblas_controls"]
 
@@ -82,7 +84,10 @@ def openblas_controls() -> list:
 @contextlib.contextmanager
 def one_blas_thread():
     """Run the ``with`` block on one OpenBLAS thread (see the module's notes)."""
-    if os.environ.get("COSIM_BLAS_THREADS", "").strip().lower() == "keep":
+    if (os.environ.get("COSIM_BLAS_THREADS", "").strip().lower() == "keep"
+            or threading.active_count() > 1):
+        # another thread may be inside OpenBLAS: changing its thread count
+        # under a call in flight is not safe, so leave it as it is
         yield
         return
     controls = openblas_controls()

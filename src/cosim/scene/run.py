@@ -141,14 +141,12 @@ def _simulate(scene, scheme, progress, progress_interval, out, overwrite):
                    guard=Guard(system, scene.guard))
     if not _is_monolithic(sch) and not len(system.exchanged):
         _load_sampled()
-    blas = _one_blas_thread()
     cpu0 = time.process_time() - _host_cpu(system)
     status, message = "finished", ""
     counters = {}
     stop = failure = None
     try:
-        with blas:
-            counters = sch.run(system, scene.t_end, rec)
+        counters = sch.run(system, scene.t_end, rec)
     except UnsafeStepError:                # refused before the first step
         _discard(rec, out)
         raise
@@ -239,21 +237,6 @@ def stop_message(exc: SimulationError, t_stop: float) -> str:
             head += f" (the last sample kept; the guard tripped at t = {exc.t:.6g} s)"
         return f"{head}: {exc.reason}"
     return f"{head}: {exc}"
-
-
-def _one_blas_thread():
-    """The solve's context: OpenBLAS on one thread where a structure's modules
-    (:mod:`fem`) are loaded, which bring BLAS calls into the solve
-    (:func:`fem.blas_threads.one_blas_thread`: a threaded OpenBLAS's threads
-    wake for each call and spin after it, CPU the solve does not need for
-    its small matrices); a scene without one gets a context that does
-    nothing, and imports nothing for it."""
-    import contextlib
-    if "fem" not in sys.modules:
-        return contextlib.nullcontext()
-    from fem.blas_threads import one_blas_thread, openblas_controls
-    openblas_controls()                  # found before the clock starts
-    return one_blas_thread()
 
 
 def _load_sampled() -> None:
