@@ -23,7 +23,8 @@ process), the solve CPU of a run that is the first of its process: ``python
 ``--repeat`` such processes (at least 2: bytecode is cached as users have
 it, ``PYTHONDONTWRITEBYTECODE`` dropped, so the first process may pay for
 compiling what a later one reads).  A one-time cost inside the solve (an
-import, a first call) shows as their ratio, ``first/warm``.
+import, a first call) shows as their ratio, ``first/warm``.  Both run
+OpenBLAS on one thread, as `cosim run` does, unless the user set a count.
 """
 import argparse
 import datetime
@@ -34,6 +35,13 @@ import subprocess
 import sys
 import tempfile
 import warnings
+
+if __name__ == "__main__":
+    # the warm runs in this process run as `cosim run` does: OpenBLAS on one
+    # thread unless the user chose a count (cosim.cli.one_blas_thread_by_default),
+    # set before numpy loads
+    from cosim.cli import one_blas_thread_by_default
+    one_blas_thread_by_default()
 
 import cosim
 
