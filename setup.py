@@ -13,31 +13,43 @@ from setuptools.command.build_py import build_py
 
 #: the face every side's compiled model-exchange face derives from (cimported)
 FACE = "src/cosim/core/_stacked.pxd"
+#: the C face a side's compiled step offers the schemes' compiled loops (cimported)
+SIDE_FACE = "src/cosim/core/_side_face.pxd"
 
 KERNELS = [
     # the multibody step (the integrator) extends the tree's model (its .pxd)
     Extension("cosim.sides._multibody_tree", ["src/cosim/sides/_multibody_tree.pyx"]),
     Extension("cosim.sides._multibody_step", ["src/cosim/sides/_multibody_step.pyx"],
+              depends=[SIDE_FACE, "src/cosim/sides/_multibody_tree.pxd"]),
+    # the tree's model-exchange face, for the monolithic reference
+    Extension("cosim.sides._tree_face", ["src/cosim/sides/_tree_face.pyx"],
               depends=[FACE, "src/cosim/sides/_multibody_tree.pxd"]),
     # the implicit scheme's iterations, which call the sides' kernels through
     # the C face they fill in (cosim/core/_side_face.pxd, declarations only)
-    Extension("cosim.core.schemes._implicit_step", ["src/cosim/core/schemes/_implicit_step.pyx"]),
+    Extension("cosim.core.schemes._implicit_step", ["src/cosim/core/schemes/_implicit_step.pyx"],
+              depends=[SIDE_FACE]),
     # the structure's step (its Python face) extends the contact phases, which
     # extend the modal response, which calls the rank-one update (their .pxd)
     Extension("cosim.sides._rank_one", ["src/cosim/sides/_rank_one.pyx"]),
     Extension("cosim.sides._structure_modes", ["src/cosim/sides/_structure_modes.pyx"],
               depends=["src/cosim/sides/_rank_one.pxd"]),
     Extension("cosim.sides._structure_contacts", ["src/cosim/sides/_structure_contacts.pyx"],
-              depends=["src/cosim/sides/_structure_modes.pxd"]),
+              depends=["src/cosim/sides/_structure_modes.pxd", SIDE_FACE]),
     Extension("cosim.sides._structure_step", ["src/cosim/sides/_structure_step.pyx"],
               depends=["src/cosim/sides/_structure_modes.pxd",
-                       "src/cosim/sides/_structure_contacts.pxd"]),
+                       "src/cosim/sides/_structure_contacts.pxd", SIDE_FACE]),
     # the compiled loop, and its following contacts (which call the structure's
     # face through cosim/core/_stacked.pxd, declarations only)
     Extension("cosim.core.schemes._driver", ["src/cosim/core/schemes/_driver.pyx"],
-              depends=["src/cosim/core/schemes/_follow.pxd"]),
-    # the compiled loop's samples in blocks (calls the loop's steps)
-    Extension("cosim.core.schemes._driver_block", ["src/cosim/core/schemes/_driver_block.pyx"]),
+              depends=["src/cosim/core/schemes/_follow.pxd", "src/cosim/core/schemes/_driver.pxd",
+                       "src/cosim/core/schemes/_driver_faces.pxd", SIDE_FACE]),
+    # the sides as the compiled loop holds them, stepped through their C faces
+    Extension("cosim.core.schemes._driver_faces", ["src/cosim/core/schemes/_driver_faces.pyx"],
+              depends=["src/cosim/core/schemes/_driver_faces.pxd", SIDE_FACE]),
+    # the compiled loop's samples in blocks (calls the loop's steps in C)
+    Extension("cosim.core.schemes._driver_block", ["src/cosim/core/schemes/_driver_block.pyx"],
+              depends=["src/cosim/core/schemes/_driver.pxd",
+                       "src/cosim/core/schemes/_driver_faces.pxd", SIDE_FACE]),
     Extension("cosim.core.schemes._follow", ["src/cosim/core/schemes/_follow.pyx"],
               depends=[FACE]),
     # the monolithic reference's right-hand side, and the structure's face it calls

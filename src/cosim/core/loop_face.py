@@ -16,11 +16,22 @@ mixin names, for the loop, what it may ask and set:
 - :attr:`switch_handler`: what the kernel calls at each located switch;
 - :attr:`closed_end`: per hosted contact, closed (1) or open (0) at the end
   of the last step (the array the kernel writes in place), or None for a
-  side that keeps no such record (a multibody side).
+  side that keeps no such record (a multibody side);
+- :meth:`loop_kernel`: the kernel whose C face (``side_face()``, see
+  :mod:`cosim.core._side_face`) may take the side's steps with no Python
+  call, or None.  A class whose kernel mirrors its Python step says so
+  (``loop_face_faithful = True`` in its body); the methods the face stands
+  in for (:data:`FACE_MIRRORS`) are noted then, and a side where any was
+  replaced since (a subclass, an instance's own, a test's patch) offers no
+  face: the loop takes its Python methods.
 """
 from __future__ import annotations
 
-__all__ = ["LoopFace"]
+__all__ = ["LoopFace", "FACE_MIRRORS"]
+
+#: the side's methods that its C face stands in for in the compiled loop
+FACE_MIRRORS = ("outputs", "_step_impl", "_compiled_step", "compiled_step", "reference_step",
+                "begin_step")
 
 
 class LoopFace:
@@ -34,8 +45,30 @@ class LoopFace:
     #: no switch to hear of unless a side locates them
     _on_switch = None
 
+    #: the methods FACE_MIRRORS names, as the class that declared
+    #: ``loop_face_faithful`` defined them; None where no class did
+    _face_methods = None
+
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        if cls.__dict__.get("loop_face_faithful", False):
+            cls._face_methods = {n: getattr(cls, n, None) for n in FACE_MIRRORS}
+
     def _compiled_step(self, inputs):
         return None
+
+    def loop_kernel(self, inputs):
+        """The compiled kernel whose C face may take this side's steps in the
+        compiled loop with no Python call (asked again when its face's
+        ``generation`` changes), or None: the side's class does not declare
+        its kernel faithful, or one of :data:`FACE_MIRRORS` was replaced, or
+        :meth:`compiled_step` gives none for ``inputs``."""
+        known = self._face_methods
+        own = getattr(self, "__dict__", {})
+        if known is None or any(n in own for n in FACE_MIRRORS) or any(
+                getattr(type(self), n, None) is not f for n, f in known.items()):
+            return None
+        return self.compiled_step(inputs)
 
     def compiled_step(self, inputs):
         """The compiled kernel that takes the step under ``inputs`` (a

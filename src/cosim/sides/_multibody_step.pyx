@@ -20,8 +20,9 @@ velocities (a rigid impact).
 The tree's model that the step integrates (kinematics, mass matrix and
 forces, laws, right-hand side, energy) is the base class
 :class:`cosim.sides._multibody_tree.TreeDynamics`; here are the integrator
-(RK4 with switches located in the sub-steps), the sampled path, the C face
-and the model-exchange face of the monolithic reference.
+(RK4 with switches located in the sub-steps), the sampled path and the C face;
+the model-exchange face of the monolithic reference is
+:mod:`cosim.sides._tree_face`.
 
 State layout (``y``, length ``2 n + 4 n_c + 2 + 6 n_p``)::
 
@@ -35,12 +36,9 @@ from libc.string cimport memcpy
 from cpython.exc cimport PyErr_CheckSignals
 from cpython.pycapsule cimport PyCapsule_New
 
-from cosim.core._side_face cimport COSIM_SIDE_FACE, SideFace
+from cosim.core._side_face cimport COSIM_SIDE_FACE, SideFace, free_log, log_switch
 
 import numpy as np
-
-# a C struct only: nothing of the core is imported at run time
-from cosim.core._stacked cimport FaceTable
 
 # the tree's model (kinematics, laws, right-hand side, energy), which the
 # step below integrates, and the kinds and limits both use
@@ -132,6 +130,8 @@ cdef class MultibodyStep(TreeDynamics):
     cdef double cs_max_step, cs_free_step
     cdef double[::1] cs_y
     cdef SideFace cface
+    # the compiled loop's step is under way: switches go to the face's log
+    cdef bint cs_logging
 
     def __init__(self, *args, **kwargs):
         TreeDynamics.__init__(self, *args, **kwargs)
@@ -140,6 +140,9 @@ cdef class MultibodyStep(TreeDynamics):
         self.cface.nx, self.cface.naux, self.cface.nports = 2 * self.n, 4 * self.nc + 2, self.np_
         self.cs_max_step, self.cs_free_step = 0.0, 0.0
         self.cs_y = np.zeros(self.ny)
+
+    def __dealloc__(self):
+        free_log(&self.cface.log)
 
     def step(self, double t, double h, x, aux, inputs, embedded, double max_step,
              double free_step, on_switch, peak=None):
@@ -183,7 +186,88 @@ cdef class MultibodyStep(TreeDynamics):
         self.cface.side = <void*> self
         self.cface.step = _face_step
         self.cface.outputs = _face_outputs
+        self.cface.loop = _face_loop
+        self.cface.motion = _face_motion
         return PyCapsule_New(&self.cface, COSIM_SIDE_FACE, NULL)
+
+    def retire(self):
+        """The host no longer steps through this kernel: the face's
+        ``generation`` changes, so that a loop holding it asks the host again."""
+        self.cface.generation += 1
+
+    cdef int side_loop(self, double t, double h, const double* u, int rows, double* x,
+                       double* aux, double* pm, double* peak) except -1:
+        """:meth:`step` under the input polynomial ``u`` ((rows, n_p, 2)
+        row-major, in ``(time - t) / h``), the partners' motion as last set
+        (:meth:`set_step`, ``side_motion``); the located switches go to the
+        face's log.  Returns 1, touching nothing, where the input is beyond
+        the kernel or :meth:`configure_side` was not called."""
+        cdef int j, p, i, nx = self.cface.nx, na = self.cface.naux
+        cdef double* y = &self.cs_y[0]
+        if rows > MAX_COEF or self.cs_max_step <= 0.0:
+            return 1
+        self.t0, self.h = t, h
+        self.u_len = rows
+        self.u_t0, self.u_h = t, h
+        for j in range(rows):
+            for p in range(self.np_):
+                self.u_coef[j, p, 0] = u[(j * self.np_ + p) * 2]
+                self.u_coef[j, p, 1] = u[(j * self.np_ + p) * 2 + 1]
+        for i in range(self.nc):
+            aux[4 * i + 2] = 0.0                # first moments are per step
+        for i in range(nx):
+            y[i] = x[i]
+        for i in range(na):
+            y[nx + i] = aux[i]
+        for i in range(nx + na, self.ny):
+            y[i] = 0.0
+        self.cface.log.n = 0
+        self.cs_logging = True
+        try:
+            self._integrate(t, y, t + h, self.cs_max_step, self.cs_free_step, True, None,
+                            peak if self.nc > 0 else NULL)
+        finally:
+            self.cs_logging = False
+        for i in range(nx):
+            x[i] = y[i]
+        for i in range(na):
+            aux[i] = y[nx + i]
+        for i in range(6 * self.np_):
+            pm[i] = y[nx + na + i]
+        return 0
+
+    cdef int side_motion(self, int k, double t0, double h, const double* c,
+                         int n) noexcept:
+        """Contact ``k``'s partner motion, as :meth:`set_step` loads it from
+        its ``EmbeddedContact``; 1 where it is beyond the kernel."""
+        cdef int i
+        cdef double re, im
+        if n > MAX_COEF or not 0 <= k < self.nc:
+            return 1
+        self.m_len[k] = n
+        self.m_t0[k] = t0
+        self.m_h[k] = h
+        self.m_still[k] = 1
+        for i in range(n):
+            re, im = c[2 * i], c[2 * i + 1]
+            self.m_re[k, i] = re
+            self.m_im[k, i] = im
+            if i > 0:
+                if re != 0 or im != 0:
+                    self.m_still[k] = 0
+                self.dm_re[k, i - 1] = re * i / h
+                self.dm_im[k, i - 1] = im * i / h
+        return 0
+
+    cdef int _log_flips(self, double t, const double* s_old, const double* s_new) except -1:
+        """:meth:`_notify` for the compiled loop: each flipped switch into the
+        face's log."""
+        cdef int j
+        for j in range(self.nc):
+            if (s_old[j] > 0.0) != (s_new[j] > 0.0):
+                self.n_switches += 1
+                log_switch(&self.cface.log, t, j, s_new[j] > 0.0)
+        return 0
 
     cdef int side_step(self, double t, double h, const double* u, int rows, double* x,
                        double* aux, double* pm) except -1:
@@ -410,6 +494,8 @@ cdef class MultibodyStep(TreeDynamics):
                             self._notify(on_switch, t, y, k1, s0, snew)
                             if pk != NULL:
                                 self._watched()     # after a jump of the rates
+                        elif self.cs_logging:
+                            self._log_flips(t, s0, snew)
                         memcpy(s0, snew, nc * sizeof(double))
                         continue
                     if pk != NULL:
@@ -418,6 +504,8 @@ cdef class MultibodyStep(TreeDynamics):
                         self._notify(on_switch, te, y1, k1n, s0, s1)
                         if pk != NULL:
                             self._watched()
+                    elif self.cs_logging:
+                        self._log_flips(te, s0, s1)
                 elif pk != NULL:
                     self._watch(pk, h)
                 memcpy(s0, s1, nc * sizeof(double))
@@ -431,6 +519,7 @@ cdef class MultibodyStep(TreeDynamics):
     def face(self):
         """The tree's compiled model-exchange face (:class:`TreeFace`), for the
         monolithic reference's compiled right-hand side."""
+        from cosim.sides._tree_face import TreeFace
         return TreeFace(self)
 
     def rhs(self, double t, y):
@@ -637,102 +726,6 @@ cdef class MultibodyStep(TreeDynamics):
                 P[j, p, 0], P[j, p, 1] = self.px_re[n + p], self.px_im[n + p]
                 P[j, npt + p, 0], P[j, npt + p, 1] = self.pv_re[n + p], self.pv_im[n + p]
 
-cdef int _tree_outputs(void* obj, const double* x, double* pos, double* vel) except -1:
-    return (<TreeFace>obj).outputs(x, pos, vel)
-
-
-cdef int _tree_derivatives(void* obj, double t, const double* x, const double* u,
-                           double* dx) except -1:
-    return (<TreeFace>obj).derivatives(t, x, u, dx)
-
-
-cdef int _tree_ledger(void* obj, double t, const double* x, double* rates) except -1:
-    return (<TreeFace>obj).ledger_rates(t, x, rates)
-
-
-cdef int _tree_follow(void* obj, int port, double px, double py, const double* x,
-                      double* out) except -1:
-    raise TypeError("a tree's ports do not follow a point")
-
-
-cdef class TreeFace:
-    """The model-exchange face of a tree (``cosim.core._stacked``'s
-    ``FaceTable``): :meth:`MultibodySubsystem.derivatives`, ``outputs`` and
-    ``ledger_rates`` on the kernel's kinematics, mass matrix and joint
-    effects, for state ``x = [q, dq]``.  It shares the kernel's workspace (the
-    monolithic reference does not step the tree)."""
-
-    cdef MultibodyStep k
-    cdef double[::1] rates
-    cdef FaceTable tab
-
-    def __init__(self, MultibodyStep kernel):
-        self.k = kernel
-        self.rates = np.zeros(2)
-        self.tab.obj = <void*>self
-        self.tab.n_states = 2 * kernel.n
-        self.tab.n_ports = kernel.np_
-        self.tab.can_follow = 0
-        self.tab.outputs = _tree_outputs
-        self.tab.derivatives = _tree_derivatives
-        self.tab.ledger_rates = _tree_ledger
-        self.tab.follow = _tree_follow
-
-    def table(self):
-        """The face's ``FaceTable`` in a capsule named ``cosim.FaceTable``."""
-        return PyCapsule_New(&self.tab, b"cosim.FaceTable", NULL)
-
-    @property
-    def can_follow(self):
-        return False
-    cdef int outputs(self, const double* x, double* pos, double* vel) except -1:
-        cdef MultibodyStep k = self.k
-        cdef int p, n = k.n
-        k._frames(x, x + n)
-        for p in range(k.np_):
-            k._point(n + p, k.port_body[p], k.pl_re[p], k.pl_im[p], x + n, False)
-            pos[2 * p], pos[2 * p + 1] = k.px_re[n + p], k.px_im[n + p]
-            vel[2 * p], vel[2 * p + 1] = k.pv_re[n + p], k.pv_im[n + p]
-        return 0
-
-    cdef int derivatives(self, double t, const double* x, const double* u,
-                         double* dx) except -1:
-        """``[dq, M^-1 (Re(J^H u) - F + effects)]`` for port forces ``u``."""
-        cdef MultibodyStep k = self.k
-        cdef int i, p, n = k.n, npt = k.np_
-        cdef double s
-        cdef const double* dq = x + n
-        k._frames(x, dq)
-        for i in range(n):
-            k._point(i, i, k.com_re[i], k.com_im[i], dq, True)
-        for p in range(npt):
-            k._point(n + p, k.port_body[p], k.pl_re[p], k.pl_im[p], dq, True)
-        k._mass_and_forces()
-        if k.nd or k.has_springs or k.has_dampers:
-            k._effects(t, x, dq, &self.rates[0])
-            for i in range(n):
-                k.F[i] = k.F[i] - k.tau[i]
-        for i in range(n):
-            s = 0.0
-            for p in range(npt):
-                s += k.J_re[n + p, i] * u[2 * p] + k.J_im[n + p, i] * u[2 * p + 1]
-            k.b[i] = s - k.F[i]
-        for i in range(n):
-            dx[i] = dq[i]
-        if k._solve(dx + n) != 0:
-            k._fail(t)
-        return 0
-
-    cdef int ledger_rates(self, double t, const double* x, double* rates) except -1:
-        """Power dissipated by the joint dampers and supplied by the drives [W]."""
-        cdef MultibodyStep k = self.k
-        if k.nd or k.has_springs or k.has_dampers:
-            k._effects(t, x, x + k.n, rates)
-        else:
-            rates[0] = 0.0
-            rates[1] = 0.0
-        return 0
-
 # ------------------------------------------------- the C face's functions
 cdef int _face_step(void* side, double t, double h, const double* u, int rows, double* x,
                     double* aux, double* pm) except -1:
@@ -741,3 +734,13 @@ cdef int _face_step(void* side, double t, double h, const double* u, int rows, d
 
 cdef void _face_outputs(void* side, const double* x, double* pos, double* vel) noexcept:
     (<MultibodyStep> side).side_outputs(x, pos, vel)
+
+
+cdef int _face_loop(void* side, double t, double h, const double* u, int rows, double* x,
+                    double* aux, double* pm, double* peak, signed char* closed) except -1:
+    return (<MultibodyStep> side).side_loop(t, h, u, rows, x, aux, pm, peak)
+
+
+cdef int _face_motion(void* side, int slot, double t0, double h, const double* c,
+                      int n) noexcept:
+    return (<MultibodyStep> side).side_motion(slot, t0, h, c, n)

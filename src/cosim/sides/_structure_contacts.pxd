@@ -2,6 +2,7 @@
 """Declarations of :mod:`cosim.sides._structure_contacts`: the hosted
 springs' phases of the structure's compiled step, which
 :class:`cosim.sides._structure_step.StructureStep` extends with its Python face."""
+from cosim.core._side_face cimport SwitchLog
 from cosim.sides._structure_modes cimport ModalResponse
 
 
@@ -22,3 +23,6 @@ cdef class ContactPhases(ModalResponse):
     cdef void _peak_interval(self, int k, double tc, double lo, double hi, double v_lo,
                              double d_hi, double v_hi, const double* P) noexcept nogil
     cdef void _raise_peaks(self, double[::1] peak) noexcept nogil
+    cdef int _advance(self, double[::1] x, double[::1] aux, double[:, ::1] pm,
+                      signed char[::1] closed, double[::1] peak, SwitchLog* log,
+                      double* at) except -1

@@ -12,11 +12,14 @@ steps is :class:`cosim.sides._structure_modes.ModalResponse`.
 from libc.math cimport pow, ceil, fabs, sqrt, INFINITY
 from libc.float cimport DBL_EPSILON
 
+from cosim.core._side_face cimport SwitchLog, free_log, log_switch
 from cosim.sides._structure_modes cimport DEG1, _reparam, ModalResponse
 
+cdef enum:
+    SEGMENTS = 10000
 
 #: segments (contact switches) one step may take before it is said to stall
-MAX_SEGMENTS = 10000
+MAX_SEGMENTS = SEGMENTS
 
 
 class StalledStep(RuntimeError):
@@ -331,6 +334,33 @@ cdef class ContactPhases(ModalResponse):
         contact's largest penetration over each segment (the reference's
         ``_segment_peaks``).  Returns the located switches
         ``[(time, contact, closed), ...]``."""
+        cdef int m = self.m, npt = self.np_, nc = self.nc, i, stalled
+        cdef double tc = self.t
+        cdef SwitchLog log
+        if x.shape[0] != 2 * m or aux.shape[0] != 4 * nc + 2 or pm.shape[0] != 3 \
+                or pm.shape[1] != 2 * npt or closed.shape[0] != nc or peak.shape[0] != nc:
+            raise ValueError(f"`x`, `aux`, `pm`, `closed` and `peak` must have {2 * m}, "
+                             f"{4 * nc + 2}, (3, {2 * npt}), {nc} and {nc} entries, got "
+                             f"{x.shape[0]}, {aux.shape[0]}, ({pm.shape[0]}, {pm.shape[1]}), "
+                             f"{closed.shape[0]} and {peak.shape[0]}")
+        log.n, log.cap, log.time, log.slot, log.on = 0, 0, NULL, NULL, NULL
+        try:
+            stalled = self._advance(x, aux, pm, closed, peak, &log, &tc)
+            out = [(log.time[i], log.slot[i], log.on[i] != 0) for i in range(log.n)]
+        finally:
+            free_log(&log)
+        if stalled:
+            raise StalledStep(f"the compiled structure step made {MAX_SEGMENTS} segments "
+                              f"in the step from t = {self.t!r} s without reaching its "
+                              f"end (at t = {tc!r} s)")
+        return out
+
+    cdef int _advance(self, double[::1] x, double[::1] aux, double[:, ::1] pm,
+                      signed char[::1] closed, double[::1] peak, SwitchLog* log,
+                      double* at) except -1:
+        """:meth:`step`, its switches appended to ``log``; returns 1 where the
+        step stalled (after ``SEGMENTS`` segments, at ``at[0]``; ``x`` is
+        then untouched), else 0."""
         cdef int m = self.m, npt = self.np_, nc = self.nc, j, k, s, p
         cdef long i, n, row
         cdef double t1 = self.t + self.h, tc = self.t, eps, L, tau, tol, best, hi, lo0, hi0
@@ -340,13 +370,6 @@ cdef class ContactPhases(ModalResponse):
         cdef const double* P
         cdef long[64] who
         cdef int n_who
-        if x.shape[0] != 2 * m or aux.shape[0] != 4 * nc + 2 or pm.shape[0] != 3 \
-                or pm.shape[1] != 2 * npt or closed.shape[0] != nc or peak.shape[0] != nc:
-            raise ValueError(f"`x`, `aux`, `pm`, `closed` and `peak` must have {2 * m}, "
-                             f"{4 * nc + 2}, (3, {2 * npt}), {nc} and {nc} entries, got "
-                             f"{x.shape[0]}, {aux.shape[0]}, ({pm.shape[0]}, {pm.shape[1]}), "
-                             f"{closed.shape[0]} and {peak.shape[0]}")
-        log = []
         for k in range(nc):
             aux[4 * k + 2] = 0.0            # first moments are per step
         for i in range(m):
@@ -356,10 +379,9 @@ cdef class ContactPhases(ModalResponse):
         cdef long segments = 0
         while t1 - tc > eps:
             segments += 1
-            if segments > MAX_SEGMENTS:
-                raise StalledStep(f"the compiled structure step made {MAX_SEGMENTS} segments "
-                                  f"in the step from t = {self.t!r} s without reaching its "
-                                  f"end (at t = {tc!r} s)")
+            if segments > SEGMENTS:
+                at[0] = tc
+                return 1
             L = t1 - tc
             # the contacts at the segment's start: R q, R dq
             for p in range(npt):
@@ -379,7 +401,7 @@ cdef class ContactPhases(ModalResponse):
                 self.dd0[k] = dd
                 self.active[k] = d > 0 or (d == 0 and dd > 0)
                 if d == 0 and dd > 0:
-                    log.append((tc, k, True))
+                    log_switch(log, tc, k, True)
                 if self.active[k]:
                     mask |= (<long long> 1) << k
                     any_active = True
@@ -388,7 +410,7 @@ cdef class ContactPhases(ModalResponse):
                 for k in range(nc):
                     if self.active[k] and closed[k] == 0 and self.d0[k] != 0 \
                             and self.dd0[k] > 0:
-                        log.append((tc, k, True))
+                        log_switch(log, tc, k, True)
             for k in range(nc):
                 closed[k] = self.active[k]
             s = self._basis(mask)
@@ -473,12 +495,12 @@ cdef class ContactPhases(ModalResponse):
             self._end_state(s, best)
             tc += best
             for j in range(n_who):
-                log.append((tc, who[j], not self.active[who[j]]))
+                log_switch(log, tc, who[j], not self.active[who[j]])
                 closed[who[j]] = not self.active[who[j]]
         for i in range(m):
             x[i] = self.q[i]
             x[m + i] = self.dq[i]
-        return log
+        return 0
 
     cdef void _raise_peaks(self, double[::1] peak) noexcept nogil:
         """``peak`` of each closed contact raised to its segment's largest

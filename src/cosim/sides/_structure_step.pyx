@@ -43,7 +43,7 @@ face its host calls (Python, and the C face of :mod:`cosim.core._side_face`).
 """
 from cpython.pycapsule cimport PyCapsule_New
 
-from cosim.core._side_face cimport COSIM_SIDE_FACE, SideFace
+from cosim.core._side_face cimport COSIM_SIDE_FACE, SideFace, free_log
 from cosim.sides._structure_contacts cimport ContactPhases
 from cosim.sides._structure_modes cimport DEG1, MAX_BASES, MAX_CONTACTS
 
@@ -85,8 +85,12 @@ cdef class StructureStep(ContactPhases):
         (a tuple of bools) added; ``Psi`` None for the structure's own modes.
     """
 
-    # the C face (cosim.core._side_face)
+    # the C face (cosim.core._side_face), and the compiled loop's copies of
+    # the host's state that a step it declines leaves untouched
     cdef SideFace face
+    cdef double[::1] cs_x, cs_aux, cs_peak
+    cdef double[:, ::1] cs_pm
+    cdef signed char[::1] cs_closed
 
     def __init__(self, omega, R, ref, direction, g_modal, contacts, basis):
         cdef int m = len(omega)
@@ -163,6 +167,12 @@ cdef class StructureStep(ContactPhases):
         # the C face: a structure that hosts no contact, stepped exactly; its
         # quadratures are not touched
         self.face.nx, self.face.naux, self.face.nports = 2 * m, 0, self.np_
+        self.cs_x, self.cs_aux, self.cs_peak = np.zeros(2 * m), np.zeros(4 * nc + 2), np.zeros(nc)
+        self.cs_pm = np.zeros((3, 2 * max(self.np_, 1)))
+        self.cs_closed = np.zeros(nc, dtype=np.int8)
+
+    def __dealloc__(self):
+        free_log(&self.face.log)
 
     # --------------------------------------------------------------- loading
     def forget_bases(self):
@@ -239,7 +249,86 @@ cdef class StructureStep(ContactPhases):
         self.face.side = <void*> self
         self.face.step = _face_step
         self.face.outputs = _face_outputs
+        self.face.loop = _face_loop
+        self.face.motion = _face_motion
         return PyCapsule_New(&self.face, COSIM_SIDE_FACE, NULL)
+
+    def retire(self):
+        """The host no longer steps through this kernel: the face's
+        ``generation`` changes, so that a loop holding it asks the host again."""
+        self.face.generation += 1
+
+    cdef int side_loop(self, double t, double h, const double* u, int rows, double* x,
+                       double* aux, double* pm, double* peak, signed char* closed) except -1:
+        """The host's step as its ``_step_impl`` takes it through :meth:`set_step`
+        (the partners' motion as last set) and :meth:`step` or :meth:`step_free`,
+        on copies of its state: the switches go to the face's log.  Returns
+        1, touching nothing, where the load is beyond the kernel or the step
+        stalled (the host's own step then takes it)."""
+        cdef int i, nc = self.nc, m = self.m, npt = self.np_
+        cdef double at
+        if rows > DEG1 - 1:
+            return 1
+        self._load(t, h, u, rows)
+        self.face.log.n = 0
+        if not nc:
+            for i in range(6 * npt):
+                pm[i] = 0.0
+            self._free(x, pm)
+            return 0
+        for i in range(2 * m):
+            self.cs_x[i] = x[i]
+        for i in range(4 * nc + 2):
+            self.cs_aux[i] = aux[i]
+        for i in range(nc):
+            self.cs_peak[i] = peak[i]
+            self.cs_closed[i] = closed[i]
+        for i in range(6 * npt):
+            self.cs_pm[i // (2 * npt), i % (2 * npt)] = 0.0
+        if self._advance(self.cs_x, self.cs_aux, self.cs_pm, self.cs_closed, self.cs_peak,
+                         &self.face.log, &at):
+            self.face.log.n = 0
+            return 1
+        for i in range(2 * m):
+            x[i] = self.cs_x[i]
+        for i in range(4 * nc + 2):
+            aux[i] = self.cs_aux[i]
+        for i in range(nc):
+            peak[i] = self.cs_peak[i]
+            closed[i] = self.cs_closed[i]
+        for i in range(6 * npt):
+            pm[i] = self.cs_pm[i // (2 * npt), i % (2 * npt)]
+        return 0
+
+    cdef int side_motion(self, int k, double t0, double h, const double* c,
+                         int n) noexcept:
+        """Contact ``k``'s partner motion, as :meth:`set_step` loads it from
+        an ``EmbeddedContact`` (its ``velocity_coeffs`` with numpy's complex
+        arithmetic); 1 where it is beyond the kernel."""
+        cdef int i
+        cdef double re, im, pr, pi, rat, scl
+        if n > DEG1 or not 0 <= k < self.nc:
+            return 1
+        self.m_t0[k], self.m_h[k] = t0, h
+        self.m_len[k] = n
+        for i in range(n):
+            self.m_re[k, i] = c[2 * i]
+            self.m_im[k, i] = c[2 * i + 1]
+        if n < 2:
+            self.dm_len[k] = 1
+            self.dm_re[k, 0] = 0.0
+            self.dm_im[k, 0] = 0.0
+            return 0
+        self.dm_len[k] = n - 1
+        rat = 0.0 / h
+        scl = 1.0 / (h + 0.0 * rat)
+        for i in range(1, n):
+            re, im = c[2 * i], c[2 * i + 1]
+            pr = re * i - im * 0.0              # (c * (i + 0j)) / (h + 0j) as numpy
+            pi = re * 0.0 + im * i
+            self.dm_re[k, i - 1] = (pr + pi * rat) * scl
+            self.dm_im[k, i - 1] = (pi - pr * rat) * scl
+        return 0
 
     cdef int side_step(self, double t, double h, const double* u, int rows, double* x,
                        double* aux, double* pm) except -1:
@@ -291,3 +380,13 @@ cdef int _face_step(void* side, double t, double h, const double* u, int rows, d
 
 cdef void _face_outputs(void* side, const double* x, double* pos, double* vel) noexcept:
     (<StructureStep> side).side_outputs(x, pos, vel)
+
+
+cdef int _face_loop(void* side, double t, double h, const double* u, int rows, double* x,
+                    double* aux, double* pm, double* peak, signed char* closed) except -1:
+    return (<StructureStep> side).side_loop(t, h, u, rows, x, aux, pm, peak, closed)
+
+
+cdef int _face_motion(void* side, int slot, double t0, double h, const double* c,
+                      int n) noexcept:
+    return (<StructureStep> side).side_motion(slot, t0, h, c, n)

@@ -34,7 +34,7 @@ from cosim.core.ode import RK4
 from cosim.sides.fem_closed_form import ClosedFormContacts
 from cosim.sides.fem_energy import StructureEnergy
 from cosim.sides.fem_ports import StructurePorts
-from cosim.sides.kernel import compiled_module
+from cosim.sides.kernel import compiled_module, retired
 from cosim.core.subsystem import EmbeddedContact, StepInput, Subsystem
 
 __all__ = ["StructureSubsystem"]
@@ -74,6 +74,9 @@ class StructureSubsystem(StructurePorts, ClosedFormContacts, StructureEnergy, Lo
     integrator_options : dict
         Options of that integrator (``beta``, ``gamma``, ``alpha``, ``rho_inf``).
     """
+
+    #: its compiled kernel's C face mirrors its Python step and outputs (LoopFace)
+    loop_face_faithful = True
 
     capabilities = frozenset({"rigid_impacts", "moving_ports", "modes", "compiled_loop",
                               "compiled_follow"})
@@ -227,7 +230,7 @@ class StructureSubsystem(StructurePorts, ClosedFormContacts, StructureEnergy, Lo
         self._embedded.append(e)
         self.aux = np.zeros(4 * len(self._embedded) + 2)
         self._closed_end = np.full(len(self._embedded), -1, np.int8)
-        self._kernel = None
+        self._kernel = retired(self._kernel)
         self._closed_ok = None
         self.peak = np.zeros(len(self._embedded))
         return e

@@ -17,7 +17,7 @@ import importlib
 import logging
 import os
 
-__all__ = ["kernel_choice", "compiled_module", "KERNEL_ENV"]
+__all__ = ["kernel_choice", "compiled_module", "retired", "KERNEL_ENV"]
 
 logger = logging.getLogger(__name__)
 
@@ -55,3 +55,12 @@ def compiled_module(name: str):
             logger.warning("the compiled kernel `cosim.sides.%s` is not built (%s): using the numpy "
                            "reference, which is slower; reinstall with `pip install .`", name, exc)
         return None
+
+
+def retired(kernel):
+    """None, for a side that drops its compiled ``kernel`` (None or False
+    too): a kernel is told (``retire()``), so that the compiled loop that
+    steps the side through the kernel's C face asks the side again."""
+    if kernel:
+        kernel.retire()
+    return None

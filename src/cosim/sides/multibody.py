@@ -15,7 +15,7 @@ from multibody import TreeModel
 from cosim.errors import SimulationError
 from cosim.core.loop_face import LoopFace
 from cosim.core.ode import INTEGRATORS, RK4, TimeStepper
-from cosim.sides.kernel import compiled_module
+from cosim.sides.kernel import compiled_module, retired
 from cosim.sides.multibody_kernel import (CompiledFace, SampledSteps, TreeFaceMixin,
                                           kernel_effects, kernel_law)
 from cosim.core.subsystem import (DISSIPATED, IMPULSE, MOMENT, QUADRATURES, WORK, EmbeddedContact,
@@ -59,6 +59,9 @@ class MultibodySubsystem(SampledSteps, TreeFaceMixin, CompiledFace, LoopFace, Su
     ``peak`` holds each embedded contact's largest penetration, located on
     the integrator's sub-steps (:func:`cosim.core.ode.substep_peaks`).
     """
+
+    #: its compiled kernel's C face mirrors its Python step and outputs (LoopFace)
+    loop_face_faithful = True
 
     capabilities = frozenset({"rigid_impacts", "impact_watch", "connections", "skeleton",
                               "sampled_steps", "compiled_loop"})
@@ -117,7 +120,7 @@ class MultibodySubsystem(SampledSteps, TreeFaceMixin, CompiledFace, LoopFace, Su
         self._embedded.append(e)
         self.aux = np.zeros(4 * len(self._embedded) + 2)
         self.peak = np.zeros(len(self._embedded))
-        self._kernel = None
+        self._kernel = retired(self._kernel)
         return e
 
     #: embedded slot -> cosim.core.connection_modes.EmbeddedConnection (grasp, friction)
@@ -128,7 +131,7 @@ class MultibodySubsystem(SampledSteps, TreeFaceMixin, CompiledFace, LoopFace, Su
         :class:`cosim.core.connection_modes.EmbeddedConnection`: its mode's normal and
         tangential forces, friction, and a grasp on the located touch)."""
         self._connections = {**self._connections, int(slot): connection}
-        self._kernel = None
+        self._kernel = retired(self._kernel)
 
     def _connection_switch(self, t, j, on, y):
         """A located switch of connection ``j``: grasp on touch.  Returns the

@@ -9,6 +9,7 @@ import numpy as np
 
 from cosim.core.subsystem import SubsystemState
 from cosim.sides.fem import StructureSubsystem
+from cosim.sides.kernel import retired
 from cosim.sides.plane_circle import CircleHosting
 
 __all__ = ["PlaneSubsystem"]
@@ -19,6 +20,9 @@ class PlaneSubsystem(CircleHosting, StructureSubsystem):
     (same parameters as :class:`~cosim.sides.fem.StructureSubsystem`); its
     ports slide along its boundary (:meth:`slide_port`), and it hosts circle
     contacts (:mod:`cosim.sides.plane_circle`)."""
+
+    #: its compiled kernel's C face mirrors its Python step and outputs (LoopFace)
+    loop_face_faithful = True
 
     #: its ports slide in Python (:meth:`slide_port`), never by the compiled face
     #: of a line structure
@@ -152,7 +156,7 @@ class PlaneSubsystem(CircleHosting, StructureSubsystem):
         next step that it takes)."""
         self._bases = {}
         if self._kernel:
-            self._kernel = None
+            self._kernel = retired(self._kernel)
 
     def get_state(self):
         """As the structure's, with each following contact's corrected

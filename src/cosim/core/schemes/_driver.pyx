@@ -16,10 +16,14 @@ is decided once per run by :func:`cosim.core.schemes.driver.refusal`; the
 Python loop (:meth:`cosim.core.schemes.base.CoSimulationScheme.run`) stays
 the reference it is tested against.
 
-The sides are reached duck-typed through their compiled kernels
-(``cosim.sides._multibody_step``, ``cosim.sides._structure_step``), so that
-``cosim.core`` imports nothing of ``cosim.sides``.  Every formula below is
-the Python loop's, written in the same order of operations.
+The sides are stepped through the C faces of their compiled kernels
+(:mod:`cosim.core._side_face`, held by
+:class:`cosim.core.schemes._driver_faces.Sides`), so that a macro step calls
+no Python where every side offers one; a side without a face, or one that
+declines a step, takes its Python step there (duck-typed through its
+kernel's Python methods), and ``cosim.core`` imports nothing of
+``cosim.sides``.  Every formula below is the Python loop's, written in the
+same order of operations.
 """
 import importlib
 
@@ -28,6 +32,9 @@ from libc.math cimport isfinite, isnan, NAN
 from libc.string cimport memcpy
 
 from cosim.core.subsystem import StepInput
+from cosim.core._side_face cimport SwitchLog
+from cosim.core.schemes._driver_faces cimport Sides
+from cosim.core.schemes._driver_faces import Sides
 # declarations only: _follow is imported for a run with a following contact
 from cosim.core.schemes._follow cimport FollowTable
 from cpython.pycapsule cimport PyCapsule_GetPointer
@@ -56,53 +63,6 @@ cdef class Driver:
     controlled : bool
         Whether the step is controlled (``contact_step`` given and rows exchanged).
     """
-
-    cdef object system, subs, laws, hosted_embs, step_input, scheme
-    cdef int nsub, nports, nc, nr, order, width_gs, n_order, n_hosted, n_coupler, n_exch
-    cdef bint gs, controlled, land
-    cdef double H, contact_step, horizon
-    # layout
-    cdef long[::1] kind, port0, nport, seq, rigid
-    cdef long[::1] row_a, row_b, sub_a, sub_b, coupler, exchanged
-    # the system's own arrays, read-only (a following contact may turn its normal)
-    cdef const double[:, ::1] normal
-    cdef const double[::1] offset
-    cdef long[::1] h_c, h_host, h_slot, h_partner, h_pport
-    cdef list Gc, rows_of, xs, auxs, peaks, closed, free_steps
-    # the following contacts (cosim.core.schemes._follow), None where there are none
-    cdef object fol
-    cdef FollowTable* ft
-    cdef double[::1] max_step, free_step
-    # state (StepState's fields)
-    cdef double[:, ::1] P, V, P0, V0, Pp, Vp
-    cdef bint has_prev, has_dd_prev, aimed
-    cdef double h_prev_step, h_next, h_prev
-    cdef double[:, ::1] hist
-    cdef int nhist
-    cdef public object f, d, dd
-    cdef double[::1] fv, dv, ddv, dd_prev, d1, dd1, f1
-    cdef public object stepped, work
-    cdef double[::1] stv, wv
-    # the books (StepBooks): per contact, impulse [N s], dissipated [J] and
-    # work [J] so far, the work as recorded (with the embedded contacts'),
-    # the subsystems' internal ledger, and the coupler rows' dissipation rates
-    cdef public object impulse, diss, work_total, work_rec
-    cdef double[::1] impv, dissv, wtv, p_prev
-    cdef public double internal_dissipated, internal_supplied
-    cdef public bint finite
-    cdef long[::1] e_c, e_host, e_slot, law_kind
-    cdef double[::1] law_k, law_c
-    cdef int n_emb
-    cdef bint coupler_diss
-    # scratch
-    cdef double[:, ::1] base, coeffs
-    cdef list saved
-    cdef double[::1] saved_t
-    cdef long[::1] saved_n
-    cdef double[::1] imp0
-    cdef long[::1] done
-    #: counters: accepted steps and rejected tries taken by the driver
-    cdef public long n_steps, n_rejected
 
     def __init__(self, scheme, system, order, state, d, dd, bint controlled):
         cdef int s, c, r, k, i
@@ -168,8 +128,9 @@ cdef class Driver:
             self.fol = importlib.import_module("cosim.core.schemes._follow").Followers(
                 system, self.Gc)
             self.ft = <FollowTable*>PyCapsule_GetPointer(self.fol.table(), b"cosim.FollowTable")
-        self.rows_of = [np.array(scheme.rows_of(system, s), dtype=np.int_)
-                        for s in range(self.nsub)]
+        rows_of = [list(scheme.rows_of(system, s)) for s in range(self.nsub)]
+        self.rows_idx = np.array([r for rs in rows_of for r in rs] or [0], dtype=np.int_)
+        self.rows_off = np.cumsum([0] + [len(rs) for rs in rows_of]).astype(np.int_)
         self.P = np.zeros((self.nports, 2))
         self.V = np.zeros((self.nports, 2))
         for s in range(self.nsub):
@@ -206,9 +167,16 @@ cdef class Driver:
         self.stv, self.wv = self.stepped, self.work
         self.base = np.zeros((3, self.nr))
         self.coeffs = np.zeros((3, self.nr))
-        self.saved = [None] * self.nsub
-        self.saved_t = np.zeros(self.nsub)
-        self.saved_n = np.zeros(self.nsub, dtype=np.int_)
+        self.sides = Sides(list(self.subs), self.max_step, self.free_step)
+        self.fresh = True
+        self.ubuf = np.zeros(3 * 2 * max(self.nports, 1))
+        self.pmbuf = np.zeros(6 * max(self.nports, 1))
+        self.gotv = np.zeros(max(self.nr, 1))
+        self.mot = np.zeros((max(self.n_hosted, 1), 8))
+        self.mot_n = np.zeros(max(self.n_hosted, 1), dtype=np.int_)
+        self.mot_t0 = np.zeros(max(self.n_hosted, 1))
+        self.mot_h = np.ones(max(self.n_hosted, 1))
+        self.force_py = np.zeros(self.nsub, dtype=np.int_)
         self.imp0 = np.zeros(max(self.n_hosted, 1))
         self.done = np.zeros(self.nsub, dtype=np.int_)
         self.n_steps = self.n_rejected = 0
@@ -223,6 +191,7 @@ cdef class Driver:
         self.work_total = np.zeros(self.nc)
         self.impv, self.dissv, self.wtv = self.impulse, self.diss, self.work_total
         self.work_rec = np.zeros(self.nc)
+        self.wrv = self.work_rec
         self.p_prev = np.zeros(self.nc)
         self.coupler_diss = False
         rates = system.dissipation_rates(self.f, self.d, self.dd)
@@ -302,11 +271,8 @@ cdef class Driver:
             if c < self.nc and self.dv[c] <= 0 and self.d1[c] > 0:
                 closed = True
         for k in range(self.n_hosted):
-            log = self.subs[self.h_host[k]].switch_log
-            if log:
-                for ts, j, on in log:
-                    if j == self.h_slot[k] and on:
-                        hosted = True
+            if self._hosted_touch(k, &tau):
+                hosted = True
         if not (closed or hosted):
             return None
         onset = self._onset(t, h)
@@ -315,18 +281,32 @@ cdef class Driver:
         tau = onset[0] + (LAND_MARGIN if hosted else -LAND_MARGIN) * self.contact_step
         return (tau, True) if tau > ONSET_WINDOW * self.contact_step else None
 
+    cdef bint _hosted_touch(self, int k, double* first) noexcept:
+        """Whether hosted contact ``k`` touched in its host's last step, and
+        when first (``first[0]``)."""
+        cdef SwitchLog* log = self.sides.log[self.h_host[k]]
+        cdef int i
+        cdef bint found = False
+        for i in range(log.n):
+            if log.slot[i] == self.h_slot[k] and log.on[i]:
+                if not found or log.time[i] < first[0]:
+                    first[0] = log.time[i]
+                found = True
+        return found
+
     cdef object _onset(self, double t, double h):
         """StepController.onset (its root finding, a rare path, in numpy)."""
         cdef int i, c, k
-        cdef double a
-        hosted = []
+        cdef double a, ts, first = 0.0
+        cdef bint hosted = False
         for k in range(self.n_hosted):
-            slot = self.h_slot[k]
-            for ts, j, on in self.subs[self.h_host[k]].switch_log:
-                if j == slot and on:
-                    hosted.append(ts - t)
+            if self._hosted_touch(k, &ts):
+                if not hosted or ts < first:
+                    first = ts
+                hosted = True
         if hosted:
-            return max(min(hosted), 1e-12 * h), True
+            a = first - t
+            return (1e-12 * h if 1e-12 * h > a else a), True
         closing = [int(c) for c in self.system.coupler
                    if self.dv[c] <= 0 and self.d1[c] > 0]
         if not closing:
@@ -346,41 +326,16 @@ cdef class Driver:
             return max(min(found), 1e-12 * h), True
         return max(min([0.5 * h] + found), 1e-12 * h), False
 
-    # ----------------------------------------------------------- the state
-    cdef void _save(self):
-        cdef int s
-        for s in range(self.nsub):
-            if self.rigid[s]:
-                continue
-            sub = self.subs[s]
-            cl = sub.closed_end
-            self.saved[s] = (sub.x.copy(), sub.aux.copy(), sub.peak.copy(),
-                             None if cl is None else cl.copy())
-            self.saved_t[s] = sub.t
-            self.saved_n[s] = sub.n_steps
-
-    cdef void _restore(self):
-        cdef int s
-        for s in range(self.nsub):
-            if self.rigid[s]:
-                continue
-            sub = self.subs[s]
-            x, aux, peak, cl = self.saved[s]
-            sub.x[...] = x
-            sub.aux[...] = aux
-            sub.peak[...] = peak
-            if cl is not None:
-                sub.closed_end[...] = cl
-            sub.t = self.saved_t[s]
-            sub.n_steps = self.saved_n[s]
-        self.P[...] = self.P0
-        self.V[...] = self.V0
-
     # ---------------------------------------------------------- the sides
-    cdef void _outputs(self, int s):
-        """Read side ``s``'s port outputs into the live arrays."""
+    cdef void _outputs(self, int s) except *:
+        """Read side ``s``'s port outputs into the live arrays: through its C
+        face, else its Python ``outputs``."""
         cdef int i, p0 = self.port0[s]
         cdef double[:, ::1] pos, vel
+        if self.sides.ready(s):
+            self.sides.outputs(s, &self.P[p0, 0], &self.V[p0, 0])
+            return
+        self.sides.to_python()
         sub = self.subs[s]
         po, ve = sub.outputs(sub.t, sub.x)
         pos = np.ascontiguousarray(po, dtype=float)
@@ -391,27 +346,57 @@ cdef class Driver:
             self.V[p0 + i, 0] = vel[i, 0]
             self.V[p0 + i, 1] = vel[i, 1]
 
-    cdef object _step_side(self, int s, double t, double h, int width):
+    cdef int _step_side(self, int s, double t, double h, int width) except -1:
         """Step side ``s`` over ``[t, t + h]`` under the row forces
         ``self.coeffs[:width]`` (``_step_side`` of the base class without
-        sub-steps), add the work they did to ``self.work`` and the impulse
-        each row gave to ``got``; returns ``got``."""
+        sub-steps): through its C face, else (no face, or the face declines)
+        its Python step; add the work they did to ``self.work`` and leave
+        the impulse each row gave in ``self.gotv``."""
         cdef int j, k, r, np2 = 2 * self.nport[s]
         cdef double acc, mg
         cdef double[:, ::1] G = self.Gc[s]
-        cdef double[:, ::1] mom
-        u = np.zeros((width, np2))
-        cdef double[:, ::1] uv = u
+        cdef double* u = &self.ubuf[0]
+        cdef double* mom = &self.pmbuf[0]
         for j in range(width):          # coeffs @ Gc[s].T
             for k in range(np2):
                 acc = 0.0
                 for r in range(self.nr):
                     acc += self.coeffs[j, r] * G[k, r]
-                uv[j, k] = acc
+                u[j * np2 + k] = acc
+        if not (self.sides.ready(s) and not self.force_py[s]
+                and self.sides.loop(s, t, h, u, width, mom) == 0):
+            self._python_step(s, t, h, width)
+        self.force_py[s] = 0
+        for r in range(self.nr):        # collect_work: einsum("jc,jc->c", coeffs, mom[:p] @ G)
+            acc = 0.0
+            for j in range(width):
+                mg = 0.0
+                for k in range(np2):
+                    mg += mom[j * np2 + k] * G[k, r]
+                acc += self.coeffs[j, r] * mg
+            self.wv[r] += acc
+        for r in range(self.nr):
+            acc = self.coeffs[0, r] / 1.0
+            for j in range(1, width):
+                acc += self.coeffs[j, r] / (j + 1.0)
+            self.gotv[r] = h * acc
+        return 0
+
+    cdef int _python_step(self, int s, double t, double h, int width) except -1:
+        """Side ``s``'s step through its Python methods (the reference
+        path): its kernel asked for at each step, as the side's own step
+        asks (a side may change its kernel or decline one step), else its
+        own step; the port moments into ``self.pmbuf``."""
+        cdef int k, i, np2 = 2 * self.nport[s]
+        cdef double[::1] mv
+        self.sides.to_python()
+        for k in range(self.n_hosted):          # the partners' motion, as set in C
+            if self.h_host[k] == s:
+                self.hosted_embs[k].set_motion(self.mot_t0[k], self.mot_h[k], np.asarray(
+                    self.mot[k, :2 * self.mot_n[k]]).view(complex).copy())
         sub = self.subs[s]
-        inp = self.step_input(t, h, u.reshape(width, self.nport[s], 2))
-        # asked at each step, as the side's own step asks: a side may change
-        # its kernel (its basis renewed) or decline one step
+        u = np.array(self.ubuf[:width * np2]).reshape(width, self.nport[s], 2)
+        inp = self.step_input(t, h, u)
         kern = sub.compiled_step(inp)
         if kern is None:                # the side's own step: its reference
             sub.reference_step(t, h, inp)
@@ -427,23 +412,11 @@ cdef class Driver:
             pm = self._step_structure(s, kern, t, h, inp)
         sub.t = t + h
         sub.n_steps += 1
-        mom = np.ascontiguousarray(pm).view(float).reshape(3, -1)
-        for r in range(self.nr):        # collect_work: einsum("jc,jc->c", coeffs, mom[:p] @ G)
-            acc = 0.0
-            for j in range(width):
-                mg = 0.0
-                for k in range(np2):
-                    mg += mom[j, k] * G[k, r]
-                acc += self.coeffs[j, r] * mg
-            self.wv[r] += acc
-        got = np.empty(self.nr)
-        cdef double[::1] gv = got
-        for r in range(self.nr):
-            acc = self.coeffs[0, r] / 1.0
-            for j in range(1, width):
-                acc += self.coeffs[j, r] / (j + 1.0)
-            gv[r] = h * acc
-        return got
+        mv = np.ascontiguousarray(pm).view(float).reshape(-1)
+        for i in range(3 * np2):
+            self.pmbuf[i] = mv[i]
+        self.sides.took_python_step(s)
+        return 0
 
     cdef object _step_structure(self, int s, kern, double t, double h, inp):
         """The structure's step by its kernel, as its ``_step_impl`` takes it;
@@ -473,27 +446,44 @@ cdef class Driver:
         sub.reference_step(t, h, inp)
         return sub.port_moments
 
-    cdef void _partner_motion(self, int k, double t, double h, bint after):
+    cdef void _partner_motion(self, int k, double t, double h, bint after) noexcept:
         """_set_partner_motion of hosted contact ``k``: the cubic Hermite to
-        the partner's outputs at ``t + h`` (``after``), else extrapolated."""
-        cdef int p = self.port0[self.h_partner[k]] + self.h_pport[k]
+        the partner's outputs at ``t + h`` (``after``), else extrapolated;
+        into ``self.mot[k]`` and the host's face (its Python step sets the
+        contact's)."""
+        cdef int p = self.port0[self.h_partner[k]] + self.h_pport[k], host = self.h_host[k]
         cdef double x0r = self.P0[p, 0], x0i = self.P0[p, 1], v0r = self.V0[p, 0]
         cdef double v0i = self.V0[p, 1], x1r, x1i, v1r, v1i, dxr, dxi, ar = 0.0, ai = 0.0
-        emb = self.hosted_embs[k]
+        cdef double* m = &self.mot[k, 0]
+        m[0], m[1], m[2], m[3] = x0r, x0i, h * v0r, h * v0i
         if after:
             x1r, x1i, v1r, v1i = self.P[p, 0], self.P[p, 1], self.V[p, 0], self.V[p, 1]
             dxr, dxi = x1r - x0r, x1i - x0i
-            emb.set_motion(t, h, (complex(x0r, x0i), complex(h * v0r, h * v0i),
-                                  complex(3 * dxr - h * (2 * v0r + v1r),
-                                          3 * dxi - h * (2 * v0i + v1i)),
-                                  complex(-2 * dxr + h * (v0r + v1r),
-                                          -2 * dxi + h * (v0i + v1i))))
-            return
-        if self.order > 0 and self.has_prev:
-            ar = (v0r - self.Vp[p, 0]) / self.h_prev_step
-            ai = (v0i - self.Vp[p, 1]) / self.h_prev_step
-        emb.set_motion(t, h, (complex(x0r, x0i), complex(h * v0r, h * v0i),
-                              complex(0.5 * ar * h * h, 0.5 * ai * h * h)))
+            m[4] = 3 * dxr - h * (2 * v0r + v1r)
+            m[5] = 3 * dxi - h * (2 * v0i + v1i)
+            m[6] = -2 * dxr + h * (v0r + v1r)
+            m[7] = -2 * dxi + h * (v0i + v1i)
+            self.mot_n[k] = 4
+        else:
+            if self.order > 0 and self.has_prev:
+                ar = (v0r - self.Vp[p, 0]) / self.h_prev_step
+                ai = (v0i - self.Vp[p, 1]) / self.h_prev_step
+            m[4], m[5] = 0.5 * ar * h * h, 0.5 * ai * h * h
+            self.mot_n[k] = 3
+        self.mot_t0[k], self.mot_h[k] = t, h
+        if self.sides.ready(host) and self.sides.motion(host, self.h_slot[k], t, h, m,
+                                                        self.mot_n[k]):
+            self.force_py[host] = 1
+
+    def sync(self):
+        """Hand the sides, and the hosted contacts, what the loop kept in C:
+        their time, step count and last switches, the partners' motion."""
+        cdef int k
+        for k in range(self.n_hosted):
+            if self.mot_n[k]:
+                self.hosted_embs[k].set_motion(self.mot_t0[k], self.mot_h[k], np.asarray(
+                    self.mot[k, :2 * self.mot_n[k]]).view(complex).copy())
+        self.sides.to_python()
 
     cdef void _penetration(self, int c, double* d, double* dd):
         cdef int a = self.row_a[c], b = self.row_b[c]
@@ -540,8 +530,8 @@ cdef class Driver:
                     self.base[j, r] = 0.0
         return p + 1
 
-    cdef void _advance_jacobi(self, double t, double h, double ratio):
-        cdef int rows = self._extrapolated(ratio), i, j, r, s, k
+    cdef void _advance_jacobi(self, double t, double h, double ratio) except *:
+        cdef int rows = self._extrapolated(ratio), i, j, r, s, k, q
         for j in range(rows):
             for r in range(self.nr):
                 self.coeffs[j, r] = self.base[j, r]
@@ -551,23 +541,24 @@ cdef class Driver:
             self.stv[r] = 0.0
         for i in range(self.n_order):
             s = self.seq[i]
-            got = self._step_side(s, t, h, rows)
-            for r in self.rows_of[s]:
+            self._step_side(s, t, h, rows)
+            for q in range(self.rows_off[s], self.rows_off[s + 1]):
+                r = self.rows_idx[q]
                 if self.sub_a[r] == s:
-                    self.stv[r] = got[r]
+                    self.stv[r] = self.gotv[r]
             self._outputs(s)
 
-    cdef void _advance_gs(self, double t, double h, double ratio):
+    cdef void _advance_gs(self, double t, double h, double ratio) except *:
         cdef int rows = self._extrapolated(ratio), width = rows if rows > 2 else 2
-        cdef int i, j, r, s, k, c, other, host
+        cdef int i, j, r, s, k, c, other, host, q
         cdef double imp, mom, m0, m1, d, dd, ftilde
-        cdef double[::1] aux
+        cdef double* aux
         for s in range(self.nsub):
             self.done[s] = self.rigid[s]
         for r in range(self.nr):
             self.stv[r] = 0.0
         for k in range(self.n_hosted):
-            self.imp0[k] = self.subs[self.h_host[k]].aux[4 * self.h_slot[k]]
+            self.imp0[k] = self.sides.paux[self.h_host[k]][4 * self.h_slot[k]]
         for i in range(self.n_order):
             s = self.seq[i]
             for j in range(width):
@@ -580,7 +571,7 @@ cdef class Driver:
                     self._partner_motion(k, t, h, self.done[self.h_partner[k]]
                                          and not self.rigid[self.h_partner[k]])
                 elif self.h_partner[k] == s and self.done[host]:    # hosted_force
-                    aux = self.subs[host].aux
+                    aux = self.sides.paux[host]
                     imp = aux[4 * self.h_slot[k]]
                     mom = aux[4 * self.h_slot[k] + 2]
                     m0 = (imp - self.imp0[k]) / h
@@ -589,8 +580,8 @@ cdef class Driver:
                         self.coeffs[j, c] = 0.0
                     self.coeffs[0, c] = 4.0 * m0 - 6.0 * m1
                     self.coeffs[1, c] = 12.0 * m1 - 6.0 * m0
-            mine = self.rows_of[s]
-            for r in mine:
+            for q in range(self.rows_off[s], self.rows_off[s + 1]):
+                r = self.rows_idx[q]
                 other = self.sub_b[r] if self.sub_a[r] == s else self.sub_a[r]
                 if self.done[other]:
                     self._penetration_pred(r, s, h, &d, &dd)
@@ -599,10 +590,11 @@ cdef class Driver:
                         self.coeffs[j, r] = 0.0
                     self.coeffs[0, r] = self.hist[self.nhist - 1, r]
                     self.coeffs[1, r] = ftilde - self.hist[self.nhist - 1, r]
-            got = self._step_side(s, t, h, width)
-            for r in mine:
+            self._step_side(s, t, h, width)
+            for q in range(self.rows_off[s], self.rows_off[s + 1]):
+                r = self.rows_idx[q]
                 if self.sub_a[r] == s or self.rigid[self.sub_a[r]]:
-                    self.stv[r] = got[r]
+                    self.stv[r] = self.gotv[r]
             self.done[s] = 1
             self._outputs(s)
 
@@ -638,14 +630,21 @@ cdef class Driver:
         within ``remaining`` [s], rejected tries retried; else of length
         ``h_fixed``).  Leaves the rows, forces, impulse and work of the step
         in :attr:`d`, :attr:`dd`, :attr:`f`, :attr:`stepped`, :attr:`work`
-        and returns its length [s]."""
+        and returns its length [s]; the sides are handed what was kept in C
+        (:meth:`sync`)."""
+        cdef double h = self.step_c(t, remaining, h_fixed)
+        self.sync()
+        return h
+
+    cdef double step_c(self, double t, double remaining, double h_fixed) except? -1.0:
+        """:meth:`step` in C, the sides' Python state left behind (see :meth:`sync`)."""
         cdef double h, ratio, w
         cdef int c, r, k, i
         cdef bint was_aimed, at_onset
         while True:
             if self.controlled:
                 h = self._propose(remaining)
-                self._save()
+                self.sides.save()
             else:
                 h = h_fixed
             if self.ft != NULL:         # surface points under their points at t
@@ -663,7 +662,9 @@ cdef class Driver:
             if self.controlled:
                 retry = self._judge(t, h)
                 if retry is not None:
-                    self._restore()
+                    self.sides.restore()
+                    self.P[...] = self.P0
+                    self.V[...] = self.V0
                     self.h_next = retry[0]
                     self.aimed = retry[1]
                     self.n_rejected += 1
@@ -679,7 +680,8 @@ cdef class Driver:
                 if c < self.nc and (self.d1[c] <= 0 and self.d1[c] + w * self.dd1[c] > 0 or (
                         was_aimed and self.f1[c] != 0 and self.fv[c] == 0)):
                     at_onset = True
-        f_was = self.f
+        # new arrays where the recorder keeps what it is given, step by step
+        f_was = self.f if self.fresh or not at_onset else np.array(self.f)
         for r in range(self.nr):
             self.dd_prev[r] = self.ddv[r]
         self.has_dd_prev = True
@@ -696,10 +698,15 @@ cdef class Driver:
         for r in range(self.nr):
             self.hist[self.nhist, r] = self.f1[r]
         self.nhist += 1
-        self.f = np.array(self.f1)      # new arrays: the recorder keeps what it is given
-        self.d = np.array(self.d1)
-        self.dd = np.array(self.dd1)
-        self.fv, self.dv, self.ddv = self.f, self.d, self.dd
+        if self.fresh:
+            self.f = np.array(self.f1)
+            self.d = np.array(self.d1)
+            self.dd = np.array(self.dd1)
+            self.fv, self.dv, self.ddv = self.f, self.d, self.dd
+        else:
+            self.fv[...] = self.f1
+            self.dv[...] = self.d1
+            self.ddv[...] = self.dd1
         self.h_prev = h
         if at_onset:                    # the history starts again at the onset
             onsets = onset_contacts(self.system, self.contact_step, self.d, self.dd, self.f,
@@ -716,14 +723,15 @@ cdef class Driver:
         self._book(h)
         return h
 
-    cdef void _book(self, double h):
+    cdef void _book(self, double h) except *:
         """StepBooks.book's ledgers: the exchanged forces' work, the coupler
         rows' impulse and (trapezoidal) dissipation, the embedded contacts'
         quadratures, the subsystems' internal ledger; and whether the rows
         are finite."""
         cdef int i, c, s
         cdef double a, b
-        cdef double[::1] aux
+        cdef double* aux
+        cdef double[::1] wr
         for c in range(self.nc):        # nr == nc: bincount is the rows' own work
             self.wtv[c] += self.wv[c]
         if self.n_coupler:
@@ -736,7 +744,7 @@ cdef class Driver:
                 self.dissv[c] += 0.5 * h * (self.p_prev[c] + a)
                 self.p_prev[c] = a
         for i in range(self.n_emb):
-            aux = self.subs[self.e_host[i]].aux
+            aux = self.sides.paux[self.e_host[i]]
             c = self.e_c[i]
             self.impv[c] = aux[4 * self.e_slot[i]]
             self.dissv[c] = aux[4 * self.e_slot[i] + 1]
@@ -745,17 +753,19 @@ cdef class Driver:
         for s in range(self.nsub):
             if self.rigid[s]:
                 continue
-            aux = self.subs[s].aux
-            a += aux[aux.shape[0] - 2]
+            aux = self.sides.paux[s]
+            a += aux[self.sides.naux[s] - 2]
             if self.kind[s] == MULTIBODY:
-                b += aux[aux.shape[0] - 1]
+                b += aux[self.sides.naux[s] - 1]
         self.internal_dissipated, self.internal_supplied = a, b
-        self.work_rec = np.empty(self.nc)
-        cdef double[::1] wr = self.work_rec
+        if self.fresh:
+            self.work_rec = np.empty(self.nc)
+            self.wrv = self.work_rec
+        wr = self.wrv
         for c in range(self.nc):
             wr[c] = self.wtv[c] + 0.0
         for i in range(self.n_emb):
-            aux = self.subs[self.e_host[i]].aux
+            aux = self.sides.paux[self.e_host[i]]
             c = self.e_c[i]
             wr[c] = self.wtv[c] + aux[4 * self.e_slot[i] + 3]
         self.finite = True

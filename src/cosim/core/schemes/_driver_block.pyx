@@ -16,6 +16,10 @@ them before anything else happens.
 """
 from libc.string cimport memcpy
 
+from cosim.core._side_face cimport SwitchLog
+from cosim.core.schemes._driver cimport Driver
+from cosim.core.schemes._driver_faces cimport Sides
+
 #: why a block ended
 cdef enum:
     FULL = 0
@@ -26,14 +30,13 @@ cdef enum:
 REASONS = ("full", "end", "nonfinite", "raised")
 
 
-cdef void _put(double[:, ::1] out, int i, object src):
-    cdef double[::1] v = src
+cdef void _put(double[:, ::1] out, int i, double[::1] v):
     cdef Py_ssize_t n = v.shape[0]
     if n:
         memcpy(&out[i, 0], &v[0], n * sizeof(double))
 
 
-def fill(drv, list subs, list edges, long[::1] e_c, long[::1] e_host, long[::1] e_slot,
+def fill(Driver drv, list subs, list edges, long[::1] e_c, long[::1] e_host, long[::1] e_slot,
          double t, double t_end, long k, long n, double H, double sliver, bint controlled,
          double[::1] T, double[:, ::1] D, double[:, ::1] DD, double[:, ::1] F,
          double[:, ::1] IMP, double[:, ::1] DISS, double[:, ::1] INT, double[:, ::1] W,
@@ -53,8 +56,10 @@ def fill(drv, list subs, list edges, long[::1] e_c, long[::1] e_host, long[::1] 
     cdef int m = T.shape[0], i = 0, j, s, nsub = len(subs), nc = e_c.shape[0]
     cdef int reason = FULL
     cdef double h
-    cdef double[::1] v, pk
+    cdef double* pk
     cdef Py_ssize_t off
+    cdef Sides sides = drv.sides
+    cdef SwitchLog* log
     error = None
     while i < m:
         if controlled:
@@ -74,9 +79,9 @@ def fill(drv, list subs, list edges, long[::1] e_c, long[::1] e_host, long[::1] 
                 break
         try:
             if controlled:
-                h = drv.step(t, t_end - t)
+                h = drv.step_c(t, t_end - t, 0.0)
             else:
-                drv.step(t, h, h)
+                drv.step_c(t, h, h)
             k += 1
             T[i] = t + h
             REJ[i] = drv.n_rejected
@@ -86,34 +91,32 @@ def fill(drv, list subs, list edges, long[::1] e_c, long[::1] e_host, long[::1] 
                 reason = NONFINITE
                 i += 1
                 break
-            _put(D, i, drv.d)
-            _put(DD, i, drv.dd)
-            _put(F, i, drv.f)
-            _put(IMP, i, drv.impulse)
-            _put(DISS, i, drv.diss)
-            _put(W, i, drv.work_rec)
+            _put(D, i, drv.dv)
+            _put(DD, i, drv.ddv)
+            _put(F, i, drv.fv)
+            _put(IMP, i, drv.impv)
+            _put(DISS, i, drv.dissv)
+            _put(W, i, drv.wrv)
             INT[i, 0] = drv.internal_dissipated
             INT[i, 1] = drv.internal_supplied
             off = 0
             for s in range(nsub):
-                v = subs[s].x
-                if v.shape[0]:
-                    memcpy(&X[i, off], &v[0], v.shape[0] * sizeof(double))
-                off += v.shape[0]
+                if sides.nx[s]:
+                    memcpy(&X[i, off], sides.px[s], sides.nx[s] * sizeof(double))
+                off += sides.nx[s]
             # the embedded contacts' peaks since the last sample, taken as
             # take_peaks takes them (read, then the hosts start again from 0)
             for j in range(nc):
-                pk = subs[e_host[j]].peak
+                pk = sides.ppeak[e_host[j]]
                 PK[i, e_c[j]] = pk[e_slot[j]]
             for j in range(nc):
-                pk = subs[e_host[j]].peak
+                pk = sides.ppeak[e_host[j]]
                 pk[e_slot[j]] = 0.0
             for j in range(nc):
-                log = subs[e_host[j]].switch_log
-                if log:
-                    for ts, slot, on in log:
-                        if slot == e_slot[j]:
-                            edges.append((i, e_c[j], ts, on))
+                log = sides.log[e_host[j]]
+                for s in range(log.n):
+                    if log.slot[s] == e_slot[j]:
+                        edges.append((i, e_c[j], log.time[s], log.on[s] != 0))
         except BaseException as exc:
             # a signal's KeyboardInterrupt too: the row is not written (a
             # step taken counts, as step by step, where its sample is refused)

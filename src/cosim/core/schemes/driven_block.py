@@ -124,12 +124,16 @@ def run_blocks(scheme, system, recorder, drv, t, t_end, k, n, H, sliver, control
     e_slot = np.array([hs[1] for _, hs in emb], dtype=np.int_)
     rows = _Rows(system, BLOCK)
     compiled_cpu = 0.0
+    drv.fresh = False               # the rows are copied into the blocks
     while True:
         c0 = time.process_time()
         edges = []
-        m, t, k1, why, error = _driver_block.fill(
-            drv, subs, edges, e_c, e_host, e_slot, t, t_end, k, n, H, sliver, controlled,
-            *rows.args())
+        try:
+            m, t, k1, why, error = _driver_block.fill(
+                drv, subs, edges, e_c, e_host, e_slot, t, t_end, k, n, H, sliver, controlled,
+                *rows.args())
+        finally:
+            drv.sync()              # the sides' time, steps and switches, kept in C
         compiled_cpu += time.process_time() - c0
         rows.energies(system, m - 1 if why == "nonfinite" else m)
         kept0 = recorder.n_offered
