@@ -773,6 +773,13 @@ cdef class Driver:
             if not (isfinite(self.dv[c]) and isfinite(self.ddv[c])):
                 self.finite = False
 
+    def side_counts(self):
+        """``face_steps``: the sides' steps (rejected tries included) taken
+        through their C faces; ``python_side_steps``: through their Python
+        methods."""
+        return {"face_steps": self.sides.n_face_steps,
+                "python_side_steps": self.sides.n_python_steps}
+
     def start(self, double h_prev):
         """Set the length the first step's ratio is taken against [s]."""
         self.h_prev = h_prev

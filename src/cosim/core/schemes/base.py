@@ -343,7 +343,8 @@ class CoSimulationScheme(InputExtrapolation, CouplingScheme):
         self.loop_stats = {"loop": "python" if drv is None else "compiled",
                            "refusal": self.loop_refusal, "macro_steps": k,
                            "compiled_cpu_s": compiled_cpu,
-                           "run_cpu_s": time.process_time() - cpu0}
+                           "run_cpu_s": time.process_time() - cpu0,
+                           **({} if drv is None else drv.side_counts())}
         return {"n_windows": k, "n_iterations": self.n_iterations, "n_rejected": n_rejected}
 
     #: the macro loop's state (set by :meth:`run`)
@@ -353,7 +354,8 @@ class CoSimulationScheme(InputExtrapolation, CouplingScheme):
     #: the last finished run's loop: ``loop`` (``"compiled"`` or ``"python"``),
     #: ``refusal`` (:attr:`loop_refusal`), ``macro_steps``, ``compiled_cpu_s``
     #: (process CPU inside the compiled loop's calls [s]) and ``run_cpu_s``
-    #: (the whole of :meth:`run` [s]), for benchmarks
+    #: (the whole of :meth:`run` [s]), for benchmarks (and the compiled loop's
+    #: ``face_steps``, ``python_side_steps``: ``Driver.side_counts``)
     loop_stats: dict | None = None
 
     def _compiled_loop(self, system, state, d, dd, controlled, h_prev):

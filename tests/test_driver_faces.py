@@ -1,0 +1,169 @@
+"""The compiled macro loop steps its sides through their C faces
+(:mod:`cosim.core.schemes._driver_faces`, :mod:`cosim.core._side_face`).
+
+three_mass f100 (a structure hosting a contact against the moving robot,
+the robot's RK4 with two ground contacts embedded) and beam_impact (the
+beam's contact follows the arm) take every side step through a face
+(``face_steps``, ``python_side_steps`` of the scheme's ``loop_stats``), and
+agree with the Python loop (``COSIM_DRIVER=python``, the reference) for the
+scenes and for copies moved by one and two ulps
+(:func:`cosim.studies.roundoff.spread`): the same contact counts, macro
+steps and rejected tries, and intervals, peaks and series within bounds.
+
+The bounds: the faces evaluate the Python steps' formulas in the same
+order, except a structure's port outputs, which the face sums mode by mode
+where numpy's ``R @ x`` sums in BLAS's order: an ulp or two of a port's
+position or velocity.  Measured here: located switch times within 6e-16 s,
+peaks within 2e-15 relative, every series within 2e-12 of its largest
+magnitude (beam_impact; 4e-15 on three_mass).  Bounded at 1e-12 s (over
+a thousand times the largest seen, and 1e-7 of the contact step), 1e-12
+relative, and the 1e-10 of ``tests/test_driver.py``.
+"""
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import cosim
+from cosim.core.recorder import Recorder
+from cosim.core.schemes import driven_block, driver
+from cosim.scene.build import build_system
+from cosim.sides.kernel import kernel_choice, retired
+from cosim.studies.roundoff import spread
+
+CASES = Path(__file__).resolve().parents[1] / "cases"
+SCENES = [("three_mass", "f100"), ("beam_impact", None)]
+#: located switch times [s], peaks (relative), series (of their largest magnitude)
+INTERVAL_TOL, PEAK_REL, SERIES_REL = 1e-12, 1e-12, 1e-10
+
+pytestmark = pytest.mark.skipif(kernel_choice() == "numpy",
+                                reason="the C faces are the compiled kernels'")
+
+
+def _scene(name, variant, overrides=()):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return cosim.load_scene(CASES / f"{name}.toml", variant, overrides=overrides)
+
+
+def _stats(scene, before_run=None):
+    """The scheme's ``loop_stats`` of a run of ``scene`` (``before_run(system,
+    recorder)`` first)."""
+    system, sch = build_system(scene)
+    rec = Recorder(system, scene.name, sch.name, scene.t_end)
+    if before_run is not None:
+        before_run(system, rec)
+    sch.run(system, scene.t_end, rec)
+    return sch.loop_stats, sch, system
+
+
+@pytest.mark.parametrize("name,variant", SCENES)
+def test_every_side_step_goes_through_a_face(name, variant):
+    stats, sch, system = _stats(_scene(name, variant))
+    assert stats["loop"] == "compiled"
+    moving = sum(not sub.rigid for sub in system.subsystems)
+    assert stats["python_side_steps"] == 0
+    assert stats["face_steps"] == moving * (stats["macro_steps"] + sch.n_rejected) > 0
+
+
+def _run(scene, loop, monkeypatch):
+    monkeypatch.setenv(driver.DRIVER_ENV, loop)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return cosim.simulate(scene, estimate=False)
+
+
+def _assert_agree(ref, got):
+    sr, sg = ref.summary, got.summary
+    assert (sg["status"], sg["macro_steps"], sg["rejected_steps"]) == (
+        sr["status"], sr["macro_steps"], sr["rejected_steps"])
+    cr, cg = sr["contacts"], sg["contacts"]
+    assert {n: c["count"] for n, c in cg.items()} == {n: c["count"] for n, c in cr.items()}
+    for n, c in cr.items():
+        a, b = np.asarray(c["intervals"], float), np.asarray(cg[n]["intervals"], float)
+        assert a.shape == b.shape and np.max(np.abs(a - b), initial=0.0) <= INTERVAL_TOL, n
+        assert cg[n]["peak_penetration"] == pytest.approx(c["peak_penetration"], rel=PEAK_REL)
+    for key in ref.series:
+        a, b = np.asarray(ref.series[key], float), np.asarray(got.series[key], float)
+        assert a.shape == b.shape, key
+        scale = float(np.max(np.abs(a), initial=0.0))
+        assert np.max(np.abs(a - b), initial=0.0) <= SERIES_REL * scale, key
+
+
+@pytest.mark.parametrize("name,variant", SCENES)
+def test_the_faces_agree_with_the_python_loop_under_round_off(name, variant, monkeypatch):
+    """Counts equal, intervals, peaks and series within the module's bounds,
+    for the scene and its copies moved by +-1 and +-2 ulps."""
+    counts = set()
+    for scene in spread(_scene(name, variant), 5):
+        ref, got = _run(scene, "python", monkeypatch), _run(scene, "compiled", monkeypatch)
+        _assert_agree(ref, got)
+        counts.add(tuple(sorted((n, c["count"]) for n, c in got.summary["contacts"].items())))
+    assert len(counts) == 1, counts
+
+
+def test_a_renewed_kernel_takes_one_python_step_then_its_new_face(monkeypatch):
+    """A side that drops its kernel between two blocks (as a plane body
+    does when a spring's stiffness changes): the face's generation changes,
+    the side's next step is its Python step (which builds the new kernel),
+    and the steps after go through the new kernel's face; the run is the
+    undisturbed run's."""
+    monkeypatch.setattr(driven_block, "BLOCK", 64)
+    scene = _scene("three_mass", "f100")
+    plain, _, plain_system = _stats(scene)
+    dropped = []
+
+    def drop_after_first_block(system, rec):
+        chain = system.subsystems[0]
+        record = rec.record_block
+
+        def record_then_drop(*args, **kwargs):
+            record(*args, **kwargs)
+            if not dropped:
+                dropped.append(chain._kernel)
+                chain._kernel = retired(chain._kernel)
+        rec.record_block = record_then_drop
+    stats, sch, system = _stats(scene, drop_after_first_block)
+    assert dropped and system.subsystems[0]._kernel not in (None, False, dropped[0])
+    assert stats["python_side_steps"] == 1
+    assert stats["face_steps"] == plain["face_steps"] - 1
+    assert stats["macro_steps"] == plain["macro_steps"]
+    # the same formulas on the same state (the new kernel is built as the first was)
+    for sub, ref in zip(system.subsystems, plain_system.subsystems):
+        assert np.allclose(sub.x, ref.x, rtol=1e-12, atol=1e-12 * np.max(np.abs(ref.x),
+                                                                      initial=0.0)), sub.name
+
+
+def test_a_stalled_structure_step_is_declined_by_the_face(monkeypatch):
+    """The structure step the compiled kernel stalls in (three_mass f100 at
+    contact steps of 100 us without landing, ``tests/test_kernel_structure.py``)
+    is declined by the face, changing nothing, and taken by the side's Python
+    step, which hands it to the reference; every other step goes through the
+    faces, and the run agrees with the Python loop's."""
+    scene = _scene("three_mass", "f100", ("scheme.contact_step=1e-4",
+                                          "scheme.land_onsets=false"))
+    stats, sch, system = _stats(scene)
+    assert stats["loop"] == "compiled" and stats["python_side_steps"] == 1
+    moving = sum(not sub.rigid for sub in system.subsystems)
+    assert stats["face_steps"] == moving * (stats["macro_steps"] + sch.n_rejected) - 1
+    _assert_agree(_run(scene, "python", monkeypatch), _run(scene, "compiled", monkeypatch))
+
+
+def test_a_side_whose_outputs_are_replaced_offers_no_face(monkeypatch):
+    """The face stands in for the side's ``outputs`` and step: where one is
+    replaced (a subclass, a test's patch) the side offers no face and the
+    loop takes its Python methods."""
+    from cosim.core.subsystem import StepInput
+    from cosim.sides.fem import StructureSubsystem
+    system, _ = build_system(_scene("three_mass", "f100"))
+    chain = system.subsystems[0]
+    inp = StepInput.zero(0.0, 1e-3, chain.n_ports)
+    assert chain.loop_kernel(inp) is chain.compiled_step(inp) is not None
+    monkeypatch.setattr(StructureSubsystem, "outputs", lambda self, t, x: (None, None))
+    assert chain.loop_kernel(inp) is None
+    monkeypatch.undo()
+    chain.reference_step = lambda t, h, inputs: None
+    assert chain.loop_kernel(inp) is None
