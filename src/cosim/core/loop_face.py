@@ -21,7 +21,7 @@ mixin names, for the loop, what it may ask and set:
   :mod:`cosim.core._side_face`) may take the side's steps with no Python
   call, or None.  A class whose kernel mirrors its Python step says so
   (``loop_face_faithful = True`` in its body); the methods the face stands
-  in for (:data:`FACE_MIRRORS`) are noted then, and a side where any was
+  in for (``FACE_MIRRORS``) are noted then, and a side where any was
   replaced since (a subclass, an instance's own, a test's patch) offers no
   face: the loop takes its Python methods.
 """
@@ -61,7 +61,7 @@ class LoopFace:
         """The compiled kernel whose C face may take this side's steps in the
         compiled loop with no Python call (asked again when its face's
         ``generation`` changes), or None: the side's class does not declare
-        its kernel faithful, or one of :data:`FACE_MIRRORS` was replaced, or
+        its kernel faithful, or one of ``FACE_MIRRORS`` was replaced, or
         :meth:`compiled_step` gives none for ``inputs``."""
         known = self._face_methods
         own = getattr(self, "__dict__", {})
