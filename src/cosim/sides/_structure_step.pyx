@@ -360,6 +360,20 @@ cdef class StructureStep(ContactPhases):
             vel[2 * p] = dw * self.dirs[p, 0]
             vel[2 * p + 1] = dw * self.dirs[p, 1]
 
+    def outputs(self, double[::1] x):
+        """Ports' positions and velocities, each ``(n_p, 2)``, at state ``x``
+        (:meth:`side_outputs`: the host's ``outputs`` where it is stepped here,
+        so that its Python step and the C face read the same bits)."""
+        if x.shape[0] < 2 * self.m:
+            raise ValueError(f"`x` must have {2 * self.m} entries, got {x.shape[0]}")
+        pos = np.empty((self.np_, 2))
+        vel = np.empty((self.np_, 2))
+        cdef double[:, ::1] pv = pos
+        cdef double[:, ::1] vv = vel
+        if self.np_:
+            self.side_outputs(&x[0], &pv[0, 0], &vv[0, 0])
+        return pos, vel
+
     # ------------------------------------------------ stepping with no contact
     def step_free(self, double[::1] x, double[:, ::1] pm):
         """Advance ``x`` exactly over the loaded step with no hosted contact
