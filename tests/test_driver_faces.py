@@ -173,3 +173,18 @@ def test_a_side_whose_outputs_are_replaced_offers_no_face(monkeypatch):
     monkeypatch.undo()
     chain.reference_step = lambda t, h, inputs: None
     assert chain.loop_kernel(inp) is None
+
+
+def test_a_trees_energies_are_taken_in_one_compiled_call():
+    """The recorder's energies of a multibody side's states (each block's
+    rows) are the kernel's ``energy`` of each row, evaluated in one call:
+    the same function on the same rows (bounded at 1e-14 of the largest)."""
+    from cosim.core.subsystem import Subsystem
+    system, _ = build_system(_scene("three_mass", "f100"))
+    robot = system.subsystems[system.names.index("robot")]
+    rng = np.random.default_rng(3)
+    X = robot.x + 0.1 * rng.standard_normal((50, robot.x.size))
+    one = robot.energies(X[:, :])
+    rows = Subsystem.energies(robot, X)
+    assert one.shape == rows.shape == (50,)
+    assert np.max(np.abs(one - rows)) <= 1e-14 * np.max(np.abs(rows))

@@ -18,6 +18,7 @@ from cosim.core.links import kernel_law     # the numbering every kernel shares
 
 from cosim.core.ode import RK4, ScipyStepper
 from cosim.core.subsystem import MOMENT, QUADRATURES, Samples
+from cosim.sides.kernel import compiled_module
 
 if TYPE_CHECKING:
     from multibody import JointEffects
@@ -195,16 +196,27 @@ class SampledSteps:
 class TreeFaceMixin:
     """``compiled_face`` of a :class:`cosim.sides.multibody.MultibodySubsystem`
     (:meth:`cosim.core.subsystem.Subsystem.compiled_face`): the tree's kernel
-    (``cosim.sides._multibody_step.TreeFace``), or None where the kernel is
+    (``cosim.sides._tree_face.TreeFace``), or None where the kernel is
     not built or not chosen (``COSIM_KERNEL=numpy``) or does not step the
     side (a user's own drive or integrator: its joint effects are not
-    loaded), or was built from older sources without a face."""
+    loaded), or was built from older sources without a face; and
+    ``energies`` of many states in one compiled call."""
 
     def compiled_face(self):
         kernel = self._compiled()
         if kernel is None or not self._kernel_steps or not hasattr(kernel, "face"):
             return None
         return kernel.face()
+
+    def energies(self, X):
+        """:meth:`energy` at each row of ``X``: the kernel's, row by row in
+        one compiled call, where ``energy`` is the kernel's alone (no joint
+        effects' potential)."""
+        kernel = self._compiled()
+        module = compiled_module("_tree_face") if kernel is not None else None
+        if module is None or self.effects is not None:
+            return super().energies(X)
+        return module.tree_energies(kernel, X)
 class CompiledFace:
     """:meth:`compiled_loop_refusal` and :meth:`compiled_side` of
     :class:`cosim.sides.multibody.MultibodySubsystem`."""
