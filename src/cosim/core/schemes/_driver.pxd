@@ -18,6 +18,8 @@ cdef class Driver:
     cdef const double[::1] offset
     cdef long[::1] h_c, h_host, h_slot, h_partner, h_pport
     cdef list Gc
+    # each side's exchange map (2 n_ports, n_rows), C-contiguous, as a pointer
+    cdef double** gp
     # each side's rows, flat (rows_idx[rows_off[s]:rows_off[s + 1]])
     cdef long[::1] rows_idx, rows_off
     # the following contacts (cosim.core.schemes._follow), None where there are none

@@ -29,6 +29,7 @@ import importlib
 
 import numpy as np
 from libc.math cimport isfinite, isnan, NAN
+from libc.stdlib cimport calloc, free
 from libc.string cimport memcpy
 
 from cosim.core.subsystem import StepInput
@@ -123,6 +124,12 @@ cdef class Driver:
         self.hosted_embs = [system.hosted[c].embedded for c in hc]
         # copies: a following contact turns side a's column in place (_follow)
         self.Gc = [np.array(G, dtype=float, order="C") for G in system.exchange_maps]
+        self.gp = <double**> calloc(max(self.nsub, 1), sizeof(double*))
+        if self.gp == NULL:
+            raise MemoryError()
+        for s in range(self.nsub):
+            if self.Gc[s].size:
+                self.gp[s] = <double*> <size_t> self.Gc[s].ctypes.data
         self.fol, self.ft = None, NULL
         if system.followers:
             self.fol = importlib.import_module("cosim.core.schemes._follow").Followers(
@@ -354,14 +361,14 @@ cdef class Driver:
         the impulse each row gave in ``self.gotv``."""
         cdef int j, k, r, np2 = 2 * self.nport[s]
         cdef double acc, mg
-        cdef double[:, ::1] G = self.Gc[s]
+        cdef const double* G = self.gp[s]
         cdef double* u = &self.ubuf[0]
         cdef double* mom = &self.pmbuf[0]
         for j in range(width):          # coeffs @ Gc[s].T
             for k in range(np2):
                 acc = 0.0
                 for r in range(self.nr):
-                    acc += self.coeffs[j, r] * G[k, r]
+                    acc += self.coeffs[j, r] * G[k * self.nr + r]
                 u[j * np2 + k] = acc
         if not (self.sides.ready(s) and not self.force_py[s]
                 and self.sides.loop(s, t, h, u, width, mom) == 0):
@@ -372,7 +379,7 @@ cdef class Driver:
             for j in range(width):
                 mg = 0.0
                 for k in range(np2):
-                    mg += mom[j * np2 + k] * G[k, r]
+                    mg += mom[j * np2 + k] * G[k * self.nr + r]
                 acc += self.coeffs[j, r] * mg
             self.wv[r] += acc
         for r in range(self.nr):
@@ -772,6 +779,9 @@ cdef class Driver:
         for c in range(self.nr):
             if not (isfinite(self.dv[c]) and isfinite(self.ddv[c])):
                 self.finite = False
+
+    def __dealloc__(self):
+        free(self.gp)
 
     def side_counts(self):
         """``face_steps``: the sides' steps (rejected tries included) taken
