@@ -41,6 +41,9 @@ from cosim.core.schemes._follow cimport FollowTable
 from cpython.pycapsule cimport PyCapsule_GetPointer
 from cosim.core.schemes.step_control import LAND_MARGIN, ONSET_WINDOW, onset_contacts
 
+# the step controller's constants, as C doubles (read at every step)
+cdef double LAND_M = LAND_MARGIN, ONSET_W = ONSET_WINDOW
+
 #: kinds of side
 cdef enum:
     RIGID = 0
@@ -285,8 +288,8 @@ cdef class Driver:
         onset = self._onset(t, h)
         if onset is None or not onset[1]:
             return None
-        tau = onset[0] + (LAND_MARGIN if hosted else -LAND_MARGIN) * self.contact_step
-        return (tau, True) if tau > ONSET_WINDOW * self.contact_step else None
+        tau = onset[0] + (LAND_M if hosted else -LAND_M) * self.contact_step
+        return (tau, True) if tau > ONSET_W * self.contact_step else None
 
     cdef bint _hosted_touch(self, int k, double* first) noexcept:
         """Whether hosted contact ``k`` touched in its host's last step, and
@@ -679,7 +682,7 @@ cdef class Driver:
             break
         # accept
         was_aimed, at_onset = self.aimed, False
-        w = ONSET_WINDOW * self.contact_step
+        w = ONSET_W * self.contact_step
         self.aimed = False
         if self.controlled and self.land:
             for i in range(self.n_coupler):
