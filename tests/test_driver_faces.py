@@ -159,9 +159,9 @@ def test_a_stalled_structure_step_is_declined_by_the_face(monkeypatch):
 
 
 def test_a_side_whose_outputs_are_replaced_offers_no_face(monkeypatch):
-    """The face stands in for the side's ``outputs`` and step: where one is
-    replaced (a subclass, a test's patch) the side offers no face and the
-    loop takes its Python methods."""
+    """The face stands in for the side's ``outputs``, step and switch
+    handler: where one is replaced (a subclass, a test's patch) the side
+    offers no face and the loop takes its Python methods."""
     from cosim.core.subsystem import StepInput
     from cosim.sides.fem import StructureSubsystem
     system, _ = build_system(_scene("three_mass", "f100"))
@@ -171,8 +171,13 @@ def test_a_side_whose_outputs_are_replaced_offers_no_face(monkeypatch):
     monkeypatch.setattr(StructureSubsystem, "outputs", lambda self, t, x: (None, None))
     assert chain.loop_kernel(inp) is None
     monkeypatch.undo()
+    assert chain.loop_kernel(inp) is not None
     chain.reference_step = lambda t, h, inputs: None
     assert chain.loop_kernel(inp) is None
+    robot = system.subsystems[system.names.index("robot")]
+    assert robot.loop_kernel(StepInput.zero(0.0, 1e-3, robot.n_ports)) is not None
+    robot._on_switch = lambda t, j, on, y: None         # a switch handler of its own
+    assert robot.loop_kernel(StepInput.zero(0.0, 1e-3, robot.n_ports)) is None
 
 
 def test_a_trees_energies_are_taken_in_one_compiled_call():

@@ -31,7 +31,7 @@ __all__ = ["LoopFace", "FACE_MIRRORS"]
 
 #: the side's methods that its C face stands in for in the compiled loop
 FACE_MIRRORS = ("outputs", "_step_impl", "_compiled_step", "compiled_step", "reference_step",
-                "begin_step")
+                "begin_step", "_on_switch")
 
 
 class LoopFace:
