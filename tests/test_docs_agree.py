@@ -207,7 +207,7 @@ def _published(folder: str, name: str) -> dict:
     return data
 
 
-_BUILD = ("the compilation took 87 s of CPU and 3.1 min of wall time")
+_BUILD = ("the compilation took 79 s of CPU and 0.8 min of wall time")
 
 
 def test_the_readme_build_is_the_published_run():
@@ -221,7 +221,7 @@ def test_the_readme_build_is_the_published_run():
                     "ls src/**/*.pyx", 14)
     assert_printed(modules)
     assert_reproduced(modules, len(pyx))
-    for value, measured, tol in ((87, data["cpu_s"], 0.5), (3.1, data["wall_s"] / 60, 0.05)):
+    for value, measured, tol in ((79, data["cpu_s"], 0.5), (0.8, data["wall_s"] / 60, 0.05)):
         claim = Claim("README.md", _BUILD, "python benchmarks/build_time.py", value, abs=tol)
         assert_printed(claim)
         assert_reproduced(claim, measured)
