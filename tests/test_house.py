@@ -254,7 +254,8 @@ def test_no_module_probes_a_private_attribute_of_another_module():
 #: scheme and the recorder through public faces (the sides' ``compiled_loop``
 #: capability, cosim.core.loop_face), never through their private attributes
 LOOP = ("cosim/core/schemes/_driver.pyx", "cosim/core/schemes/_driver_block.pyx",
-        "cosim/core/schemes/driven_block.py", "cosim/core/schemes/_follow.pyx")
+        "cosim/core/schemes/driven_block.py", "cosim/core/schemes/_follow.pyx",
+        "cosim/core/schemes/implicit.py", "cosim/core/schemes/_implicit_step.pyx")
 
 
 def _private_reads(text: str) -> list[str]:

@@ -147,7 +147,7 @@ cdef class Acceleration:
     cdef bint have_prev
     cdef double[::1] r_prev, hx_prev
     # this step's columns in the order they came; the kept steps' blocks,
-    # newest first, each newest column first (IQNILS._old)
+    # newest first, each newest column first (the reference's ``_old``)
     cdef double[:, ::1] cur_v, cur_w
     cdef int n_cur
     cdef double[:, :, ::1] old_v, old_w
@@ -276,7 +276,7 @@ cdef class Acceleration:
 
     cdef void _iqn(self, double* z, const double* hz, const double* r) noexcept:
         """:meth:`IQNILS.update` after the new column: the QR filter
-        (:meth:`IQNILS._columns`), then the least-squares solve."""
+        (the reference's ``_columns``), then the least-squares solve."""
         cdef int n = self.n, N = 0, m = 0, j, i, jj, bad
         cdef double* A = &self.qr_a[0]
         cdef double* beta = &self.qr_beta[0]
@@ -333,7 +333,7 @@ cdef class Acceleration:
 
 cdef class ImplicitStep:
     """The compiled iterations of :class:`cosim.core.schemes.implicit.Implicit`
-    on one system (built by :meth:`Implicit._compiled_iterations`).
+    on one system (built by :meth:`cosim.core.schemes.implicit.Implicit._compiled_iterations`).
 
     Parameters
     ----------

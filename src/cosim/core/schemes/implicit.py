@@ -286,6 +286,9 @@ class Implicit(CoSimulationScheme):
         if cs is not None and cs.mode.dtype != np.int64:
             return None
         contacts = []
+        row_a, row_b = system.contact_rows
+        normals, offsets = system.contact_normals, system.contact_offsets
+        maps = system.exchange_maps
         for c in system.coupler:
             ln = system.links[c]
             law, conn = ln.contact.law, ln.connection
@@ -293,8 +296,7 @@ class Implicit(CoSimulationScheme):
                     conn is not None and conn.friction is not None):
                 return None
             g = None if conn is None else conn.grasp
-            contacts.append((int(c), int(system._row_a[c]), int(system._row_b[c]),
-                             system._normals[c], system._offsets[c],
+            contacts.append((int(c), int(row_a[c]), int(row_b[c]), normals[c], offsets[c],
                              _implicit_step.LAW_KINDS[law.name], law.contact_stiffness,
                              getattr(law, "contact_damping", 0.0), int(system.tangent_row[c]),
                              None if g is None else (g.stiffness, g.damping,
@@ -311,7 +313,7 @@ class Implicit(CoSimulationScheme):
             kernel = None if get is None else get()
             if not hasattr(kernel, "side_face"):    # none, or built before the C face
                 return None
-            sides.append((kernel, sub.x, sub.aux, system._Gc[s], int(first[s])))
+            sides.append((kernel, sub.x, sub.aux, maps[s], int(first[s])))
         outs = system.outputs()
         opts = {"max_iterations": self.max_iterations, "tolerance": self.tolerance,
                 "force_tolerance": self.force_tolerance, "acceleration": self.acceleration,
@@ -335,7 +337,7 @@ class Implicit(CoSimulationScheme):
             raise
         for s, pm in zip(self._kernel_sides, moments):
             system.subsystems[s].took_compiled_step(t, h, pm)
-            system._applied[s] = (coeffs, system._Gc[s])     # as step_input keeps them
+            system.book_applied(s, coeffs)      # as step_input keeps them
         self.n_iterations += it
         if converged:
             return stepped
