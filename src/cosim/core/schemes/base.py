@@ -253,22 +253,22 @@ class CoSimulationScheme(InputExtrapolation, CouplingScheme):
         d, dd = system.penetrations(outs)
         f = system.forces(d, dd)
         st.outs, st.f = outs, f
-        # a step longer than the run is one step to t_end: the history and the
-        # sliver test below measure it as the step it is
+        # a step longer than the run is one step to t_end: the history and sliver measure that
         st.hist = self._starting_history(system, d, dd, f, min(H, t_end))
         books = StepBooks(self, system, recorder, f, d, dd)
         books.start(d, dd, f)
         controlled = self.contact_step is not None and len(system.exchanged) > 0
         n = max(1, math.ceil(t_end / H - 1e-9))
-        # what is left of the run below this is round-off, not a step: relative
-        # to the shorter of the step and the run (a step longer than t_end is
-        # clipped to it; relative to the step alone, the whole run would be a
-        # sliver and no step would be taken)
+        # what is left of the run below this is round-off, not a step: relative to the shorter
+        # of the step and the run (to a step longer than t_end alone, the run would be a sliver)
         sliver = 1e-12 * min(H, t_end)
         h_prev = min(H, t_end)
         k, t, n_rejected = 0, 0.0, 0
         drv = self._compiled_loop(system, st, d, dd, controlled, h_prev)
         compiled_cpu = 0.0                      # the compiled loop, its samples in blocks:
+        if done := drv is None and self._macro_blocks(system, recorder, books, t_end, n, H,
+                                                      sliver, controlled, h_prev):
+            k, n_rejected, compiled_cpu = done          # the implicit scheme's, in blocks
         if blocks := drv is not None and driven_block.takes(recorder):
             k, n_rejected, compiled_cpu = driven_block.run_blocks(
                 self, system, recorder, drv, t, t_end, k, n, H, sliver, controlled)
@@ -294,7 +294,7 @@ class CoSimulationScheme(InputExtrapolation, CouplingScheme):
             books.book_driven(t + h, drv)
             if controlled:
                 t = t + h
-        while drv is None:
+        while drv is None and not done:
             if controlled:
                 if t_end - t <= sliver:
                     break
@@ -340,21 +340,22 @@ class CoSimulationScheme(InputExtrapolation, CouplingScheme):
             books.book(t + h, h, d, dd, f, stepped)
             if controlled:
                 t = t + h
-        self.loop_stats = {"loop": "python" if drv is None else "compiled",
-                           "refusal": self.loop_refusal, "macro_steps": k,
-                           "compiled_cpu_s": compiled_cpu,
-                           "run_cpu_s": time.process_time() - cpu0}
+        self.loop_stats = {"loop": "python" if drv is None and not done else "compiled",
+                           "refusal": self.loop_refusal, "macro_steps": k, "compiled_cpu_s":
+                           compiled_cpu, "run_cpu_s": time.process_time() - cpu0}
         return {"n_windows": k, "n_iterations": self.n_iterations, "n_rejected": n_rejected}
 
     #: the macro loop's state (set by :meth:`run`)
     _state = None
     #: why the last run took the Python loop (None: it took the compiled one)
     loop_refusal: str | None = None
-    #: the last finished run's loop: ``loop`` (``"compiled"`` or ``"python"``),
-    #: ``refusal`` (:attr:`loop_refusal`), ``macro_steps``, ``compiled_cpu_s``
-    #: (process CPU inside the compiled loop's calls [s]) and ``run_cpu_s``
-    #: (the whole of :meth:`run` [s]), for benchmarks
+    #: the last finished run's loop: ``loop`` (``"compiled"`` or ``"python"``), ``refusal``
+    #: (:attr:`loop_refusal`), ``macro_steps``, ``compiled_cpu_s`` (process CPU inside the
+    #: compiled loop's calls [s]) and ``run_cpu_s`` (the whole of :meth:`run` [s]), for benchmarks
     loop_stats: dict | None = None
+
+    def _macro_blocks(self, *run):
+        """Run a compiled macro loop of the scheme's own: ``(k, n_rejected, cpu)``; None if not."""
 
     def _compiled_loop(self, system, state, d, dd, controlled, h_prev):
         """The compiled macro loop for this run (:mod:`cosim.core.schemes.driver`),

@@ -266,6 +266,18 @@ class Implicit(CoSimulationScheme):
         self._kernel = self._compiled_iterations(system) if self.compiled_iterations else None
         return super().run(system, t_end, recorder)
 
+    def _macro_blocks(self, system, recorder, books, t_end, n, H, sliver, controlled, h_prev):
+        """The macro loop in compiled code, its samples in blocks
+        (:mod:`cosim.core.schemes.implicit_block`), where it covers the run:
+        ``(k, n_rejected, compiled_cpu)``; None where the Python loop runs
+        (:attr:`loop_refusal` says why)."""
+        from cosim.core.schemes import implicit_block
+        self.loop_refusal = implicit_block.refusal(self, system, recorder, controlled)
+        if self.loop_refusal is not None:
+            return None
+        return implicit_block.run_blocks(self, system, recorder, books, self._state, t_end, n,
+                                         H, sliver, h_prev)
+
     # ------------------------------------------------- compiled iterations
     def _compiled_iterations(self, system):
         """The compiled iterations of this system
