@@ -95,6 +95,7 @@ cdef class ImplicitBlocks:
     cdef long long[::1] mode
     cdef double[::1] anchor
     cdef double t_pend, h_pend
+    cdef long it_pend
     #: the length of the last step [s]; the earliest time a ``time`` or
     #: ``after`` trigger may fire (inf: none known) [s]
     cdef public double h_prev, next_trigger
@@ -206,13 +207,13 @@ cdef class ImplicitBlocks:
     def fill(self, double t_end, long k, long n, double H, double sliver,
              double[::1] T, double[:, ::1] D, double[:, ::1] DD, double[:, ::1] F,
              double[:, ::1] IMP, double[:, ::1] DISS, double[:, ::1] INT, double[:, ::1] W,
-             double[:, ::1] X, double[::1] POT):
+             double[:, ::1] X, double[::1] POT, long[::1] ITS):
         """Fill rows from 0 with the steps from count ``k`` (``n`` steps of
         ``H``, the last to ``t_end``).  Returns ``(rows, k, reason, error,
         t1)``: the rows written, the count after the steps taken (the
         pending one included), why the block ended (:data:`REASONS`), the
         exception a step raised (reason ``raised``) and the end of the last
-        step taken [s]."""
+        step taken [s].  ``ITS`` takes the iterations so far at each row."""
         cdef int m = T.shape[0], i = 0, reason = FULL
         cdef double t = 0.0, h = 0.0, t1 = 0.0
         error = None
@@ -220,6 +221,7 @@ cdef class ImplicitBlocks:
             self.pending = 0
             self._book(self.h_pend)
             self._write(i, self.t_pend, T, D, DD, F, IMP, DISS, INT, W, X, POT)
+            ITS[i] = self.it_pend
             i += 1
         while i < m:
             if k >= n:
@@ -248,10 +250,12 @@ cdef class ImplicitBlocks:
             if self._may_switch(t1):
                 self.pending = 1
                 self.t_pend, self.h_pend = t1, h
+                self.it_pend = self.n_iterations
                 reason = SWITCH
                 break
             self._book(h)
             self._write(i, t + h, T, D, DD, F, IMP, DISS, INT, W, X, POT)
+            ITS[i] = self.n_iterations
             i += 1
         return i, k, REASONS[reason], error, t1
 

@@ -57,9 +57,7 @@ def refusal(scheme, system, recorder, controlled) -> str | None:
         from cosim.core.schemes import _implicit_block
     except ImportError:
         return "the compiled implicit loop is not built"
-    from cosim.core.schemes.implicit import Implicit
-    if type(scheme).advance is not Implicit.advance or \
-            type(scheme)._advance_compiled is not Implicit._advance_compiled:
+    if _replaced(scheme, "advance") or _replaced(scheme, "_advance_compiled"):
         return f"the `advance` of scheme `{scheme.name}` is replaced"
     if system.circles or system.embedded or len(system.coupler) != system.n_contacts:
         return "a contact is not exchanged as a force"
@@ -67,6 +65,14 @@ def refusal(scheme, system, recorder, controlled) -> str | None:
         if ln.contact.law.name not in _implicit_block.LAW_KINDS:
             return f"contact `{ln.contact.name}` has a law the compiled loop does not evaluate"
     return None
+
+
+def _replaced(scheme, name) -> bool:
+    """Whether method ``name`` of ``scheme``'s class is not the implicit
+    scheme's own (a test or a user wrapped it): the Python loop calls it."""
+    fn = getattr(type(scheme), name)
+    return (getattr(fn, "__module__", None), getattr(fn, "__qualname__", None)) != (
+        "cosim.core.schemes.implicit", f"Implicit.{name}")
 
 
 def _contacts(system):
@@ -121,10 +127,11 @@ class _Rows:
         self.internal = np.zeros((m, 2))
         self.x = np.zeros((m, int(system.stacked()[-1])))
         self.pot = np.zeros(m)
+        self.its = np.zeros(m, dtype=np.int_)       # iterations so far
 
     def args(self):
         return (self.t, self.d, self.dd, self.f, self.imp, self.diss, self.internal, self.work,
-                self.x, self.pot)
+                self.x, self.pot, self.its)
 
     def record(self, system, rec, b) -> None:
         """Record rows ``0 .. b - 1``, their energy each side's
@@ -184,7 +191,9 @@ def run_blocks(scheme, system, recorder, books, state, t_end, n, H, sliver, h_pr
                 rows.record(system, recorder, m)
             except GuardError:
                 # the step of the refused sample counts, as step by step
-                scheme.n_windows = k0 - pending + recorder.n_offered - kept0 + 1
+                j = recorder.n_offered - kept0
+                scheme.n_windows = k0 - pending + j + 1
+                scheme.n_iterations = n_it0 + int(rows.its[j])
                 raise
             scheme.n_windows = k
             if why == "switch":
