@@ -126,6 +126,11 @@ def test_the_loop_is_compiled_and_says_why_not():
     assert st["loop"] == "python" and "controlled" in st["refusal"]
     st = stats("rigid_cable", ["t_end=0.002"])
     assert st is None or st["loop"] != "compiled"
+    from cosim.core.schemes import driver
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv(driver.DRIVER_ENV, "python")
+        st = stats(None, ["t_end=0.002"])
+    assert st["loop"] == "python" and driver.DRIVER_ENV in st["refusal"]
     try:
         implicit_block.ENABLED = False
         st = stats(None, ["t_end=0.002"])

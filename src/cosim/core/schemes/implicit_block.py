@@ -21,7 +21,7 @@ first step whose rows are not finite (stopped as step by step), or when a
 step raised: a signal's KeyboardInterrupt keeps the whole samples before
 it and is raised again.  The progress callback is told at each block's end.
 
-:data:`ENABLED` False runs the Python loop of
+:data:`ENABLED` False (or ``COSIM_DRIVER=python``) runs the Python loop of
 :meth:`cosim.core.schemes.base.CoSimulationScheme.run`, the reference the
 blocks are tested against; so does a recorder that reads the system's live
 state at each sample (``reads_live_system``).
@@ -45,8 +45,11 @@ BLOCK = 256
 
 def refusal(scheme, system, recorder, controlled) -> str | None:
     """Why this implicit run's macro loop stays in Python, or None."""
+    from cosim.core.schemes import driver
     if not ENABLED:
         return "the compiled implicit loop is switched off (`implicit_block.ENABLED`)"
+    if driver.driver_choice() == "python":
+        return f"the Python loop was asked for (`{driver.DRIVER_ENV}=python`)"
     if scheme._kernel is None:
         return "the implicit iterations are not compiled for this system"
     if controlled:
