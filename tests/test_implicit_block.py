@@ -40,15 +40,27 @@ pytest.importorskip("cosim.core.schemes._implicit_block",
                     reason="the compiled implicit loop is not built here")
 
 TOL = 1e-10
-#: brachiation under the implicit scheme: its kernel applies (every side
-#: compiled, the grasps exchanged)
+#: runs the block loop takes: brachiation under its implicit scheme (every
+#: side compiled, the grasps exchanged), and other shipped scenes with their
+#: contacts exchanged (`placement = "coupler"`) under the implicit scheme
+_COUPLER = ['contacts.A.placement="coupler"', 'contacts.B.placement="coupler"',
+            'contacts.C.placement="coupler"']
 CASES_RUN = [
-    ("scene 0.05 s", None, ["t_end=0.05"]),
-    ("scene", None, []),           # grasp at the touch, release 50 ms after
-    ("aitken", None, ['scheme.acceleration="aitken"', "t_end=0.9"]),
-    ("order 2", None, ["scheme.extrapolation_order=2", "t_end=0.9"]),
-    ("kelvin_voigt", None, ['contacts.gripper2.law={ type = "kelvin_voigt", contact_stiffness '
-                            '= 1e5, contact_damping = 50.0 }', "t_end=0.9"]),
+    ("scene 0.05 s", "brachiation", None, ["t_end=0.05"]),
+    ("scene", "brachiation", None, []),     # grasp at the touch, release 50 ms after
+    ("aitken", "brachiation", None, ['scheme.acceleration="aitken"', "t_end=0.9"]),
+    ("order 2", "brachiation", None, ["scheme.extrapolation_order=2", "t_end=0.9"]),
+    ("kelvin_voigt", "brachiation", None, [
+        'contacts.gripper2.law={ type = "kelvin_voigt", contact_stiffness = 1e5, '
+        'contact_damping = 50.0 }', "t_end=0.9"]),
+    # a point mass against a rigid wall, linear and Kelvin-Voigt
+    ("spring_drop", "spring_drop", "undamped", ['contacts.wall.placement="coupler"',
+                                                'scheme.name="implicit"']),
+    ("spring_drop kv", "spring_drop", "kelvin_voigt", ['contacts.wall.placement="coupler"',
+                                                       'scheme.name="implicit"']),
+    # the robot on the ground striking the chain: three exchanged contacts
+    ("three_mass", "three_mass", "f100", ['scheme={ name = "implicit", macro_step = 3e-5 }',
+                                          "t_end=0.05", *_COUPLER]),
 ]
 
 
@@ -80,9 +92,10 @@ def same_outcome(a, b, tol=TOL):
         assert sb["energy"][key] == pytest.approx(sa["energy"][key], rel=tol, abs=1e-15), key
 
 
-@pytest.mark.parametrize("name, variant, overrides", CASES_RUN, ids=[c[0] for c in CASES_RUN])
-def test_blocks_give_the_python_loop(monkeypatch, name, variant, overrides):
-    scene = _scene("brachiation", variant, overrides)
+@pytest.mark.parametrize("case, name, variant, overrides", CASES_RUN,
+                         ids=[c[0] for c in CASES_RUN])
+def test_blocks_give_the_python_loop(monkeypatch, case, name, variant, overrides):
+    scene = _scene(name, variant, overrides)
     blocks = []                 # the rows of each block recorded
     record = implicit_block._Rows.record
     monkeypatch.setattr(implicit_block._Rows, "record",
@@ -104,7 +117,8 @@ def test_blocks_give_the_python_loop(monkeypatch, name, variant, overrides):
     assert tol <= 2e-9
     assert series_distance(ref, path) <= tol
     same_outcome(ref, path, tol)
-    if not overrides:
+    assert sum(v["count"] for v in path.summary["contacts"].values()) >= 1
+    if name == "brachiation" and not overrides:
         assert [s[:2] for s in switches(path)] == [("gripper1", "grasped"),
                                                    ("gripper2", "grasped"),
                                                    ("gripper1", "released")]
