@@ -34,6 +34,7 @@ from libc.stdlib cimport free, malloc
 from libc.string cimport memcpy
 
 from cosim.core._side_face cimport COSIM_SIDE_FACE, SideFace
+from cosim.core.schemes._implicit_step cimport ImplicitStep
 
 import numpy as np
 
@@ -82,14 +83,15 @@ cdef class ImplicitBlocks:
         The length the first step's ratio is taken against [s].
     """
 
-    cdef object scheme, system, kernel, subs, ksubs, not_converged, coupler_rows
-    cdef list kernels, xs
+    cdef object scheme, system, subs, ksubs, not_converged, coupler_rows
+    cdef ImplicitStep kernel
+    cdef list kernels, xs, moments
     cdef SideFace* faces
     cdef int ns, nsub, nc, nr, order, nhist, pending
     cdef long[::1] s_first, s_np, c_a, c_b, c_kind, c_trow, c_grasp, c_touch
     cdef double[::1] c_nx, c_ny, c_off, c_k, c_cd, g_k, g_c, g_kt, g_ct
     cdef list G
-    cdef double[::1] pos, vel, d, dd, f, fn, impulse, diss, work, w, p_prev, stepped
+    cdef double[::1] pos, vel, d, dd, f, fn, guess, impulse, diss, work, w, p_prev, stepped
     cdef double[:, ::1] hist
     cdef list co
     cdef long long[::1] mode
@@ -154,6 +156,9 @@ cdef class ImplicitBlocks:
         n = max(self.nr, 1)
         self.d, self.dd, self.f = np.zeros(n), np.zeros(n), np.zeros(n)
         self.fn, self.w, self.stepped = np.zeros(n), np.zeros(n), np.zeros(n)
+        self.guess = np.zeros(n)
+        # each side's port moments of its last step (what took_compiled_step keeps)
+        self.moments = [np.zeros((3, int(self.s_np[s])), dtype=complex) for s in range(self.ns)]
         m = max(self.nc, 1)
         self.impulse, self.diss, self.work = np.zeros(m), np.zeros(m), np.zeros(m)
         self.p_prev = np.zeros(m)
@@ -175,7 +180,8 @@ cdef class ImplicitBlocks:
     def set_history(self, hist):
         """Take the force history (oldest first, the last three kept)."""
         cdef int k, r
-        hist = list(hist)[-3:]
+        hist = list(hist)
+        hist = hist[max(len(hist) - 3, 0):]
         self.nhist = len(hist)
         for k in range(self.nhist):
             for r in range(self.nr):
@@ -263,9 +269,9 @@ cdef class ImplicitBlocks:
         """One macro step: the extrapolated forces, the compiled iterations,
         the sides told of their step (as ``Implicit._advance_compiled``)."""
         cdef int p, r, s
-        cdef double ratio = h / self.h_prev, f0, f1, f2
+        cdef double ratio = h / self.h_prev, f0, f1, f2, g
         cdef double[:, ::1] co
-        cdef double[::1] sv
+        cdef int it
         p = self.order if self.order < self.nhist - 1 else self.nhist - 1
         co = self.co[p]
         for r in range(self.nr):            # extrapolation_coeffs, its formulas in its order
@@ -282,24 +288,23 @@ cdef class ImplicitBlocks:
             if ratio > 1.0 + 1e-9 and f0 == 0.0:     # a growing step holds an open contact
                 for s in range(1, p + 1):
                     co[s, r] = 0.0
-        fn = np.asarray(self.fn)[:self.nr]
         try:
-            it, converged, guess, stepped, coeffs, moments = self.kernel.advance(
-                t, h, fn, self.co[p])
+            it = self.kernel.c_advance(t, h, self.fn, self.co[p], self.guess)
         except BaseException:
-            fs = self.kernel.failed_side
-            if fs >= 0:                     # as Subsystem.step marks a side whose step raised
-                self.ksubs[fs].status = "failed"
+            if self.kernel.failed_side >= 0:    # as Subsystem.step marks a side whose step raised
+                self.ksubs[self.kernel.failed_side].status = "failed"
             raise
-        self._work(coeffs, moments)
+        for r in range(self.nr):            # the impulse and force polynomial the step applied
+            g = self.guess[r]
+            f0 = self.fn[r]
+            self.stepped[r] = h * (f0 + 0.5 * (g - f0))
+        self._work()
         for s in range(self.ns):
-            self.ksubs[s].took_compiled_step(t, h, moments[s])
+            self.ksubs[s].took_compiled_step(t, h, self.moments[s])
         self.n_iterations += it
-        sv = stepped
-        for r in range(self.nr):
-            self.stepped[r] = sv[r]
-        if not converged:
-            self.not_converged(self.system, t, h, fn.copy(), guess, self.kernel.residual,
+        if not self.kernel.converged:
+            self.not_converged(self.system, t, h, np.array(self.fn[:self.nr]),
+                               np.array(self.guess[:self.nr]), self.kernel.residual,
                                self.coupler_rows, [])
         self.h_prev = h
         for s in range(self.ns):            # the ports at the step's end
@@ -311,27 +316,29 @@ cdef class ImplicitBlocks:
         cdef int j = 2 * self.s_first[s]
         self.faces[s].outputs(self.faces[s].side, &x[0], &self.pos[j], &self.vel[j])
 
-    cdef int _work(self, coeffs, list moments) except -1:
+    cdef int _work(self) except -1:
         """:meth:`CoupledSystem.exchange_work`'s rows: each side's force
-        polynomial against its ports' velocity moments."""
-        cdef double[:, ::1] cf = coeffs
-        cdef double[::1] mom
+        polynomial ``[f_n, guess - f_n]`` against its ports' velocity moments
+        (which it keeps, as ``took_compiled_step`` is handed them)."""
         cdef double[:, ::1] G
-        cdef int s, r, q, j, nq
+        cdef double[::1] mom
+        cdef int s, r, q, nq
         cdef double a, b
         for r in range(self.nr):
             self.w[r] = 0.0
         for s in range(self.ns):
-            mom = np.ascontiguousarray(moments[s]).reshape(-1).view(float)
-            G = self.G[s]
             nq = 2 * self.s_np[s]
+            mom = self.moments[s].reshape(-1).view(float)
+            for q in range(3 * nq):
+                mom[q] = self.kernel.pm[s, q]
+            G = self.G[s]
             for r in range(self.nr):
                 a = 0.0
                 b = 0.0
                 for q in range(nq):
                     a += mom[q] * G[q, r]
                     b += mom[nq + q] * G[q, r]
-                self.w[r] += cf[0, r] * a + cf[1, r] * b
+                self.w[r] += self.fn[r] * a + (self.guess[r] - self.fn[r]) * b
         return 0
 
     cdef void _rows(self) noexcept:
