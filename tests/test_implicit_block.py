@@ -47,6 +47,8 @@ _COUPLER = ['contacts.A.placement="coupler"', 'contacts.B.placement="coupler"',
             'contacts.C.placement="coupler"']
 CASES_RUN = [
     ("scene 0.05 s", "brachiation", None, ["t_end=0.05"]),
+    ("short last step", "brachiation", None, ["t_end=0.0505"]),     # its ratio 0.5
+    ("order 0", "brachiation", None, ["scheme.extrapolation_order=0", "t_end=0.9"]),
     ("scene", "brachiation", None, []),     # grasp at the touch, release 50 ms after
     ("aitken", "brachiation", None, ['scheme.acceleration="aitken"', "t_end=0.9"]),
     ("order 2", "brachiation", None, ["scheme.extrapolation_order=2", "t_end=0.9"]),
