@@ -92,7 +92,7 @@ cdef class ImplicitBlocks:
     cdef double[::1] c_nx, c_ny, c_off, c_k, c_cd, g_k, g_c, g_kt, g_ct
     cdef list G
     cdef double[::1] pos, vel, d, dd, f, fn, guess, impulse, diss, work, w, p_prev, stepped
-    cdef double[:, ::1] hist
+    cdef double[:, ::1] hist, co0, co1, co2, mom
     cdef list co
     cdef long long[::1] mode
     cdef double[::1] anchor
@@ -157,8 +157,13 @@ cdef class ImplicitBlocks:
         self.d, self.dd, self.f = np.zeros(n), np.zeros(n), np.zeros(n)
         self.fn, self.w, self.stepped = np.zeros(n), np.zeros(n), np.zeros(n)
         self.guess = np.zeros(n)
-        # each side's port moments of its last step (what took_compiled_step keeps)
-        self.moments = [np.zeros((3, int(self.s_np[s])), dtype=complex) for s in range(self.ns)]
+        # each side's port moments of its last step (what took_compiled_step
+        # keeps): complex (3, n_p) views of one buffer, read as floats here
+        maxp = max([1] + [int(k) for k in self.s_np])
+        buf = np.zeros((max(self.ns, 1), 3 * maxp), dtype=complex)
+        self.moments = [buf[s, :3 * self.s_np[s]].reshape(3, self.s_np[s])
+                        for s in range(self.ns)]
+        self.mom = buf.view(float)
         m = max(self.nc, 1)
         self.impulse, self.diss, self.work = np.zeros(m), np.zeros(m), np.zeros(m)
         self.p_prev = np.zeros(m)
@@ -166,6 +171,7 @@ cdef class ImplicitBlocks:
             self.p_prev[c] = p_prev[c]
         self.order = scheme.extrapolation_order
         self.co = [np.zeros((p + 1, self.nr)) for p in range(3)]
+        self.co0, self.co1, self.co2 = self.co
         self.hist = np.zeros((3, n))
         self.set_history(hist)
         self.h_prev = h_prev
@@ -273,7 +279,7 @@ cdef class ImplicitBlocks:
         cdef double[:, ::1] co
         cdef int it
         p = self.order if self.order < self.nhist - 1 else self.nhist - 1
-        co = self.co[p]
+        co = self.co0 if p == 0 else self.co1 if p == 1 else self.co2
         for r in range(self.nr):            # extrapolation_coeffs, its formulas in its order
             f0 = self.hist[self.nhist - 1, r]
             self.fn[r] = f0
@@ -289,7 +295,7 @@ cdef class ImplicitBlocks:
                 for s in range(1, p + 1):
                     co[s, r] = 0.0
         try:
-            it = self.kernel.c_advance(t, h, self.fn, self.co[p], self.guess)
+            it = self.kernel.c_advance(t, h, self.fn, co, self.guess)
         except BaseException:
             if self.kernel.failed_side >= 0:    # as Subsystem.step marks a side whose step raised
                 self.ksubs[self.kernel.failed_side].status = "failed"
@@ -328,7 +334,7 @@ cdef class ImplicitBlocks:
             self.w[r] = 0.0
         for s in range(self.ns):
             nq = 2 * self.s_np[s]
-            mom = self.moments[s].reshape(-1).view(float)
+            mom = self.mom[s]
             for q in range(3 * nq):
                 mom[q] = self.kernel.pm[s, q]
             G = self.G[s]
