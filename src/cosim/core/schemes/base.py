@@ -253,7 +253,7 @@ class CoSimulationScheme(InputExtrapolation, CouplingScheme):
         d, dd = system.penetrations(outs)
         f = system.forces(d, dd)
         st.outs, st.f = outs, f
-        # a step longer than the run is one step to t_end: the history and sliver measure that
+        # a step longer than the run is one step to t_end, as the history and sliver see it
         st.hist = self._starting_history(system, d, dd, f, min(H, t_end))
         books = StepBooks(self, system, recorder, f, d, dd)
         books.start(d, dd, f)
