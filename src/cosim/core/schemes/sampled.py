@@ -163,23 +163,24 @@ class _Emitter:
                               dtype=int)
         self.laws = [ln.contact.law for ln in system.links]
         self.rigid = np.array([law.rigid for law in self.laws], dtype=bool)
+        self.order = [(c, slot) for c, (_, slot) in system.embedded.items()]
 
     #: whether the recorder (or the guard) refused a sample
     refused = False
     #: process CPU spent here, called back from the side's steps [s]
     cpu = 0.0
 
-    def __call__(self, smp, switch_row) -> None:
+    def __call__(self, smp, switch_row, located=()) -> None:
         c0 = time.process_time()
         try:
-            self._emit(smp, switch_row)
+            self._emit(smp, switch_row, located)
         except Exception:
             self.refused = True
             raise
         finally:
             self.cpu += time.process_time() - c0
 
-    def _emit(self, smp, switch_row) -> None:
+    def _emit(self, smp, switch_row, located) -> None:
         sysm, nc = self.system, self.system.n_contacts
         m = len(smp.t)
         pos = np.broadcast_to(self.pos, (m,) + self.pos.shape).copy()
@@ -208,14 +209,41 @@ class _Emitter:
             x[:, a:b] = xr
         block = (smp.t, d, dd, f, quad[:, :, 0], quad[:, :, 1], smp.ledger, quad[:, :, 3], x,
                  energy, peaks)
-        self._push(block, 0, m, switch_row)
+        self._push(block, 0, m, switch_row, located)
 
-    def _push(self, block, a, b, switch_row=None) -> None:
-        """Record rows ``a .. b - 1``, the switches of the step of row
-        ``switch_row`` reported before it (:meth:`_report`, in the recorder's
-        block); stop at a non-finite row as the loop does."""
+    def _edges(self, located) -> dict:
+        """Row -> the switches ``(contact, time, on)`` the side kept in its
+        rows, in the order :meth:`_report` reports a step's: contact by
+        contact, each contact's in the order located (a rigid law's touch
+        as its impact, an instant; its release is not an edge)."""
+        at = {}
+        for row, slot, ts, on in located:
+            at.setdefault(row, []).append((slot, ts, on))
+        out = {}
+        for row, got in at.items():
+            edges = []
+            for c, slot in self.order:
+                for j, ts, on in got:
+                    if j != slot:
+                        continue
+                    if not self.rigid[c]:
+                        edges.append((c, ts, on))
+                    elif on:
+                        edges += [(c, ts, True), (c, ts, False)]
+            if edges:
+                out[row] = edges
+        return out
+
+    def _push(self, block, a, b, switch_row=None, located=()) -> None:
+        """Record rows ``a .. b - 1``, the switches the side kept in its rows
+        (``located``) and those of the step of row ``switch_row`` reported
+        before them (:meth:`_report`, in the recorder's block); stop at a
+        non-finite row as the loop does."""
         if b <= a:
             return
+        edges = self._edges(located)
+        if switch_row is not None:
+            edges[switch_row] = self._report
         t, d, dd, f, impulse, diss, ledger, work, x, energy, peaks = block
         ok = np.isfinite(d[a:b]).all(axis=1) & np.isfinite(dd[a:b]).all(axis=1)
         bad = np.flatnonzero(~ok)
@@ -225,10 +253,13 @@ class _Emitter:
                                        impulse[a:stop], diss[a:stop], ledger[a:stop],
                                        work[a:stop], x=x[a:stop], energy=energy[a:stop],
                                        peaks=peaks[a:stop],
-                                       edges=None if switch_row is None else
-                                       {switch_row - a: self._report})
-        if switch_row is not None and stop == switch_row:
-            self._report()              # the loop reports them before it looks at the rows
+                                       edges={r - a: e for r, e in edges.items()} or None)
+        if stop in edges:               # the loop reports them before it looks at the rows
+            if callable(edges[stop]):
+                edges[stop]()
+            else:
+                for c, ts, on in edges[stop]:
+                    self.recorder.edge(c, ts, on)
         if stop < b:
             cause = nonfinite_cause(self.system, d[stop], dd[stop], f[stop])
             raise GuardError(cause[0] if cause else "non-finite state", float(t[stop]),
