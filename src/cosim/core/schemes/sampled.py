@@ -12,10 +12,14 @@ sample.  Here the side takes many macro steps in one call (its
 the loop restarts it, or an adaptive scipy method sampled from its dense
 output) and the recorder takes the samples as arrays
 (:meth:`~cosim.core.recorder.Recorder.record_block`).  The side returns to
-Python at the end, at a full buffer of :data:`BLOCK` samples, after a step
-in which a switch was located (an impact, a touch or a release: the
-recorder and the run guard see them before that step's sample, as in the
-loop), or at a non-finite state.
+Python at the end, at a full buffer of :data:`BLOCK` samples, or at a
+non-finite state.  The switches it locates go with the samples: the RK4
+kernel keeps a penalty law's touches and releases in rows (the step's row,
+the contact, the time, on or off) and goes on integrating; it returns after
+a step in which it told the side of a switch in Python (a rigid law's
+impact, resolved there, or a switch past its rows), and an adaptive method
+after each switch.  The recorder and the run guard see each step's switches
+before its sample, contact by contact, as in the loop.
 
 What the path gives, against the loop:
 
