@@ -192,7 +192,7 @@ class SampledSteps:
         try:
             y1 = integ.sample(kernel.rhs, t0, y0, T, kernel.switch if self._embedded else None,
                               self._on_switch, self._probe if self._embedded else None,
-                              len(self._embedded), out)
+                              len(self._embedded), out, probe_rows=kernel.sample_penetrations)
         except Exception:
             if not refused:
                 self.status = "failed"
