@@ -170,3 +170,24 @@ def test_an_interrupt_keeps_whole_samples_and_their_switches(monkeypatch):
                 assert a1 == pytest.approx(b1, rel=1e-12), c
                 edges += 1
     assert edges >= 2
+
+
+def test_penetrations_at_many_states_are_those_at_each():
+    """The kernel's batch of penetrations (an adaptive side's samples) runs
+    the formulas of its one-state ``penetrations`` on each row: within an
+    ulp of the largest magnitude (the same operations; bounded, not bit
+    for bit, as two calls)."""
+    from test_sampled import _scene
+    system, _ = _scene("manipulator_wall", "mu0.03").build()
+    side = next(s for s in system.subsystems if not s.rigid)
+    kernel = side._compiled()
+    kernel.set_step(0.0, 1e-3, None, side._embedded)
+    rng = np.random.default_rng(7)
+    n2 = side.x.size
+    Y = side.x[None, :] + 0.3 * rng.standard_normal((50, n2))
+    T = np.linspace(0.0, 1e-3, 50)
+    D = np.full((50, len(side._embedded)), np.nan)
+    kernel.sample_penetrations(T, Y, D)
+    one = np.array([kernel.penetrations(t, y)[0] for t, y in zip(T, Y)])
+    assert np.all(np.abs(D - one) <= np.spacing(np.max(np.abs(one))))
+    assert len(np.unique(np.sign(one))) == 2        # both sides of the wall
