@@ -17,10 +17,11 @@ import signal
 import numpy as np
 import pytest
 
+import cosim
 from cosim.core.schemes import sampled
 from cosim.scene.run import RunInterrupted
 from cosim.sides import multibody_kernel
-from test_sampled import run, same_outcome, series_distance
+from test_sampled import _scene, run, same_outcome, series_distance
 
 STRIKE_Q0 = 0.09994114       # ground_multicontact_strike's body height [m]
 
@@ -177,7 +178,6 @@ def test_penetrations_at_many_states_are_those_at_each():
     the formulas of its one-state ``penetrations`` on each row: within an
     ulp of the largest magnitude (the same operations; bounded, not bit
     for bit, as two calls)."""
-    from test_sampled import _scene
     system, _ = _scene("manipulator_wall", "mu0.03").build()
     side = next(s for s in system.subsystems if not s.rigid)
     kernel = side._compiled()
@@ -191,3 +191,37 @@ def test_penetrations_at_many_states_are_those_at_each():
     one = np.array([kernel.penetrations(t, y)[0] for t, y in zip(T, Y)])
     assert np.all(np.abs(D - one) <= np.spacing(np.max(np.abs(one))))
     assert len(np.unique(np.sign(one))) == 2        # both sides of the wall
+
+
+def test_a_spool_that_fails_inside_the_block_stops_where_the_loop_does(monkeypatch, tmp_path):
+    """spring_drop's whole run is one block: its spool's second chunk (64
+    rows) cannot be written; the run stopped at the sample whose store
+    failed, the loop's message word for word."""
+    import errno
+    from cosim.core import series
+    from cosim.errors import OutputError
+    monkeypatch.setattr(series, "CHUNK_BYTES", 1)
+    opened = series._open_spool
+
+    class Full:
+        def __init__(self, fh):
+            self.fh, self.writes = fh, 0
+
+        def write(self, data):
+            self.writes += 1
+            if self.writes == 2:
+                raise OSError(errno.ENOSPC, "No space left on device")
+            return self.fh.write(data)
+
+        def __getattr__(self, name):
+            return getattr(self.fh, name)
+    monkeypatch.setattr(series, "_open_spool", lambda path: Full(opened(path)))
+    said = []
+    for on in (False, True):
+        monkeypatch.setattr(sampled, "ENABLED", on)
+        out = tmp_path / f"run{on:d}"
+        with pytest.raises(OutputError) as info:
+            cosim.simulate(_scene("spring_drop"), out=out)
+        said.append(str(info.value).replace(str(out), "DIR"))
+    assert said[0] == said[1]
+    assert "the run stopped at t = 0.0127 s" in said[1]

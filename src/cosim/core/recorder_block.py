@@ -269,8 +269,15 @@ def _commit(rec, t, d, dd, f, impulse, dissipated, work, x, energy, diss_total, 
         rows = np.maximum.reduceat(contrib[:kept[-1] + 1], np.r_[0, kept[:-1] + 1], axis=0)
         rows[0] = np.maximum(rows[0], carry)
         carry, start = np.zeros_like(carry), kept[-1] + 1
-        _store_rows(rec, t[kept], x[kept], d[kept], f[kept], energy[kept], diss_total[kept],
-                    rows)
+        try:
+            _store_rows(rec, t[kept], x[kept], d[kept], f[kept], energy[kept],
+                        diss_total[kept], rows)
+        except Exception:
+            # a spool that cannot be written: the run reached the sample whose
+            # store failed, as one by one (record keeps it, then stores it)
+            i = int(np.searchsorted(t[:k], rec._last_t))
+            rec._prev = (t[i], d[i].copy(), dd[i].copy(), active[i].copy())
+            raise
     rec._since = np.maximum(carry, np.max(contrib[start:k], axis=0)) if start < k else carry
     rec._count += k
     if rec._progress is not None:
@@ -305,7 +312,7 @@ def _store_rows(rec, t, x, d, f, energy, diss_total, pk) -> None:
             rows[:, L["mode"]] = sysm.connections.mode
         rows[:, L["pk"]] = pk[i:j]
         rec._n_buf += j - i
+        rec._last_t = t[j - 1]
         i = j
         if rec._n_buf == len(rec._buf):
             rec._flush()
-    rec._last_t = t[-1]
