@@ -225,3 +225,22 @@ def test_a_spool_that_fails_inside_the_block_stops_where_the_loop_does(monkeypat
         said.append(str(info.value).replace(str(out), "DIR"))
     assert said[0] == said[1]
     assert "the run stopped at t = 0.0127 s" in said[1]
+
+
+def test_the_general_penetrations_give_the_same_run(monkeypatch):
+    """The emitter's penetrations from every side's ports (kept for a
+    contact whose ports are not one on the moving side, one on a rigid
+    partner) agree with its shortcut's, and with the loop."""
+    init = sampled._Emitter.__init__
+
+    def general(self, *args):
+        init(self, *args)
+        assert self.split           # every shipped scene's contacts are split
+        self.split = False
+    loop = run(monkeypatch, "ground_multicontact", on=False)
+    fast = run(monkeypatch, "ground_multicontact", on=True)
+    monkeypatch.setattr(sampled._Emitter, "__init__", general)
+    slow = run(monkeypatch, "ground_multicontact", on=True)
+    assert series_distance(fast, slow) <= 1e-12
+    assert series_distance(loop, slow) <= 1e-10
+    same_outcome(loop, slow, 1e-10)

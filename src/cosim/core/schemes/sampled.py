@@ -168,6 +168,19 @@ class _Emitter:
         self.laws = [ln.contact.law for ln in system.links]
         self.rigid = np.array([law.rigid for law in self.laws], dtype=bool)
         self.order = [(c, slot) for c, (_, slot) in system.embedded.items()]
+        # each contact's port on this side and its rigid partner's, which stands still
+        row_a, row_b = system.contact_rows
+        a_in = (row_a >= first[s]) & (row_a < first[s + 1])
+        b_in = (row_b >= first[s]) & (row_b < first[s + 1])
+        self.split = bool(np.all(a_in != b_in))
+        if self.split:
+            mine = np.where(a_in, row_a, row_b) - first[s]
+            fixed = np.where(a_in, row_b, row_a)
+            self.mine = (slice(int(mine[0]), int(mine[0]) + len(mine))
+                         if np.array_equal(mine, np.arange(mine[0], mine[0] + len(mine)))
+                         else mine)
+            self.sign = np.where(a_in, 1.0, -1.0)[:, None]      # (a - b): +-(mine - fixed)
+            self.fixed_pos, self.fixed_vel = self.pos[fixed], self.vel[fixed]
 
     #: whether the recorder (or the guard) refused a sample
     refused = False
@@ -187,16 +200,20 @@ class _Emitter:
     def _emit(self, smp, switch_row, located) -> None:
         sysm, nc = self.system, self.system.n_contacts
         m = len(smp.t)
-        pos = np.broadcast_to(self.pos, (m,) + self.pos.shape).copy()
-        vel = np.broadcast_to(self.vel, (m,) + self.vel.shape).copy()
-        pos[:, self.ports], vel[:, self.ports] = smp.position, smp.velocity
         # CoupledSystem.penetrations, on every sample at once
-        row_a, row_b = sysm.contact_rows
         normals = sysm.contact_normals
-        dx = pos[:, row_a] - pos[:, row_b]
-        dv = vel[:, row_a] - vel[:, row_b]
-        d = sysm.contact_offsets - np.einsum("mcx,cx->mc", dx, normals)
-        dd = -np.einsum("mcx,cx->mc", dv, normals)
+        if self.split:          # side a's port less side b's, one of them still
+            dx = (smp.position[:, self.mine] - self.fixed_pos) * self.sign
+            dv = (smp.velocity[:, self.mine] - self.fixed_vel) * self.sign
+        else:
+            pos = np.broadcast_to(self.pos, (m,) + self.pos.shape).copy()
+            vel = np.broadcast_to(self.vel, (m,) + self.vel.shape).copy()
+            pos[:, self.ports], vel[:, self.ports] = smp.position, smp.velocity
+            row_a, row_b = sysm.contact_rows
+            dx = pos[:, row_a] - pos[:, row_b]
+            dv = vel[:, row_a] - vel[:, row_b]
+        d = sysm.contact_offsets - (dx[..., 0] * normals[:, 0] + dx[..., 1] * normals[:, 1])
+        dd = -(dv[..., 0] * normals[:, 0] + dv[..., 1] * normals[:, 1])
         f = np.empty((m, nc))
         energy = smp.energy.copy()          # the other sides are rigid: no energy
         for c, law in enumerate(self.laws):
