@@ -18,6 +18,7 @@ import time
 import numpy as np
 
 from couplers.law_base import ContactLaw
+from cosim.core.guard_block import flagged
 from cosim.core.guard_error import GuardError
 from cosim.core.hermite import hermite_cubic_max
 from cosim.core.progress import Progress
@@ -154,13 +155,16 @@ def record_block(rec, t, d, dd, f, impulse, dissipated, internal, work, x, energ
     edge_rows = sorted(set(np.nonzero(flip)[0].tolist()) | ({0} if switched else set())
                        | {j - 1 for j in edges if j > 0})
     at = _crossings(rec, flip, t_prev, d_prev, dd_prev, t, d, dd, a_prev)
+    # the guard looks only at the stretches between edges that hold a sample
+    # its fast test flags (the others pass it unchanged)
+    flags = None if rec.guard is None else flagged(rec.guard, d, dd, f, drift, internal[:, 1])
     pos = 0
     if 0 in edges:
         _located(rec, t, d, dd, f, impulse, dissipated, work, x, energy, diss_total, drift,
                  internal, active, contrib, edges[0], 0)
     for je in edge_rows + [m]:
         hi = min(je + 1, m)
-        if rec.guard is not None and hi > pos:
+        if rec.guard is not None and hi > pos and (flags is None or flags[pos:hi].any()):
             try:
                 rec.guard.check_block(
                     t[pos:hi], d[pos:hi], dd[pos:hi], f[pos:hi], drift[pos:hi],
