@@ -546,12 +546,12 @@ cdef class MultibodyStep(TreeDynamics):
         ``x`` and ``aux`` are advanced in place; ``moments`` (the host's
         ``port_moments``, ``(3, n_p)`` complex) gets the last step's.
 
-        A penalty law's touch or release located in a step is written to
-        row ``i`` of ``ST`` (its time) and ``SJ`` (the step's row, the
-        contact, 1 for on) and the steps go on; a rigid law's touch (an
-        impact, resolved in Python) and a switch past the buffers' end go
-        to the host's ``on_switch`` (its logs hold them), and the call
-        returns after that step.
+        A switch located in a step (a penalty law's touch or release, a
+        rigid law's release) is written to row ``i`` of ``ST`` (its time)
+        and ``SJ`` (the step's row, the contact, 1 for on) and the steps go
+        on; a rigid law's touch (an impact, resolved in Python) and a switch
+        past the buffers' end go to the host's ``on_switch`` (its logs hold
+        them), and the call returns after that step.
 
         Returns after step ``k1 - 1``, after a step ``h`` of which is at
         most ``sliver`` (not taken: the run has ended), after a step in
@@ -654,9 +654,9 @@ cdef class MultibodyStep(TreeDynamics):
 
 cdef class _Located:
     """``on_switch`` of the steps of :meth:`MultibodyStep.sample_steps`: a
-    penalty law's switch is kept in the rows ``ST``, ``SJ`` (time; step's
-    row, contact, on); a rigid law's touch, or a switch with no row left,
-    is the host's (``told``)."""
+    switch is kept in the rows ``ST``, ``SJ`` (time; step's row, contact,
+    on), but a rigid law's touch, or a switch with no row left, is the
+    host's (``told``)."""
     cdef MultibodyStep k
     cdef object host
     cdef double[::1] st
