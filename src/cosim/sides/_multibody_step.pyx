@@ -93,6 +93,34 @@ cdef void _substep_peaks(double* peak, const double* d0, const double* v0, const
             peak[j] = p
 
 
+cdef class _Located:
+    """``on_switch`` of the steps of :meth:`MultibodyStep.sample_steps`: a
+    switch is kept in the rows ``ST``, ``SJ`` (time; step's row, contact,
+    on), but a rigid law's touch, or a switch with no row left, is the
+    host's (``told``)."""
+    cdef MultibodyStep k
+    cdef object host
+    cdef double[::1] st
+    cdef long[:, ::1] sj
+    cdef long row
+    cdef bint told
+
+    def __init__(self, MultibodyStep k, host, double[::1] st, long[:, ::1] sj):
+        self.k, self.host, self.st, self.sj = k, host, st, sj
+        self.row, self.told = 0, False
+        k.n_located = 0
+
+    def __call__(self, double t, int j, bint on, y):
+        cdef long i = self.k.n_located
+        if (self.k.c_kind[j] != RIGID or not on) and i < self.st.shape[0]:
+            self.st[i] = t
+            self.sj[i, 0], self.sj[i, 1], self.sj[i, 2] = self.row, j, on
+            self.k.n_located = i + 1
+            return None
+        self.told = True
+        return self.host(t, j, on, y)
+
+
 cdef class MultibodyStep(TreeDynamics):
     """Compiled RK4 step of one :class:`cosim.sides.multibody.MultibodySubsystem`.
 
@@ -651,34 +679,6 @@ cdef class MultibodyStep(TreeDynamics):
                             False)
                 P[j, p, 0], P[j, p, 1] = self.px_re[n + p], self.px_im[n + p]
                 P[j, npt + p, 0], P[j, npt + p, 1] = self.pv_re[n + p], self.pv_im[n + p]
-
-cdef class _Located:
-    """``on_switch`` of the steps of :meth:`MultibodyStep.sample_steps`: a
-    switch is kept in the rows ``ST``, ``SJ`` (time; step's row, contact,
-    on), but a rigid law's touch, or a switch with no row left, is the
-    host's (``told``)."""
-    cdef MultibodyStep k
-    cdef object host
-    cdef double[::1] st
-    cdef long[:, ::1] sj
-    cdef long row
-    cdef bint told
-
-    def __init__(self, MultibodyStep k, host, double[::1] st, long[:, ::1] sj):
-        self.k, self.host, self.st, self.sj = k, host, st, sj
-        self.row, self.told = 0, False
-        k.n_located = 0
-
-    def __call__(self, double t, int j, bint on, y):
-        cdef long i = self.k.n_located
-        if (self.k.c_kind[j] != RIGID or not on) and i < self.st.shape[0]:
-            self.st[i] = t
-            self.sj[i, 0], self.sj[i, 1], self.sj[i, 2] = self.row, j, on
-            self.k.n_located = i + 1
-            return None
-        self.told = True
-        return self.host(t, j, on, y)
-
 
 cdef int _tree_outputs(void* obj, const double* x, double* pos, double* vel) except -1:
     return (<TreeFace>obj).outputs(x, pos, vel)
