@@ -263,8 +263,18 @@ class Implicit(CoSimulationScheme):
         if self.acceleration == "iqn_ils":
             kw.update({k: getattr(self, k) for k in self._IQN_OPTIONS})
         self._accel = ACCELERATIONS[self.acceleration](**kw)
-        self._kernel = self._compiled_iterations(system) if self.compiled_iterations else None
+        built = self.__dict__.pop("_prepared", None)      # by prepare(), for this system
+        self._kernel = (None if not self.compiled_iterations else built[1]
+                        if built is not None and built[0] is system
+                        else self._compiled_iterations(system))
         return super().run(system, t_end, recorder)
+
+    def prepare(self, system, t_end, recorder):
+        # the sides' kernels, then the compiled iterations over them, built
+        # before the clock for the run that follows (which takes them)
+        super().prepare(system, t_end, recorder)
+        if self.compiled_iterations:
+            self._prepared = (system, self._compiled_iterations(system))
 
     # ------------------------------------------------- compiled iterations
     def _compiled_iterations(self, system):
