@@ -140,8 +140,10 @@ def _simulate(scene, scheme, progress, progress_interval, out, overwrite):
                    series_path=None if out is None else inside(out, "series.npz"),
                    guard=Guard(system, scene.guard))
     # what the run does once at its start (kernels built, its loop's modules
-    # loaded), before the clock: a process's first run counts none of it
+    # loaded, the recorder's rows and spool), before the clock: a process's
+    # first run counts none of it
     sch.prepare(system, scene.t_end, rec)
+    rec.prepare()                          # its rows laid out, its spool opened
     cpu0 = time.process_time() - _host_cpu(system)
     status, message = "finished", ""
     counters = {}
