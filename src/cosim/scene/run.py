@@ -130,7 +130,6 @@ def _simulate(scene, scheme, progress, progress_interval, out, overwrite):
     size = scene_size(system)
     if out is not None:
         sch.preflight(system, scene.t_end)     # a refusal writes nothing
-        write_scene(scene, out)
     if _is_monolithic(sch):
         auto = False                       # it locates every switch itself
     else:                                  # embedded contacts: their integrator does
@@ -141,8 +140,10 @@ def _simulate(scene, scheme, progress, progress_interval, out, overwrite):
                    guard=Guard(system, scene.guard))
     # what the run does once at its start (kernels built, its loop's modules
     # loaded, the recorder's rows and spool), before the clock: a process's
-    # first run counts none of it
+    # first run counts none of it; a kernel built wrong writes nothing
     sch.prepare(system, scene.t_end, rec)
+    if out is not None:
+        write_scene(scene, out)
     rec.prepare()                          # its rows laid out, its spool opened
     cpu0 = time.process_time() - _host_cpu(system)
     status, message = "finished", ""

@@ -47,8 +47,9 @@ def driver_choice() -> str:
 def compiled_driver():
     """The compiled loop's module, or None where it was not built (said once)."""
     global _missing_said
+    from cosim.sides.kernel import import_kernel
     try:
-        return importlib.import_module("cosim.core.schemes._driver")
+        return import_kernel("cosim.core.schemes._driver")
     except ImportError as exc:
         if not _missing_said:
             _missing_said = True
@@ -135,6 +136,7 @@ def prepare(scheme, system, recorder) -> None:
     the run.  A process's first run then counts no import and no kernel
     build in its ``cpu_time_s``; the run finds them built and loaded."""
     from cosim.core.schemes import driven_block
+    from cosim.sides.kernel import import_kernel
     for sub in system.subsystems:
         if "compiled_loop" in sub.capabilities:
             sub.compiled_loop_refusal()      # builds the side's kernel, kept for its steps
@@ -145,9 +147,9 @@ def prepare(scheme, system, recorder) -> None:
         blocks = True
     if not sampled and refusal(scheme, system) is None and compiled_driver() is not None:
         if system.followers:                 # the loop moves their points in compiled code
-            importlib.import_module("cosim.core.schemes._follow")
+            import_kernel("cosim.core.schemes._follow")
         if driven_block.takes(recorder):
-            importlib.import_module("cosim.core.schemes._driver_block")
+            import_kernel("cosim.core.schemes._driver_block")
             blocks = True
     if blocks:
         importlib.import_module("cosim.core.guard_block")
