@@ -264,9 +264,12 @@ class Implicit(CoSimulationScheme):
             kw.update({k: getattr(self, k) for k in self._IQN_OPTIONS})
         self._accel = ACCELERATIONS[self.acceleration](**kw)
         built = self.__dict__.pop("_prepared", None)      # by prepare(), for this system
-        self._kernel = (None if not self.compiled_iterations else built[1]
-                        if built is not None and built[0] is system
-                        else self._compiled_iterations(system))
+        if not self.compiled_iterations:
+            self._kernel = None
+        elif built is not None and built[0] is system:
+            self._kernel = built[1]
+        else:
+            self._kernel = self._compiled_iterations(system)
         return super().run(system, t_end, recorder)
 
     def prepare(self, system, t_end, recorder):
