@@ -15,9 +15,10 @@ import numpy as np
 from cosim.core import preflight
 from cosim.errors import CouplingError, UnsafeStepError
 from cosim.core.preflight import stiffest_normal
-from cosim.core.schemes import driven_block
+from cosim.core.schemes import driven_block, driver
 from cosim.core.schemes.extrapolation import InputExtrapolation, extrapolation_coeffs
-from cosim.core.schemes.step_control import StepBooks, StepController, StepState
+from cosim.core.schemes.step_control import (StepBooks, StepController, StepState,
+                                              watch_impacts)
 from cosim.core.subsystem import reparametrised
 
 __all__ = ["Option", "CouplingScheme", "CoSimulationScheme", "UnsafeStepError", "CouplingError",
@@ -132,6 +133,13 @@ class CouplingScheme(ABC):
         (:class:`~cosim.errors.UnsafeStepError`).  Nothing to refuse here; the
         co-simulation schemes check their steps against the contacts."""
 
+    def prepare(self, system, t_end: float, recorder) -> None:
+        """Do before the solve's clock starts what a :meth:`run` of ``system``
+        to ``t_end`` [s] into ``recorder`` would do at its start, once: build
+        the sides' compiled kernels, load the modules its loop takes
+        (:func:`cosim.scene.run.simulate` calls it; a ``run`` without it does
+        the same itself, inside its solve).  Nothing here."""
+
     @abstractmethod
     def run(self, system, t_end: float, recorder) -> dict:
         """Advance the system to ``t_end``, recording as it goes."""
@@ -158,6 +166,10 @@ class CoSimulationScheme(InputExtrapolation, CouplingScheme):
         "substeps": Option(dict, None, _substeps_ok,
                            "a table of subsystem name = number of sub-steps (>= 1)"),
     }
+
+    def prepare(self, system, t_end: float, recorder) -> None:
+        # the sides' kernels, the compiled loop's or the sampled path's modules
+        driver.prepare(self, system, recorder)
 
     @property
     def horizon(self) -> float:
@@ -360,7 +372,6 @@ class CoSimulationScheme(InputExtrapolation, CouplingScheme):
     def _compiled_loop(self, system, state, d, dd, controlled, h_prev):
         """The compiled macro loop for this run (:mod:`cosim.core.schemes.driver`),
         or None where the Python loop runs it (:attr:`loop_refusal` says why)."""
-        from cosim.core.schemes import driver
         self.loop_refusal = why = driver.refusal(self, system)
         if why is not None:
             return None
@@ -453,33 +464,7 @@ class CoSimulationScheme(InputExtrapolation, CouplingScheme):
             impulse += hk * np.sum(cf / (j + 1), axis=0)
         return impulse
 
-    @staticmethod
-    def _watch_impacts(system, recorder) -> None:
-        """Let the run guard see each rigid impact as a side's integrator
-        resolves it: the switches of the step so far after those it noted
-        (:meth:`~cosim.core.guard.Guard.switches_ahead`; an impact is a touch
-        and a release at one instant).  A train of impacts that accumulates
-        at a finite time would otherwise never end its step."""
-        guard = getattr(recorder, "guard", None)
-        rigid = {}                       # subsystem -> {embedded slot: contact}
-        for c, (s, slot) in system.embedded.items():
-            if system.links[c].contact.law.rigid:
-                rigid.setdefault(s, {})[slot] = c
-        for s, slots in rigid.items():
-            sub = system.subsystems[s]
-            if "impact_watch" not in sub.capabilities:
-                continue
-            sub.impact_watch = None
-            if guard is None:
-                continue
-            keep = guard.options.chatter_switches // 2 + 1    # impacts that can trip it
-
-            def watch(t, sub=sub, slots=slots):
-                for slot, c in slots.items():
-                    times = [ts for ts, j, on in sub.switch_log if j == slot and on][-keep:]
-                    if times and times[-1] == t:
-                        guard.switches_ahead(c, [x for ts in times for x in (ts, ts)])
-            sub.impact_watch = watch
+    _watch_impacts = staticmethod(watch_impacts)
 
     def _moving(self, system):
         return self._topology(system).moving

@@ -263,14 +263,21 @@ class Implicit(CoSimulationScheme):
         if self.acceleration == "iqn_ils":
             kw.update({k: getattr(self, k) for k in self._IQN_OPTIONS})
         self._accel = ACCELERATIONS[self.acceleration](**kw)
-        self._kernel = self._compiled_iterations(system) if self.compiled_iterations else None
+        built = self.__dict__.pop("_prepared", None)      # by prepare(), for this system
+        self._kernel = (built[1] if built is not None and built[0] is system else
+                        self._compiled_iterations(system) if self.compiled_iterations else None)
         return super().run(system, t_end, recorder)
 
+    def prepare(self, system, t_end, recorder):
+        # the sides' kernels, the compiled iterations over them and the
+        # modules of the run's loop, before the clock (the run takes them)
+        super().prepare(system, t_end, recorder)
+        from cosim.core.schemes import implicit_block
+        self._prepared = (system, implicit_block.prepare(self, system, recorder))
+
     def _macro_blocks(self, system, recorder, books, t_end, n, H, sliver, controlled, h_prev):
-        """The macro loop in compiled code, its samples in blocks
-        (:mod:`cosim.core.schemes.implicit_block`), where it covers the run:
-        ``(k, n_rejected, compiled_cpu)``; None where the Python loop runs
-        (:attr:`loop_refusal` says why)."""
+        """:mod:`cosim.core.schemes.implicit_block`'s loop where it covers the
+        run; None where the Python loop runs (:attr:`loop_refusal` says why)."""
         from cosim.core.schemes import implicit_block
         self.loop_refusal = implicit_block.refusal(self, system, recorder, controlled)
         if self.loop_refusal is not None:
@@ -290,8 +297,9 @@ class Implicit(CoSimulationScheme):
         whose law is not linear or Kelvin-Voigt, or with friction."""
         if system.hosted or system.followers or not len(system.coupler_rows):
             return None
+        from cosim.sides.kernel import import_kernel
         try:
-            from cosim.core.schemes import _implicit_step
+            _implicit_step = import_kernel("cosim.core.schemes._implicit_step")
         except ImportError:             # not built: the reference iterates
             return None
         cs = system.connections

@@ -70,6 +70,27 @@ def refusal(scheme, system, recorder, controlled) -> str | None:
     return None
 
 
+def prepare(scheme, system, recorder):
+    """Before the solve's clock: build ``scheme``'s compiled iterations over
+    ``system`` (None where the Python reference iterates) and load the
+    modules its compiled macro loop takes where :func:`refusal` lets it.
+    Returns the iterations' kernel, for the run."""
+    import importlib
+    if not scheme.compiled_iterations:
+        return None
+    kernel = scheme._compiled_iterations(system)
+    built = scheme.__dict__.get("_kernel", None)
+    scheme._kernel = kernel
+    try:
+        controlled = scheme.contact_step is not None and len(system.exchanged) > 0
+        if kernel is not None and refusal(scheme, system, recorder, controlled) is None:
+            importlib.import_module("cosim.core.guard_block")
+            importlib.import_module("cosim.core.recorder_block")
+    finally:
+        scheme._kernel = built
+    return kernel
+
+
 def _replaced(scheme, name) -> bool:
     """Whether method ``name`` of ``scheme``'s class is not the implicit
     scheme's own (a test or a user wrapped it): the Python loop calls it."""
