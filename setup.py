@@ -27,7 +27,10 @@ KERNELS = [
     # the implicit scheme's iterations, which call the sides' kernels through
     # the C face they fill in (cosim/core/_side_face.pxd, declarations only)
     Extension("cosim.core.schemes._implicit_step", ["src/cosim/core/schemes/_implicit_step.pyx"],
-              depends=[SIDE_FACE]),
+              depends=["src/cosim/core/schemes/_implicit_step.pxd", SIDE_FACE]),
+    # the implicit scheme's macro loop, which calls the iterations through their .pxd
+    Extension("cosim.core.schemes._implicit_block", ["src/cosim/core/schemes/_implicit_block.pyx"],
+              depends=["src/cosim/core/schemes/_implicit_step.pxd", SIDE_FACE]),
     # the structure's step (its Python face) extends the contact phases, which
     # extend the modal response, which calls the rank-one update (their .pxd)
     Extension("cosim.sides._rank_one", ["src/cosim/sides/_rank_one.pyx"]),

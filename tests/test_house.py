@@ -255,6 +255,7 @@ def test_no_module_probes_a_private_attribute_of_another_module():
 #: capability, cosim.core.loop_face), never through their private attributes
 LOOP = ("cosim/core/schemes/_driver.pyx", "cosim/core/schemes/_driver_block.pyx",
         "cosim/core/schemes/driven_block.py", "cosim/core/schemes/_follow.pyx",
+        "cosim/core/schemes/implicit.py", "cosim/core/schemes/_implicit_step.pyx",
         "cosim/core/schemes/_driver_faces.pyx")
 
 

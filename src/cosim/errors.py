@@ -1,7 +1,8 @@
 """Errors of a run (the scene loader's SceneError lives in cosim.scene.checks)."""
 
 __all__ = ["SimulationError", "CouplingError", "FMUError", "UnsafeStepError", "OutputExistsError",
-           "shown", "OutputError", "OutputBusyError", "SignalStop", "PluginError"]
+           "shown", "OutputError", "OutputBusyError", "SignalStop", "PluginError",
+           "KernelBuildError"]
 
 
 class SimulationError(RuntimeError):
@@ -55,6 +56,15 @@ class PluginError(ValueError):
     of cosim's) that cannot be used: it fails to import, is not a class of
     its group, or its name clashes; the message names the distribution and
     the entry point (:mod:`cosim.core.plugins`)."""
+
+
+class KernelBuildError(RuntimeError):
+    """A compiled kernel was built but cannot be loaded with the modules it
+    was built against (a kernel rebuilt after a change of a shared ``.pxd``
+    without its partners, or against another numpy): a broken build, which
+    is never run past on the numpy reference; the message names the module,
+    the cause and the command that rebuilds every kernel
+    (:func:`cosim.sides.kernel.import_kernel`)."""
 
 
 class OutputExistsError(FileExistsError):

@@ -95,7 +95,7 @@ def _main(argv) -> int:
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    from cosim.errors import OutputError, OutputExistsError, PluginError
+    from cosim.errors import KernelBuildError, OutputError, OutputExistsError, PluginError
     from cosim.scene.load import SceneError
     from cosim.core.schemes import UnsafeStepError
 
@@ -110,7 +110,8 @@ def _main(argv) -> int:
             except OutputExistsError as exc:
                 print(f"error: {exc.for_command_line()}", file=sys.stderr)
                 return 2
-            except (SceneError, UnsafeStepError, OutputError, PluginError) as exc:
+            except (SceneError, UnsafeStepError, OutputError, PluginError,
+                    KernelBuildError) as exc:
                 print(f"error: {exc}", file=sys.stderr)
                 return 2
             except (Exception, SystemExit) as exc:     # an installed plug-in's failure

@@ -10,7 +10,7 @@ import numpy as np
 
 from cosim.core.guard_error import GuardError
 
-__all__ = ["check_block", "HUGE"]
+__all__ = ["check_block", "flagged", "HUGE"]
 
 #: entries beyond this magnitude may overflow a row's sum: such rows are
 #: summed one by one, as :meth:`~cosim.core.guard.Guard.check` sums them
@@ -60,24 +60,44 @@ def check_block(guard, t, d, dd, f, created, supplied, dissipated, work=None,
     if guard.scale is None:          # the first sample starts the guard: as check does
         _one(guard, 0, t, d, dd, f, created, supplied, dissipated, work, peak)
         i = 1
-    rows = np.hstack([d, dd, f])
-    odd = ~np.isfinite(rows).all(axis=1) | (np.abs(rows) > HUGE).any(axis=1)
-    for j in np.flatnonzero(odd):
-        s = d[j].sum() + dd[j].sum() + f[j].sum()
-        odd[j] = s - s != 0
+    odd = _odd(d, dd, f)
     while i < m:
-        if guard.growth == math.inf:    # the energy bound off: a ledger not finite still stops
-            bad = odd[i:] | ~np.isfinite(created[i:])
-        else:
-            bound = np.maximum(guard.growth * (guard.scale + np.abs(supplied[i:])),
-                               guard.options.energy_floor)
-            bad = odd[i:] | ~(created[i:] <= bound)
-        hit = np.flatnonzero(bad)
+        hit = np.flatnonzero(_bad(guard, odd[i:], created[i:], supplied[i:]))
         if not hit.size:
             return
         i += int(hit[0])
         _one(guard, i, t, d, dd, f, created, supplied, dissipated, work, peak)
         i += 1
+
+
+def flagged(guard, d, dd, f, created, supplied):
+    """The samples (``(m,)`` bool) that ``check`` would judge on its slow
+    path under the guard's present scale, or None before its first sample.
+    Samples none of which is flagged pass :func:`check_block` without a
+    change to the guard: a scale the slow path raised flags fewer."""
+    if guard.scale is None:
+        return None
+    d, dd, f = (np.asarray(a, float).reshape(len(created), -1) for a in (d, dd, f))
+    return _bad(guard, _odd(d, dd, f), np.asarray(created, float), np.asarray(supplied, float))
+
+
+def _odd(d, dd, f):
+    """Rows whose sum (``check``'s) is not finite."""
+    rows = np.hstack([d, dd, f])
+    odd = ~np.isfinite(rows).all(axis=1) | (np.abs(rows) > HUGE).any(axis=1)
+    for j in np.flatnonzero(odd):
+        s = d[j].sum() + dd[j].sum() + f[j].sum()
+        odd[j] = s - s != 0
+    return odd
+
+
+def _bad(guard, odd, created, supplied):
+    """The fast test of ``check`` on rows, under the guard's present scale."""
+    if guard.growth == math.inf:    # the energy bound off: a ledger not finite still stops
+        return odd | ~np.isfinite(created)
+    bound = np.maximum(guard.growth * (guard.scale + np.abs(supplied)),
+                       guard.options.energy_floor)
+    return odd | ~(created <= bound)
 
 
 def _one(guard, j, t, d, dd, f, created, supplied, dissipated, work, peak):

@@ -288,7 +288,7 @@ class ScipyStepper(TimeStepper):
         return y
 
     def sample(self, f, t0: float, y0: np.ndarray, t_out: np.ndarray, switch, on_switch,
-               probe, n_peaks: int, emit) -> np.ndarray:
+               probe, n_peaks: int, emit, probe_rows=None) -> np.ndarray:
         """Integrate from ``t0`` through the output times ``t_out``
         (increasing, the last the end) without restarting at them: each
         output state is read from the solver's dense output (the last is
@@ -302,7 +302,9 @@ class ScipyStepper(TimeStepper):
         before, ``P`` (rows; at least 0: the peaks :meth:`integrate` raises
         from zero at each step, over the maxima located, the ends of the
         solver's runs and the sample itself).  Every sample before a switch
-        is emitted before ``on_switch`` is told of it.  Returns the end state.
+        is emitted before ``on_switch`` is told of it.  ``probe_rows(T, Y)``,
+        where given, gives the watched quantities at many samples at once
+        (rows; what ``probe`` gives one at a time).  Returns the end state.
         """
         t_out = np.asarray(t_out, float)
         t, y = t0, y0
@@ -339,19 +341,18 @@ class ScipyStepper(TimeStepper):
                 if inner.any():
                     Y[inner] = sol.at(ts[inner])
                 P = np.zeros((j - i, n_peaks))
-                lo = t
-                for r in range(j - i if watch else 0):
-                    hi = t_out[i + r]
-                    p = pk if r == 0 else np.zeros(n_peaks)
-                    if ev:          # the maxima located since the sample before
-                        for k in np.flatnonzero((ev_t > lo) & (ev_t <= hi)):
-                            d_ev = probe(*ev[k])[0]
-                            for q in range(n_peaks):
-                                p[q] = max(p[q], float(d_ev[q]))
-                    d_s = probe(float(hi), Y[r])[0]
-                    for q in range(n_peaks):
-                        P[r, q] = max(p[q], float(d_s[q]))
-                    lo = hi
+                if watch:
+                    # each sample's value, over the maxima located since the
+                    # sample before (the first's since this run's start, and pk)
+                    if probe_rows is not None:
+                        probe_rows(ts, Y, P)
+                    else:
+                        for r in range(j - i):
+                            P[r] = np.asarray(probe(float(ts[r]), Y[r])[0], float)[:n_peaks]
+                    P[0] = np.maximum(P[0], pk)
+                    for k in np.flatnonzero((ev_t > t) & (ev_t <= ts[-1])) if ev else ():
+                        r = int(np.searchsorted(ts, ev_t[k], side="left"))
+                        P[r] = np.maximum(P[r], np.asarray(probe(*ev[k])[0], float)[:n_peaks])
                 pk = np.zeros(n_peaks)
                 emit(i, j, Y, P)
                 i = j

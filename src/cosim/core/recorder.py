@@ -257,6 +257,16 @@ class Recorder:
         if self._n_buf == len(self._buf):
             self._flush()
 
+    def prepare(self) -> None:
+        """Lay out the rows and open the spool, as the first sample would:
+        set-up that a run calls before its solve's clock starts
+        (:func:`cosim.scene.run.simulate`), so that its ``cpu_time_s`` counts
+        no file created."""
+        if self._buf is None:
+            sysm = self.system
+            self._layout(sum(len(sub.x) for sub in sysm.subsystems),
+                         getattr(sysm, "n_rows", sysm.n_contacts))
+
     def _layout(self, nx: int, nd: int) -> None:
         """Row layout of the chunk buffer and the series' names, fixed at the
         first sample."""

@@ -18,6 +18,7 @@ import time
 import numpy as np
 
 from couplers.law_base import ContactLaw
+from cosim.core.guard_block import flagged
 from cosim.core.guard_error import GuardError
 from cosim.core.hermite import hermite_cubic_max
 from cosim.core.progress import Progress
@@ -154,13 +155,16 @@ def record_block(rec, t, d, dd, f, impulse, dissipated, internal, work, x, energ
     edge_rows = sorted(set(np.nonzero(flip)[0].tolist()) | ({0} if switched else set())
                        | {j - 1 for j in edges if j > 0})
     at = _crossings(rec, flip, t_prev, d_prev, dd_prev, t, d, dd, a_prev)
+    # the guard looks only at the stretches between edges that hold a sample
+    # its fast test flags (the others pass it unchanged)
+    flags = None if rec.guard is None else flagged(rec.guard, d, dd, f, drift, internal[:, 1])
     pos = 0
     if 0 in edges:
         _located(rec, t, d, dd, f, impulse, dissipated, work, x, energy, diss_total, drift,
                  internal, active, contrib, edges[0], 0)
     for je in edge_rows + [m]:
         hi = min(je + 1, m)
-        if rec.guard is not None and hi > pos:
+        if rec.guard is not None and hi > pos and (flags is None or flags[pos:hi].any()):
             try:
                 rec.guard.check_block(
                     t[pos:hi], d[pos:hi], dd[pos:hi], f[pos:hi], drift[pos:hi],
@@ -269,8 +273,15 @@ def _commit(rec, t, d, dd, f, impulse, dissipated, work, x, energy, diss_total, 
         rows = np.maximum.reduceat(contrib[:kept[-1] + 1], np.r_[0, kept[:-1] + 1], axis=0)
         rows[0] = np.maximum(rows[0], carry)
         carry, start = np.zeros_like(carry), kept[-1] + 1
-        _store_rows(rec, t[kept], x[kept], d[kept], f[kept], energy[kept], diss_total[kept],
-                    rows)
+        try:
+            _store_rows(rec, t[kept], x[kept], d[kept], f[kept], energy[kept],
+                        diss_total[kept], rows)
+        except Exception:
+            # a spool that cannot be written: the run reached the sample whose
+            # store failed, as one by one (record keeps it, then stores it)
+            i = int(np.searchsorted(t[:k], rec._last_t))
+            rec._prev = (t[i], d[i].copy(), dd[i].copy(), active[i].copy())
+            raise
     rec._since = np.maximum(carry, np.max(contrib[start:k], axis=0)) if start < k else carry
     rec._count += k
     if rec._progress is not None:
@@ -305,7 +316,7 @@ def _store_rows(rec, t, x, d, f, energy, diss_total, pk) -> None:
             rows[:, L["mode"]] = sysm.connections.mode
         rows[:, L["pk"]] = pk[i:j]
         rec._n_buf += j - i
+        rec._last_t = t[j - 1]
         i = j
         if rec._n_buf == len(rec._buf):
             rec._flush()
-    rec._last_t = t[-1]

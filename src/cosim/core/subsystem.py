@@ -452,8 +452,9 @@ class RigidReference(LoopFace, Subsystem):
         return None if type(self) is RigidReference else f"is a rigid {type(self).__name__}"
 
     def compiled_face(self):
+        from cosim.sides.kernel import import_kernel
         try:
-            from cosim.core._stacked import FixedFace
+            stacked = import_kernel("cosim.core._stacked")
         except ImportError:             # not built: the Python right-hand side runs
             return None
-        return FixedFace(self._pos)
+        return stacked.FixedFace(self._pos)

@@ -351,9 +351,15 @@ class CoupledSystem(MovingPorts):
         """Port forces of subsystem ``s`` from contact-force polynomial
         coefficients ``coeffs`` (order + 1, n_rows)."""
         sub = self.subsystems[s]
-        self._applied[s] = (coeffs, self._Gc[s])
+        self.book_applied(s, coeffs)
         c = coeffs @ self._Gc[s].T
         return StepInput(t0, h, c.reshape(len(coeffs), sub.n_ports, 2))
+
+    def book_applied(self, s: int, coeffs: np.ndarray) -> None:
+        """Keep ``coeffs`` (order + 1, n_rows), the force polynomial a scheme
+        handed subsystem ``s`` for its step without :meth:`step_input` (a
+        compiled iteration), for :meth:`collect_work`."""
+        self._applied[s] = (coeffs, self._Gc[s])
 
     def collect_work(self, s: int) -> None:
         """Add the work the exchanged forces did on subsystem ``s`` over its

@@ -130,7 +130,6 @@ def _simulate(scene, scheme, progress, progress_interval, out, overwrite):
     size = scene_size(system)
     if out is not None:
         sch.preflight(system, scene.t_end)     # a refusal writes nothing
-        write_scene(scene, out)
     if _is_monolithic(sch):
         auto = False                       # it locates every switch itself
     else:                                  # embedded contacts: their integrator does
@@ -139,8 +138,13 @@ def _simulate(scene, scheme, progress, progress_interval, out, overwrite):
                    auto_edges=auto, progress=progress, progress_interval=progress_interval,
                    series_path=None if out is None else inside(out, "series.npz"),
                    guard=Guard(system, scene.guard))
-    if not _is_monolithic(sch) and not len(system.exchanged):
-        _load_sampled()
+    # what the run does once at its start (kernels built, its loop's modules
+    # loaded, the recorder's rows and spool), before the clock: a process's
+    # first run counts none of it; a kernel built wrong writes nothing
+    sch.prepare(system, scene.t_end, rec)
+    if out is not None:
+        write_scene(scene, out)
+    rec.prepare()                          # its rows laid out, its spool opened
     cpu0 = time.process_time() - _host_cpu(system)
     status, message = "finished", ""
     counters = {}
@@ -237,16 +241,6 @@ def stop_message(exc: SimulationError, t_stop: float) -> str:
             head += f" (the last sample kept; the guard tripped at t = {exc.t:.6g} s)"
         return f"{head}: {exc.reason}"
     return f"{head}: {exc}"
-
-
-def _load_sampled() -> None:
-    """Import the sampled loop and the recorder's and guard's blocks, which a
-    run whose partners are all rigid imports where it first samples: before
-    the clock starts, so that a process's first run does not count them in
-    its ``cpu_time_s`` (about 1 ms of a 10 ms solve)."""
-    import cosim.core.guard_block  # noqa: F401
-    import cosim.core.recorder_block  # noqa: F401
-    import cosim.core.schemes.sampled  # noqa: F401
 
 
 def _is_monolithic(sch) -> bool:

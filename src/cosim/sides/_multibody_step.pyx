@@ -91,6 +91,34 @@ cdef void _substep_peaks(double* peak, const double* d0, const double* v0, const
             peak[j] = p
 
 
+cdef class _Located:
+    """``on_switch`` of the steps of :meth:`MultibodyStep.sample_steps`: a
+    switch is kept in the rows ``ST``, ``SJ`` (time; step's row, contact,
+    on), but a rigid law's touch, or a switch with no row left, is the
+    host's (``told``)."""
+    cdef MultibodyStep k
+    cdef object host
+    cdef double[::1] st
+    cdef long[:, ::1] sj
+    cdef long row
+    cdef bint told
+
+    def __init__(self, MultibodyStep k, host, double[::1] st, long[:, ::1] sj):
+        self.k, self.host, self.st, self.sj = k, host, st, sj
+        self.row, self.told = 0, False
+        k.n_located = 0
+
+    def __call__(self, double t, int j, bint on, y):
+        cdef long i = self.k.n_located
+        if (self.k.c_kind[j] != RIGID or not on) and i < self.st.shape[0]:
+            self.st[i] = t
+            self.sj[i, 0], self.sj[i, 1], self.sj[i, 2] = self.row, j, on
+            self.k.n_located = i + 1
+            return None
+        self.told = True
+        return self.host(t, j, on, y)
+
+
 cdef class MultibodyStep(TreeDynamics):
     """Compiled RK4 step of one :class:`cosim.sides.multibody.MultibodySubsystem`.
 
@@ -125,6 +153,8 @@ cdef class MultibodyStep(TreeDynamics):
     cdef public long n_switches
     #: rows :meth:`sample_steps` has filled in its current (or last) call
     cdef public long n_sampled
+    #: switches :meth:`sample_steps` has kept in its rows in its current (or last) call
+    cdef public long n_located
     # the C face (cosim.core._side_face): RK4's largest and free sub-steps,
     # and the stepping state
     cdef double cs_max_step, cs_free_step
@@ -137,6 +167,7 @@ cdef class MultibodyStep(TreeDynamics):
         TreeDynamics.__init__(self, *args, **kwargs)
         self.n_switches = 0
         self.n_sampled = 0
+        self.n_located = 0
         self.cface.nx, self.cface.naux, self.cface.nports = 2 * self.n, 4 * self.nc + 2, self.np_
         self.cs_max_step, self.cs_free_step = 0.0, 0.0
         self.cs_y = np.zeros(self.ny)
@@ -617,7 +648,8 @@ cdef class MultibodyStep(TreeDynamics):
     # ------------------------------------------------- many output points
     def sample_steps(self, x, aux, embedded, long k0, long k1, double H, double t_end,
                      double sliver, double max_step, double free_step, on_switch, peak,
-                     double[::1] T, double[:, ::1] Y, double[:, ::1] PK, moments):
+                     double[::1] T, double[:, ::1] Y, double[:, ::1] PK, moments,
+                     double[::1] ST, long[:, ::1] SJ):
         """Take the host's macro steps ``k0 .. k1 - 1`` in one call, each as
         :meth:`step` takes it (from ``t = k H`` over ``h = min(H, t_end - t)``,
         RK4 restarted at ``t``, first moments from zero, no input force: a
@@ -631,21 +663,29 @@ cdef class MultibodyStep(TreeDynamics):
         ``x`` and ``aux`` are advanced in place; ``moments`` (the host's
         ``port_moments``, ``(3, n_p)`` complex) gets the last step's.
 
+        A switch located in a step (a penalty law's touch or release, a
+        rigid law's release) is written to row ``i`` of ``ST`` (its time)
+        and ``SJ`` (the step's row, the contact, 1 for on) and the steps go
+        on; a rigid law's touch (an impact, resolved in Python) and a switch
+        past the buffers' end go to the host's ``on_switch`` (its logs hold
+        them), and the call returns after that step.
+
         Returns after step ``k1 - 1``, after a step ``h`` of which is at
         most ``sliver`` (not taken: the run has ended), after a step in
-        which a switch was located (the host was told: its logs hold the
-        step's switches and impacts, which its recorder must see before
-        the sample), or after a step that left the state non-finite.
-        Returns ``(rows, why)``, ``why`` one of ``"steps"``, ``"end"``,
-        ``"switch"``, ``"nonfinite"``.  :attr:`n_sampled` counts the rows
-        filled as they are, so a caller that catches an exception raised
-        inside a step (by the host's ``on_switch``) knows which rows hold
-        whole steps.
+        which the host was told of a switch (its recorder must see the
+        step's switches and impacts before the sample), or after a step
+        that left the state non-finite.  Returns ``(rows, why, located)``,
+        ``why`` one of ``"steps"``, ``"end"``, ``"switch"``,
+        ``"nonfinite"``, ``located`` the rows of ``ST`` and ``SJ`` filled.
+        :attr:`n_sampled` and :attr:`n_located` count the rows filled as
+        they are, so a caller that catches an exception raised inside a
+        step (a signal's, or the host's ``on_switch``'s) knows which rows
+        hold whole steps.
         """
         cdef double[::1] xv = x
         cdef double[::1] av = aux
         cdef int i, nx = xv.shape[0], na = av.shape[0], ny = self.ny, nc = self.nc
-        cdef long k, j = 0, switches
+        cdef long k, j = 0
         cdef double t, h
         cdef double[::1] pkv
         cdef double* pk = NULL
@@ -670,6 +710,9 @@ cdef class MultibodyStep(TreeDynamics):
             y[i] = xv[i]
         for i in range(na):
             y[nx + i] = av[i]
+        if SJ.shape[1] != 3 or SJ.shape[0] != ST.shape[0]:
+            raise ValueError("`SJ` must have 3 columns and as many rows as `ST`")
+        cdef _Located rows = _Located(self, on_switch, ST, SJ)
         self.set_step(k0 * H, H, None, embedded)
         why = "steps"
         for k in range(k0, k1):
@@ -683,8 +726,8 @@ cdef class MultibodyStep(TreeDynamics):
                 y[nx + 4 * i + 2] = 0.0              # first moments are per step
             for i in range(nx + na, ny):
                 y[i] = 0.0
-            switches = self.n_switches
-            self._integrate(t, y, t + h, max_step, free_step, True, on_switch, pk)
+            rows.row = j
+            self._integrate(t, y, t + h, max_step, free_step, True, rows, pk)
             T[j] = t + h
             finite = True
             for i in range(nx + na):
@@ -703,11 +746,11 @@ cdef class MultibodyStep(TreeDynamics):
             if not finite:
                 why = "nonfinite"
                 break
-            if self.n_switches != switches:
+            if rows.told:
                 why = "switch"
                 break
         moments[...] = ybuf[nx + na:].view(complex).reshape(3, self.np_)
-        return j, why
+        return j, why, self.n_located
 
     def sample_outputs(self, double[:, ::1] Y, double[:, :, ::1] P, double[::1] E):
         """Ports' positions and velocities and the energy (:meth:`outputs`,

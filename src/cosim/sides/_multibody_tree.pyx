@@ -555,6 +555,25 @@ cdef class TreeDynamics:
             self._penetration(k, t, &d, &dd)
             sw[k] = self._law_switch(k, d, dd)
 
+    def sample_penetrations(self, double[::1] T, double[:, ::1] Y, double[:, ::1] D):
+        """The contacts' penetrations [m] at many states, one call:
+        ``D[j, k]`` at ``(T[j], Y[j])`` (rows ``[q, dq, ...]``), as
+        ``penetrations`` gives them one state at a time."""
+        cdef int j, k, p, n = self.n
+        cdef double d, dd
+        if Y.shape[0] < T.shape[0] or D.shape[0] < T.shape[0] or D.shape[1] != self.nc \
+                or Y.shape[1] < 2 * n:
+            raise ValueError(f"`Y` must be ({T.shape[0]}, >= {2 * n}), `D` ({T.shape[0]}, "
+                             f"{self.nc})")
+        for j in range(T.shape[0]):
+            self._frames(&Y[j, 0], &Y[j, n])
+            for k in range(self.nc):
+                p = self.c_port[k]
+                self._point(n + p, self.port_body[p], self.pl_re[p], self.pl_im[p], &Y[j, n],
+                            False)
+                self._penetration(k, T[j], &d, &dd)
+                D[j, k] = d
+
 
     cdef double _energy(self, const double* y) noexcept nogil:
         """:meth:`energy` at ``y``."""
@@ -573,3 +592,16 @@ cdef class TreeDynamics:
             for i in range(n):
                 pot -= self.mass[i] * (self.px_re[i] * self.g_re + self.px_im[i] * self.g_im)
         return 0.5 * kin + pot
+
+    def energies(self, X):
+        """:meth:`_energy` (the step kernel's ``energy``) at each row of the
+        states ``X`` (m, >= 2 n) [J], in one call (the recorder's rows)."""
+        cdef double[:, ::1] xv = np.ascontiguousarray(X, dtype=float).reshape(len(X), -1)
+        out = np.empty(xv.shape[0])
+        cdef double[::1] ov = out
+        cdef Py_ssize_t i
+        if xv.shape[0] and xv.shape[1] < 2 * self.n:
+            raise ValueError(f"`X` must have {2 * self.n} columns, got {xv.shape[1]}")
+        for i in range(xv.shape[0]):
+            ov[i] = self._energy(&xv[i, 0])
+        return out

@@ -4,8 +4,7 @@
 compiled right-hand side (:mod:`cosim.core._stacked`): the tree's
 derivatives, port outputs and ledger rates on the compiled kernel's model
 (:class:`cosim.sides._multibody_tree.TreeDynamics`), which
-:meth:`cosim.sides._multibody_step.MultibodyStep.face` hands out; and the
-tree's energy at many states (:func:`tree_energies`), for the recorder."""
+:meth:`cosim.sides._multibody_step.MultibodyStep.face` hands out."""
 from cpython.pycapsule cimport PyCapsule_New
 
 import numpy as np
@@ -111,16 +110,3 @@ cdef class TreeFace:
             rates[1] = 0.0
         return 0
 
-
-def tree_energies(TreeDynamics kernel, X):
-    """The tree's energy (the kernel's ``energy``) at each row of the states
-    ``X`` (m, >= 2 n) [J]."""
-    cdef double[:, ::1] xv = np.ascontiguousarray(X, dtype=float).reshape(len(X), -1)
-    out = np.empty(xv.shape[0])
-    cdef double[::1] ov = out
-    cdef Py_ssize_t i
-    if xv.shape[0] and xv.shape[1] < 2 * kernel.n:
-        raise ValueError(f"`X` must have {2 * kernel.n} columns, got {xv.shape[1]}")
-    for i in range(xv.shape[0]):
-        ov[i] = kernel._energy(&xv[i, 0])
-    return out

@@ -156,9 +156,8 @@ class StructureSubsystem(StructurePorts, ClosedFormContacts, StructureEnergy, Lo
             raise refuse(self._ts, "step()", out, f"three arrays (u, v, a) of shape ({m},)")
 
     def outputs(self, t, x):
-        kernel = self._compiled_step(None)
-        if kernel is not None:          # the bits the compiled loop's C face reads
-            return kernel.outputs(x)
+        if self._kernel:                # the bits the compiled loop's C face reads
+            return self._kernel.outputs(x)
         m = self.n_modes
         w, dw = self._R @ x[:m], self._R @ x[m:2 * m]
         return self._ref + w[:, None] * self._dirs, dw[:, None] * self._dirs

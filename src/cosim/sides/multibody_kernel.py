@@ -18,7 +18,6 @@ from cosim.core.links import kernel_law     # the numbering every kernel shares
 
 from cosim.core.ode import RK4, ScipyStepper
 from cosim.core.subsystem import MOMENT, QUADRATURES, Samples
-from cosim.sides.kernel import compiled_module
 
 if TYPE_CHECKING:
     from multibody import JointEffects
@@ -58,6 +57,18 @@ def kernel_effects(effects: JointEffects | None):
     return effects.stiffness, effects.rest, effects.damping, drives
 
 
+#: switches the kernel keeps in its rows in one call of
+#: :meth:`SampledSteps.sample_steps` before it hands them to the host one at
+#: a time (each then ends the call after its step)
+LOCATED = 256
+
+
+def _located(ST, SJ, n, rows) -> list:
+    """The kernel's kept switches ``(row, slot, time, on)`` of rows below ``rows``."""
+    return [(int(r), int(j), float(ts), bool(on))
+            for ts, (r, j, on) in zip(ST[:n].tolist(), SJ[:n].tolist()) if r < rows]
+
+
 class SampledSteps:
     """The sampled face of :class:`~cosim.sides.multibody.MultibodySubsystem`
     (a mixin: it reads the side's kernel, state and logs)."""
@@ -82,10 +93,13 @@ class SampledSteps:
         in one call of the kernel; an adaptive method integrates across the
         steps' ends and samples them from its dense output
         (:meth:`cosim.core.ode.ScipyStepper.sample`).  ``emit(samples,
-        switch_row)`` receives the steps' ends in order as
+        switch_row, located)`` receives the steps' ends in order as
         :class:`~cosim.core.subsystem.Samples`; ``switch_row`` (or None) is
         the sample before which :attr:`switch_log` and :attr:`impact_log`
-        hold switches to report.  Every sample before a step that raises
+        hold switches to report; ``located`` lists the switches the kernel
+        kept in its rows without a return to Python (RK4: a penalty law's
+        touches and releases), each ``(row, slot, time, on)`` in the order
+        located, to report before sample ``row``.  Every sample before a step that raises
         is emitted before the exception goes on, and so is every sample
         before a step that a signal stopped (the kernel looks at the
         signals within its steps: Ctrl-C raises there).
@@ -108,11 +122,13 @@ class SampledSteps:
             Y = np.empty((m, self.x.size + self.aux.size))
             PK = np.empty((m, len(self._embedded)))
             self.port_moments = np.zeros((3, self.n_ports), complex)
+            ST = np.empty(LOCATED)
+            SJ = np.empty((LOCATED, 3), dtype=np.int_)
             try:
-                rows, why = kernel.sample_steps(
+                rows, why, n_loc = kernel.sample_steps(
                     self.x, self.aux, self._embedded, k0, k1, H, t_end, sliver,
                     integ.max_step, integ.free_step or 0.0, self._on_switch, self.peak, T, Y,
-                    PK, self.port_moments)
+                    PK, self.port_moments, ST, SJ)
             except BaseException as exc:
                 # a step that raised (or that Ctrl-C or SIGTERM stopped: the kernel
                 # looks at the signals within its steps) is dropped; the whole
@@ -122,12 +138,22 @@ class SampledSteps:
                 done = kernel.n_sampled
                 if done:
                     self._sampled_clock(T, done)
-                    emit(self._samples(T[:done], Y[:done], PK[:done]), None)
+                    emit(self._samples(T[:done], Y[:done], PK[:done]), None,
+                         _located(ST, SJ, kernel.n_located, done))
                 raise
             if rows:
                 self._sampled_clock(T, rows)
-                emit(self._samples(T[:rows], Y[:rows], PK[:rows]),
-                     rows - 1 if why == "switch" else None)
+                located = _located(ST, SJ, n_loc, rows)
+                last = None
+                if why in ("switch", "nonfinite"):
+                    # the last step (it told the host, or it is the last the
+                    # recorder sees): its switches kept in the rows join the
+                    # host's log, in the order located
+                    last = rows - 1
+                    mine = [(ts, j, on) for r, j, ts, on in located if r == last]
+                    located = [e for e in located if e[0] != last]
+                    self.switch_log = sorted(mine + self.switch_log, key=lambda e: e[0])
+                emit(self._samples(T[:rows], Y[:rows], PK[:rows]), last, located)
             return k0 + rows, why
         T, why = [], "steps"
         for k in range(k0, k1):
@@ -158,7 +184,7 @@ class SampledSteps:
             self.n_steps += i1 - i0 - row - 1
             try:
                 emit(self._samples(T[i0:i1], np.ascontiguousarray(Yb[:, :nx + na]), Pb),
-                     0 if self.switch_log else None)
+                     0 if self.switch_log else None, ())
             except BaseException:
                 refused.append(True)
                 raise
@@ -166,7 +192,7 @@ class SampledSteps:
         try:
             y1 = integ.sample(kernel.rhs, t0, y0, T, kernel.switch if self._embedded else None,
                               self._on_switch, self._probe if self._embedded else None,
-                              len(self._embedded), out)
+                              len(self._embedded), out, probe_rows=kernel.sample_penetrations)
         except Exception:
             if not refused:
                 self.status = "failed"
@@ -213,10 +239,9 @@ class TreeFaceMixin:
         one compiled call, where ``energy`` is the kernel's alone (no joint
         effects' potential)."""
         kernel = self._compiled()
-        module = compiled_module("_tree_face") if kernel is not None else None
-        if module is None or self.effects is not None:
+        if kernel is None or self.effects is not None:
             return super().energies(X)
-        return module.tree_energies(kernel, X)
+        return kernel.energies(X)
 class CompiledFace:
     """:meth:`compiled_loop_refusal` and :meth:`compiled_side` of
     :class:`cosim.sides.multibody.MultibodySubsystem`."""

@@ -142,20 +142,7 @@ cdef class Acceleration:
     key), for the tests to compare them; :class:`ImplicitStep` calls its C
     face."""
 
-    cdef int kind, n, reuse, max_cols
-    cdef double relax, filt, omega
-    cdef bint have_prev
-    cdef double[::1] r_prev, hx_prev
-    # this step's columns in the order they came; the kept steps' blocks,
-    # newest first, each newest column first (IQNILS._old)
-    cdef double[:, ::1] cur_v, cur_w
-    cdef int n_cur
-    cdef double[:, :, ::1] old_v, old_w
-    cdef long[::1] old_n
-    cdef int n_old
-    # the columns in use, newest first: block (-1 this step's) and index
-    cdef long[::1] col_blk, col_idx
-    cdef double[::1] qr_a, qr_beta, qr_b, qr_alpha
+    # the attributes are declared in _implicit_step.pxd
 
     def __init__(self, str kind, int n, double relaxation, int reuse=0,
                  double filter_tolerance=1e-6, int max_columns=50):
@@ -276,7 +263,7 @@ cdef class Acceleration:
 
     cdef void _iqn(self, double* z, const double* hz, const double* r) noexcept:
         """:meth:`IQNILS.update` after the new column: the QR filter
-        (:meth:`IQNILS._columns`), then the least-squares solve."""
+        (the reference's ``_columns``), then the least-squares solve."""
         cdef int n = self.n, N = 0, m = 0, j, i, jj, bad
         cdef double* A = &self.qr_a[0]
         cdef double* beta = &self.qr_beta[0]
@@ -333,7 +320,7 @@ cdef class Acceleration:
 
 cdef class ImplicitStep:
     """The compiled iterations of :class:`cosim.core.schemes.implicit.Implicit`
-    on one system (built by :meth:`Implicit._compiled_iterations`).
+    on one system (built by :meth:`cosim.core.schemes.implicit.Implicit._compiled_iterations`).
 
     Parameters
     ----------
@@ -359,28 +346,7 @@ cdef class ImplicitStep:
         ``relaxation``, ``reuse``, ``filter_tolerance``, ``roundoff``.
     """
 
-    cdef int ns, n_rows, nq, ncc, max_it, maxp
-    cdef list kernels, xs, auxs
-    cdef SideFace* faces
-    cdef long[::1] s_nx, s_na, s_np, s_first
-    cdef double[:, ::1] saved_x, saved_aux
-    cdef double[:, :, ::1] G
-    cdef double[:, ::1] u, pm
-    cdef double[::1] pos, vel
-    cdef long[::1] k_c, k_a, k_b, k_trow, k_kind, k_grasp
-    cdef double[::1] k_nx, k_ny, k_off, k_k, k_cd, g_k, g_c, g_kt, g_ct
-    cdef long long[::1] mode
-    cdef double[::1] anchor
-    cdef long[::1] rows
-    cdef double ftol, tol, roundoff
-    cdef double[::1] f, coef1, z, hz, r
-    cdef Acceleration acc
-    # IQNILS.start's key of the last step: its length, the closed coupler rows
-    cdef bint have_key
-    cdef double key_h
-    cdef long[::1] key_closed
-    #: the side whose step raised (its index among ``sides``), -1 if none
-    cdef public int failed_side
+    # the attributes are declared in _implicit_step.pxd
 
     def __init__(self, sides, pos, vel, contacts, rows, int n_rows, mode, anchor, options):
         cdef int s, i
@@ -509,14 +475,33 @@ cdef class ImplicitStep:
         ``h (f_n + (guess - f_n) / 2)`` [N s] the step applied, its force
         polynomials ``[f_n, guess - f_n]`` (2, n_rows) and each side's port
         velocity moments ((3, n_p) complex), all new arrays."""
-        cdef int s, i, r, it, n = self.n_rows, converged = 0
-        cdef double[::1] xv, av
+        cdef int s, r, it, n = self.n_rows
         cdef double[:, :] cv = co
-        cdef bint keep
         if f_n.shape[0] != n or cv.shape[1] != n or cv.shape[0] < 1:
             raise ValueError(f"`f_n` must have {n} entries and `co` (k >= 1, {n})")
         guess_a = np.empty(n)
         cdef double[::1] guess = guess_a
+        it = self.c_advance(t, h, f_n, cv, guess)
+        impulse_a = np.empty(n)
+        coeffs_a = np.empty((2, n))
+        cdef double[::1] impulse = impulse_a
+        cdef double[:, ::1] coeffs = coeffs_a
+        for r in range(n):
+            coeffs[0, r] = f_n[r]
+            coeffs[1, r] = guess[r] - f_n[r]
+            impulse[r] = h * (f_n[r] + 0.5 * (guess[r] - f_n[r]))
+        moments = [self.port_moments(s) for s in range(self.ns)]
+        return it, bool(self.converged), guess_a, impulse_a, coeffs_a, moments
+
+    cdef int c_advance(self, double t, double h, double[::1] f_n, double[:, :] cv,
+                       double[::1] guess) except -1:
+        """:meth:`advance`'s iterations: the last guess into ``guess``
+        (n_rows), whether they converged into ``converged``, each side's port
+        moments in ``pm``; returns the iterations taken."""
+        cdef int s, i, r, it, n = self.n_rows
+        cdef double[::1] xv, av
+        cdef bint keep
+        self.converged = 0
         for r in range(n):                  # numpy's sum over rows: one row after another
             guess[r] = cv[0, r]
             for i in range(1, cv.shape[0]):
@@ -548,21 +533,12 @@ cdef class ImplicitStep:
             self._forces()
             if self._residual(guess):
                 self.acc.c_finish()
-                converged = 1
+                self.converged = 1
                 break
             self.acc.c_update(&self.z[0], &self.hz[0], &self.r[0])
             for i in range(self.nq):
                 guess[self.rows[i]] = self.z[i]
-        impulse_a = np.empty(n)
-        coeffs_a = np.empty((2, n))
-        cdef double[::1] impulse = impulse_a
-        cdef double[:, ::1] coeffs = coeffs_a
-        for r in range(n):
-            coeffs[0, r] = f_n[r]
-            coeffs[1, r] = guess[r] - f_n[r]
-            impulse[r] = h * (f_n[r] + 0.5 * (guess[r] - f_n[r]))
-        moments = [self.port_moments(s) for s in range(self.ns)]
-        return it, bool(converged), guess_a, impulse_a, coeffs_a, moments
+        return it
 
     cdef int _pass(self, double t, double h, double[::1] f_n, double[::1] guess) except -1:
         """Step every side under ``[f_n, guess - f_n]`` and read its ports."""

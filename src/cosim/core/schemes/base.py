@@ -15,9 +15,10 @@ import numpy as np
 from cosim.core import preflight
 from cosim.errors import CouplingError, UnsafeStepError
 from cosim.core.preflight import stiffest_normal
-from cosim.core.schemes import driven_block
+from cosim.core.schemes import driven_block, driver
 from cosim.core.schemes.extrapolation import InputExtrapolation, extrapolation_coeffs
-from cosim.core.schemes.step_control import StepBooks, StepController, StepState
+from cosim.core.schemes.step_control import (StepBooks, StepController, StepState,
+                                              watch_impacts)
 from cosim.core.subsystem import reparametrised
 
 __all__ = ["Option", "CouplingScheme", "CoSimulationScheme", "UnsafeStepError", "CouplingError",
@@ -132,6 +133,13 @@ class CouplingScheme(ABC):
         (:class:`~cosim.errors.UnsafeStepError`).  Nothing to refuse here; the
         co-simulation schemes check their steps against the contacts."""
 
+    def prepare(self, system, t_end: float, recorder) -> None:
+        """Do before the solve's clock starts what a :meth:`run` of ``system``
+        to ``t_end`` [s] into ``recorder`` would do at its start, once: build
+        the sides' compiled kernels, load the modules its loop takes
+        (:func:`cosim.scene.run.simulate` calls it; a ``run`` without it does
+        the same itself, inside its solve).  Nothing here."""
+
     @abstractmethod
     def run(self, system, t_end: float, recorder) -> dict:
         """Advance the system to ``t_end``, recording as it goes."""
@@ -158,6 +166,10 @@ class CoSimulationScheme(InputExtrapolation, CouplingScheme):
         "substeps": Option(dict, None, _substeps_ok,
                            "a table of subsystem name = number of sub-steps (>= 1)"),
     }
+
+    def prepare(self, system, t_end: float, recorder) -> None:
+        # the sides' kernels, the compiled loop's or the sampled path's modules
+        driver.prepare(self, system, recorder)
 
     @property
     def horizon(self) -> float:
@@ -253,22 +265,22 @@ class CoSimulationScheme(InputExtrapolation, CouplingScheme):
         d, dd = system.penetrations(outs)
         f = system.forces(d, dd)
         st.outs, st.f = outs, f
-        # a step longer than the run is one step to t_end: the history and the
-        # sliver test below measure it as the step it is
+        # a step longer than the run is one step to t_end, as the history and sliver see it
         st.hist = self._starting_history(system, d, dd, f, min(H, t_end))
         books = StepBooks(self, system, recorder, f, d, dd)
         books.start(d, dd, f)
         controlled = self.contact_step is not None and len(system.exchanged) > 0
         n = max(1, math.ceil(t_end / H - 1e-9))
-        # what is left of the run below this is round-off, not a step: relative
-        # to the shorter of the step and the run (a step longer than t_end is
-        # clipped to it; relative to the step alone, the whole run would be a
-        # sliver and no step would be taken)
+        # what is left of the run below this is round-off, not a step: relative to the shorter
+        # of the step and the run (to a step longer than t_end alone, the run would be a sliver)
         sliver = 1e-12 * min(H, t_end)
         h_prev = min(H, t_end)
         k, t, n_rejected = 0, 0.0, 0
         drv = self._compiled_loop(system, st, d, dd, controlled, h_prev)
         compiled_cpu = 0.0                      # the compiled loop, its samples in blocks:
+        if done := drv is None and self._macro_blocks(system, recorder, books, t_end, n, H,
+                                                      sliver, controlled, h_prev):
+            k, n_rejected, compiled_cpu = done          # the implicit scheme's, in blocks
         if blocks := drv is not None and driven_block.takes(recorder):
             k, n_rejected, compiled_cpu = driven_block.run_blocks(
                 self, system, recorder, drv, t, t_end, k, n, H, sliver, controlled)
@@ -294,7 +306,7 @@ class CoSimulationScheme(InputExtrapolation, CouplingScheme):
             books.book_driven(t + h, drv)
             if controlled:
                 t = t + h
-        while drv is None:
+        while drv is None and not done:
             if controlled:
                 if t_end - t <= sliver:
                     break
@@ -340,10 +352,9 @@ class CoSimulationScheme(InputExtrapolation, CouplingScheme):
             books.book(t + h, h, d, dd, f, stepped)
             if controlled:
                 t = t + h
-        self.loop_stats = {"loop": "python" if drv is None else "compiled",
-                           "refusal": self.loop_refusal, "macro_steps": k,
-                           "compiled_cpu_s": compiled_cpu,
-                           "run_cpu_s": time.process_time() - cpu0,
+        self.loop_stats = {"loop": "python" if drv is None and not done else "compiled",
+                           "refusal": self.loop_refusal, "macro_steps": k, "compiled_cpu_s":
+                           compiled_cpu, "run_cpu_s": time.process_time() - cpu0,
                            **({} if drv is None else drv.side_counts())}
         return {"n_windows": k, "n_iterations": self.n_iterations, "n_rejected": n_rejected}
 
@@ -351,17 +362,18 @@ class CoSimulationScheme(InputExtrapolation, CouplingScheme):
     _state = None
     #: why the last run took the Python loop (None: it took the compiled one)
     loop_refusal: str | None = None
-    #: the last finished run's loop: ``loop`` (``"compiled"`` or ``"python"``),
-    #: ``refusal`` (:attr:`loop_refusal`), ``macro_steps``, ``compiled_cpu_s``
-    #: (process CPU inside the compiled loop's calls [s]) and ``run_cpu_s``
-    #: (the whole of :meth:`run` [s]), for benchmarks (and the compiled loop's
-    #: ``face_steps``, ``python_side_steps``: ``Driver.side_counts``)
+    #: the last finished run's loop: ``loop`` (``"compiled"`` or ``"python"``), ``refusal``
+    #: (:attr:`loop_refusal`), ``macro_steps``, ``compiled_cpu_s`` (process CPU inside the
+    #: compiled loop's calls [s]) and ``run_cpu_s`` (the whole of :meth:`run` [s]), for benchmarks
+    #: (and the compiled loop's ``face_steps``, ``python_side_steps``: ``Driver.side_counts``)
     loop_stats: dict | None = None
+
+    def _macro_blocks(self, *run):
+        """Run a compiled macro loop of the scheme's own: ``(k, n_rejected, cpu)``; None if not."""
 
     def _compiled_loop(self, system, state, d, dd, controlled, h_prev):
         """The compiled macro loop for this run (:mod:`cosim.core.schemes.driver`),
         or None where the Python loop runs it (:attr:`loop_refusal` says why)."""
-        from cosim.core.schemes import driver
         self.loop_refusal = why = driver.refusal(self, system)
         if why is not None:
             return None
@@ -454,33 +466,7 @@ class CoSimulationScheme(InputExtrapolation, CouplingScheme):
             impulse += hk * np.sum(cf / (j + 1), axis=0)
         return impulse
 
-    @staticmethod
-    def _watch_impacts(system, recorder) -> None:
-        """Let the run guard see each rigid impact as a side's integrator
-        resolves it: the switches of the step so far after those it noted
-        (:meth:`~cosim.core.guard.Guard.switches_ahead`; an impact is a touch
-        and a release at one instant).  A train of impacts that accumulates
-        at a finite time would otherwise never end its step."""
-        guard = getattr(recorder, "guard", None)
-        rigid = {}                       # subsystem -> {embedded slot: contact}
-        for c, (s, slot) in system.embedded.items():
-            if system.links[c].contact.law.rigid:
-                rigid.setdefault(s, {})[slot] = c
-        for s, slots in rigid.items():
-            sub = system.subsystems[s]
-            if "impact_watch" not in sub.capabilities:
-                continue
-            sub.impact_watch = None
-            if guard is None:
-                continue
-            keep = guard.options.chatter_switches // 2 + 1    # impacts that can trip it
-
-            def watch(t, sub=sub, slots=slots):
-                for slot, c in slots.items():
-                    times = [ts for ts, j, on in sub.switch_log if j == slot and on][-keep:]
-                    if times and times[-1] == t:
-                        guard.switches_ahead(c, [x for ts in times for x in (ts, ts)])
-            sub.impact_watch = watch
+    _watch_impacts = staticmethod(watch_impacts)
 
     def _moving(self, system):
         return self._topology(system).moving

@@ -19,7 +19,7 @@ import importlib
 import logging
 import os
 
-__all__ = ["DRIVER_ENV", "refusal", "compiled_driver"]
+__all__ = ["DRIVER_ENV", "refusal", "compiled_driver", "prepare"]
 
 logger = logging.getLogger(__name__)
 
@@ -47,8 +47,9 @@ def driver_choice() -> str:
 def compiled_driver():
     """The compiled loop's module, or None where it was not built (said once)."""
     global _missing_said
+    from cosim.sides.kernel import import_kernel
     try:
-        return importlib.import_module("cosim.core.schemes._driver")
+        return import_kernel("cosim.core.schemes._driver")
     except ImportError as exc:
         if not _missing_said:
             _missing_said = True
@@ -122,3 +123,34 @@ def refusal(scheme, system) -> str | None:
         if type(ln.contact.law) not in shipped:
             return f"contact `{ln.contact.name}` has a user's law"
     return None
+
+
+def prepare(scheme, system, recorder) -> None:
+    """What a run of the co-simulation ``scheme`` over ``system`` does once
+    at its start, done before its solve's clock starts
+    (:meth:`cosim.core.schemes.base.CouplingScheme.prepare`): each side that
+    declares ``compiled_loop`` builds its compiled kernel (as its first step
+    or the loop's question would), and the modules the run takes are loaded:
+    the sampled path with the recorder's and guard's blocks where every
+    partner is rigid, the compiled loop with its block filler where it takes
+    the run.  A process's first run then counts no import and no kernel
+    build in its ``cpu_time_s``; the run finds them built and loaded."""
+    from cosim.core.schemes import driven_block
+    from cosim.sides.kernel import import_kernel
+    for sub in system.subsystems:
+        if "compiled_loop" in sub.capabilities:
+            sub.compiled_loop_refusal()      # builds the side's kernel, kept for its steps
+    blocks = sampled = False
+    if not len(system.exchanged):           # all partners rigid: perhaps the sampled path
+        sampled = importlib.import_module("cosim.core.schemes.sampled").refusal(
+            scheme, system) is None
+        blocks = True
+    if not sampled and refusal(scheme, system) is None and compiled_driver() is not None:
+        if system.followers:                 # the loop moves their points in compiled code
+            import_kernel("cosim.core.schemes._follow")
+        if driven_block.takes(recorder):
+            import_kernel("cosim.core.schemes._driver_block")
+            blocks = True
+    if blocks:
+        importlib.import_module("cosim.core.guard_block")
+        importlib.import_module("cosim.core.recorder_block")

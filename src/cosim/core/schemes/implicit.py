@@ -263,8 +263,27 @@ class Implicit(CoSimulationScheme):
         if self.acceleration == "iqn_ils":
             kw.update({k: getattr(self, k) for k in self._IQN_OPTIONS})
         self._accel = ACCELERATIONS[self.acceleration](**kw)
-        self._kernel = self._compiled_iterations(system) if self.compiled_iterations else None
+        built = self.__dict__.pop("_prepared", None)      # by prepare(), for this system
+        self._kernel = (built[1] if built is not None and built[0] is system else
+                        self._compiled_iterations(system) if self.compiled_iterations else None)
         return super().run(system, t_end, recorder)
+
+    def prepare(self, system, t_end, recorder):
+        # the sides' kernels, the compiled iterations over them and the
+        # modules of the run's loop, before the clock (the run takes them)
+        super().prepare(system, t_end, recorder)
+        from cosim.core.schemes import implicit_block
+        self._prepared = (system, implicit_block.prepare(self, system, recorder))
+
+    def _macro_blocks(self, system, recorder, books, t_end, n, H, sliver, controlled, h_prev):
+        """:mod:`cosim.core.schemes.implicit_block`'s loop where it covers the
+        run; None where the Python loop runs (:attr:`loop_refusal` says why)."""
+        from cosim.core.schemes import implicit_block
+        self.loop_refusal = implicit_block.refusal(self, system, recorder, controlled)
+        if self.loop_refusal is not None:
+            return None
+        return implicit_block.run_blocks(self, system, recorder, books, self._state, t_end, n,
+                                         H, sliver, h_prev)
 
     # ------------------------------------------------- compiled iterations
     def _compiled_iterations(self, system):
@@ -278,14 +297,18 @@ class Implicit(CoSimulationScheme):
         whose law is not linear or Kelvin-Voigt, or with friction."""
         if system.hosted or system.followers or not len(system.coupler_rows):
             return None
+        from cosim.sides.kernel import import_kernel
         try:
-            from cosim.core.schemes import _implicit_step
+            _implicit_step = import_kernel("cosim.core.schemes._implicit_step")
         except ImportError:             # not built: the reference iterates
             return None
         cs = system.connections
         if cs is not None and cs.mode.dtype != np.int64:
             return None
         contacts = []
+        row_a, row_b = system.contact_rows
+        normals, offsets = system.contact_normals, system.contact_offsets
+        maps = system.exchange_maps
         for c in system.coupler:
             ln = system.links[c]
             law, conn = ln.contact.law, ln.connection
@@ -293,8 +316,7 @@ class Implicit(CoSimulationScheme):
                     conn is not None and conn.friction is not None):
                 return None
             g = None if conn is None else conn.grasp
-            contacts.append((int(c), int(system._row_a[c]), int(system._row_b[c]),
-                             system._normals[c], system._offsets[c],
+            contacts.append((int(c), int(row_a[c]), int(row_b[c]), normals[c], offsets[c],
                              _implicit_step.LAW_KINDS[law.name], law.contact_stiffness,
                              getattr(law, "contact_damping", 0.0), int(system.tangent_row[c]),
                              None if g is None else (g.stiffness, g.damping,
@@ -311,7 +333,7 @@ class Implicit(CoSimulationScheme):
             kernel = None if get is None else get()
             if not hasattr(kernel, "side_face"):    # none, or built before the C face
                 return None
-            sides.append((kernel, sub.x, sub.aux, system._Gc[s], int(first[s])))
+            sides.append((kernel, sub.x, sub.aux, maps[s], int(first[s])))
         outs = system.outputs()
         opts = {"max_iterations": self.max_iterations, "tolerance": self.tolerance,
                 "force_tolerance": self.force_tolerance, "acceleration": self.acceleration,
@@ -335,7 +357,7 @@ class Implicit(CoSimulationScheme):
             raise
         for s, pm in zip(self._kernel_sides, moments):
             system.subsystems[s].took_compiled_step(t, h, pm)
-            system._applied[s] = (coeffs, system._Gc[s])     # as step_input keeps them
+            system.book_applied(s, coeffs)      # as step_input keeps them
         self.n_iterations += it
         if converged:
             return stepped

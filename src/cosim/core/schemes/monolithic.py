@@ -85,7 +85,7 @@ def _compiled_rhs(system, active):
     from cosim.core.links import kernel_law
     if system.connections is not None:
         return None
-    faces = [getattr(sub, "compiled_face", lambda: None)() for sub in system.subsystems]
+    faces = _faces(system)
     laws = [kernel_law(ln.contact.law) for ln in system.links]
     if any(f is None for f in faces) or any(law is None for law in laws):
         return None
@@ -95,6 +95,11 @@ def _compiled_rhs(system, active):
     contacts = [(ln.sub_a, ln.port_a, ln.sub_b, ln.port_b, *ln.contact.normal,
                  ln.contact.offset, *law, ln.follow) for ln, law in zip(system.links, laws)]
     return StackedRHS(faces, system.stacked(), contacts, active)
+
+
+def _faces(system) -> list:
+    """Each subsystem's compiled face, or None for one that has none."""
+    return [getattr(sub, "compiled_face", lambda: None)() for sub in system.subsystems]
 
 
 _METHODS = ("RK45", "RK23", "DOP853", "Radau", "BDF", "LSODA")
@@ -265,6 +270,18 @@ class Monolithic(CouplingScheme):
             elif t >= t_end * (1 - 1e-14):
                 record(t, y)
         return {"n_windows": n_segments, "n_iterations": 0, "n_rejected": 0}
+
+    def prepare(self, system, t_end, recorder):
+        # the modules of the sides' compiled faces (a face is asked for
+        # here, the run builds its own at its start), of the compiled
+        # right-hand side and of the solver, loaded before the clock
+        faces = _faces(system)
+        if system.connections is None and all(f is not None for f in faces):
+            from cosim.core._stacked import StackedRHS  # noqa: F401
+        if self.method in _PAIRS:
+            import cosim.core.embedded_rk  # noqa: F401
+        else:
+            import scipy.integrate  # noqa: F401
 
     def _segment_solver(self, rhs, t_end):
         """``segment(t, y, g, direction, terminal, t_eval)``: one run of the

@@ -12,10 +12,14 @@ sample.  Here the side takes many macro steps in one call (its
 the loop restarts it, or an adaptive scipy method sampled from its dense
 output) and the recorder takes the samples as arrays
 (:meth:`~cosim.core.recorder.Recorder.record_block`).  The side returns to
-Python at the end, at a full buffer of :data:`BLOCK` samples, after a step
-in which a switch was located (an impact, a touch or a release: the
-recorder and the run guard see them before that step's sample, as in the
-loop), or at a non-finite state.
+Python at the end, at a full buffer of :data:`BLOCK` samples, or at a
+non-finite state.  The switches it locates go with the samples: the RK4
+kernel keeps a penalty law's touches and releases in rows (the step's row,
+the contact, the time, on or off) and goes on integrating; it returns after
+a step in which it told the side of a switch in Python (a rigid law's
+impact, resolved there, or a switch past its rows), and an adaptive method
+after each switch.  The recorder and the run guard see each step's switches
+before its sample, contact by contact, as in the loop.
 
 What the path gives, against the loop:
 
@@ -163,35 +167,53 @@ class _Emitter:
                               dtype=int)
         self.laws = [ln.contact.law for ln in system.links]
         self.rigid = np.array([law.rigid for law in self.laws], dtype=bool)
+        self.order = [(c, slot) for c, (_, slot) in system.embedded.items()]
+        # each contact's port on this side and its rigid partner's, which stands still
+        row_a, row_b = system.contact_rows
+        a_in = (row_a >= first[s]) & (row_a < first[s + 1])
+        b_in = (row_b >= first[s]) & (row_b < first[s + 1])
+        self.split = bool(np.all(a_in != b_in))
+        if self.split:
+            mine = np.where(a_in, row_a, row_b) - first[s]
+            fixed = np.where(a_in, row_b, row_a)
+            self.mine = (slice(int(mine[0]), int(mine[0]) + len(mine))
+                         if np.array_equal(mine, np.arange(mine[0], mine[0] + len(mine)))
+                         else mine)
+            self.sign = np.where(a_in, 1.0, -1.0)[:, None]      # (a - b): +-(mine - fixed)
+            self.fixed_pos, self.fixed_vel = self.pos[fixed], self.vel[fixed]
 
     #: whether the recorder (or the guard) refused a sample
     refused = False
     #: process CPU spent here, called back from the side's steps [s]
     cpu = 0.0
 
-    def __call__(self, smp, switch_row) -> None:
+    def __call__(self, smp, switch_row, located=()) -> None:
         c0 = time.process_time()
         try:
-            self._emit(smp, switch_row)
+            self._emit(smp, switch_row, located)
         except Exception:
             self.refused = True
             raise
         finally:
             self.cpu += time.process_time() - c0
 
-    def _emit(self, smp, switch_row) -> None:
+    def _emit(self, smp, switch_row, located) -> None:
         sysm, nc = self.system, self.system.n_contacts
         m = len(smp.t)
-        pos = np.broadcast_to(self.pos, (m,) + self.pos.shape).copy()
-        vel = np.broadcast_to(self.vel, (m,) + self.vel.shape).copy()
-        pos[:, self.ports], vel[:, self.ports] = smp.position, smp.velocity
         # CoupledSystem.penetrations, on every sample at once
-        row_a, row_b = sysm.contact_rows
         normals = sysm.contact_normals
-        dx = pos[:, row_a] - pos[:, row_b]
-        dv = vel[:, row_a] - vel[:, row_b]
-        d = sysm.contact_offsets - np.einsum("mcx,cx->mc", dx, normals)
-        dd = -np.einsum("mcx,cx->mc", dv, normals)
+        if self.split:          # side a's port less side b's, one of them still
+            dx = (smp.position[:, self.mine] - self.fixed_pos) * self.sign
+            dv = (smp.velocity[:, self.mine] - self.fixed_vel) * self.sign
+        else:
+            pos = np.broadcast_to(self.pos, (m,) + self.pos.shape).copy()
+            vel = np.broadcast_to(self.vel, (m,) + self.vel.shape).copy()
+            pos[:, self.ports], vel[:, self.ports] = smp.position, smp.velocity
+            row_a, row_b = sysm.contact_rows
+            dx = pos[:, row_a] - pos[:, row_b]
+            dv = vel[:, row_a] - vel[:, row_b]
+        d = sysm.contact_offsets - (dx[..., 0] * normals[:, 0] + dx[..., 1] * normals[:, 1])
+        dd = -(dv[..., 0] * normals[:, 0] + dv[..., 1] * normals[:, 1])
         f = np.empty((m, nc))
         energy = smp.energy.copy()          # the other sides are rigid: no energy
         for c, law in enumerate(self.laws):
@@ -208,14 +230,41 @@ class _Emitter:
             x[:, a:b] = xr
         block = (smp.t, d, dd, f, quad[:, :, 0], quad[:, :, 1], smp.ledger, quad[:, :, 3], x,
                  energy, peaks)
-        self._push(block, 0, m, switch_row)
+        self._push(block, 0, m, switch_row, located)
 
-    def _push(self, block, a, b, switch_row=None) -> None:
-        """Record rows ``a .. b - 1``, the switches of the step of row
-        ``switch_row`` reported before it (:meth:`_report`, in the recorder's
-        block); stop at a non-finite row as the loop does."""
+    def _edges(self, located) -> dict:
+        """Row -> the switches ``(contact, time, on)`` the side kept in its
+        rows, in the order :meth:`_report` reports a step's: contact by
+        contact, each contact's in the order located (a rigid law's touch
+        as its impact, an instant; its release is not an edge)."""
+        at = {}
+        for row, slot, ts, on in located:
+            at.setdefault(row, []).append((slot, ts, on))
+        out = {}
+        for row, got in at.items():
+            edges = []
+            for c, slot in self.order:
+                for j, ts, on in got:
+                    if j != slot:
+                        continue
+                    if not self.rigid[c]:
+                        edges.append((c, ts, on))
+                    elif on:
+                        edges += [(c, ts, True), (c, ts, False)]
+            if edges:
+                out[row] = edges
+        return out
+
+    def _push(self, block, a, b, switch_row=None, located=()) -> None:
+        """Record rows ``a .. b - 1``, the switches the side kept in its rows
+        (``located``) and those of the step of row ``switch_row`` reported
+        before them (:meth:`_report`, in the recorder's block); stop at a
+        non-finite row as the loop does."""
         if b <= a:
             return
+        edges = self._edges(located)
+        if switch_row is not None:
+            edges[switch_row] = self._report
         t, d, dd, f, impulse, diss, ledger, work, x, energy, peaks = block
         ok = np.isfinite(d[a:b]).all(axis=1) & np.isfinite(dd[a:b]).all(axis=1)
         bad = np.flatnonzero(~ok)
@@ -225,10 +274,13 @@ class _Emitter:
                                        impulse[a:stop], diss[a:stop], ledger[a:stop],
                                        work[a:stop], x=x[a:stop], energy=energy[a:stop],
                                        peaks=peaks[a:stop],
-                                       edges=None if switch_row is None else
-                                       {switch_row - a: self._report})
-        if switch_row is not None and stop == switch_row:
-            self._report()              # the loop reports them before it looks at the rows
+                                       edges={r - a: e for r, e in edges.items()} or None)
+        if stop in edges:               # the loop reports them before it looks at the rows
+            if callable(edges[stop]):
+                edges[stop]()
+            else:
+                for c, ts, on in edges[stop]:
+                    self.recorder.edge(c, ts, on)
         if stop < b:
             cause = nonfinite_cause(self.system, d[stop], dd[stop], f[stop])
             raise GuardError(cause[0] if cause else "non-finite state", float(t[stop]),

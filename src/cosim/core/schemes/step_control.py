@@ -16,7 +16,8 @@ import numpy as np
 
 from cosim.core.guard import GuardError, nonfinite_cause
 
-__all__ = ["StepState", "StepController", "LAND_MARGIN", "ONSET_WINDOW", "onset_contacts"]
+__all__ = ["StepState", "StepController", "LAND_MARGIN", "ONSET_WINDOW", "onset_contacts",
+           "watch_impacts"]
 
 #: a contact step over which an exchanged contact closes is retried to end
 #: this fraction of ``contact_step`` before the predicted onset
@@ -388,3 +389,31 @@ class StepBooks:
                              cause[1] if cause else None, "non-finite")
         recorder.record(t1, d, dd, f, drv.impulse, drv.diss,
                         (drv.internal_dissipated, drv.internal_supplied), drv.work_rec)
+
+
+def watch_impacts(system, recorder) -> None:
+    """Let the run guard see each rigid impact as a side's integrator
+    resolves it: the switches of the step so far after those it noted
+    (:meth:`~cosim.core.guard.Guard.switches_ahead`; an impact is a touch
+    and a release at one instant).  A train of impacts that accumulates
+    at a finite time would otherwise never end its step."""
+    guard = getattr(recorder, "guard", None)
+    rigid = {}                       # subsystem -> {embedded slot: contact}
+    for c, (s, slot) in system.embedded.items():
+        if system.links[c].contact.law.rigid:
+            rigid.setdefault(s, {})[slot] = c
+    for s, slots in rigid.items():
+        sub = system.subsystems[s]
+        if "impact_watch" not in sub.capabilities:
+            continue
+        sub.impact_watch = None
+        if guard is None:
+            continue
+        keep = guard.options.chatter_switches // 2 + 1    # impacts that can trip it
+
+        def watch(t, sub=sub, slots=slots):
+            for slot, c in slots.items():
+                times = [ts for ts, j, on in sub.switch_log if j == slot and on][-keep:]
+                if times and times[-1] == t:
+                    guard.switches_ahead(c, [x for ts in times for x in (ts, ts)])
+        sub.impact_watch = watch
