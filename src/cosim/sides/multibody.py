@@ -326,7 +326,8 @@ class MultibodySubsystem(SampledSteps, TreeFaceMixin, CompiledFace, LoopFace, Su
             kernel.set_step(t, h, inputs, self._embedded)
             y1 = integ.integrate(kernel.rhs, t, y0, t + h,
                                  kernel.switch if self._embedded else None,
-                                 self._on_switch, coarse=True, probe=probe, peak=self.peak)
+                                 self._on_switch, coarse=True, probe=probe, peak=self.peak,
+                                 tree=self._tree_rk(kernel))
         else:
             # laws' switch functions are positive where closed; a connection's
             # are not, so a side with connections never takes coarse steps
