@@ -177,17 +177,15 @@ class SampledSteps:
                     self.switch_log = sorted(mine + self.switch_log, key=lambda e: e[0])
                 emit(self._samples(T[:rows], Y[:rows], PK[:rows]), last, located)
             return k0 + rows, why
-        T, why = [], "steps"
-        for k in range(k0, k1):
-            t = k * H
-            h = min(H, t_end - t)
-            if h <= sliver:
-                why = "end"
-                break
-            T.append(t + h)
-        if not T:
+        # the steps' ends k H + min(H, t_end - k H), on arrays (the same
+        # roundings as one step at a time), up to a sliver of round-off
+        t = np.arange(k0, k1) * H
+        h = np.minimum(H, t_end - t)
+        short = np.flatnonzero(h <= sliver)
+        why = "steps" if not short.size else "end"
+        T = t[:short[0] if short.size else None] + h[:short[0] if short.size else None]
+        if not T.size:
             return k0, why
-        T = np.array(T)
         na, nx = self.aux.size, self.x.size
         t0 = k0 * H
         kernel.set_step(t0, T[-1] - t0, None, self._embedded)
