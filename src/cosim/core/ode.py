@@ -262,9 +262,10 @@ class ScipyStepper(TimeStepper):
     def integrate(self, f, t0, y0, t1, switch=None, on_switch=None, coarse=False,
                   probe=None, peak=None, tree=None):
         """See :meth:`TimeStepper.integrate`; ``coarse`` is ignored (the
-        error control chooses the steps); ``tree`` as in :meth:`_run`.  A watched quantity's maxima are
-        non-terminal events (its rate falling through zero), located on the
-        dense output; the values there are probed at the located states."""
+        error control chooses the steps); ``tree`` as in :meth:`_run`.  A
+        watched quantity's maxima are non-terminal events (its rate falling
+        through zero), located on the dense output; the values there are
+        probed at the located states."""
         t, y = t0, y0
         sign = None if switch is None else switch(t, y) > 0
         n_watch = len(peak) if probe is not None and peak is not None else 0

@@ -1,4 +1,5 @@
-# cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True, initializedcheck=False
+# cython: language_level=3, boundscheck=False, wraparound=False, cdivision=True
+# cython: initializedcheck=False
 """The embedded Runge-Kutta pairs of :mod:`cosim.core.embedded_rk` (DOP853,
 RK45) compiled: the same error norm, step-size control, starting step, dense
 output, Illinois event location, ``max_step`` and landing on ``t1``, in the
@@ -190,8 +191,9 @@ cdef class _Solver:
         self.K = np.empty((self.pair.n_all, n))
         self.R = np.empty((4 + self.pair.n_dense, n))
         self.y, self.y_new, self.abs_y = np.empty(n), np.empty(n), np.empty(n)
-        self.scale, self.ytmp, self.acc, self.ye = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
-        self.g, self.g_new, self.gtmp = np.empty(max(m, 1)), np.empty(max(m, 1)), np.empty(max(m, 1))
+        self.scale, self.ytmp, self.acc = np.empty(n), np.empty(n), np.empty(n)
+        self.ye = np.empty(n)
+        self.g, self.g_new, self.gtmp = (np.empty(max(m, 1)) for _ in range(3))
         self.dirs = np.empty(max(m, 1))
         self.term = np.empty(max(m, 1), dtype=np.int_)
         self.act_j = np.empty(max(m, 1), dtype=np.int_)
