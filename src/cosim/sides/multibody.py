@@ -280,10 +280,10 @@ class MultibodySubsystem(SampledSteps, TreeFaceMixin, CompiledFace, LoopFace, Su
         contacts = ([(e.port, e.side, e.normal, e.offset, *law)
                      for e, law in zip(self._embedded, laws)] if self._kernel_steps else [])
         m = self.model
-        return module.MultibodyStep(m.parent, m.revolute, m._offset, m._axis, m._angle0,
-                                    m.ancestors, m.mass, m.inertia, m._com, m._rot_mass, self._g,
-                                    self._port_body, self._port_local_c, contacts,
-                                    effects if self._kernel_steps else None)
+        return self._with_pairs(module.MultibodyStep(
+            m.parent, m.revolute, m._offset, m._axis, m._angle0, m.ancestors, m.mass, m.inertia,
+            m._com, m._rot_mass, self._g, self._port_body, self._port_local_c, contacts,
+            effects if self._kernel_steps else None))
 
     @property
     def kernel(self) -> str:

@@ -83,6 +83,13 @@ class SampledSteps:
     #: (kernel, its compiled pairs) of :meth:`_tree_rk`
     _rk = (None, None)
 
+    def _with_pairs(self, kernel):
+        """``kernel``, with its compiled pairs (:meth:`_tree_rk`) loaded where it
+        steps this side: when the kernel is built, not inside the first solve."""
+        if self._kernel_steps:
+            self._tree_rk(kernel)
+        return kernel
+
     def _tree_rk(self, kernel):
         """The compiled pairs over ``kernel`` (``cosim.sides._embedded_rk.TreeRK``)
         where the integrator is DOP853 or RK45 and the module is built, else
