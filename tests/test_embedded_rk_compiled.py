@@ -12,7 +12,8 @@ operation.  Never bit for bit, so:
   few hundred steps, each rounding otherwise by a few ulps of values of
   order 1, under a rotation that does not amplify them;
 - both pairs converge at their order on it (the compiled pair alone);
-- on manipulator_wall with a rigid wall (mu0 .. mu0.35) the compiled side
+- on manipulator_wall with a rigid wall (mu0 .. mu0.35, and mu0.03 with
+  RK45 instead of DOP853) the compiled side
   takes the same steps as the reference (the same count of evaluations of
   the tree's right-hand side, which counts accepted, rejected and dense
   output stages), the same impacts and switches, for the scene and its
@@ -135,21 +136,29 @@ def _run(monkeypatch, scene, compiled: bool):
             "state": np.array([[v["q"], v["dq"]] for v in s["final_state"]["robot"].values()])}
 
 
-def _copies(variant):
+def _copies(variant, overrides=()):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        scene = cosim.load_scene(CASES / "manipulator_wall.toml", variant, ["t_end=0.45"])
+        scene = cosim.load_scene(CASES / "manipulator_wall.toml", variant,
+                                 ["t_end=0.45", *overrides])
         return list(spread(scene, 5))
 
 
-@pytest.mark.parametrize("variant", ["mu0", "mu0.03", "mu0.15", "mu0.35"])
+#: the robot's RK45 at its default tolerances instead of the scene's DOP853
+RK45 = ("subsystems.robot.integrator.method=rk45", "subsystems.robot.integrator.rtol=1e-8",
+        "subsystems.robot.integrator.atol=1e-10")
+
+
+@pytest.mark.parametrize("variant, overrides", [
+    ("mu0", ()), ("mu0.03", ()), ("mu0.15", ()), ("mu0.35", ()), ("mu0.03", RK45)],
+    ids=["mu0", "mu0.03", "mu0.15", "mu0.35", "mu0.03-rk45"])
 @pytest.mark.parametrize("path", [True, False], ids=["sampled", "loop"])
-def test_manipulator_wall_rigid_same_steps(monkeypatch, variant, path):
+def test_manipulator_wall_rigid_same_steps(monkeypatch, variant, overrides, path):
     """Same evaluations, impacts and switches for the scene and its +-1,
     +-2 ulp copies; impact times within 1e-12 s, states within 1e-10; on the
     sampled path and in the macro loop (the stepper's ``integrate``)."""
     monkeypatch.setattr(sampled, "ENABLED", path)
-    for scene in _copies(variant):
+    for scene in _copies(variant, overrides):
         ref = _run(monkeypatch, scene, False)
         fast = _run(monkeypatch, scene, True)
         assert fast["n_rhs"] == ref["n_rhs"] > 100
