@@ -33,6 +33,7 @@ operation.  Never bit for bit, so:
 from __future__ import annotations
 
 import math
+import sys
 import warnings
 
 import numpy as np
@@ -181,3 +182,36 @@ def test_manipulator_wall_penalty_within_the_references_own_spread(monkeypatch):
         assert abs(fast["intervals"][0] - ref["intervals"][0]) <= 1e-12
         assert abs(fast["intervals"][1] - ref["intervals"][1]) <= 5e-12
         np.testing.assert_allclose(fast["state"], ref["state"], rtol=0, atol=1e-8)
+
+
+
+def test_no_python_call_per_step(monkeypatch):
+    """Per accepted step no Python function runs: the compiled side's run
+    calls about as many Python functions at rtol 1e-13 as at 1e-8 (within
+    a few: the watched maxima located, each probed in Python, may differ),
+    though it takes about 25 more steps, 300 more evaluations of the tree's
+    right-hand side; the reference's calls grow with its steps (by 450)."""
+    loose = ("subsystems.robot.integrator.rtol=1e-8", "subsystems.robot.integrator.atol=1e-10")
+    tight = ("subsystems.robot.integrator.rtol=1e-13", "subsystems.robot.integrator.atol=1e-15")
+    n = [0]
+
+    def count(frame, event, arg):
+        if event == "call":
+            n[0] += 1
+
+    def calls(compiled, overrides):
+        scene = _copies("mu0.03", overrides)[0]
+        _run(monkeypatch, scene, compiled)          # one-time imports and caches
+        n[0] = 0
+        sys.setprofile(count)
+        try:
+            out = _run(monkeypatch, scene, compiled)
+        finally:
+            sys.setprofile(None)
+        return n[0], out["n_rhs"]
+
+    (fast, rhs), (fast_t, rhs_t) = calls(True, loose), calls(True, tight)
+    assert rhs_t > rhs + 200, (rhs, rhs_t)
+    assert abs(fast_t - fast) <= 6, (fast, fast_t)
+    (ref, _), (ref_t, _) = calls(False, loose), calls(False, tight)
+    assert ref_t > ref + 200 and ref > fast, (ref, ref_t, fast)
