@@ -24,6 +24,9 @@ KERNELS = [
     # the tree's model-exchange face, for the monolithic reference
     Extension("cosim.sides._tree_face", ["src/cosim/sides/_tree_face.pyx"],
               depends=[FACE, "src/cosim/sides/_multibody_tree.pxd"]),
+    # the embedded Runge-Kutta pairs (DOP853, RK45) over the tree's right-hand side (its .pxd)
+    Extension("cosim.sides._embedded_rk", ["src/cosim/sides/_embedded_rk.pyx"],
+              depends=["src/cosim/sides/_multibody_tree.pxd"]),
     # the implicit scheme's iterations, which call the sides' kernels through
     # the C face they fill in (cosim/core/_side_face.pxd, declarations only)
     Extension("cosim.core.schemes._implicit_step", ["src/cosim/core/schemes/_implicit_step.pyx"],

@@ -260,16 +260,17 @@ class ScipyStepper(TimeStepper):
         return self.integrate(f, t, y, t + h)
 
     def integrate(self, f, t0, y0, t1, switch=None, on_switch=None, coarse=False,
-                  probe=None, peak=None):
+                  probe=None, peak=None, tree=None):
         """See :meth:`TimeStepper.integrate`; ``coarse`` is ignored (the
-        error control chooses the steps).  A watched quantity's maxima are
-        non-terminal events (its rate falling through zero), located on the
-        dense output; the values there are probed at the located states."""
+        error control chooses the steps); ``tree`` as in :meth:`_run`.  A
+        watched quantity's maxima are non-terminal events (its rate falling
+        through zero), located on the dense output; the values there are
+        probed at the located states."""
         t, y = t0, y0
         sign = None if switch is None else switch(t, y) > 0
         n_watch = len(peak) if probe is not None and peak is not None else 0
         while t < t1:
-            sol = self._run(f, t, y, t1, switch, sign, probe, n_watch)
+            sol = self._run(f, t, y, t1, switch, sign, probe, n_watch, tree=tree)
             if sol.status == -1:
                 raise RuntimeError(f"integrator {self.name} failed at t = {sol.t:.6g} s: "
                                    f"{sol.message}")
@@ -288,7 +289,7 @@ class ScipyStepper(TimeStepper):
         return y
 
     def sample(self, f, t0: float, y0: np.ndarray, t_out: np.ndarray, switch, on_switch,
-               probe, n_peaks: int, emit, probe_rows=None) -> np.ndarray:
+               probe, n_peaks: int, emit, probe_rows=None, tree=None) -> np.ndarray:
         """Integrate from ``t0`` through the output times ``t_out``
         (increasing, the last the end) without restarting at them: each
         output state is read from the solver's dense output (the last is
@@ -304,7 +305,8 @@ class ScipyStepper(TimeStepper):
         solver's runs and the sample itself).  Every sample before a switch
         is emitted before ``on_switch`` is told of it.  ``probe_rows(T, Y)``,
         where given, gives the watched quantities at many samples at once
-        (rows; what ``probe`` gives one at a time).  Returns the end state.
+        (rows; what ``probe`` gives one at a time); ``tree`` as in :meth:`_run`.
+        Returns the end state.
         """
         t_out = np.asarray(t_out, float)
         t, y = t0, y0
@@ -324,7 +326,7 @@ class ScipyStepper(TimeStepper):
                 emit(i, i + 1, y[None, :].copy(), P)
                 return y
             sol = self._run(f, t, y, t1, switch, sign, probe if watch else None, len(watch),
-                            t_out[i:])
+                            t_out[i:], tree)
             t_seg = sol.t
             last = sol.status == 0
             # samples inside this run: before its end, or up to it when it
@@ -374,13 +376,19 @@ class ScipyStepper(TimeStepper):
                     pk[q] = max(pk[q], float(d_end[q]))
             sign, y = _switched(sol, sign, t, y, switch, on_switch)
 
-    def _run(self, f, t, y, t1, switch, sign, probe, n_watch, t_eval=None):
+    def _run(self, f, t, y, t1, switch, sign, probe, n_watch, t_eval=None, tree=None):
         """One run of the solver from ``(t, y)`` towards ``t1``: each switch a
         terminal event in the direction away from its side ``sign``, the
         first ``n_watch`` rates of ``probe`` non-terminal events (falling);
         the states at the output times ``t_eval`` before where it stops are
-        read from its dense output.  A :class:`_Run`."""
+        read from its dense output.  A :class:`_Run`.  ``tree`` (a compiled
+        tree's pairs, ``cosim.sides._embedded_rk.TreeRK``, or None) runs the
+        pair in C where ``f``, ``switch`` and ``probe`` are that tree's own."""
         n_sw = 0 if sign is None else len(sign)
+        if tree is not None and self.method in _PAIRS:
+            t, y, status, msg, t_ev, y_ev, y_out = tree.run(
+                self.method, t, y, t1, self.rtol, self.atol, self.max_step, sign, n_watch, t_eval)
+            return _Run(t, y, status, msg, t_ev, y_ev, lambda ts: y_out[:len(ts)])
         if self.method in _PAIRS:
             from cosim.core.embedded_rk import PAIRS, Events, solve   # loaded when built
             events = None

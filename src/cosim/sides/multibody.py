@@ -283,10 +283,10 @@ class MultibodySubsystem(SampledSteps, TreeFaceMixin, CompiledFace, LoopFace, Su
         contacts = ([(e.port, e.side, e.normal, e.offset, *law)
                      for e, law in zip(self._embedded, laws)] if self._kernel_steps else [])
         m = self.model
-        return module.MultibodyStep(m.parent, m.revolute, m._offset, m._axis, m._angle0,
-                                    m.ancestors, m.mass, m.inertia, m._com, m._rot_mass, self._g,
-                                    self._port_body, self._port_local_c, contacts,
-                                    effects if self._kernel_steps else None)
+        return self._with_pairs(module.MultibodyStep(
+            m.parent, m.revolute, m._offset, m._axis, m._angle0, m.ancestors, m.mass, m.inertia,
+            m._com, m._rot_mass, self._g, self._port_body, self._port_local_c, contacts,
+            effects if self._kernel_steps else None))
 
     @property
     def kernel(self) -> str:
@@ -329,7 +329,8 @@ class MultibodySubsystem(SampledSteps, TreeFaceMixin, CompiledFace, LoopFace, Su
             kernel.set_step(t, h, inputs, self._embedded)
             y1 = integ.integrate(kernel.rhs, t, y0, t + h,
                                  kernel.switch if self._embedded else None,
-                                 self._on_switch, coarse=True, probe=probe, peak=self.peak)
+                                 self._on_switch, coarse=True, probe=probe, peak=self.peak,
+                                 tree=self._tree_rk(kernel))
         else:
             # laws' switch functions are positive where closed; a connection's
             # are not, so a side with connections never takes coarse steps

@@ -18,6 +18,7 @@ from cosim.core.links import kernel_law     # the numbering every kernel shares
 
 from cosim.core.ode import RK4, ScipyStepper
 from cosim.core.subsystem import MOMENT, QUADRATURES, Samples
+from cosim.sides.kernel import compiled_module
 
 if TYPE_CHECKING:
     from multibody import JointEffects
@@ -69,9 +70,37 @@ def _located(ST, SJ, n, rows) -> list:
             for ts, (r, j, on) in zip(ST[:n].tolist(), SJ[:n].tolist()) if r < rows]
 
 
+#: whether an adaptive pair (DOP853, RK45) over the compiled kernel runs in C
+#: (``cosim.sides._embedded_rk``); False runs :mod:`cosim.core.embedded_rk`
+#: over the kernel's right-hand side, the reference the tests hold it to
+COMPILED_PAIRS = True
+
+
 class SampledSteps:
     """The sampled face of :class:`~cosim.sides.multibody.MultibodySubsystem`
     (a mixin: it reads the side's kernel, state and logs)."""
+
+    #: (kernel, its compiled pairs) of :meth:`_tree_rk`
+    _rk = (None, None)
+
+    def _with_pairs(self, kernel):
+        """``kernel``, with its compiled pairs (:meth:`_tree_rk`) loaded where it
+        steps this side: when the kernel is built, not inside the first solve."""
+        if self._kernel_steps:
+            self._tree_rk(kernel)
+        return kernel
+
+    def _tree_rk(self, kernel):
+        """The compiled pairs over ``kernel`` (``cosim.sides._embedded_rk.TreeRK``)
+        where the integrator is DOP853 or RK45 and the module is built, else
+        None (the numpy pairs over the kernel's right-hand side)."""
+        if not COMPILED_PAIRS or getattr(self.integrator, "method", None) not in ("RK45",
+                                                                                  "DOP853"):
+            return None
+        if self._rk[0] is not kernel:
+            module = compiled_module("_embedded_rk")
+            self._rk = (kernel, None if module is None else module.TreeRK(kernel))
+        return self._rk[1]
 
     def sampling_refusal(self) -> str | None:
         """Why :meth:`sample_steps` cannot take this side's macro steps, or
@@ -155,17 +184,15 @@ class SampledSteps:
                     self.switch_log = sorted(mine + self.switch_log, key=lambda e: e[0])
                 emit(self._samples(T[:rows], Y[:rows], PK[:rows]), last, located)
             return k0 + rows, why
-        T, why = [], "steps"
-        for k in range(k0, k1):
-            t = k * H
-            h = min(H, t_end - t)
-            if h <= sliver:
-                why = "end"
-                break
-            T.append(t + h)
-        if not T:
+        # the steps' ends k H + min(H, t_end - k H), on arrays (the same
+        # roundings as one step at a time), up to a sliver of round-off
+        t = np.arange(k0, k1) * H
+        h = np.minimum(H, t_end - t)
+        short = np.flatnonzero(h <= sliver)
+        why = "steps" if not short.size else "end"
+        T = t[:short[0] if short.size else None] + h[:short[0] if short.size else None]
+        if not T.size:
             return k0, why
-        T = np.array(T)
         na, nx = self.aux.size, self.x.size
         t0 = k0 * H
         kernel.set_step(t0, T[-1] - t0, None, self._embedded)
@@ -192,7 +219,8 @@ class SampledSteps:
         try:
             y1 = integ.sample(kernel.rhs, t0, y0, T, kernel.switch if self._embedded else None,
                               self._on_switch, self._probe if self._embedded else None,
-                              len(self._embedded), out, probe_rows=kernel.sample_penetrations)
+                              len(self._embedded), out, probe_rows=kernel.sample_penetrations,
+                              tree=self._tree_rk(kernel))
         except Exception:
             if not refused:
                 self.status = "failed"
