@@ -176,9 +176,8 @@ class _Emitter:
         if self.split:
             mine = np.where(a_in, row_a, row_b) - first[s]
             fixed = np.where(a_in, row_b, row_a)
-            self.mine = (slice(int(mine[0]), int(mine[0]) + len(mine))
-                         if np.array_equal(mine, np.arange(mine[0], mine[0] + len(mine)))
-                         else mine)
+            run = len(mine) and np.array_equal(mine, np.arange(mine[0], mine[0] + len(mine)))
+            self.mine = slice(int(mine[0]), int(mine[0]) + len(mine)) if run else mine
             self.sign = np.where(a_in, 1.0, -1.0)[:, None]      # (a - b): +-(mine - fixed)
             self.fixed_pos, self.fixed_vel = self.pos[fixed], self.vel[fixed]
 
