@@ -86,6 +86,20 @@ def test_blocks_give_the_step_by_step_run(monkeypatch, name, variant, overrides)
     same_outcome(ref, path)
 
 
+@pytest.mark.parametrize("block", [8, 9])
+def test_a_run_whose_steps_fill_its_last_block_exactly(monkeypatch, block):
+    """three_mass f100 to 0.016 s takes 8 macro steps of 2 ms, which fill a
+    block of 8 exactly: the loop then comes back once more with no row (the
+    run's end), which records nothing; a block of 9 ends at the run's end."""
+    monkeypatch.setattr(driven_block, "BLOCK", block)
+    path = run(monkeypatch, "three_mass", "f100", True, ("t_end=0.016",))
+    ref = run(monkeypatch, "three_mass", "f100", False, ("t_end=0.016",))
+    assert path.status == ref.status == "finished"
+    assert path.summary["macro_steps"] == 8
+    assert series_distance(ref, path) <= TOL
+    same_outcome(ref, path)
+
+
 def test_the_four_scenes_take_a_block_path():
     """three_mass and beam_impact run the compiled loop (in blocks);
     ground_multicontact and manipulator_wall, whose partners are rigid, the

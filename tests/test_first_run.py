@@ -117,7 +117,7 @@ def _stale(monkeypatch, stale):
     """Make importing the modules ``stale`` raise as a mismatched build does."""
     import importlib
 
-    from cosim.sides import kernel
+    from cosim.core import kernel_import
     real = importlib.import_module
 
     def fake(name, package=None):
@@ -125,7 +125,7 @@ def _stale(monkeypatch, stale):
             raise ValueError(MISMATCH)
         return real(name, package)
 
-    monkeypatch.setattr(kernel.importlib, "import_module", fake)
+    monkeypatch.setattr(kernel_import.importlib, "import_module", fake)
 
 
 def test_a_kernel_built_against_other_declarations_stops_with_the_rebuild(monkeypatch):
@@ -141,7 +141,7 @@ def test_a_kernel_built_against_other_declarations_stops_with_the_rebuild(monkey
     assert "`cosim.sides._structure_step`" in text and "size changed" in text
     assert "python setup.py build_ext --inplace" in text and "pip install ." in text
     # not one that is missing: that one falls back to the reference, said once
-    monkeypatch.setattr(sys.modules["cosim.sides.kernel"].importlib, "import_module",
+    monkeypatch.setattr(sys.modules["cosim.core.kernel_import"].importlib, "import_module",
                         lambda name, package=None: (_ for _ in ()).throw(ImportError(name)))
     assert compiled_module("_structure_step") is None
 

@@ -52,7 +52,7 @@ def test_sigint_leaves_readable_partial_outputs(tmp_path):
     out = tmp_path / "run"
     proc = subprocess.Popen([sys.executable, "-m", "cosim.cli", "run",
                              str(CASES / "three_mass.toml"), "--variant", "f100",
-                             "--set", "t_end=50", "--out", str(out)],
+                             "--set", "t_end=500", "--out", str(out)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
     spool = out / ".series.npz.spool"
     deadline = time.monotonic() + 120

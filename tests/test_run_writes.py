@@ -64,7 +64,7 @@ def long_run(out, cwd):
     """A run that goes on until stopped, once it has started stepping."""
     proc = subprocess.Popen([sys.executable, "-m", "cosim.cli", "run",
                              str(CASES / "three_mass.toml"), "--variant", "f100",
-                             "--set", "t_end=50", "--out", str(out)],
+                             "--set", "t_end=500", "--out", str(out)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=cwd)
     spool = out / ".series.npz.spool"
     deadline = time.monotonic() + 120

@@ -452,7 +452,7 @@ class RigidReference(LoopFace, Subsystem):
         return None if type(self) is RigidReference else f"is a rigid {type(self).__name__}"
 
     def compiled_face(self):
-        from cosim.sides.kernel import import_kernel
+        from cosim.core.kernel_import import import_kernel
         try:
             stacked = import_kernel("cosim.core._stacked")
         except ImportError:             # not built: the Python right-hand side runs

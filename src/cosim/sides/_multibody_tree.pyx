@@ -596,7 +596,10 @@ cdef class TreeDynamics:
     def energies(self, X):
         """:meth:`_energy` (the step kernel's ``energy``) at each row of the
         states ``X`` (m, >= 2 n) [J], in one call (the recorder's rows)."""
-        cdef double[:, ::1] xv = np.ascontiguousarray(X, dtype=float).reshape(len(X), -1)
+        X = np.ascontiguousarray(X, dtype=float)
+        if len(X) == 0:             # no rows: no energies (a reshape of none cannot infer)
+            return np.empty(0)
+        cdef double[:, ::1] xv = X.reshape(len(X), -1)
         out = np.empty(xv.shape[0])
         cdef double[::1] ov = out
         cdef Py_ssize_t i

@@ -327,13 +327,13 @@ class MultibodySubsystem(SampledSteps, TreeFaceMixin, CompiledFace, LoopFace, Su
         probe = self._probe if self._embedded else None
         if kernel is not None:           # an adaptive method: compiled right-hand side
             kernel.set_step(t, h, inputs, self._embedded)
+            rk = self._tree_rk(kernel)          # our pairs only: a plug-in's takes no `tree`
             y1 = integ.integrate(kernel.rhs, t, y0, t + h,
                                  kernel.switch if self._embedded else None,
                                  self._on_switch, coarse=True, probe=probe, peak=self.peak,
-                                 tree=self._tree_rk(kernel))
+                                 **({} if rk is None else {"tree": rk}))
         else:
-            # laws' switch functions are positive where closed; a connection's
-            # are not, so a side with connections never takes coarse steps
+            # laws' switch functions are positive where closed, a connection's not: no coarse steps
             y1 = integ.integrate(lambda tt, yy: self._rhs(tt, yy, inputs), t, y0, t + h,
                                  switch, self._on_switch, coarse=not self._connections,
                                  probe=probe, peak=self.peak)

@@ -94,9 +94,9 @@ class SampledSteps:
         """The compiled pairs over ``kernel`` (``cosim.sides._embedded_rk.TreeRK``)
         where the integrator is DOP853 or RK45 and the module is built, else
         None (the numpy pairs over the kernel's right-hand side)."""
-        if not COMPILED_PAIRS or getattr(self.integrator, "method", None) not in ("RK45",
-                                                                                  "DOP853"):
-            return None
+        if not COMPILED_PAIRS or not isinstance(self.integrator, ScipyStepper) or \
+                self.integrator.method not in ("RK45", "DOP853"):
+            return None         # a plug-in integrator is called as the protocol says
         if self._rk[0] is not kernel:
             module = compiled_module("_embedded_rk")
             self._rk = (kernel, None if module is None else module.TreeRK(kernel))

@@ -77,6 +77,8 @@ class _Rows:
         (:meth:`~cosim.core.subsystem.Subsystem.energies`) and the contacts'
         stored energy, summed in the order of
         :meth:`~cosim.core.system.CoupledSystem.energy`."""
+        if b <= 0:                  # a block that ends at its first step
+            return
         off = system.stacked()
         e = 0
         for s, sub in enumerate(system.subsystems):

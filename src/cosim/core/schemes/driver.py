@@ -47,7 +47,7 @@ def driver_choice() -> str:
 def compiled_driver():
     """The compiled loop's module, or None where it was not built (said once)."""
     global _missing_said
-    from cosim.sides.kernel import import_kernel
+    from cosim.core.kernel_import import import_kernel
     try:
         return import_kernel("cosim.core.schemes._driver")
     except ImportError as exc:
@@ -136,7 +136,7 @@ def prepare(scheme, system, recorder) -> None:
     the run.  A process's first run then counts no import and no kernel
     build in its ``cpu_time_s``; the run finds them built and loaded."""
     from cosim.core.schemes import driven_block
-    from cosim.sides.kernel import import_kernel
+    from cosim.core.kernel_import import import_kernel
     for sub in system.subsystems:
         if "compiled_loop" in sub.capabilities:
             sub.compiled_loop_refusal()      # builds the side's kernel, kept for its steps

@@ -297,7 +297,7 @@ class Implicit(CoSimulationScheme):
         whose law is not linear or Kelvin-Voigt, or with friction."""
         if system.hosted or system.followers or not len(system.coupler_rows):
             return None
-        from cosim.sides.kernel import import_kernel
+        from cosim.core.kernel_import import import_kernel
         try:
             _implicit_step = import_kernel("cosim.core.schemes._implicit_step")
         except ImportError:             # not built: the reference iterates
