@@ -170,6 +170,9 @@ def bench_case(name, path, variant, contact=None, spread=3, cache=None, origin="
     except (SceneError, SimulationError, ValueError) as exc:
         case["refused"] = _plain(f"{type(exc).__name__}: {exc}")
         return case
+    except Exception as exc:     # a run that raised: said, and the batch goes on
+        case["error"] = _plain(f"{type(exc).__name__}: {exc}")
+        return case
     finally:
         ctx.__exit__(None, None, None)
         case["bench_cpu_s"] = time.process_time() - t0
@@ -224,6 +227,8 @@ def _why(c) -> str:
     """Why a row has no ratio."""
     if "refused" in c:
         return "bench does not apply: " + c["refused"].split(": ", 1)[-1].replace("|", "/")
+    if "error" in c:
+        return "bench stopped: " + c["error"].replace("|", "/")
     if c["cosim"] is None:
         return "no co-simulation row meets 1 %"
     return "no monolithic row meets 1 %"
@@ -241,7 +246,7 @@ def table(data: dict) -> str:
         variant = (c["variant"] or "-") + (f" (`--contact {c['contact']}`)" if c["contact"]
                                            else "")
         load = f"{c['load_before']:.1f}"
-        if "refused" in c:
+        if "refused" in c or "error" in c:
             lines.append(f"| {c['scene']} | {variant} | {_why(c)} | - | - | - | - | - | - "
                          f"| {load} |")
             continue
@@ -258,10 +263,12 @@ def table(data: dict) -> str:
 def totals(data: dict) -> dict:
     cases = data["cases"]
     return {"cases": len(cases), "refused": sum("refused" in c for c in cases),
+            "errors": sum("error" in c for c in cases),
             "ratios": sum(c.get("ratio") is not None for c in cases),
             "met": sum(c.get("verdict") == "yes" for c in cases),
             "over": sum(c.get("verdict") == "no" for c in cases),
-            "no_ratio": sum("refused" not in c and c.get("ratio") is None for c in cases)}
+            "no_ratio": sum("refused" not in c and "error" not in c and c.get("ratio") is None
+                            for c in cases)}
 
 
 def readme(data: dict) -> str:
@@ -286,6 +293,7 @@ def readme(data: dict) -> str:
             f"(and why not the compiled one), its macro steps and CPU per step.\n\n"
             f"{table(data)}\n\n"
             f"{t['cases']} scenes and variants: {t['refused']} refused by the bench, "
+            + (f"{t['errors']} stopped by an error, " if t.get("errors") else "") +
             f"{t['no_ratio']} without a ratio, {t['ratios']} with one: {t['met']} at most "
             f"{TARGET:g}, {t['over']} over.\n")
 

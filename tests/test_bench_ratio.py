@@ -71,9 +71,11 @@ def test_the_table_has_one_row_per_case_and_the_verdict_column(br, tmp_path, mon
     none = {**case, "scene": "none", "cosim": None, "ratio": None, "verdict": "-"}
     refused = br.bench_case("rod_impact", "cases/rod_impact.toml", None, spread=1,
                             cache=str(tmp_path / "cache"))
-    lines = br.table({"cases": [case, over, none, refused]}).splitlines()
+    stopped = {"scene": "stopped", "variant": None, "contact": None, "load_before": 1.0,
+               "error": "FloatingPointError: the mass matrix is not positive definite"}
+    lines = br.table({"cases": [case, over, none, refused, stopped]}).splitlines()
     head = [c.strip() for c in lines[0].strip("|").split("|")]
-    assert head[6:8] == ["co-sim / mono", "≤ 1"] and len(lines) == 2 + 4
+    assert head[6:8] == ["co-sim / mono", "≤ 1"] and len(lines) == 2 + 5
     cells = [[c.strip() for c in ln.strip("|").split("|")] for ln in lines[2:]]
     assert all(len(c) == len(head) for c in cells)
     assert cells[0][:2] == ["spring_drop", "undamped"]
@@ -84,8 +86,11 @@ def test_the_table_has_one_row_per_case_and_the_verdict_column(br, tmp_path, mon
     # a scene the bench refuses says why, in the words of the bench, with no path of this machine
     assert cells[3][2].startswith("bench does not apply: ") and "`joint` must be given" in cells[3][2]
     assert str(ROOT) not in lines[5] and cells[3][7] == "-"
-    t = br.totals({"cases": [case, over, none, refused]})
-    assert (t["refused"], t["no_ratio"], t["ratios"], t["over"]) == (1, 1, 2, 1)
+    # a bench that raised says so, and the batch went on
+    assert cells[4][2] == "bench stopped: FloatingPointError: the mass matrix is not positive " \
+                          "definite" and cells[4][7] == "-"
+    t = br.totals({"cases": [case, over, none, refused, stopped]})
+    assert (t["refused"], t["errors"], t["no_ratio"], t["ratios"], t["over"]) == (1, 1, 1, 2, 1)
 
 
 def test_the_published_table_is_its_json(br):
