@@ -41,6 +41,33 @@ def exit_velocity(t, dq, t_release: float) -> float:
     return float(np.interp(t_release, t, dq))
 
 
+def _impact_at(summary: dict, series, contact: str, joint: str, at: float) -> dict | None:
+    """The rigid impact of ``contact`` at the instant ``at`` that jumped the
+    rates of ``joint``'s side (the run's record of it, with ``dq_before`` and
+    ``dq_after``), or None.
+
+    A rigid impact jumps the rates within an instant, which a series sampled
+    at macro steps straddles: a rate read there by interpolation would mix
+    the rates before and after.  The run records both (``summary["impacts"]``)."""
+    sub, name = joint.split("/", 1)
+    own = {k.split("/", 2)[2] for k in series.keys() if k.startswith(f"dq/{sub}/")}
+    for hit in reversed(summary.get("impacts") or ()):
+        if hit["contact"] == contact and math.isclose(hit["time"], at, rel_tol=1e-12) \
+                and name in hit["dq_after"] and set(hit["dq_after"]) == own:
+            return hit
+    return None
+
+
+def _rate(summary: dict, series, contact: str, joint: str, at: float, when: str) -> float:
+    """``joint``'s rate at ``at``: the rigid impact's rate ``when``
+    (``before`` or ``after``) where ``contact`` has one at that instant
+    (:func:`_impact_at`), else :func:`exit_velocity`'s reading."""
+    hit = _impact_at(summary, series, contact, joint, at)
+    if hit is not None:
+        return float(hit[f"dq_{when}"][joint.split("/", 1)[1]])
+    return exit_velocity(series["t"], series[f"dq/{joint}"], at)
+
+
 def impact_regime(summary: dict, series, contact: str, joint: str) -> dict:
     """The impact regime of CASES.md section 5, read from a run.
 
@@ -84,15 +111,15 @@ def impact_regime(summary: dict, series, contact: str, joint: str) -> dict:
            "exit_velocity": math.nan}
     if not iv:
         return out
-    t, dq = np.asarray(series["t"]), np.asarray(series[f"dq/{joint}"])
+    t = np.asarray(series["t"])
     (t_on, t_off), t_last = iv[0], iv[-1][1]
-    out["rate_at_touch"] = exit_velocity(t, dq, t_on)
+    out["rate_at_touch"] = _rate(summary, series, contact, joint, t_on, "before")
     if t_off >= t[-1]:
         out["regime"] = "open-ended"
         return out
-    out["rate_at_release"] = exit_velocity(t, dq, t_off)
+    out["rate_at_release"] = _rate(summary, series, contact, joint, t_off, "after")
     if t_last < t[-1]:
-        out["exit_velocity"] = exit_velocity(t, dq, t_last)
+        out["exit_velocity"] = _rate(summary, series, contact, joint, t_last, "after")
     turned = out["rate_at_touch"] * out["rate_at_release"] < 0
     out["regime"] = ("forward" if not turned else "backward" if len(iv) == 1 else "backward+")
     return out
@@ -100,7 +127,9 @@ def impact_regime(summary: dict, series, contact: str, joint: str) -> dict:
 
 def impact_metrics(result, contact: str, joint: str) -> dict:
     """Contact count, peak penetration [m], and the exit velocity of ``joint``
-    (``"SUBSYSTEM/JOINT"``) at the contact's last release.
+    (``"SUBSYSTEM/JOINT"``) at the contact's last release: where that release
+    is a rigid impact's instant, the rate the impact left (its record's
+    ``dq_after``), not a reading across the jump.
 
     The exit velocity is NaN when the contact never closed or never released.
     """
@@ -111,7 +140,8 @@ def impact_metrics(result, contact: str, joint: str) -> dict:
         t_off = c["intervals"][-1][1]
         t = result.series["t"]
         if t_off < t[-1]:
-            out["exit_velocity"] = exit_velocity(t, result.series[f"dq/{joint}"], t_off)
+            out["exit_velocity"] = _rate(result.summary, result.series, contact, joint, t_off,
+                                         "after")
     return out
 
 
