@@ -128,16 +128,15 @@ def loop_of(path, variant, ov, scheme) -> dict:
     from cosim.core.recorder import Recorder
     from cosim.scene.build import build_system
     from cosim.scene.load import load_scene
-    from cosim.scene.run import _load_sampled
     ctx = _quiet()
     try:
         scene = load_scene(path, variant, list(ov), scheme)
         system, sch = build_system(scene)
-        if not len(system.exchanged):       # as cosim.scene.run.simulate: the sampled loop
-            _load_sampled()
         rec = Recorder(system, scene.name, sch.name, scene.t_end, every=scene.output_every,
                        auto_edges=[c not in system.embedded for c in range(system.n_contacts)],
                        guard=Guard(system, scene.guard))
+        sch.prepare(system, scene.t_end, rec)   # as cosim.scene.run.simulate, before the clock
+        rec.prepare()
         t0 = time.process_time()
         sch.run(system, scene.t_end, rec)
         cpu = time.process_time() - t0
