@@ -171,7 +171,7 @@ def build_parser() -> argparse.ArgumentParser:
                                       "scene's default_variant)")
     bn.add_argument("--schemes", type=_schemes,
                     help="co-simulation schemes, comma separated (default: the scene's "
-                         "own, if it is one, and implicit)")
+                         "own, if it is one, gauss_seidel and implicit)")
     bn.add_argument("--steps", type=_steps, help="step sizes [s], comma separated (default "
                                                   "1e-4,5e-5,2e-5,1e-5)")
     bn.add_argument("--contact", help="contact whose peak penetration and count are compared "

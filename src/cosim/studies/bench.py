@@ -278,8 +278,9 @@ def _runs(scene, schemes=None, steps=None, tolerances=(1e-3, 1e-4, 1e-6, 1e-8),
           paper: bool = True) -> list[tuple]:
     """The rows of :func:`run_bench` (its arguments of the same names):
     (scheme, label, step, tolerance, overrides) each."""
-    if schemes is None:
-        schemes = ([scene.scheme] if scene.scheme != "monolithic" else []) + ["implicit"]
+    if schemes is None:     # an explicit scheme too: the cheapest within 1 % may be one
+        schemes = ([scene.scheme] if scene.scheme != "monolithic" else []) + [
+            "gauss_seidel", "implicit"]
         schemes = list(dict.fromkeys(schemes))
     steps = list(steps or (1e-4, 5e-5, 2e-5, 1e-5))
     varied = "contact_step" if scene.scheme_options.get("contact_step") else "macro_step"
