@@ -322,7 +322,7 @@ def main(argv=None) -> int:
     ap.add_argument("--only", default="", help="comma-separated scene names (shipped or "
                     "generated)")
     ap.add_argument("--schemes", default=None, help="the bench's --schemes, comma-separated "
-                    "(default: the bench's own default: the scene's scheme, gauss_seidel and implicit)")
+                    "(default: the bench's own: the scene's scheme, gauss_seidel and implicit)")
     ap.add_argument("--no-shipped", action="store_true", help="the generated scenes alone")
     ap.add_argument("--out", default="runs/bench-ratio")
     ap.add_argument("--cache", default="runs/.bench-cache", help="the references' cache")
