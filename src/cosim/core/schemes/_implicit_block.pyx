@@ -38,6 +38,8 @@ from cosim.core.schemes._implicit_step cimport ImplicitStep
 
 import numpy as np
 
+from cosim.core.schemes._implicit_step import grasp_columns
+
 cdef enum:
     # why a block ended
     FULL = 0
@@ -144,11 +146,7 @@ cdef class ImplicitBlocks:
         self.c_cd = np.array([float(k[6]) for k in contacts])
         self.c_trow = np.array([k[7] for k in contacts], dtype=np.int_)
         self.c_grasp = np.array([k[8] is not None for k in contacts], dtype=np.int_)
-        grasps = [k[8] or (0.0, 0.0, 0.0, 0.0) for k in contacts]
-        self.g_k = np.array([float(g[0]) for g in grasps])
-        self.g_c = np.array([float(g[1]) for g in grasps])
-        self.g_kt = np.array([float(g[2]) for g in grasps])
-        self.g_ct = np.array([float(g[3]) for g in grasps])
+        self.g_k, self.g_c, self.g_kt, self.g_ct = grasp_columns(contacts, 8)
         self.c_touch = np.array([bool(k[9]) for k in contacts], dtype=np.int_)
         cs = system.connections
         self.mode = cs.mode if cs is not None else np.zeros(max(self.nc, 1), dtype=np.longlong)

@@ -96,6 +96,14 @@ cdef void _apply(const double* A, const double* beta, int n, int m, double* x) n
             x[i] += s * A[k * n + i]
 
 
+def grasp_columns(contacts, int at):
+    """The grasps of ``contacts`` (item ``at`` of each entry: its stiffness,
+    damping, tangential stiffness and tangential damping, or None without a
+    grasp, which counts as zeros) as four arrays, one entry per contact."""
+    grasps = [k[at] or (0.0, 0.0, 0.0, 0.0) for k in contacts]
+    return tuple(np.array([float(g[i]) for g in grasps]) for i in range(4))
+
+
 def least_squares(V, r):
     """``alpha`` minimising ``|V alpha + r|`` by the kernel's QR (``V`` n x m,
     m <= n, of full rank): what IQN-ILS solves at each iteration, for the
@@ -400,11 +408,7 @@ cdef class ImplicitStep:
         self.k_cd = np.array([float(c[7]) for c in contacts])
         self.k_trow = np.array([c[8] for c in contacts], dtype=np.int_)
         self.k_grasp = np.array([c[9] is not None for c in contacts], dtype=np.int_)
-        grasps = [c[9] or (0.0, 0.0, 0.0, 0.0) for c in contacts]
-        self.g_k = np.array([float(g[0]) for g in grasps])
-        self.g_c = np.array([float(g[1]) for g in grasps])
-        self.g_kt = np.array([float(g[2]) for g in grasps])
-        self.g_ct = np.array([float(g[3]) for g in grasps])
+        self.g_k, self.g_c, self.g_kt, self.g_ct = grasp_columns(contacts, 9)
         self.mode = mode if mode is not None else np.zeros(1, dtype=np.longlong)
         self.anchor = anchor if anchor is not None else np.zeros(1)
         self.rows = np.ascontiguousarray(rows, dtype=np.int_)
