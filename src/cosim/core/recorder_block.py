@@ -23,6 +23,12 @@ from cosim.core.guard_error import GuardError
 from cosim.core.hermite import hermite_cubic_max
 from cosim.core.progress import Progress
 
+try:                              # the crossings' bisection compiled (see _crossings)
+    from cosim.core.kernel_import import import_kernel
+    _compiled = import_kernel("cosim.core.schemes._driver_block")
+except ImportError:               # not built: the same bisection on arrays
+    _compiled = None
+
 __all__ = ["record_block"]
 
 
@@ -201,8 +207,8 @@ def record_block(rec, t, d, dd, f, impulse, dissipated, internal, work, x, energ
 
 
 #: fewest crossings in a block located on arrays (each array bisection costs
-#: about as much as eight located one by one)
-ARRAY_CROSSINGS = 8
+#: about as much as eight located one by one; the compiled one, less than one)
+ARRAY_CROSSINGS = 8 if _compiled is None else 1
 
 
 def _crossings(rec, flip, t_prev, d_prev, dd_prev, t, d, dd, a_prev) -> dict:
@@ -220,6 +226,10 @@ def _crossings(rec, flip, t_prev, d_prev, dd_prev, t, d, dd, a_prev) -> dict:
     t0, t1 = t_prev[rows], t[rows]
     d0, v0, d1, v1 = d_prev[rows, cs], dd_prev[rows, cs], d[rows, cs], dd[rows, cs]
     was = a_prev[rows, cs]
+    if _compiled is not None:     # the same bisection in C, its operations in this order
+        times = np.empty(len(rows))
+        _compiled.crossings(t0, t1, d0, v0, d1, v1, was.view(np.uint8), times)
+        return dict(zip(zip(rows.tolist(), cs.tolist()), times.tolist()))
     h = t1 - t0
     dx = d1 - d0
     c1, c2, c3 = h * v0, 3 * dx - h * (2 * v0 + v1), -2 * dx + h * (v0 + v1)
