@@ -83,7 +83,9 @@ def record_block(rec, t, d, dd, f, impulse, dissipated, internal, work, x, energ
 
     Notes
     -----
-    The subsystems' own states are not read: a scheme that integrated
+    No array handed in is kept: what the recorder keeps it copies (a
+    caller may write its next samples into the same arrays).  The
+    subsystems' own states are not read: a scheme that integrated
     past the block (it returns at ``t_end``, a full buffer or a switch)
     hands the states at each sample in ``x``.  Connection modes must not
     change inside the block: switches logged since the last sample
@@ -158,7 +160,11 @@ def record_block(rec, t, d, dd, f, impulse, dissipated, internal, work, x, energ
     if released:
         flip[0, sorted(released)] = False
     edges = {j - i0: e for j, e in (edges or {}).items() if i0 <= j < m + i0}
-    edge_rows = sorted(set(np.nonzero(flip)[0].tolist()) | ({0} if switched else set())
+    fr, fc = np.nonzero(flip)
+    flips = {}                      # row -> its flipped contacts, each with its new state
+    for j, c, on in zip(fr.tolist(), fc.tolist(), active[fr, fc].tolist()):
+        flips.setdefault(j, []).append((c, on))
+    edge_rows = sorted(flips.keys() | ({0} if switched else set())
                        | {j - 1 for j in edges if j > 0})
     at = _crossings(rec, flip, t_prev, d_prev, dd_prev, t, d, dd, a_prev)
     # the guard looks only at the stretches between edges that hold a sample
@@ -183,13 +189,12 @@ def record_block(rec, t, d, dd, f, impulse, dissipated, internal, work, x, energ
         if je == m:
             break
         try:
-            for c in np.flatnonzero(flip[je]):
-                c = int(c)
+            for c, on in flips.get(je, ()):
                 tc = at.get((je, c))
                 if tc is None:
                     tc = rec._crossing(c, t_prev[je], d_prev[je, c], dd_prev[je, c], t[je],
                                        d[je, c], dd[je, c], a_prev[je, c])
-                rec.edge(c, tc, bool(active[je, c]))
+                rec.edge(c, tc, on)
             if je == 0:
                 for e in switched:  # a grasp holds from its switch; a release frees
                     c = sysm.contact_names.index(e["contact"])
