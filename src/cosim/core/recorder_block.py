@@ -268,10 +268,10 @@ def _commit(rec, t, d, dd, f, impulse, dissipated, work, x, energy, diss_total, 
     """Keep the first ``k`` samples of a block (:meth:`record_block`)."""
     if k <= 0:
         return
-    np.maximum(rec.peak, np.max(contrib[:k], axis=0), out=rec.peak)
+    np.maximum(rec.peak, contrib[:k].max(axis=0), out=rec.peak)
     rec.supplied = internal[k - 1, 1]
-    rec.max_drift = max(rec.max_drift, float(np.max(np.abs(drift[:k]))))
-    top = float(np.max(drift[:k]))
+    rec.max_drift = max(rec.max_drift, float(np.abs(drift[:k]).max()))
+    top = float(drift[:k].max())
     if top > rec.max_created:
         rec.max_created = top
     rec._prev = (t[k - 1], d[k - 1].copy(), dd[k - 1].copy(), active[k - 1].copy())
@@ -280,14 +280,21 @@ def _commit(rec, t, d, dd, f, impulse, dissipated, work, x, energy, diss_total, 
                  None if work is None else work[k - 1].copy(), d[k - 1].copy())
     rec._x_prev = x[k - 1].copy()
     # the stored samples, and the largest penetration since the one before each
-    kept = np.flatnonzero((rec._count + np.arange(k)) % rec.every == 0)
     carry, start = rec._since, 0
-    if kept.size:
+    if rec.every == 1:              # every sample kept: slices, each its own peaks
+        kept = slice(0, k)
+        rows = contrib[:k].copy()
+        last = k - 1
+    else:
+        kept = np.flatnonzero((rec._count + np.arange(k)) % rec.every == 0)
         # each kept sample's peaks: the largest over the samples since the
         # one kept before it (the first group with what was carried over)
-        rows = np.maximum.reduceat(contrib[:kept[-1] + 1], np.r_[0, kept[:-1] + 1], axis=0)
+        rows = np.maximum.reduceat(contrib[:kept[-1] + 1], np.r_[0, kept[:-1] + 1],
+                                   axis=0) if kept.size else None
+        last = kept[-1] if kept.size else None
+    if last is not None:
         rows[0] = np.maximum(rows[0], carry)
-        carry, start = np.zeros_like(carry), kept[-1] + 1
+        carry, start = np.zeros_like(carry), last + 1
         try:
             _store_rows(rec, t[kept], x[kept], d[kept], f[kept], energy[kept],
                         diss_total[kept], rows)
