@@ -131,7 +131,7 @@ def record_block(rec, t, d, dd, f, impulse, dissipated, internal, work, x, energ
     cs = sysm.connections
     if cs is not None:           # energy set free by connection switches
         dissipated = dissipated + cs.lost
-    diss_total = np.sum(dissipated, axis=1) + internal[:, 0]
+    diss_total = dissipated.sum(axis=1) + internal[:, 0]
     drift = energy + diss_total - internal[:, 1] - rec.e0
     active = f[:, :nc] > 0
     switched, released = [], set()
@@ -154,8 +154,7 @@ def record_block(rec, t, d, dd, f, impulse, dissipated, internal, work, x, energ
     for i, c in zip(*np.nonzero(rise)):
         contrib[i, c] = max(contrib[i, c], hermite_cubic_max(
             d_prev[i, c], dd_prev[i, c], d[i, c], dd[i, c], h[i])[0])
-    peak_before = np.maximum(rec.peak[None, :], np.vstack(
-        [np.full((1, nc), -np.inf), np.maximum.accumulate(contrib, axis=0)[:-1]]))
+    peak_before = None              # what the guard is told of the peaks, when it looks
     flip = (a_prev != active) & rec.auto_edges[None, :]
     if released:
         flip[0, sorted(released)] = False
@@ -177,6 +176,9 @@ def record_block(rec, t, d, dd, f, impulse, dissipated, internal, work, x, energ
     for je in edge_rows + [m]:
         hi = min(je + 1, m)
         if rec.guard is not None and hi > pos and (flags is None or flags[pos:hi].any()):
+            if peak_before is None:
+                peak_before = np.maximum(rec.peak[None, :], np.vstack(
+                    [np.full((1, nc), -np.inf), np.maximum.accumulate(contrib, axis=0)[:-1]]))
             try:
                 rec.guard.check_block(
                     t[pos:hi], d[pos:hi], dd[pos:hi], f[pos:hi], drift[pos:hi],
@@ -304,7 +306,7 @@ def _commit(rec, t, d, dd, f, impulse, dissipated, work, x, energy, diss_total, 
             i = int(np.searchsorted(t[:k], rec._last_t))
             rec._prev = (t[i], d[i].copy(), dd[i].copy(), active[i].copy())
             raise
-    rec._since = np.maximum(carry, np.max(contrib[start:k], axis=0)) if start < k else carry
+    rec._since = np.maximum(carry, contrib[start:k].max(axis=0)) if start < k else carry
     rec._count += k
     if rec._progress is not None:
         now = time.monotonic()

@@ -58,7 +58,8 @@ class _Rows:
 
     def __init__(self, system, m):
         nr, nc = system.n_rows, system.n_contacts
-        nx = int(system.stacked()[-1])
+        self.off = system.stacked().tolist()        # each side's columns of x
+        nx = self.off[-1]
         self.t = np.zeros(m)
         self.d, self.dd, self.f = np.zeros((m, nr)), np.zeros((m, nr)), np.zeros((m, nr))
         self.imp, self.diss, self.work = np.zeros((m, nc)), np.zeros((m, nc)), np.zeros((m, nc))
@@ -79,7 +80,7 @@ class _Rows:
         :meth:`~cosim.core.system.CoupledSystem.energy`."""
         if b <= 0:                  # a block that ends at its first step
             return
-        off = system.stacked()
+        off = self.off
         e = 0
         for s, sub in enumerate(system.subsystems):
             e = e + sub.energies(self.x[:b, off[s]:off[s + 1]])
