@@ -302,3 +302,32 @@ def test_the_blocks_crossings_are_the_recorders():
         want = rec._crossing(c, t[j], d[j, c], dd[j, c], t[j + 1], d[j + 1, c], dd[j + 1, c],
                              active[j, c])
         assert abs(tc - want) <= 2 * math.ulp(want)
+
+
+def test_the_compiled_crossings_are_the_array_bisections(monkeypatch):
+    """The compiled bisection (`_driver_block.crossings`) and the numpy one it
+    replaces where the kernels are built: the same formulas in the same order,
+    each operation rounded once (contraction off), so within 2 ulps on
+    random flips, among them one a few ulps from each end of its step."""
+    from cosim.core import recorder_block
+    from cosim.core.recorder import Recorder
+    from cosim.scene.build import build_system
+    assert recorder_block._compiled is not None
+    system, sch = build_system(_scene("three_mass", "f100"))
+    rec = Recorder(system, "three_mass", sch.name, 0.25)
+    rng = np.random.default_rng(5)
+    m, nc = 60, system.n_contacts
+    t = np.cumsum(rng.uniform(1e-6, 1e-3, m + 1))
+    d = rng.uniform(-1e-5, 1e-5, (m + 1, nc))
+    d[1, 0], d[2, 0] = 1e-300, -4 * math.ulp(0.0)       # a crossing at the very end
+    dd = rng.uniform(-0.2, 0.2, (m + 1, nc))
+    active = d > 0
+    flip = active[1:] != active[:-1]
+    args = (rec, flip, t[:-1], d[:-1], dd[:-1], t[1:], d[1:], dd[1:], active[:-1])
+    got = recorder_block._crossings(*args)
+    monkeypatch.setattr(recorder_block, "_compiled", None)
+    monkeypatch.setattr(recorder_block, "ARRAY_CROSSINGS", 1)
+    want = recorder_block._crossings(*args)
+    assert got.keys() == want.keys() and len(got) == int(flip.sum()) > 10
+    for key, tc in got.items():
+        assert abs(tc - want[key]) <= 2 * math.ulp(want[key]), key

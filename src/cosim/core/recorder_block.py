@@ -23,6 +23,12 @@ from cosim.core.guard_error import GuardError
 from cosim.core.hermite import hermite_cubic_max
 from cosim.core.progress import Progress
 
+try:                              # the crossings' bisection compiled (see _crossings)
+    from cosim.core.kernel_import import import_kernel
+    _compiled = import_kernel("cosim.core.schemes._driver_block")
+except ImportError:               # not built: the same bisection on arrays
+    _compiled = None
+
 __all__ = ["record_block"]
 
 
@@ -77,7 +83,9 @@ def record_block(rec, t, d, dd, f, impulse, dissipated, internal, work, x, energ
 
     Notes
     -----
-    The subsystems' own states are not read: a scheme that integrated
+    No array handed in is kept: what the recorder keeps it copies (a
+    caller may write its next samples into the same arrays).  The
+    subsystems' own states are not read: a scheme that integrated
     past the block (it returns at ``t_end``, a full buffer or a switch)
     hands the states at each sample in ``x``.  Connection modes must not
     change inside the block: switches logged since the last sample
@@ -123,7 +131,7 @@ def record_block(rec, t, d, dd, f, impulse, dissipated, internal, work, x, energ
     cs = sysm.connections
     if cs is not None:           # energy set free by connection switches
         dissipated = dissipated + cs.lost
-    diss_total = np.sum(dissipated, axis=1) + internal[:, 0]
+    diss_total = dissipated.sum(axis=1) + internal[:, 0]
     drift = energy + diss_total - internal[:, 1] - rec.e0
     active = f[:, :nc] > 0
     switched, released = [], set()
@@ -146,13 +154,16 @@ def record_block(rec, t, d, dd, f, impulse, dissipated, internal, work, x, energ
     for i, c in zip(*np.nonzero(rise)):
         contrib[i, c] = max(contrib[i, c], hermite_cubic_max(
             d_prev[i, c], dd_prev[i, c], d[i, c], dd[i, c], h[i])[0])
-    peak_before = np.maximum(rec.peak[None, :], np.vstack(
-        [np.full((1, nc), -np.inf), np.maximum.accumulate(contrib, axis=0)[:-1]]))
+    peak_before = None              # what the guard is told of the peaks, when it looks
     flip = (a_prev != active) & rec.auto_edges[None, :]
     if released:
         flip[0, sorted(released)] = False
     edges = {j - i0: e for j, e in (edges or {}).items() if i0 <= j < m + i0}
-    edge_rows = sorted(set(np.nonzero(flip)[0].tolist()) | ({0} if switched else set())
+    fr, fc = np.nonzero(flip)
+    flips = {}                      # row -> its flipped contacts, each with its new state
+    for j, c, on in zip(fr.tolist(), fc.tolist(), active[fr, fc].tolist()):
+        flips.setdefault(j, []).append((c, on))
+    edge_rows = sorted(flips.keys() | ({0} if switched else set())
                        | {j - 1 for j in edges if j > 0})
     at = _crossings(rec, flip, t_prev, d_prev, dd_prev, t, d, dd, a_prev)
     # the guard looks only at the stretches between edges that hold a sample
@@ -165,6 +176,9 @@ def record_block(rec, t, d, dd, f, impulse, dissipated, internal, work, x, energ
     for je in edge_rows + [m]:
         hi = min(je + 1, m)
         if rec.guard is not None and hi > pos and (flags is None or flags[pos:hi].any()):
+            if peak_before is None:
+                peak_before = np.maximum(rec.peak[None, :], np.vstack(
+                    [np.full((1, nc), -np.inf), np.maximum.accumulate(contrib, axis=0)[:-1]]))
             try:
                 rec.guard.check_block(
                     t[pos:hi], d[pos:hi], dd[pos:hi], f[pos:hi], drift[pos:hi],
@@ -177,13 +191,12 @@ def record_block(rec, t, d, dd, f, impulse, dissipated, internal, work, x, energ
         if je == m:
             break
         try:
-            for c in np.flatnonzero(flip[je]):
-                c = int(c)
+            for c, on in flips.get(je, ()):
                 tc = at.get((je, c))
                 if tc is None:
                     tc = rec._crossing(c, t_prev[je], d_prev[je, c], dd_prev[je, c], t[je],
                                        d[je, c], dd[je, c], a_prev[je, c])
-                rec.edge(c, tc, bool(active[je, c]))
+                rec.edge(c, tc, on)
             if je == 0:
                 for e in switched:  # a grasp holds from its switch; a release frees
                     c = sysm.contact_names.index(e["contact"])
@@ -201,8 +214,8 @@ def record_block(rec, t, d, dd, f, impulse, dissipated, internal, work, x, energ
 
 
 #: fewest crossings in a block located on arrays (each array bisection costs
-#: about as much as eight located one by one)
-ARRAY_CROSSINGS = 8
+#: about as much as eight located one by one; the compiled one, less than one)
+ARRAY_CROSSINGS = 8 if _compiled is None else 1
 
 
 def _crossings(rec, flip, t_prev, d_prev, dd_prev, t, d, dd, a_prev) -> dict:
@@ -220,6 +233,10 @@ def _crossings(rec, flip, t_prev, d_prev, dd_prev, t, d, dd, a_prev) -> dict:
     t0, t1 = t_prev[rows], t[rows]
     d0, v0, d1, v1 = d_prev[rows, cs], dd_prev[rows, cs], d[rows, cs], dd[rows, cs]
     was = a_prev[rows, cs]
+    if _compiled is not None:     # the same bisection in C, its operations in this order
+        times = np.empty(len(rows))
+        _compiled.crossings(t0, t1, d0, v0, d1, v1, was.view(np.uint8), times)
+        return dict(zip(zip(rows.tolist(), cs.tolist()), times.tolist()))
     h = t1 - t0
     dx = d1 - d0
     c1, c2, c3 = h * v0, 3 * dx - h * (2 * v0 + v1), -2 * dx + h * (v0 + v1)
@@ -253,10 +270,10 @@ def _commit(rec, t, d, dd, f, impulse, dissipated, work, x, energy, diss_total, 
     """Keep the first ``k`` samples of a block (:meth:`record_block`)."""
     if k <= 0:
         return
-    np.maximum(rec.peak, np.max(contrib[:k], axis=0), out=rec.peak)
+    np.maximum(rec.peak, contrib[:k].max(axis=0), out=rec.peak)
     rec.supplied = internal[k - 1, 1]
-    rec.max_drift = max(rec.max_drift, float(np.max(np.abs(drift[:k]))))
-    top = float(np.max(drift[:k]))
+    rec.max_drift = max(rec.max_drift, float(np.abs(drift[:k]).max()))
+    top = float(drift[:k].max())
     if top > rec.max_created:
         rec.max_created = top
     rec._prev = (t[k - 1], d[k - 1].copy(), dd[k - 1].copy(), active[k - 1].copy())
@@ -265,14 +282,21 @@ def _commit(rec, t, d, dd, f, impulse, dissipated, work, x, energy, diss_total, 
                  None if work is None else work[k - 1].copy(), d[k - 1].copy())
     rec._x_prev = x[k - 1].copy()
     # the stored samples, and the largest penetration since the one before each
-    kept = np.flatnonzero((rec._count + np.arange(k)) % rec.every == 0)
     carry, start = rec._since, 0
-    if kept.size:
+    if rec.every == 1:              # every sample kept: slices, each its own peaks
+        kept = slice(0, k)
+        rows = contrib[:k].copy()
+        last = k - 1
+    else:
+        kept = np.flatnonzero((rec._count + np.arange(k)) % rec.every == 0)
         # each kept sample's peaks: the largest over the samples since the
         # one kept before it (the first group with what was carried over)
-        rows = np.maximum.reduceat(contrib[:kept[-1] + 1], np.r_[0, kept[:-1] + 1], axis=0)
+        rows = np.maximum.reduceat(contrib[:kept[-1] + 1], np.r_[0, kept[:-1] + 1],
+                                   axis=0) if kept.size else None
+        last = kept[-1] if kept.size else None
+    if last is not None:
         rows[0] = np.maximum(rows[0], carry)
-        carry, start = np.zeros_like(carry), kept[-1] + 1
+        carry, start = np.zeros_like(carry), last + 1
         try:
             _store_rows(rec, t[kept], x[kept], d[kept], f[kept], energy[kept],
                         diss_total[kept], rows)
@@ -282,7 +306,7 @@ def _commit(rec, t, d, dd, f, impulse, dissipated, work, x, energy, diss_total, 
             i = int(np.searchsorted(t[:k], rec._last_t))
             rec._prev = (t[i], d[i].copy(), dd[i].copy(), active[i].copy())
             raise
-    rec._since = np.maximum(carry, np.max(contrib[start:k], axis=0)) if start < k else carry
+    rec._since = np.maximum(carry, contrib[start:k].max(axis=0)) if start < k else carry
     rec._count += k
     if rec._progress is not None:
         now = time.monotonic()

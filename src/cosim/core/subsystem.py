@@ -445,6 +445,12 @@ class RigidReference(LoopFace, Subsystem):
     def energy(self, x=None):
         return 0.0
 
+    def energies(self, X):
+        """Zero at each row (no per-row call), unless a subclass has an energy."""
+        if type(self).energy is RigidReference.energy:
+            return np.zeros(len(X))
+        return super().energies(X)
+
     def compiled_loop_refusal(self) -> str | None:
         """Why the compiled macro loop cannot take this side (words that
         follow its name), or None: it holds fixed ports, which a subclass

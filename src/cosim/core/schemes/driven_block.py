@@ -58,7 +58,8 @@ class _Rows:
 
     def __init__(self, system, m):
         nr, nc = system.n_rows, system.n_contacts
-        nx = int(system.stacked()[-1])
+        self.off = system.stacked().tolist()        # each side's columns of x
+        nx = self.off[-1]
         self.t = np.zeros(m)
         self.d, self.dd, self.f = np.zeros((m, nr)), np.zeros((m, nr)), np.zeros((m, nr))
         self.imp, self.diss, self.work = np.zeros((m, nc)), np.zeros((m, nc)), np.zeros((m, nc))
@@ -79,7 +80,7 @@ class _Rows:
         :meth:`~cosim.core.system.CoupledSystem.energy`."""
         if b <= 0:                  # a block that ends at its first step
             return
-        off = system.stacked()
+        off = self.off
         e = 0
         for s, sub in enumerate(system.subsystems):
             e = e + sub.energies(self.x[:b, off[s]:off[s + 1]])
@@ -100,12 +101,11 @@ class _Rows:
         for j, c, ts, on in edges:
             if j < b:
                 at.setdefault(j, []).append((c, ts, on))
-        s = slice(0, b)
-        # copies: the recorder keeps some of what it is given, and the rows are reused
-        rec.record_block(self.t[s].copy(), self.d[s].copy(), self.dd[s].copy(),
-                         self.f[s].copy(), self.imp[s].copy(), self.diss[s].copy(),
-                         self.internal[s].copy(), self.work[s].copy(), x=self.x[s].copy(),
-                         energy=self.energy[s].copy(), peaks=self.peaks[s].copy(), edges=at)
+        # views of the rows, which the next block overwrites: the recorder copies
+        # what it keeps (record_block keeps no array it is handed)
+        rec.record_block(self.t[:b], self.d[:b], self.dd[:b], self.f[:b], self.imp[:b],
+                         self.diss[:b], self.internal[:b], self.work[:b], x=self.x[:b],
+                         energy=self.energy[:b], peaks=self.peaks[:b], edges=at)
 
 
 def run_blocks(scheme, system, recorder, drv, t, t_end, k, n, H, sliver, controlled):
