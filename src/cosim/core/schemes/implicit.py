@@ -410,11 +410,8 @@ class Implicit(CoSimulationScheme):
             z = np.concatenate([guess[coupler], self._scaled(motion, k, h)])
             hz = np.concatenate([f_new[coupler], self._scaled(actual, k, h)])
             r = hz - z
-            for i, c in enumerate(hosted):
-                # no force this step, and the partner's actual end short of the
-                # contact: the motion is moot (past it, the host must see the
-                # touch inside the step, or the next starts closed unseen)
-                host, slot = system.embedded[c]
+            for i, c in enumerate(hosted):  # no force, the partner's end short of the contact:
+                host, slot = system.embedded[c]  # the motion is moot (past it, the touch is in)
                 if system.subsystems[host].embedded_quadratures()[slot, 0] == imp0[c] \
                         and d[c] <= 0:
                     r[len(coupler) + 4 * i:len(coupler) + 4 * i + 4] = 0.0
