@@ -338,10 +338,13 @@ class ScipyStepper(TimeStepper):
             if j > i:
                 ts = t_out[i:j]
                 inner = ts < t_seg
-                Y = np.empty((j - i, len(y)))
-                Y[~inner] = sol.y                 # the end itself, not its interpolant
-                if inner.any():
-                    Y[inner] = sol.at(ts[inner])
+                if inner.all():                   # the solver's rows as they are: no copy
+                    Y = np.asarray(sol.at(ts), float)
+                else:
+                    Y = np.empty((j - i, len(y)))
+                    Y[~inner] = sol.y             # the end itself, not its interpolant
+                    if inner.any():
+                        Y[inner] = sol.at(ts[inner])
                 P = np.zeros((j - i, n_peaks))
                 if watch:
                     # each sample's value, over the maxima located since the

@@ -497,8 +497,9 @@ cdef class _Solver:
             steps += 1
             if (steps & SIGNAL_POLL) == 0:
                 PyErr_CheckSignals()
+        # the samples' rows as they are: a view of this run's own array, not a copy
         return (t, np.array(self.y), status, message, t_events, y_events,
-                np.array(Yev[:n_eval]))
+                np.asarray(Yev)[:n_eval])
 
 
 cdef class TreeRK:

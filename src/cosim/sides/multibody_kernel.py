@@ -210,7 +210,7 @@ class SampledSteps:
             self._sampled_clock(T[i0:i0 + row + 1], row + 1)
             self.n_steps += i1 - i0 - row - 1
             try:
-                emit(self._samples(T[i0:i1], np.ascontiguousarray(Yb[:, :nx + na]), Pb),
+                emit(self._samples(T[i0:i1], np.ascontiguousarray(Yb), Pb, nx + na),
                      0 if self.switch_log else None, ())
             except BaseException:
                 refused.append(True)
@@ -236,12 +236,16 @@ class SampledSteps:
         self.t = float(T[rows - 1])
         self.n_steps += rows
 
-    def _samples(self, T, Y, PK) -> Samples:
-        """What a recorder needs at states ``Y`` (rows ``[x, aux]``) at times ``T``."""
+    def _samples(self, T, Y, PK, width=None) -> Samples:
+        """What a recorder needs at states ``Y`` (rows ``[x, aux]``, or the
+        first ``width`` columns of longer rows: read in place, not copied)
+        at times ``T``."""
         m, n2, npt = len(T), 2 * self.n_dof, self.n_ports
         P = np.empty((m, 2 * npt, 2))
         E = np.empty(m)
-        self._compiled().sample_outputs(Y, P, E)
+        self._compiled().sample_outputs(Y, P, E)      # reads each row's [q, dq] only
+        if width is not None:
+            Y = Y[:, :width]
         if self.effects is not None:
             E += np.array([self.effects.potential(Y[j, :self.n_dof]) for j in range(m)])
         ne = len(self._embedded)

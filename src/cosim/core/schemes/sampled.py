@@ -161,8 +161,9 @@ class _Emitter:
         self.pos = np.concatenate([sub.outputs(sub.t, sub.x)[0] for sub in subs]).reshape(-1, 2)
         self.vel = np.concatenate([sub.outputs(sub.t, sub.x)[1] for sub in subs]).reshape(-1, 2)
         self.off = system.stacked()
+        # the other sides' states (a rigid side's may have none)
         self.x_rest = [(self.off[i], self.off[i + 1], sub.x.copy())
-                       for i, sub in enumerate(subs) if i != s]
+                       for i, sub in enumerate(subs) if i != s and self.off[i + 1] > self.off[i]]
         self.slots = np.array([system.embedded[c][1] for c in range(system.n_contacts)],
                               dtype=int)
         self.laws = [ln.contact.law for ln in system.links]
@@ -223,10 +224,13 @@ class _Emitter:
         energy = energy + pot
         quad = smp.quadratures[:, self.slots]
         peaks = np.where(self.rigid[None, :], 0.0, smp.peak[:, self.slots])
-        x = np.empty((m, self.off[-1]))
-        x[:, self.off[self.s]:self.off[self.s + 1]] = smp.x
-        for a, b, xr in self.x_rest:
-            x[:, a:b] = xr
+        if self.x_rest:
+            x = np.empty((m, self.off[-1]))
+            x[:, self.off[self.s]:self.off[self.s + 1]] = smp.x
+            for a, b, xr in self.x_rest:
+                x[:, a:b] = xr
+        else:                   # the side's states are the system's: read in place
+            x = smp.x
         block = (smp.t, d, dd, f, quad[:, :, 0], quad[:, :, 1], smp.ledger, quad[:, :, 3], x,
                  energy, peaks)
         self._push(block, 0, m, switch_row, located)
