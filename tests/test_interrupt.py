@@ -197,3 +197,34 @@ def test_outputs_have_ordinary_permissions(tmp_path):
     os.umask(mask)
     for name in ("summary.json", "series.npz"):
         assert (tmp_path / name).stat().st_mode & 0o777 == 0o666 & ~mask
+
+
+@pytest.mark.parametrize("scene, variant", [(SPRING_DROP, None),
+                                            (CASES / "three_mass.toml", "f100")])
+def test_a_stop_between_a_full_buffer_and_its_flush_stores_each_row_once(tmp_path, monkeypatch,
+                                                                        scene, variant):
+    """A signal that lands after the chunk buffer's last row and before its
+    flush (the first flush raises, as the signal's KeyboardInterrupt would)
+    leaves a run whose finish stores its last row without an error and whose
+    series hold each sample once, in order."""
+    from cosim.core.recorder import Recorder
+    monkeypatch.setattr(series_mod, "CHUNK_BYTES", 4096)       # a full buffer early on
+    flush = Recorder._flush
+    calls = []
+
+    def interrupted(self):
+        calls.append(self._n_buf)
+        if len(calls) == 1:
+            raise KeyboardInterrupt
+        return flush(self)
+
+    monkeypatch.setattr(Recorder, "_flush", interrupted)
+    out = tmp_path / "run"
+    with pytest.raises(RunInterrupted):
+        cosim.simulate(cosim.load_scene(scene, variant), out=out)
+    summary, series = read(out)
+    assert summary["status"] == "interrupted"
+    t = series["t"]
+    assert len(t) > calls[0] and np.all(np.diff(t) > 0)
+    assert all(len(v) == len(t) for v in series.values())
+    assert t[-1] == pytest.approx(summary["t_end"])

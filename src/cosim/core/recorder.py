@@ -22,7 +22,7 @@ import numpy as np
 from cosim.core.hermite import hermite_cubic_max
 from cosim.core.progress import Progress
 from cosim.core.result import SimulationResult, intervals_until
-from cosim.core.series import SeriesFile, SeriesStore, chunk_rows
+from cosim.core.series import SeriesFile, SeriesStore, chunk_rows, stop_signals_held
 
 __all__ = ["Recorder", "Progress", "hermite_cubic_max", "intervals_until"]
 
@@ -240,6 +240,8 @@ class Recorder:
         sysm = self.system
         if self._buf is None:
             self._layout(len(x), len(d))
+        if self._n_buf == len(self._buf):   # full: a stop came between its last row and its flush
+            self._flush()
         row = self._buf[self._n_buf]
         row[0] = t
         L = self._slices
@@ -338,8 +340,10 @@ class Recorder:
 
     def _flush(self) -> None:
         if self._n_buf:
-            self._store_.append(self._columns(self._buf[:self._n_buf]))
-            self._n_buf = 0
+            block = self._columns(self._buf[:self._n_buf])
+            with stop_signals_held():    # a Ctrl-C between the two would store the rows twice
+                self._store_.append(block)
+                self._n_buf = 0
 
     def _crossing(self, c, t0, d0, v0, t1, d1, v1, was_active):
         # Python floats: the same IEEE arithmetic as numpy's scalars, faster

@@ -327,6 +327,8 @@ def _store_rows(rec, t, x, d, f, energy, diss_total, pk) -> None:
     L = rec._slices
     n, i = len(t), 0
     while i < n:
+        if rec._n_buf == len(rec._buf):     # full: a stop came between its last row and its flush
+            rec._flush()
         room = len(rec._buf) - rec._n_buf
         j = min(n, i + room)
         rows = rec._buf[rec._n_buf:rec._n_buf + j - i]

@@ -15,6 +15,8 @@ that compute the same numbers write the same file.
 """
 from __future__ import annotations
 
+import contextlib
+
 import os
 import zipfile
 from collections.abc import Mapping
@@ -224,3 +226,18 @@ class SeriesFile(Mapping):
 
     def __repr__(self):
         return f"SeriesFile({str(self.path)!r}, {len(self)} arrays)"
+
+
+@contextlib.contextmanager
+def stop_signals_held():
+    """Hold back the stop signals (SIGINT, SIGTERM, SIGHUP) of the calling
+    thread for the block, so that a store and its count change together; a
+    signal that came meanwhile is taken when the block ends."""
+    import signal
+    held = {signal.SIGINT} | {getattr(signal, n) for n in ("SIGTERM", "SIGHUP")
+                              if hasattr(signal, n)}
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, held)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
