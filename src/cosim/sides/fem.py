@@ -321,8 +321,9 @@ class StructureSubsystem(StructurePorts, ClosedFormContacts, ContactRK, Structur
     def compiled_loop_refusal(self) -> str | None:
         """Why the compiled macro loop cannot take this side (words that
         follow its name), or None: its compiled kernel must step it."""
-        return None if self._compiled_step(None) is not None else \
-            "is not stepped by its compiled kernel"
+        if self._compiled_step(None) is not None or (self._ts is None and self._rk_built()):
+            return None     # the closed form's kernel, or the loop calls the compiled RK4
+        return "is not stepped by its compiled kernel"
 
     def _build_kernel(self):
         free = not self._embedded and self._ts is None and not np.any(self.modal_damping)

@@ -42,12 +42,16 @@ class ContactRK:
     #: that asks for it; False where the reference steps
     _rk = None
 
+    def _rk_built(self) -> bool:
+        """Whether the compiled RK4 takes this side's contact phases."""
+        if self._rk is None:
+            self._rk = build_structure_rk(self) or False
+        return bool(self._rk)
+
     def _rk_step(self, t, h, inputs):
         """That compiled RK4 loaded with the step ``[t, t + h]`` under
         ``inputs`` and the partners' present motion, or None."""
-        if self._rk is None:
-            self._rk = build_structure_rk(self) or False
-        if not self._rk or (inputs is not None and type(inputs) is not StepInput):
+        if not self._rk_built() or (inputs is not None and type(inputs) is not StepInput):
             return None
         self._rk.set_step(t, h, inputs, self._embedded)
         return self._rk
