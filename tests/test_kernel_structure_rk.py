@@ -112,3 +112,45 @@ def test_hertz_strike_on_the_beam_matches_the_reference(monkeypatch):
     _assert_same(ref, com)
     system, scheme = build_system(cosim.load_scene(CASES / "beam_impact.toml", overrides=HERTZ))
     assert driver.refusal(scheme, system) is None
+
+
+def _damped_chain_hunt_crossley(rows):
+    """Two 0.1 kg masses on 1e5 N/m springs with stiffness-proportional damping, the top one
+    rising at 1 m/s towards a point 0.1 mm above it, a Hunt-Crossley contact
+    (k 1e9, n 1.5): a touch and a release inside one 3 ms step under a port
+    force polynomial of ``rows`` coefficients."""
+    import fem
+    from couplers import HuntCrossleyLaw, PointContact
+    from cosim.core.subsystem import StepInput
+    s = fem.Chain((0.1, 0.1), (1e5, 1e5), spacing=0.05, rayleigh=(0.0, 2e-5)).assemble()
+    sub = StructureSubsystem("chain", s, fem.modes(s), {"top": 0}, v0=np.ones(2),
+                             contact_step=1e-6)
+    law = HuntCrossleyLaw(1e9, 1.5, 0.3)
+    sub.embed_contact(PointContact("c", law, (0.0, 1.0)), 0, -1.0, (0.0, 1e-4))
+    coeffs = np.zeros((rows, 1, 2))
+    coeffs[:2, 0, 1] = (-20.0, 35.0)
+    coeffs[2:, 0, 1] = 10.0
+    return sub, StepInput(0.0, 3e-3, coeffs)
+
+
+@pytest.mark.parametrize("rows", [2, 3])
+def test_one_step_of_a_damped_chain_matches_the_reference(monkeypatch, rows):
+    """One step with a touch and a release, value by value (a linear and a
+    quadratic port load)."""
+    subs = {}
+    for kernel in ("numpy", "compiled"):
+        monkeypatch.setenv("COSIM_KERNEL", kernel)
+        sub, inp = _damped_chain_hunt_crossley(rows)
+        sub.step(0.0, 3e-3, inp)
+        subs[kernel] = sub
+    ref, com = subs["numpy"], subs["compiled"]
+    assert bool(com._rk) and not ref._rk
+    assert [(j, on) for _, j, on in ref.switch_log] == [(0, True), (0, False)]
+    assert [(j, on) for _, j, on in com.switch_log] == [(0, True), (0, False)]
+    np.testing.assert_allclose([t for t, _, _ in com.switch_log],
+                               [t for t, _, _ in ref.switch_log], rtol=0, atol=1e-12)
+    for a, b in [(ref.x, com.x), (ref.aux, com.aux), (ref.port_moments, com.port_moments),
+                 (ref.peak, com.peak)]:
+        assert np.abs(a).max() > 0
+        np.testing.assert_allclose(b, a, rtol=0, atol=1e-9 * np.abs(a).max())
+    assert ref.aux[-2] > 0 and ref.aux[1] > 0       # damping and the law both dissipate

@@ -91,6 +91,10 @@ cdef class StructureRK(TreeDynamics):
         Ports' reference positions [m] and directions.
     g_modal : (m,) float array
         Modal weight load.
+
+    ``R``, ``ref`` and ``dirs`` are the host's own arrays where they are
+    contiguous floats (as the host's are), not copies: a port that follows a
+    point moves in place and the kernel reads it there.
     contacts : list of tuples
         Per hosted contact: ``(port, side, normal (complex), offset [m],
         kind, k, c_or_chi, exponent)`` (:func:`cosim.core.links.kernel_law`).

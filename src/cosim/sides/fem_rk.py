@@ -17,8 +17,8 @@ def build_structure_rk(sub):
     """The compiled RK4 of structure subsystem ``sub`` (a
     ``cosim.sides._structure_rk.StructureRK``), or None where the numpy
     reference must step: not built or not chosen, built from other sources,
-    no hosted contact, or a law the kernels do not know (a user's) or a
-    rigid one."""
+    no hosted contact, more than the kernel takes, or a law the kernels do
+    not know (a user's) or a rigid one."""
     if not sub._embedded:
         return None
     module = compiled_module("_structure_rk")
@@ -30,8 +30,11 @@ def build_structure_rk(sub):
         if law is None or law[0] == 3:
             return None
         contacts.append((e.port, e.side, e.normal, e.offset) + tuple(law))
-    return module.StructureRK(sub.omega, sub.modal_damping, sub._R, sub._ref, sub._dirs,
-                              sub._g_modal, contacts)
+    try:
+        return module.StructureRK(sub.omega, sub.modal_damping, sub._R, sub._ref, sub._dirs,
+                                  sub._g_modal, contacts)
+    except ValueError:          # more hosted contacts than the kernel takes
+        return None
 
 
 class ContactRK:
@@ -53,5 +56,8 @@ class ContactRK:
         ``inputs`` and the partners' present motion, or None."""
         if not self._rk_built() or (inputs is not None and type(inputs) is not StepInput):
             return None
-        self._rk.set_step(t, h, inputs, self._embedded)
+        try:
+            self._rk.set_step(t, h, inputs, self._embedded)
+        except ValueError:      # a load or a motion of a degree beyond the kernel's
+            return None
         return self._rk
