@@ -20,7 +20,8 @@ force, the switch located inside the sub-step (as for a robot), unless the
 structure is undamped, stepped exactly and every embedded contact a linear
 spring: then the step is taken in closed form, segment by segment
 (:mod:`cosim.sides.fem_closed_form`).  The compiled kernel
-``cosim.sides._structure_step`` takes both where it is built.
+``cosim.sides._structure_step`` takes both where it is built; where it does not
+(damping, another law), ``cosim.sides._structure_rk`` takes the RK4 (:mod:`fem_rk`).
 """
 from __future__ import annotations
 
