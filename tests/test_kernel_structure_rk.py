@@ -154,3 +154,21 @@ def test_one_step_of_a_damped_chain_matches_the_reference(monkeypatch, rows):
         assert np.abs(a).max() > 0
         np.testing.assert_allclose(b, a, rtol=0, atol=1e-9 * np.abs(a).max())
     assert ref.aux[-2] > 0 and ref.aux[1] > 0       # damping and the law both dissipate
+
+
+def test_the_compiled_loop_steps_the_contact_phases_through_the_face(monkeypatch):
+    """In the compiled loop, the structure's steps that start with the
+    contact closed go through the RK4 kernel's C face with no Python call,
+    the others through its Python step (exact in free flight); the robot's
+    all through its face."""
+    from cosim.core.recorder import Recorder
+    monkeypatch.setenv("COSIM_KERNEL", "compiled")
+    monkeypatch.setenv("COSIM_DRIVER", "compiled")
+    scene = cosim.load_scene(SCENES / "gen0-007.toml", overrides=["t_end=0.012"])
+    system, sch = build_system(scene)
+    sch.run(system, scene.t_end, Recorder(system, scene.name, sch.name, scene.t_end))
+    stats = sch.loop_stats
+    assert stats["loop"] == "compiled"
+    steps = stats["macro_steps"] + sch.n_rejected
+    assert stats["face_steps"] + stats["python_side_steps"] == 2 * steps
+    assert steps < stats["face_steps"] < 2 * steps      # the robot's, and some of the chain's

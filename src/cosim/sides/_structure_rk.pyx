@@ -30,10 +30,13 @@ from libc.math cimport ceil, fabs, sqrt
 from libc.string cimport memcpy
 
 from cpython.exc cimport PyErr_CheckSignals
+from cpython.pycapsule cimport PyCapsule_New
+
+from cosim.core._side_face cimport COSIM_SIDE_FACE, SideFace, free_log, log_switch
 
 import numpy as np
 
-from cosim.sides._multibody_tree cimport TreeDynamics, MAX_CONTACTS, SIGNAL_POLL
+from cosim.sides._multibody_tree cimport TreeDynamics, MAX_COEF, MAX_CONTACTS, SIGNAL_POLL
 
 #: the interface :mod:`cosim.sides.fem` calls (checked there)
 RK_API = 1
@@ -106,6 +109,12 @@ cdef class StructureRK(TreeDynamics):
     cdef double[:, ::1] st           # rows: k1, k2, k3, k4, tmp, y1, k1n, yi, ya
     cdef double[:, ::1] swr          # rows: s0, s1, s, snew
     cdef list log
+    # the C face (cosim.core._side_face): RK4's largest sub-step, the stepping
+    # state, and whether the switches go to the face's log
+    cdef SideFace cface
+    cdef double cs_max_step
+    cdef double[::1] cs_y
+    cdef bint cs_logging
     #: right-hand sides evaluated so far
     cdef public long n_evals
 
@@ -132,6 +141,12 @@ cdef class StructureRK(TreeDynamics):
         self.st = np.zeros((9, self.nys))
         self.swr = np.zeros((4, max(self.nc, 1)))
         self.n_evals = 0
+        self.cface.nx, self.cface.naux, self.cface.nports = 2 * self.m, 4 * self.nc + 2, npt
+        self.cs_max_step = 0.0
+        self.cs_y = np.zeros(self.nys)
+
+    def __dealloc__(self):
+        free_log(&self.cface.log)
 
     # ------------------------------------------------------- right-hand side
     cdef void _ports(self, const double* y, bint rates) noexcept nogil:
@@ -299,7 +314,10 @@ cdef class StructureRK(TreeDynamics):
         cdef int j
         for j in range(self.nc):
             if (s_old[j] > 0.0) != (s_new[j] > 0.0):
-                self.log.append((t, j, s_new[j] > 0.0))
+                if self.cs_logging:
+                    log_switch(&self.cface.log, t, j, s_new[j] > 0.0)
+                else:
+                    self.log.append((t, j, s_new[j] > 0.0))
         return 0
 
     cdef int _integrate(self, double t0, double* y, double t1, double max_step,
@@ -400,3 +418,123 @@ cdef class StructureRK(TreeDynamics):
         for i in range(na):
             av[i] = yv[nx + i]
         return y[nx + na:].view(complex).reshape(3, self.npt), self.log
+
+    # ------------------------------------------------------------ the C face
+    def configure_rk(self, double max_step):
+        """RK4's largest sub-step [s] (the host's ``contact_step``), for the C face."""
+        self.cs_max_step = max_step
+
+    def side_face(self):
+        """The C face (:mod:`cosim.core._side_face`) of :meth:`side_loop`,
+        :meth:`side_motion` and :meth:`side_outputs`, a capsule that lives as
+        long as this kernel.  Its ``step`` (the implicit scheme's) refuses:
+        that scheme takes no structure that hosts contacts."""
+        self.cface.side = <void*> self
+        self.cface.step = _face_step
+        self.cface.outputs = _face_outputs
+        self.cface.loop = _face_loop
+        self.cface.motion = _face_motion
+        return PyCapsule_New(&self.cface, COSIM_SIDE_FACE, NULL)
+
+    def retire(self):
+        """The host no longer steps through this kernel: the face's
+        ``generation`` changes, so that a loop holding it asks the host again."""
+        self.cface.generation += 1
+
+    cdef int side_loop(self, double t, double h, const double* u, int rows, double* x,
+                       double* aux, double* pm, double* peak) except -1:
+        """The host's step (``_step_impl``) where a hosted contact is closed
+        at ``t``: the RK4 of :meth:`step` under the input polynomial ``u``
+        ((rows, n_p, 2) row-major, in ``(time - t) / h``) and the partners'
+        motion as last set, the switches to the face's log.  Returns 1,
+        touching nothing, where every contact is open at ``t`` (the host's
+        exact step, in Python, takes it), where the input is beyond the
+        kernel or :meth:`configure_rk` was not called."""
+        cdef int j, p, i, nx = 2 * self.m, na = 4 * self.nc + 2, any_closed = 0
+        cdef double* y = &self.cs_y[0]
+        self.cface.log.n = 0
+        if rows > MAX_COEF or self.cs_max_step <= 0.0:
+            return 1
+        self.t0, self.h = t, h
+        self.u_len, self.u_t0, self.u_h = rows, t, h
+        for j in range(rows):
+            for p in range(self.npt):
+                self.u_coef[j, p, 0] = u[(j * self.npt + p) * 2]
+                self.u_coef[j, p, 1] = u[(j * self.npt + p) * 2 + 1]
+        self._switch(t, x, &self.swr[2, 0])
+        for j in range(self.nc):
+            if self.swr[2, j] > 0.0:
+                any_closed = 1
+        if not any_closed:
+            return 1
+        for i in range(nx):
+            y[i] = x[i]
+        for i in range(na):
+            y[nx + i] = aux[i]
+        for j in range(self.nc):
+            y[nx + 4 * j + 2] = 0.0             # first moments are per step
+        for i in range(6 * self.npt):
+            y[nx + na + i] = 0.0
+        self.cs_logging = True
+        try:
+            self._integrate(t, y, t + h, self.cs_max_step, peak)
+        finally:
+            self.cs_logging = False
+        for i in range(nx):
+            x[i] = y[i]
+        for i in range(na):
+            aux[i] = y[nx + i]
+        for i in range(6 * self.npt):
+            pm[i] = y[nx + na + i]
+        return 0
+
+    cdef int side_motion(self, int k, double t0, double h, const double* c,
+                         int n) noexcept:
+        """Contact ``k``'s partner motion as :meth:`set_step` loads it from an
+        ``EmbeddedContact``; 1 where it is beyond the kernel."""
+        cdef int i
+        if n > MAX_COEF or n < 1 or not 0 <= k < self.nc:
+            return 1
+        self.m_len[k] = n
+        self.m_t0[k] = t0
+        self.m_h[k] = h
+        self.m_still[k] = 1
+        for i in range(n):
+            self.m_re[k, i] = c[2 * i]
+            self.m_im[k, i] = c[2 * i + 1]
+            if i > 0:
+                if c[2 * i] != 0.0 or c[2 * i + 1] != 0.0:
+                    self.m_still[k] = 0
+                self.dm_re[k, i - 1] = c[2 * i] * i / h
+                self.dm_im[k, i - 1] = c[2 * i + 1] * i / h
+        return 0
+
+    cdef void side_outputs(self, const double* x, double* pos, double* vel) noexcept:
+        """Ports' positions and velocities (:meth:`StructureSubsystem.outputs`)."""
+        cdef int p
+        self._ports(x, True)
+        for p in range(self.npt):
+            pos[2 * p] = self.ref[p, 0] + self.w[p] * self.dirs[p, 0]
+            pos[2 * p + 1] = self.ref[p, 1] + self.w[p] * self.dirs[p, 1]
+            vel[2 * p] = self.dw[p] * self.dirs[p, 0]
+            vel[2 * p + 1] = self.dw[p] * self.dirs[p, 1]
+
+
+# ------------------------------------------------- the C face's functions
+cdef int _face_step(void* side, double t, double h, const double* u, int rows, double* x,
+                    double* aux, double* pm) except -1:
+    raise ValueError("the structure's RK4 kernel takes no step of the implicit scheme")
+
+
+cdef void _face_outputs(void* side, const double* x, double* pos, double* vel) noexcept:
+    (<StructureRK> side).side_outputs(x, pos, vel)
+
+
+cdef int _face_loop(void* side, double t, double h, const double* u, int rows, double* x,
+                    double* aux, double* pm, double* peak, signed char* closed) except -1:
+    return (<StructureRK> side).side_loop(t, h, u, rows, x, aux, pm, peak)
+
+
+cdef int _face_motion(void* side, int slot, double t0, double h, const double* c,
+                      int n) noexcept:
+    return (<StructureRK> side).side_motion(slot, t0, h, c, n)

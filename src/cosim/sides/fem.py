@@ -235,7 +235,7 @@ class StructureSubsystem(StructurePorts, ClosedFormContacts, ContactRK, Structur
         self.aux = np.zeros(4 * len(self._embedded) + 2)
         self._closed_end = np.full(len(self._embedded), -1, np.int8)
         self._kernel = retired(self._kernel)
-        self._closed_ok = self._rk = None
+        self._closed_ok, self._rk = None, retired(self._rk)
         self.peak = np.zeros(len(self._embedded))
         return e
 

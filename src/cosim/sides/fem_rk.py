@@ -51,6 +51,18 @@ class ContactRK:
             self._rk = build_structure_rk(self) or False
         return bool(self._rk)
 
+    def loop_kernel(self, inputs):
+        """:meth:`LoopFace.loop_kernel`; where the closed form's kernel gives
+        none, the compiled RK4, whose C face takes the steps that start with
+        a hosted contact closed (and declines the others, which the side's
+        own exact step takes), for a side stepped exactly between contacts."""
+        kern = super().loop_kernel(inputs)
+        if kern is not None or self._ts is not None or not self._face_faithful() \
+                or not self._rk_built():
+            return kern
+        self._rk.configure_rk(self._rk4.max_step)
+        return self._rk
+
     def _rk_step(self, t, h, inputs):
         """That compiled RK4 loaded with the step ``[t, t + h]`` under
         ``inputs`` and the partners' present motion, or None."""
