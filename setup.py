@@ -41,6 +41,9 @@ KERNELS = [
               depends=["src/cosim/sides/_rank_one.pxd"]),
     Extension("cosim.sides._structure_contacts", ["src/cosim/sides/_structure_contacts.pyx"],
               depends=["src/cosim/sides/_structure_modes.pxd", SIDE_FACE]),
+    # the structure's RK4 with hosted penalty contacts, over the tree's laws (its .pxd)
+    Extension("cosim.sides._structure_rk", ["src/cosim/sides/_structure_rk.pyx"],
+              depends=["src/cosim/sides/_multibody_tree.pxd"]),
     Extension("cosim.sides._structure_step", ["src/cosim/sides/_structure_step.pyx"],
               depends=["src/cosim/sides/_structure_modes.pxd",
                        "src/cosim/sides/_structure_contacts.pxd", SIDE_FACE]),

@@ -63,12 +63,15 @@ class LoopFace:
         ``generation`` changes), or None: the side's class does not declare
         its kernel faithful, or one of ``FACE_MIRRORS`` was replaced, or
         :meth:`compiled_step` gives none for ``inputs``."""
+        return self.compiled_step(inputs) if self._face_faithful() else None
+
+    def _face_faithful(self) -> bool:
+        """Whether this side's class declares its kernel's C face faithful
+        and none of ``FACE_MIRRORS`` was replaced since."""
         known = self._face_methods
         own = getattr(self, "__dict__", {})
-        if known is None or any(n in own for n in FACE_MIRRORS) or any(
-                getattr(type(self), n, None) is not f for n, f in known.items()):
-            return None
-        return self.compiled_step(inputs)
+        return not (known is None or any(n in own for n in FACE_MIRRORS) or any(
+            getattr(type(self), n, None) is not f for n, f in known.items()))
 
     def compiled_step(self, inputs):
         """The compiled kernel that takes the step under ``inputs`` (a

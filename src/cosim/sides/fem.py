@@ -20,7 +20,8 @@ force, the switch located inside the sub-step (as for a robot), unless the
 structure is undamped, stepped exactly and every embedded contact a linear
 spring: then the step is taken in closed form, segment by segment
 (:mod:`cosim.sides.fem_closed_form`).  The compiled kernel
-``cosim.sides._structure_step`` takes both where it is built.
+``cosim.sides._structure_step`` takes both where it is built; where it does not
+(damping, another law), ``cosim.sides._structure_rk`` takes the RK4 (:mod:`fem_rk`).
 """
 from __future__ import annotations
 
@@ -34,6 +35,7 @@ from cosim.core.ode import RK4
 from cosim.sides.fem_closed_form import ClosedFormContacts
 from cosim.sides.fem_energy import StructureEnergy
 from cosim.sides.fem_ports import StructurePorts
+from cosim.sides.fem_rk import ContactRK
 from cosim.sides.kernel import compiled_module, retired
 from cosim.core.subsystem import EmbeddedContact, StepInput, Subsystem
 
@@ -49,8 +51,8 @@ STEP_API = 3
 _stale_said = False
 
 
-class StructureSubsystem(StructurePorts, ClosedFormContacts, StructureEnergy, LoopFace,
-                         Subsystem):
+class StructureSubsystem(StructurePorts, ClosedFormContacts, ContactRK, StructureEnergy,
+                         LoopFace, Subsystem):
     """A :class:`fem.LinearStructure` reduced to the modes of ``basis``.
 
     Parameters
@@ -233,7 +235,7 @@ class StructureSubsystem(StructurePorts, ClosedFormContacts, StructureEnergy, Lo
         self.aux = np.zeros(4 * len(self._embedded) + 2)
         self._closed_end = np.full(len(self._embedded), -1, np.int8)
         self._kernel = retired(self._kernel)
-        self._closed_ok = None
+        self._closed_ok, self._rk = None, retired(self._rk)
         self.peak = np.zeros(len(self._embedded))
         return e
 
@@ -320,8 +322,9 @@ class StructureSubsystem(StructurePorts, ClosedFormContacts, StructureEnergy, Lo
     def compiled_loop_refusal(self) -> str | None:
         """Why the compiled macro loop cannot take this side (words that
         follow its name), or None: its compiled kernel must step it."""
-        return None if self._compiled_step(None) is not None else \
-            "is not stepped by its compiled kernel"
+        if self._compiled_step(None) is not None or (self._ts is None and self._rk_built()):
+            return None     # the closed form's kernel, or the loop calls the compiled RK4
+        return "is not stepped by its compiled kernel"
 
     def _build_kernel(self):
         free = not self._embedded and self._ts is None and not np.any(self.modal_damping)
@@ -402,7 +405,9 @@ class StructureSubsystem(StructurePorts, ClosedFormContacts, StructureEnergy, Lo
         if self._closed_form:
             self._step_closed_form(t, h, inputs)
             return
-        closed = self._embedded and bool(np.any(self._switch(t, self.x) > 0))
+        rk = self._rk_step(t, h, inputs)            # a compiled RK4 with the contacts
+        closed = self._embedded and (rk.closed(t, self.x) if rk else
+                                     bool(np.any(self._switch(t, self.x) > 0)))
         if not closed:
             G = (self._modal_force(inputs.coeffs) if inputs is not None
                  else np.zeros((1, m)))
@@ -417,7 +422,8 @@ class StructureSubsystem(StructurePorts, ClosedFormContacts, StructureEnergy, Lo
                     self._ts_checked(out, m)
                 q1, dq1, a1 = out
             y1 = np.concatenate([q1, dq1])
-            if not self._embedded or not np.any(self._switch(t + h, y1) > 0):
+            if not self._embedded or not (rk.closed(t + h, y1) if rk else
+                                          np.any(self._switch(t + h, y1) > 0)):
                 self._account_damping(h, self.x, y1)
                 self._gauss_moments(h, G, inputs is not None and bool(np.any(inputs.coeffs)))
                 self.x[:] = y1
@@ -425,15 +431,19 @@ class StructureSubsystem(StructurePorts, ClosedFormContacts, StructureEnergy, Lo
                     self._acc = a1
                 return
         # a contact is or becomes closed: RK4 on the modal equations
-        y0 = np.concatenate([self.x, self.aux, np.zeros(6 * self.n_ports)])
-        y1 = self._rk4.integrate(lambda tt, yy: self._rhs(tt, yy, inputs), t, y0, t + h,
-                                 self._switch, self._on_switch, probe=self._probe,
-                                 peak=self.peak)
-        self._last_eval = (None, None, None)
-        na = self.aux.size
-        self.x[:] = y1[:2 * m]
-        self.aux[:] = y1[2 * m:2 * m + na]
-        self.port_moments = y1[2 * m + na:].view(complex).reshape(3, self.n_ports)
+        if rk:
+            self.port_moments, self.switch_log = rk.step(t, h, self.x, self.aux,
+                                                         self._rk4.max_step, self.peak)
+        else:
+            y0 = np.concatenate([self.x, self.aux, np.zeros(6 * self.n_ports)])
+            y1 = self._rk4.integrate(lambda tt, yy: self._rhs(tt, yy, inputs), t, y0, t + h,
+                                     self._switch, self._on_switch, probe=self._probe,
+                                     peak=self.peak)
+            self._last_eval = (None, None, None)
+            na = self.aux.size
+            self.x[:] = y1[:2 * m]
+            self.aux[:] = y1[2 * m:2 * m + na]
+            self.port_moments = y1[2 * m + na:].view(complex).reshape(3, self.n_ports)
         if self._ts is not None:
             self._acc = self._modal_acceleration(self.x, inputs, t + h)
 
