@@ -155,7 +155,8 @@ def test_the_ledger_test_sees_a_force_off_the_deformed_normal(tmp_path, monkeypa
 
 def _corner_state(tmp_path, element="P2"):
     """The square's boundary loop from the top face's last segment, with a
-    random deformation (displacements up to 1e-2 of a segment)."""
+    random deformation in the modes' span (displacements up to 1e-2 of a
+    segment)."""
     from fem.plane.boundary import BoundaryLoop
     path = _scene(tmp_path)
     path.write_text(path.read_text().replace("thickness =", f'element = "{element}"\nthickness ='))
@@ -163,7 +164,10 @@ def _corner_state(tmp_path, element="P2"):
     plate = system.subsystems[system.names.index("plate")]
     loop = BoundaryLoop(plate.structure, "top", 0.094)
     loop.set_modes(plate.Phi)
-    q = np.random.default_rng(7).standard_normal(plate.n_modes)
+    # a random nodal field's projection on the modes: the same deformation
+    # whichever basis ARPACK returns (signs, degenerate pairs)
+    u0 = np.random.default_rng(7).standard_normal(plate.Phi.shape[0])
+    q = np.linalg.lstsq(plate.Phi, u0, rcond=None)[0]
     u = plate.Phi @ q
     return loop, q * (1.25e-4 / np.max(np.abs(u)))
 
@@ -197,7 +201,8 @@ def test_the_gap_is_a_potential_whose_gradients_are_the_forces(tmp_path, monkeyp
     and along a path round the corner the gap never moves faster than the
     point (a distance is 1-Lipschitz: no jump when the closest point
     crosses onto the next segment).  With the force along the reference
-    normal the q-gradient is off by over 1e-3 (the boundary's slopes); with
+    normal the q-gradient is off by over 1e-4, a hundred times the bound
+    (the boundary's slopes: 2e-3 on P2, 9e-4 on P1 here); with
     the segment's normal kept at the vertex the gap jumps on the path by
     over 0.1 mm (a run with it stalls on the jump: it did not finish in
     150 s)."""
@@ -216,7 +221,7 @@ def test_the_gap_is_a_potential_whose_gradients_are_the_forces(tmp_path, monkeyp
     steps = np.hypot(*np.diff(path, axis=0).T)
     assert np.all(np.abs(np.diff(gaps)) <= steps * (1 + 1e-9))
     monkeypatch.setattr(BoundaryLoop, "tangent_normal", lambda self, k, tangent: self.normals[k])
-    assert np.max(_gradient_errors(loop, q, points[:1])[:, 1]) > 1e-3
+    assert np.max(_gradient_errors(loop, q, points)[:, 1]) > 1e-4
     monkeypatch.undo()
     monkeypatch.setattr(BoundaryLoop, "vertex_normal", lambda self, k, xi, diff: self.normals[k])
     gaps = np.array([loop.project(p, q)[3] for p in path])
