@@ -186,11 +186,11 @@ def test_our_modules_imported_by_a_three_mass_run(tmp_path):
     times = startup.import_times(str(CASES / "three_mass.toml"), "f100", str(tmp_path / "r"))
     loaded = [m for m in times if startup.group(m) in startup.OURS]
     counts = [len(loaded)] + [sum(startup.group(m) == p for m in loaded) for p in startup.OURS]
-    claim = Claim(PAGE, "| 91 (69, 3, 11, 8) |", "python benchmarks/startup.py", 91)
+    claim = Claim(PAGE, "| 92 (70, 3, 11, 8) |", "python benchmarks/startup.py", 92)
     assert_printed(claim)
-    assert counts == [91, 69, 3, 11, 8], counts
-    assert_printed(Claim(PAGE, "and the 91 modules themselves", "python benchmarks/startup.py",
-                         91))
+    assert counts == [92, 70, 3, 11, 8], counts
+    assert_printed(Claim(PAGE, "and the 92 modules themselves", "python benchmarks/startup.py",
+                         92))
 
 
 _DATACLASSES = """
