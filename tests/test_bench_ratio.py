@@ -107,3 +107,29 @@ def test_the_published_table_is_its_json(br):
     texts = dict(generate.scenes(data["n"], data["seed"]))
     assert {p.stem: p.read_text() for p in written} == texts
     assert str(ROOT) not in json.dumps(data)      # no path of the machine that ran it
+
+
+def test_the_performance_page_says_the_published_ratios():
+    """docs/performance.md's numbers of the bench-ratio run, from its JSON:
+    the shipped scenes' count and largest ratio, the generated scenes at
+    most 1 and the one over, with its ratio."""
+    from documented import Claim, assert_printed, assert_reproduced
+    data = json.loads((ROOT / "benchmarks" / "results" / "bench_ratio" / "bench_ratio.json")
+                      .read_text(encoding="utf-8"))
+    page, cmd = "docs/performance.md", "python benchmarks/bench_ratio.py --n 40"
+    shipped = [c for c in data["cases"] if c["origin"] == "shipped" and c.get("ratio") is not None]
+    generated = [c for c in data["cases"] if c["origin"] == "generated"]
+    over = [c for c in generated if c.get("verdict") == "no"]
+    top = max(shipped, key=lambda c: c["ratio"])
+    for printed, value, measured, tol in [
+            ("The 31 ratios of the shipped scenes are all at most 1", 31, len(shipped), 0),
+            ("(the largest 0.33, manipulator_wall mu0)", 0.33, top["ratio"], 0.005),
+            ("of the generated scenes 39 of 40 are", 39, len(generated) - len(over), 0),
+            ("**gen0-018 is 1.18, not met**", 1.18, over[0]["ratio"], 0.005),
+            ("(load average 0.6 at its start)", 0.6, data["load_start"], 0.05)]:
+        claim = Claim(page, printed, cmd, value, abs=tol)
+        assert_printed(claim)
+        assert_reproduced(claim, measured)
+    assert all(c["verdict"] == "yes" for c in shipped)
+    assert (top["scene"], top["variant"]) == ("manipulator_wall", "mu0")
+    assert [c["scene"] for c in over] == ["gen0-018"]

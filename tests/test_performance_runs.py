@@ -23,8 +23,8 @@ from documented import ROOT, Claim, assert_printed, assert_reproduced, flat, pag
 PAGE = "docs/performance.md"
 RESULTS = ROOT / "benchmarks" / "results"
 #: the page is the current state, not its history (300 until the plane bodies' set-up
-#: table came; their section is 27 lines)
-MAX_LINES = 330
+#: table came, their section 27 lines; 330 until the bench-ratio run, its section 12)
+MAX_LINES = 345
 
 
 def _text() -> str:
@@ -48,7 +48,7 @@ def _script(name: str):
     return sys.modules[key]
 
 
-def test_the_page_is_the_current_state_in_at_most_330_lines():
+def test_the_page_is_the_current_state_in_at_most_345_lines():
     assert len(_text().splitlines()) <= MAX_LINES
 
 
