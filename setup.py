@@ -15,12 +15,14 @@ from setuptools.command.build_py import build_py
 FACE = "src/cosim/core/_stacked.pxd"
 #: the C face a side's compiled step offers the schemes' compiled loops (cimported)
 SIDE_FACE = "src/cosim/core/_side_face.pxd"
+#: the sub-step's cubic Hermite and peaks, inline (a .pxd alone)
+HERMITE = "src/cosim/sides/_hermite.pxd"
 
 KERNELS = [
     # the multibody step (the integrator) extends the tree's model (its .pxd)
     Extension("cosim.sides._multibody_tree", ["src/cosim/sides/_multibody_tree.pyx"]),
     Extension("cosim.sides._multibody_step", ["src/cosim/sides/_multibody_step.pyx"],
-              depends=[SIDE_FACE, "src/cosim/sides/_multibody_tree.pxd"]),
+              depends=[SIDE_FACE, "src/cosim/sides/_multibody_tree.pxd", HERMITE]),
     # the tree's model-exchange face, for the monolithic reference
     Extension("cosim.sides._tree_face", ["src/cosim/sides/_tree_face.pyx"],
               depends=[FACE, "src/cosim/sides/_multibody_tree.pxd"]),
@@ -43,7 +45,7 @@ KERNELS = [
               depends=["src/cosim/sides/_structure_modes.pxd", SIDE_FACE]),
     # the structure's RK4 with hosted penalty contacts, over the tree's laws (its .pxd)
     Extension("cosim.sides._structure_rk", ["src/cosim/sides/_structure_rk.pyx"],
-              depends=["src/cosim/sides/_multibody_tree.pxd"]),
+              depends=["src/cosim/sides/_multibody_tree.pxd", HERMITE]),
     Extension("cosim.sides._structure_step", ["src/cosim/sides/_structure_step.pyx"],
               depends=["src/cosim/sides/_structure_modes.pxd",
                        "src/cosim/sides/_structure_contacts.pxd", SIDE_FACE]),

@@ -42,42 +42,8 @@ from cosim.sides._multibody_tree cimport TreeDynamics, MAX_COEF, MAX_CONTACTS, S
 RK_API = 1
 
 
-cdef inline double _hermite(double y0, double f0, double y1, double f1, double h,
-                            double theta) noexcept nogil:
-    """:func:`cosim.core.hermite.hermite_value`, one component."""
-    cdef double t2 = theta * theta
-    cdef double t3 = t2 * theta
-    return ((2 * t3 - 3 * t2 + 1) * y0 + (t3 - 2 * t2 + theta) * h * f0
-            + (-2 * t3 + 3 * t2) * y1 + (t3 - t2) * h * f1)
-
-
-cdef void _substep_peaks(double* peak, const double* d0, const double* v0, const double* d1,
-                         const double* v1, double h, int n) noexcept nogil:
-    """:func:`cosim.core.hermite.substep_peaks`: raise each ``peak[j]`` to the
-    largest value of the cubic Hermite over one accepted sub-step."""
-    cdef int j
-    cdef double p, dd, c1, c2, c3, qa, qb, disc, r, q, s, x
-    for j in range(n):
-        p = d1[j]
-        if v0[j] > 0.0 and 0.0 > v1[j]:
-            dd = d1[j] - d0[j]
-            c1 = h * v0[j]
-            c2 = 3.0 * dd - h * (2.0 * v0[j] + v1[j])
-            c3 = -2.0 * dd + h * (v0[j] + v1[j])
-            qa = 3.0 * c3
-            qb = 2.0 * c2
-            disc = qb * qb - 4.0 * qa * c1
-            r = sqrt(disc) if disc > 0.0 else 0.0
-            q = -0.5 * (qb + (r if qb >= 0.0 else -r))
-            s = c1 / q if q != 0.0 else 1.0
-            if not (0.0 < s < 1.0) and qa != 0.0:
-                s = q / qa
-            if 0.0 < s < 1.0:
-                x = d0[j] + s * (c1 + s * (c2 + s * c3))
-                if x > p:
-                    p = x
-        if p > peak[j]:
-            peak[j] = p
+# the sub-step's cubic Hermite and its peaks
+from cosim.sides._hermite cimport _hermite, _substep_peaks
 
 
 cdef class StructureRK(TreeDynamics):
