@@ -73,6 +73,7 @@ cdef class TreeDynamics:
     cdef void _penetration(self, int k, double t, double* d, double* dd) noexcept nogil
     cdef double _law_switch(self, int k, double d, double dd) noexcept nogil
     cdef void _law(self, int k, double d, double dd, double* f, double* p, double* sw) noexcept nogil
+    cdef void _inputs(self, double t) noexcept nogil
     cdef int _rhs(self, double t, const double* y, double* out, double* sw) noexcept nogil
     cdef double _reference(self, int k, double t, bint rate) noexcept nogil
     cdef void _effects(self, double t, const double* q, const double* dq,

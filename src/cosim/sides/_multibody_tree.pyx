@@ -401,6 +401,24 @@ cdef class TreeDynamics:
         sw[0] = s
 
     # ------------------------------------------------------- right-hand side
+    cdef void _inputs(self, double t) noexcept nogil:
+        """The ports' input forces at ``t`` into ``u_re``, ``u_im``: the step's
+        force polynomial (Horner), zero without one."""
+        cdef int npt = self.np_, p, j
+        cdef double s, ur, ui
+        if self.u_len > 0:
+            s = (t - self.u_t0) / self.u_h
+            for p in range(npt):
+                ur = self.u_coef[self.u_len - 1, p, 0]
+                ui = self.u_coef[self.u_len - 1, p, 1]
+                for j in range(self.u_len - 2, -1, -1):
+                    ur = ur * s + self.u_coef[j, p, 0]
+                    ui = ui * s + self.u_coef[j, p, 1]
+                self.u_re[p], self.u_im[p] = ur, ui
+        else:
+            for p in range(npt):
+                self.u_re[p], self.u_im[p] = 0.0, 0.0
+
     cdef int _rhs(self, double t, const double* y, double* out, double* sw) noexcept nogil:
         """``dy/dt`` into ``out`` and the contacts' switch values into ``sw``."""
         cdef int n = self.n, npt = self.np_, k, j, i, p, base
@@ -415,18 +433,7 @@ cdef class TreeDynamics:
             self._point(n + i, self.port_body[i], self.pl_re[i], self.pl_im[i], dq, True)
         self._mass_and_forces()
         # port forces: the input polynomial, then the contacts
-        if self.u_len > 0:
-            s = (t - self.u_t0) / self.u_h
-            for p in range(npt):
-                ur = self.u_coef[self.u_len - 1, p, 0]
-                ui = self.u_coef[self.u_len - 1, p, 1]
-                for j in range(self.u_len - 2, -1, -1):
-                    ur = ur * s + self.u_coef[j, p, 0]
-                    ui = ui * s + self.u_coef[j, p, 1]
-                self.u_re[p], self.u_im[p] = ur, ui
-        else:
-            for p in range(npt):
-                self.u_re[p], self.u_im[p] = 0.0, 0.0
+        self._inputs(t)
         tau = t - self.t0
         base = 2 * n
         for k in range(self.nc):

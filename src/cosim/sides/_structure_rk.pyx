@@ -149,18 +149,7 @@ cdef class StructureRK(TreeDynamics):
         cdef const double* dq = y + m
         self.n_evals += 1
         self._ports(y, True)
-        if self.u_len > 0:
-            s = (t - self.u_t0) / self.u_h
-            for p in range(npt):
-                ur = self.u_coef[self.u_len - 1, p, 0]
-                ui = self.u_coef[self.u_len - 1, p, 1]
-                for j in range(self.u_len - 2, -1, -1):
-                    ur = ur * s + self.u_coef[j, p, 0]
-                    ui = ui * s + self.u_coef[j, p, 1]
-                self.u_re[p], self.u_im[p] = ur, ui
-        else:
-            for p in range(npt):
-                self.u_re[p], self.u_im[p] = 0.0, 0.0
+        self._inputs(t)
         tau = t - self.t0
         base = 2 * m
         for k in range(self.nc):
